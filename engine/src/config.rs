@@ -1,0 +1,1051 @@
+//! One TOML file describes instrument + scene + simulation knobs. Every SPEC default is built in
+//! (`Config::default()` is the paper's reference experiment), every field can be overridden, and
+//! [`Config::validate`] names the offending field and the allowed range. [`DEFAULT_TOML`] is the same
+//! configuration written out with comments (`jsim config --print-default`); a test keeps the two identical.
+
+use serde::{Deserialize, Serialize};
+use sha2::{Digest, Sha256};
+use std::path::{Path, PathBuf};
+
+/// A configuration problem, always naming the field.
+#[derive(Debug, thiserror::Error)]
+pub enum ConfigError {
+    #[error("config field `{field}` = {value}: {allowed}")]
+    Invalid {
+        field: String,
+        value: String,
+        allowed: String,
+    },
+    #[error("cannot read config file {path}: {source}")]
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+    #[error("config file {path} is not valid: {message}")]
+    Parse { path: PathBuf, message: String },
+}
+
+fn invalid(field: &str, value: impl std::fmt::Display, allowed: &str) -> ConfigError {
+    ConfigError::Invalid {
+        field: field.to_string(),
+        value: value.to_string(),
+        allowed: allowed.to_string(),
+    }
+}
+
+/// The whole simulation + analysis configuration.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Config {
+    /// Master seed: every random stream (ACE, scene offsets, flat, noise) derives from it.
+    pub seed: u64,
+    pub instrument: Instrument,
+    pub band: Band,
+    pub optics: Optics,
+    pub detector: Detector,
+    pub readout: Readout,
+    pub ace: Ace,
+    pub photometry: Photometry,
+    pub scene: Scene,
+    pub fidelity: Fidelity,
+    pub analysis: Analysis,
+}
+
+impl Default for Config {
+    fn default() -> Self {
+        Self {
+            seed: 20240601,
+            instrument: Instrument::default(),
+            band: Band::default(),
+            optics: Optics::default(),
+            detector: Detector::default(),
+            readout: Readout::default(),
+            ace: Ace::default(),
+            photometry: Photometry::default(),
+            scene: Scene::default(),
+            fidelity: Fidelity::default(),
+            analysis: Analysis::default(),
+        }
+    }
+}
+
+/// Telescope and focal-plane geometry (SPEC §1).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Instrument {
+    pub aperture_diameter_m: f64,
+    pub obstruction_diameter_m: f64,
+    pub spider_count: u32,
+    pub spider_width_m: f64,
+    /// Azimuth of the first vane, from +x towards +y; the others follow every 360°/count.
+    pub spider_angle_deg: f64,
+    pub focal_length_m: f64,
+    pub pixel_pitch_um: f64,
+    /// Full detector format (square), pixels.
+    pub detector_px: usize,
+    /// Central photosensitive region (square), pixels; the border around it sees no light.
+    pub photosensitive_px: usize,
+}
+
+impl Default for Instrument {
+    fn default() -> Self {
+        Self {
+            aperture_diameter_m: 0.36,
+            obstruction_diameter_m: 0.126,
+            spider_count: 3,
+            spider_width_m: 0.005,
+            spider_angle_deg: 0.0,
+            focal_length_m: 4.369,
+            pixel_pitch_um: 10.0,
+            detector_px: 1968,
+            photosensitive_px: 1952,
+        }
+    }
+}
+
+impl Instrument {
+    /// Plate scale in mas per pixel: 206264.8″ · pitch / focal length.
+    pub fn plate_scale_mas(&self) -> f64 {
+        crate::ARCSEC_PER_RAD * 1e3 * self.pixel_pitch_um * 1e-6 / self.focal_length_m
+    }
+    /// Angular size of one pixel in radians.
+    pub fn pixel_rad(&self) -> f64 {
+        self.pixel_pitch_um * 1e-6 / self.focal_length_m
+    }
+    /// Width of the light-insensitive border on each side, pixels.
+    pub fn border_px(&self) -> usize {
+        (self.detector_px - self.photosensitive_px.min(self.detector_px)) / 2
+    }
+}
+
+/// Band, wavelength grid and throughput × QE (SPEC §2).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Band {
+    pub wavelength_min_um: f64,
+    pub wavelength_max_um: f64,
+    pub wavelength_step_um: f64,
+    /// Throughput × QE as `[wavelength_um, value]` points, linear in between, zero outside.
+    pub response: Vec<[f64; 2]>,
+}
+
+impl Default for Band {
+    fn default() -> Self {
+        Self {
+            wavelength_min_um: 0.99,
+            wavelength_max_um: 1.61,
+            wavelength_step_um: 0.01,
+            response: vec![[1.0, 1.0], [1.6, 1.0]],
+        }
+    }
+}
+
+/// PSF computation method.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum PsfMethod {
+    /// Matrix Fourier transform: exact output sampling for every wavelength, fast (default).
+    Mft,
+    /// Zero-padded FFT with the pupil resampled per wavelength: the simple reference.
+    Fft,
+}
+
+/// Unit of the Zernike coefficients.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum WfeUnit {
+    /// Waves at `reference_wavelength_um` (CODE V / Zemax convention).
+    Waves,
+    /// Micrometres of wavefront.
+    Um,
+}
+
+/// Zernike coefficients at one field position (pixels, detector frame).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FieldWfe {
+    pub x_px: f64,
+    pub y_px: f64,
+    pub fringe: Vec<f64>,
+}
+
+/// Optical PSF knobs (SPEC §2).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Optics {
+    /// Pupil samples across the aperture diameter (N of the N×N pupil grid).
+    pub pupil_samples: usize,
+    /// PSF table cells per detector pixel.
+    pub psf_oversampling: usize,
+    /// Half-width of the PSF table in pixels: light beyond it is not modelled (its fraction is reported).
+    pub psf_radius_px: usize,
+    pub psf_method: PsfMethod,
+    pub wfe_unit: WfeUnit,
+    pub reference_wavelength_um: f64,
+    /// Fringe Zernike coefficients Z1..Z37 (index 0 is Z1, piston). Shorter lists are zero-padded.
+    pub fringe: Vec<f64>,
+    /// Optional field-dependent table; when non-empty it replaces `fringe`, interpolated to each PSF zone.
+    pub field_table: Vec<FieldWfe>,
+    /// PSF zones per detector axis used with a field table (stars in a zone share one PSF).
+    pub field_zones: usize,
+}
+
+impl Default for Optics {
+    fn default() -> Self {
+        Self {
+            pupil_samples: 256,
+            psf_oversampling: 16,
+            psf_radius_px: 13,
+            psf_method: PsfMethod::Mft,
+            wfe_unit: WfeUnit::Waves,
+            reference_wavelength_um: 1.4,
+            fringe: default_fringe(),
+            field_table: Vec::new(),
+            field_zones: 4,
+        }
+    }
+}
+
+/// Default WFE: a small design-like residual at 1.4 µm dominated by defocus and astigmatism
+/// (Z4 = 0.07, Z5 = 0.05, Z6 = −0.03 waves; 58 nm rms), documented in the README.
+pub fn default_fringe() -> Vec<f64> {
+    vec![0.0, 0.0, 0.0, 0.07, 0.05, -0.03]
+}
+
+/// Intra-pixel sensitivity over the subpixels of one pixel (mean normalised to 1).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum IntraPixel {
+    Uniform,
+    /// Separable map: `profile_x[i] · profile_y[j]`, each resampled to the subpixel count.
+    Separable {
+        profile_x: Vec<f64>,
+        profile_y: Vec<f64>,
+    },
+    /// A CSV of rows (y) and columns (x) of sensitivities; its size sets the subpixel count.
+    Csv {
+        path: PathBuf,
+    },
+}
+
+/// Detector and electronics (SPEC §1, §4).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Detector {
+    pub exposure_s: f64,
+    /// Dark current + stray light, e⁻/pix/s.
+    pub dark_e_per_s: f64,
+    pub read_noise_e: f64,
+    pub gain_e_per_adu: f64,
+    pub full_well_e: f64,
+    pub adc_bits: u32,
+    pub bias_adu: f64,
+    /// Pixel-to-pixel sensitivity, 1σ fraction.
+    pub inter_pixel_flat_sigma: f64,
+    pub intra_pixel: IntraPixel,
+    /// Switches for the stochastic terms (for tests and noise-free truth images).
+    pub shot_noise: bool,
+    pub read_noise: bool,
+    pub digitise: bool,
+}
+
+impl Default for Detector {
+    fn default() -> Self {
+        Self {
+            exposure_s: 12.5,
+            dark_e_per_s: 24.5,
+            read_noise_e: 15.0,
+            gain_e_per_adu: 3.0,
+            full_well_e: 150_000.0,
+            adc_bits: 16,
+            bias_adu: 0.0,
+            inter_pixel_flat_sigma: 0.01,
+            intra_pixel: IntraPixel::Uniform,
+            shot_noise: true,
+            read_noise: true,
+            digitise: true,
+        }
+    }
+}
+
+/// Readout order (SPEC §4).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Hash)]
+#[serde(rename_all = "kebab-case")]
+pub enum ReadoutOrder {
+    /// Every pixel reset and read in sequence: windows `[t₁, t₁+T]` with `t₁` rolling.
+    Rolling,
+    /// All pixels start together; reads still roll, so windows differ at the end only.
+    GlobalReset,
+    /// Sample-and-hold (global shutter): identical windows.
+    SampleHold,
+}
+
+impl ReadoutOrder {
+    pub const ALL: [ReadoutOrder; 3] = [
+        ReadoutOrder::Rolling,
+        ReadoutOrder::GlobalReset,
+        ReadoutOrder::SampleHold,
+    ];
+    pub fn name(self) -> &'static str {
+        match self {
+            ReadoutOrder::Rolling => "rolling",
+            ReadoutOrder::GlobalReset => "global-reset",
+            ReadoutOrder::SampleHold => "sample-hold",
+        }
+    }
+    pub fn parse(s: &str) -> Result<Self, ConfigError> {
+        match s {
+            "rolling" => Ok(ReadoutOrder::Rolling),
+            "global-reset" => Ok(ReadoutOrder::GlobalReset),
+            "sample-hold" => Ok(ReadoutOrder::SampleHold),
+            _ => Err(invalid(
+                "readout.order",
+                s,
+                "one of rolling, global-reset, sample-hold",
+            )),
+        }
+    }
+}
+
+/// Direction in which rows are read within a channel.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Hash)]
+#[serde(rename_all = "kebab-case")]
+pub enum RowDirection {
+    /// Bottom row (Y = 0) first, as JASMINE.
+    Up,
+    /// Top row first.
+    Down,
+}
+
+/// Readout timing (SPEC §4).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Readout {
+    pub order: ReadoutOrder,
+    pub row_direction: RowDirection,
+    pub channels: usize,
+    pub channel_width_px: usize,
+    pub pixel_time_us: f64,
+    /// From the end of reset to the first pixel read.
+    pub t_overhead_s: f64,
+    /// Start-to-start time of consecutive exposures; 0 means back to back
+    /// (`t_overhead + frame sweep + exposure`).
+    pub exposure_cadence_s: f64,
+}
+
+impl Default for Readout {
+    fn default() -> Self {
+        Self {
+            order: ReadoutOrder::Rolling,
+            row_direction: RowDirection::Up,
+            channels: 16,
+            channel_width_px: 123,
+            pixel_time_us: 5.0,
+            t_overhead_s: 0.1,
+            exposure_cadence_s: 0.0,
+        }
+    }
+}
+
+/// Which ACE model a simulation uses.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Hash)]
+#[serde(rename_all = "kebab-case")]
+pub enum AceCase {
+    /// The exposure-integrated jitter is an isotropic Gaussian of `sigma_mas`, identical everywhere.
+    Gaussian,
+    /// A time series from the PSD; every pixel integrates its own window.
+    Realistic,
+    /// A still telescope.
+    None,
+}
+
+impl AceCase {
+    pub fn name(self) -> &'static str {
+        match self {
+            AceCase::Gaussian => "gaussian",
+            AceCase::Realistic => "realistic",
+            AceCase::None => "none",
+        }
+    }
+    pub fn parse(s: &str) -> Result<Self, ConfigError> {
+        match s {
+            "gaussian" => Ok(AceCase::Gaussian),
+            "realistic" => Ok(AceCase::Realistic),
+            "none" => Ok(AceCase::None),
+            _ => Err(invalid("ace.case", s, "one of gaussian, realistic, none")),
+        }
+    }
+}
+
+/// How the realistic series is scaled to `sigma_mas`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Hash)]
+#[serde(rename_all = "kebab-case")]
+pub enum SigmaConvention {
+    /// The median over exposures of the per-exposure standard deviation (the paper's realistic case).
+    MedianExposure,
+    /// The standard deviation of the whole series.
+    WholeSeries,
+}
+
+/// A natural mode of the structure: a Lorentzian peak in the PSD.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Mode {
+    pub freq_hz: f64,
+    pub width_hz: f64,
+    pub amplitude: f64,
+}
+
+/// Attitude control error (SPEC §3).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Ace {
+    pub case: AceCase,
+    pub sigma_mas: f64,
+    pub sigma_convention: SigmaConvention,
+    /// PSD continuum: `A/f_b / (1 + (f/f_b)^index)`.
+    pub boundary_freq_hz: f64,
+    pub power_law_index: f64,
+    pub continuum_amplitude: f64,
+    pub modes: Vec<Mode>,
+    /// Fractional Gaussian noise on the Fourier amplitudes.
+    pub amplitude_noise: f64,
+    pub sample_interval_ms: f64,
+    pub span_s: f64,
+    /// Start of the first exposure within the series.
+    pub first_exposure_start_s: f64,
+}
+
+/// The paper's eight natural modes (SPEC §3).
+pub fn reference_modes() -> Vec<Mode> {
+    let f = [20.0, 40.0, 60.0, 80.0, 100.0, 120.0, 140.0, 160.0];
+    let h = [0.1, 0.2, 0.3, 0.4, 0.5, 0.6, 0.7, 0.8];
+    let p = [
+        1e-2, 5e-3, 1.875e-3, 6.25e-4, 1.953e-4, 5.859e-5, 1.709e-5, 4.883e-6,
+    ];
+    (0..8)
+        .map(|i| Mode {
+            freq_hz: f[i],
+            width_hz: h[i],
+            amplitude: p[i],
+        })
+        .collect()
+}
+
+impl Default for Ace {
+    fn default() -> Self {
+        Self {
+            case: AceCase::Realistic,
+            sigma_mas: 300.0,
+            sigma_convention: SigmaConvention::MedianExposure,
+            boundary_freq_hz: 0.1,
+            power_law_index: 2.0,
+            continuum_amplitude: 1.0,
+            modes: reference_modes(),
+            amplitude_noise: 0.2,
+            sample_interval_ms: 0.15,
+            span_s: 360.0,
+            first_exposure_start_s: 0.0,
+        }
+    }
+}
+
+/// Photometric zero point (SPEC §5).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Photometry {
+    /// Photo-electrons per second for Hw = 0: 5.8e8 (the original simulator's throughput × QE with a
+    /// 9500 K spectrum through the 0.0876 m² open pupil; a simpler ETC gives 3.9e8).
+    pub zero_point_e_per_s: f64,
+}
+
+impl Default for Photometry {
+    fn default() -> Self {
+        Self {
+            zero_point_e_per_s: 5.8e8,
+        }
+    }
+}
+
+/// Which stars are simulated.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum SceneKind {
+    /// The paper's regular grid (SPEC §6).
+    Grid,
+    /// A CSV catalogue `x,y,hw,j_h` (pixels).
+    Catalogue,
+}
+
+/// Scene (SPEC §6).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Scene {
+    pub kind: SceneKind,
+    pub grid_n: usize,
+    pub grid_spacing_px: f64,
+    /// Each grid star is offset by a uniform random amount in ±this, per axis.
+    pub grid_random_px: f64,
+    pub mag_hw: f64,
+    pub j_minus_h: f64,
+    pub catalogue: Option<PathBuf>,
+}
+
+impl Default for Scene {
+    fn default() -> Self {
+        Self {
+            kind: SceneKind::Grid,
+            grid_n: 20,
+            grid_spacing_px: 98.4,
+            grid_random_px: 0.5,
+            mag_hw: 12.5,
+            j_minus_h: 2.0,
+            catalogue: None,
+        }
+    }
+}
+
+/// Integration method.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Hash)]
+#[serde(rename_all = "kebab-case")]
+pub enum Method {
+    /// Literal sum over subpixels × time samples of bilinear PSF look-ups: the slow reference.
+    Reference,
+    /// One pixel-kernel look-up per (pixel, sample): equal to the reference to rounding.
+    Direct,
+    /// Shared-window histogram ⊛ pixel kernel + per-pixel window edges: equal to direct to rounding.
+    Fast,
+}
+
+impl Method {
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::Reference => "reference",
+            Method::Direct => "direct",
+            Method::Fast => "fast",
+        }
+    }
+}
+
+/// Where the integration runs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Hash)]
+#[serde(rename_all = "kebab-case")]
+pub enum Backend {
+    /// The GPU when an adapter exists, else the CPU (said once).
+    Auto,
+    Cpu,
+    Gpu,
+}
+
+/// Speed/accuracy knobs of the simulation (our `GSParams`); each has a benchmark (`jsim bench`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Fidelity {
+    pub images: usize,
+    /// Stamp half-size around each star's mean position, before the jitter margin is added.
+    pub stamp_radius_px: usize,
+    /// Subpixels per pixel axis (sampling of the pixel area and the intra-pixel map).
+    pub subpixels: usize,
+    /// Integration time step = this many ACE samples.
+    pub time_stride: usize,
+    pub method: Method,
+    pub backend: Backend,
+    /// Add the PSF halo (static, at 1 cell per pixel) out to this radius beyond the PSF table; 0 = off.
+    pub halo_radius_px: usize,
+}
+
+impl Default for Fidelity {
+    fn default() -> Self {
+        Self {
+            images: 11,
+            stamp_radius_px: 12,
+            subpixels: 8,
+            time_stride: 1,
+            method: Method::Fast,
+            backend: Backend::Auto,
+            halo_radius_px: 0,
+        }
+    }
+}
+
+/// ePSF smoothing kernel.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Smoothing {
+    /// No smoothing (leaves pixel-phase noise: for comparison).
+    None,
+    /// Local quadratic fit over 5×5 ePSF nodes (Anderson & King 2000).
+    Quadratic,
+}
+
+/// ePSF analysis knobs (SPEC §7).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Analysis {
+    pub epsf_oversampling: usize,
+    pub epsf_iterations: usize,
+    /// ePSF half-width, pixels.
+    pub epsf_radius_px: usize,
+    /// Pixels within this radius of a star enter its fit.
+    pub fit_radius_px: f64,
+    pub smoothing: Smoothing,
+    /// Y zones of the position-dependent ePSF (1 = one ePSF for the image).
+    pub epsf_zones: usize,
+    /// Detection threshold (peak above sky) in units of the sky noise.
+    pub detect_sigma: f64,
+    /// Maximum Gauss–Newton iterations per star fit.
+    pub fit_max_iter: usize,
+    /// Sigma-clipping threshold for the ePSF stacking.
+    pub clip_sigma: f64,
+}
+
+impl Default for Analysis {
+    fn default() -> Self {
+        Self {
+            epsf_oversampling: 4,
+            epsf_iterations: 3,
+            epsf_radius_px: 6,
+            fit_radius_px: 2.5,
+            smoothing: Smoothing::Quadratic,
+            epsf_zones: 1,
+            detect_sigma: 10.0,
+            fit_max_iter: 30,
+            clip_sigma: 3.0,
+        }
+    }
+}
+
+fn check_finite(field: &str, v: f64) -> Result<(), ConfigError> {
+    if v.is_finite() {
+        Ok(())
+    } else {
+        Err(invalid(field, v, "must be a finite number"))
+    }
+}
+fn check_pos(field: &str, v: f64) -> Result<(), ConfigError> {
+    check_finite(field, v)?;
+    if v > 0.0 {
+        Ok(())
+    } else {
+        Err(invalid(field, v, "must be > 0"))
+    }
+}
+fn check_nonneg(field: &str, v: f64) -> Result<(), ConfigError> {
+    check_finite(field, v)?;
+    if v >= 0.0 {
+        Ok(())
+    } else {
+        Err(invalid(field, v, "must be ≥ 0"))
+    }
+}
+fn check_range_usize(field: &str, v: usize, lo: usize, hi: usize) -> Result<(), ConfigError> {
+    if (lo..=hi).contains(&v) {
+        Ok(())
+    } else {
+        Err(invalid(field, v, &format!("must be in {lo}..={hi}")))
+    }
+}
+
+impl Config {
+    /// Read and validate a TOML file.
+    pub fn load(path: &Path) -> Result<Self, ConfigError> {
+        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        let cfg = Self::from_toml_str(&text).map_err(|e| match e {
+            ConfigError::Parse { message, .. } => ConfigError::Parse {
+                path: path.to_path_buf(),
+                message,
+            },
+            other => other,
+        })?;
+        Ok(cfg)
+    }
+
+    /// Parse and validate TOML text.
+    pub fn from_toml_str(text: &str) -> Result<Self, ConfigError> {
+        let cfg: Config = toml::from_str(text).map_err(|e| ConfigError::Parse {
+            path: PathBuf::from("<text>"),
+            message: e.to_string(),
+        })?;
+        cfg.validate()?;
+        Ok(cfg)
+    }
+
+    /// The configuration as TOML (no comments; see [`DEFAULT_TOML`] for the commented default).
+    pub fn to_toml(&self) -> String {
+        toml::to_string_pretty(self)
+            .unwrap_or_else(|e| format!("# could not serialise config: {e}\n"))
+    }
+
+    /// SHA-256 of the canonical TOML, first 16 hex digits: identifies a configuration in outputs.
+    pub fn hash_hex(&self) -> String {
+        let digest = Sha256::digest(self.to_toml().as_bytes());
+        digest.iter().take(8).map(|b| format!("{b:02x}")).collect()
+    }
+
+    /// Pixels of the ACE time series per time step, derived.
+    pub fn integration_dt_s(&self) -> f64 {
+        self.ace.sample_interval_ms * 1e-3 * self.fidelity.time_stride as f64
+    }
+
+    /// Check every field; the error names the field and the allowed range.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        let i = &self.instrument;
+        check_pos("instrument.aperture_diameter_m", i.aperture_diameter_m)?;
+        check_nonneg(
+            "instrument.obstruction_diameter_m",
+            i.obstruction_diameter_m,
+        )?;
+        if i.obstruction_diameter_m >= i.aperture_diameter_m {
+            return Err(invalid(
+                "instrument.obstruction_diameter_m",
+                i.obstruction_diameter_m,
+                &format!(
+                    "must be smaller than instrument.aperture_diameter_m = {}",
+                    i.aperture_diameter_m
+                ),
+            ));
+        }
+        check_nonneg("instrument.spider_width_m", i.spider_width_m)?;
+        if i.spider_width_m >= i.aperture_diameter_m {
+            return Err(invalid(
+                "instrument.spider_width_m",
+                i.spider_width_m,
+                &format!(
+                    "must be narrower than the aperture ({} m)",
+                    i.aperture_diameter_m
+                ),
+            ));
+        }
+        if i.spider_count > 64 {
+            return Err(invalid(
+                "instrument.spider_count",
+                i.spider_count,
+                "must be in 0..=64",
+            ));
+        }
+        check_finite("instrument.spider_angle_deg", i.spider_angle_deg)?;
+        check_pos("instrument.focal_length_m", i.focal_length_m)?;
+        check_pos("instrument.pixel_pitch_um", i.pixel_pitch_um)?;
+        check_range_usize("instrument.detector_px", i.detector_px, 8, 65_536)?;
+        if i.photosensitive_px > i.detector_px || i.photosensitive_px == 0 {
+            return Err(invalid(
+                "instrument.photosensitive_px",
+                i.photosensitive_px,
+                &format!("must be in 1..={} (instrument.detector_px)", i.detector_px),
+            ));
+        }
+
+        let b = &self.band;
+        check_pos("band.wavelength_min_um", b.wavelength_min_um)?;
+        check_pos("band.wavelength_max_um", b.wavelength_max_um)?;
+        check_pos("band.wavelength_step_um", b.wavelength_step_um)?;
+        if b.wavelength_max_um < b.wavelength_min_um {
+            return Err(invalid(
+                "band.wavelength_max_um",
+                b.wavelength_max_um,
+                "must be ≥ band.wavelength_min_um",
+            ));
+        }
+        if (b.wavelength_max_um - b.wavelength_min_um) / b.wavelength_step_um > 10_000.0 {
+            return Err(invalid(
+                "band.wavelength_step_um",
+                b.wavelength_step_um,
+                "gives more than 10000 wavelengths",
+            ));
+        }
+        for (k, p) in b.response.iter().enumerate() {
+            check_nonneg(&format!("band.response[{k}]"), p[1])?;
+            check_pos(&format!("band.response[{k}]"), p[0])?;
+            if k > 0 && p[0] < b.response[k - 1][0] {
+                return Err(invalid(
+                    &format!("band.response[{k}]"),
+                    p[0],
+                    "wavelengths must increase",
+                ));
+            }
+        }
+        if crate::optics::spectrum::wavelength_grid(b).is_empty() {
+            return Err(invalid(
+                "band",
+                format!("{}–{} µm", b.wavelength_min_um, b.wavelength_max_um),
+                "the wavelength grid has no point where throughput × QE > 0",
+            ));
+        }
+
+        let o = &self.optics;
+        check_range_usize("optics.pupil_samples", o.pupil_samples, 16, 4096)?;
+        check_range_usize("optics.psf_oversampling", o.psf_oversampling, 1, 64)?;
+        check_range_usize("optics.psf_radius_px", o.psf_radius_px, 2, 256)?;
+        check_pos("optics.reference_wavelength_um", o.reference_wavelength_um)?;
+        if o.fringe.len() > 37 {
+            return Err(invalid(
+                "optics.fringe",
+                o.fringe.len(),
+                "at most 37 Fringe Zernike terms",
+            ));
+        }
+        for (k, c) in o.fringe.iter().enumerate() {
+            check_finite(&format!("optics.fringe[{k}]"), *c)?;
+        }
+        for (t, row) in o.field_table.iter().enumerate() {
+            check_finite(&format!("optics.field_table[{t}].x_px"), row.x_px)?;
+            check_finite(&format!("optics.field_table[{t}].y_px"), row.y_px)?;
+            if row.fringe.len() > 37 {
+                return Err(invalid(
+                    &format!("optics.field_table[{t}].fringe"),
+                    row.fringe.len(),
+                    "at most 37 terms",
+                ));
+            }
+            for (k, c) in row.fringe.iter().enumerate() {
+                check_finite(&format!("optics.field_table[{t}].fringe[{k}]"), *c)?;
+            }
+        }
+        check_range_usize("optics.field_zones", o.field_zones, 1, 64)?;
+
+        let d = &self.detector;
+        check_pos("detector.exposure_s", d.exposure_s)?;
+        if d.exposure_s > 3600.0 {
+            return Err(invalid(
+                "detector.exposure_s",
+                d.exposure_s,
+                "must be ≤ 3600 s",
+            ));
+        }
+        check_nonneg("detector.dark_e_per_s", d.dark_e_per_s)?;
+        check_nonneg("detector.read_noise_e", d.read_noise_e)?;
+        check_pos("detector.gain_e_per_adu", d.gain_e_per_adu)?;
+        check_pos("detector.full_well_e", d.full_well_e)?;
+        if !(1..=32).contains(&d.adc_bits) {
+            return Err(invalid(
+                "detector.adc_bits",
+                d.adc_bits,
+                "must be in 1..=32",
+            ));
+        }
+        check_finite("detector.bias_adu", d.bias_adu)?;
+        check_nonneg("detector.inter_pixel_flat_sigma", d.inter_pixel_flat_sigma)?;
+        if d.inter_pixel_flat_sigma > 0.5 {
+            return Err(invalid(
+                "detector.inter_pixel_flat_sigma",
+                d.inter_pixel_flat_sigma,
+                "must be ≤ 0.5",
+            ));
+        }
+        if let IntraPixel::Separable {
+            profile_x,
+            profile_y,
+        } = &d.intra_pixel
+        {
+            for (name, p) in [("profile_x", profile_x), ("profile_y", profile_y)] {
+                if p.is_empty() {
+                    return Err(invalid(
+                        &format!("detector.intra_pixel.{name}"),
+                        "[]",
+                        "needs at least one value",
+                    ));
+                }
+                for (k, v) in p.iter().enumerate() {
+                    check_nonneg(&format!("detector.intra_pixel.{name}[{k}]"), *v)?;
+                }
+                if p.iter().sum::<f64>() <= 0.0 {
+                    return Err(invalid(
+                        &format!("detector.intra_pixel.{name}"),
+                        "all zero",
+                        "needs a positive mean",
+                    ));
+                }
+            }
+        }
+
+        let r = &self.readout;
+        check_range_usize("readout.channels", r.channels, 1, 1024)?;
+        check_range_usize("readout.channel_width_px", r.channel_width_px, 1, 65_536)?;
+        if r.channels * r.channel_width_px < i.detector_px {
+            return Err(invalid(
+                "readout.channel_width_px",
+                r.channel_width_px,
+                &format!(
+                    "channels × width must cover instrument.detector_px = {}",
+                    i.detector_px
+                ),
+            ));
+        }
+        check_nonneg("readout.pixel_time_us", r.pixel_time_us)?;
+        check_nonneg("readout.t_overhead_s", r.t_overhead_s)?;
+        check_nonneg("readout.exposure_cadence_s", r.exposure_cadence_s)?;
+
+        let a = &self.ace;
+        check_nonneg("ace.sigma_mas", a.sigma_mas)?;
+        if a.sigma_mas > 1e6 {
+            return Err(invalid("ace.sigma_mas", a.sigma_mas, "must be ≤ 1e6 mas"));
+        }
+        check_pos("ace.boundary_freq_hz", a.boundary_freq_hz)?;
+        check_finite("ace.power_law_index", a.power_law_index)?;
+        if !(0.0..=8.0).contains(&a.power_law_index) {
+            return Err(invalid(
+                "ace.power_law_index",
+                a.power_law_index,
+                "must be in 0..=8",
+            ));
+        }
+        check_nonneg("ace.continuum_amplitude", a.continuum_amplitude)?;
+        for (k, m) in a.modes.iter().enumerate() {
+            check_pos(&format!("ace.modes[{k}].freq_hz"), m.freq_hz)?;
+            check_pos(&format!("ace.modes[{k}].width_hz"), m.width_hz)?;
+            check_nonneg(&format!("ace.modes[{k}].amplitude"), m.amplitude)?;
+        }
+        check_nonneg("ace.amplitude_noise", a.amplitude_noise)?;
+        check_pos("ace.sample_interval_ms", a.sample_interval_ms)?;
+        check_pos("ace.span_s", a.span_s)?;
+        let n_samples = a.span_s / (a.sample_interval_ms * 1e-3);
+        if n_samples > 5.0e7 {
+            return Err(invalid(
+                "ace.span_s",
+                a.span_s,
+                "with ace.sample_interval_ms gives more than 5e7 samples",
+            ));
+        }
+        check_nonneg("ace.first_exposure_start_s", a.first_exposure_start_s)?;
+        if a.case == AceCase::Realistic {
+            let need =
+                a.first_exposure_start_s + crate::readout::ReadoutTiming::new(self).cadence_s();
+            if need > a.span_s {
+                return Err(invalid(
+                    "ace.span_s",
+                    a.span_s,
+                    &format!(
+                        "must cover at least one exposure cycle ({need:.3} s from the series start)"
+                    ),
+                ));
+            }
+        }
+
+        check_pos(
+            "photometry.zero_point_e_per_s",
+            self.photometry.zero_point_e_per_s,
+        )?;
+
+        let s = &self.scene;
+        check_finite("scene.mag_hw", s.mag_hw)?;
+        if !(-5.0..=40.0).contains(&s.mag_hw) {
+            return Err(invalid("scene.mag_hw", s.mag_hw, "must be in -5..=40"));
+        }
+        check_finite("scene.j_minus_h", s.j_minus_h)?;
+        if !(-2.0..=8.0).contains(&s.j_minus_h) {
+            return Err(invalid("scene.j_minus_h", s.j_minus_h, "must be in -2..=8"));
+        }
+        check_range_usize("scene.grid_n", s.grid_n, 1, 1000)?;
+        check_pos("scene.grid_spacing_px", s.grid_spacing_px)?;
+        check_nonneg("scene.grid_random_px", s.grid_random_px)?;
+        if s.kind == SceneKind::Catalogue && s.catalogue.is_none() {
+            return Err(invalid(
+                "scene.catalogue",
+                "missing",
+                "a CSV path is needed when scene.kind = \"catalogue\"",
+            ));
+        }
+
+        let f = &self.fidelity;
+        check_range_usize("fidelity.images", f.images, 1, 100_000)?;
+        check_range_usize("fidelity.stamp_radius_px", f.stamp_radius_px, 1, 512)?;
+        check_range_usize("fidelity.subpixels", f.subpixels, 1, 64)?;
+        check_range_usize("fidelity.time_stride", f.time_stride, 1, 1_000_000)?;
+        check_range_usize("fidelity.halo_radius_px", f.halo_radius_px, 0, 1024)?;
+
+        let an = &self.analysis;
+        check_range_usize("analysis.epsf_oversampling", an.epsf_oversampling, 1, 16)?;
+        check_range_usize("analysis.epsf_iterations", an.epsf_iterations, 0, 100)?;
+        check_range_usize("analysis.epsf_radius_px", an.epsf_radius_px, 2, 64)?;
+        check_pos("analysis.fit_radius_px", an.fit_radius_px)?;
+        if an.fit_radius_px > an.epsf_radius_px as f64 - 1.0 {
+            return Err(invalid(
+                "analysis.fit_radius_px",
+                an.fit_radius_px,
+                &format!(
+                    "must be ≤ analysis.epsf_radius_px − 1 = {}",
+                    an.epsf_radius_px as f64 - 1.0
+                ),
+            ));
+        }
+        check_range_usize("analysis.epsf_zones", an.epsf_zones, 1, 64)?;
+        check_pos("analysis.detect_sigma", an.detect_sigma)?;
+        check_range_usize("analysis.fit_max_iter", an.fit_max_iter, 1, 10_000)?;
+        check_pos("analysis.clip_sigma", an.clip_sigma)?;
+        Ok(())
+    }
+}
+
+/// The default configuration, with comments: what `jsim config --print-default` writes.
+pub const DEFAULT_TOML: &str = include_str!("default_config.toml");
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn commented_default_equals_builtin_default() {
+        let parsed: Config = toml::from_str(DEFAULT_TOML).expect("default TOML parses");
+        assert_eq!(parsed, Config::default());
+        Config::default().validate().expect("default validates");
+    }
+
+    #[test]
+    fn round_trip_through_toml() {
+        let c = Config::default();
+        let back = Config::from_toml_str(&c.to_toml()).expect("round trip");
+        assert_eq!(back, c);
+        assert_eq!(back.hash_hex(), c.hash_hex());
+    }
+
+    fn expect_field(text: &str, field: &str) {
+        match Config::from_toml_str(text) {
+            Err(e) => {
+                let msg = e.to_string();
+                assert!(msg.contains(field), "error `{msg}` should name `{field}`");
+            }
+            Ok(_) => panic!("config `{text}` should be rejected"),
+        }
+    }
+
+    #[test]
+    fn bad_values_name_their_field() {
+        expect_field("[detector]\nexposure_s = -1.0", "detector.exposure_s");
+        expect_field("[detector]\nexposure_s = nan", "detector.exposure_s");
+        expect_field(
+            "[instrument]\nspider_width_m = 0.5",
+            "instrument.spider_width_m",
+        );
+        expect_field(
+            "[instrument]\nobstruction_diameter_m = 0.36",
+            "instrument.obstruction_diameter_m",
+        );
+        expect_field(
+            "[band]\nwavelength_min_um = 2.0\nwavelength_max_um = 2.5",
+            "band",
+        );
+        expect_field("[readout]\norder = \"sideways\"", "order");
+        expect_field("[ace]\nsigma_mas = inf", "ace.sigma_mas");
+        expect_field("[scene]\nmag_hw = nan", "scene.mag_hw");
+        expect_field("[fidelity]\nsubpixels = 0", "fidelity.subpixels");
+        expect_field("[analysis]\nfit_radius_px = 9.0", "analysis.fit_radius_px");
+        expect_field("[ace]\nspan_s = 5.0", "ace.span_s");
+        expect_field("unknown_key = 3", "unknown_key");
+        expect_field("[scene]\nkind = \"catalogue\"", "scene.catalogue");
+    }
+
+    #[test]
+    fn missing_file_is_a_clear_error() {
+        let e = Config::load(Path::new("/nonexistent/jsim.toml")).expect_err("missing file");
+        assert!(e.to_string().contains("/nonexistent/jsim.toml"));
+    }
+
+    #[test]
+    fn plate_scale_matches_spec() {
+        let s = Instrument::default().plate_scale_mas();
+        assert!((s - 472.1).abs() < 0.1, "plate scale {s}");
+    }
+}

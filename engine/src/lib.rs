@@ -1,0 +1,50 @@
+//! # JASMINE image simulator and ePSF astrometry engine
+//!
+//! The pipeline, one way, each stage a module named for the physics it models:
+//!
+//! ```text
+//! config ─► optics (pupil, Fringe Zernike WFE, polychromatic PSF) ─► integrate::kernel (pixel-response table K)
+//!        ─► jitter (ACE PSD → time series) ─► readout (per-pixel exposure windows)
+//!        ─► integrate (CPU reference / direct / fast, or wgpu) ─► detector (flats, dark, noise, gain, ADC)
+//!        ─► io (FITS + truth) ─► epsf (Anderson & King 2000) ─► astrometry (accuracy, CRLB, countermeasures)
+//! ```
+//!
+//! ## Conventions (used everywhere)
+//! * **Pixels**: 0-based; pixel `(X, Y)` covers `X − ½ ≤ x < X + ½`, so integer coordinates are pixel *centres*.
+//!   FITS viewers count from 1 (add 1 for ds9). Images are stored row-major, `data[Y * nx + X]`, Y up.
+//! * **Angles on the sky**: milliarcseconds (`_mas`); the plate scale is `206264.806·pitch/focal` arcsec/px.
+//! * **Time**: seconds (`_s`) from the start of the ACE series; exposure `i` starts at `first_exposure_start_s + i·cadence`.
+//! * **Flux**: electrons (`_e`) until the detector converts to ADU with the gain (`e_per_adu`).
+//! * **PSF tables** hold the fraction of the total flux per table cell (they sum to the encircled energy inside
+//!   the table), on a square grid with `oversampling` cells per detector pixel whose central node is the optical axis.
+//! * **FFT normalisation**: rustfft's unnormalised transforms; every use documents its own scaling.
+//! * **Randomness**: every draw comes from a ChaCha stream derived from the run seed and a named stream id
+//!   ([`rng`]); the seed is written to every FITS header, and the same seed gives the same image.
+
+pub mod astrometry;
+pub mod bench;
+pub mod config;
+pub mod detector;
+pub mod epsf;
+pub mod experiment;
+pub mod gpu;
+pub mod integrate;
+pub mod io;
+pub mod jitter;
+pub mod numerics;
+pub mod optics;
+pub mod photometry;
+pub mod predict;
+pub mod readout;
+pub mod rng;
+pub mod scene;
+pub mod simulate;
+pub mod sweep;
+
+pub use config::Config;
+
+/// Engine version recorded in every output header.
+pub const VERSION: &str = env!("CARGO_PKG_VERSION");
+
+/// Arcseconds per radian.
+pub const ARCSEC_PER_RAD: f64 = 206_264.806_247_096_36;

@@ -1,0 +1,7 @@
+//! Small numerical building blocks shared by the physics modules: a safe dense matrix product, 2-D FFTs,
+//! a dense linear solver, and robust statistics.
+
+pub mod fft2;
+pub mod gemm;
+pub mod linalg;
+pub mod stats;
