@@ -1,1 +1,90 @@
-//! TODO
+//! Exposure integration: every pixel integrates the jittering PSF over its own exposure window.
+//!
+//! * [`kernel`]: the pixel-response table K (subpixels + intra-pixel map folded in, exactly);
+//! * [`track`]: the jitter track on the time grid and window weights;
+//! * [`cpu`]: reference, direct and fast methods on the CPU (rayon over stars);
+//! * the same direct and fast methods on the GPU live in [`crate::gpu`] (WGSL in `shaders/`).
+//!
+//! Cost grows with what the scene holds: stamps only around stars, one kernel per distinct PSF, and the
+//! fast method integrates once the part of the exposure all pixels of a stamp share.
+
+pub mod cpu;
+pub mod kernel;
+pub mod track;
+
+use crate::config::Method;
+use crate::optics::psf::PsfTable;
+use crate::readout::ReadoutTiming;
+pub use cpu::{StarSpec, Stamp};
+use kernel::{IntraPixelMap, PixelKernel};
+use rayon::prelude::*;
+use std::sync::Arc;
+use track::Track;
+
+/// How the star moves during the exposure.
+#[derive(Debug, Clone, Copy)]
+pub enum Motion<'a> {
+    /// No time dependence (Gaussian ACE folded into the kernel, or a still telescope).
+    Static,
+    /// A jitter track; every pixel integrates its own window.
+    Track(&'a Track),
+}
+
+/// One star with the PSF/kernel it uses.
+#[derive(Debug, Clone)]
+pub struct StarJob {
+    pub star: StarSpec,
+    pub kernel: Arc<PixelKernel>,
+    /// Needed by the reference method only.
+    pub psf: Arc<PsfTable>,
+}
+
+/// Frame-level parameters of an integration.
+#[derive(Debug, Clone)]
+pub struct FrameSpec<'a> {
+    pub timing: &'a ReadoutTiming,
+    pub detector_px: usize,
+    pub stamp_radius_px: usize,
+    pub method: Method,
+    pub map: &'a IntraPixelMap,
+}
+
+/// Stamp bounds of a job, or `None` when it misses the detector.
+pub fn bounds_of(job: &StarJob, motion: Motion<'_>, frame: &FrameSpec<'_>) -> Option<(i64, i64, usize, usize)> {
+    let track = match motion {
+        Motion::Static => None,
+        Motion::Track(t) => Some(t),
+    };
+    cpu::stamp_bounds(job.star.x_px, job.star.y_px, track, frame.stamp_radius_px, frame.detector_px)
+}
+
+/// Integrate one star on the CPU.
+pub fn integrate_star_cpu(job: &StarJob, motion: Motion<'_>, frame: &FrameSpec<'_>) -> Option<Stamp> {
+    let b = bounds_of(job, motion, frame)?;
+    Some(match motion {
+        Motion::Static => cpu::static_stamp(&job.star, &job.kernel, frame.timing.exposure_s, b),
+        Motion::Track(t) => match frame.method {
+            Method::Reference => cpu::reference_stamp(&job.star, &job.psf, frame.map, t, frame.timing, b),
+            Method::Direct => cpu::direct_stamp(&job.star, &job.kernel, t, frame.timing, b),
+            Method::Fast => cpu::fast_stamp(&job.star, &job.kernel, t, frame.timing, b),
+        },
+    })
+}
+
+/// Integrate all stars on the CPU (parallel over stars).
+pub fn integrate_cpu(jobs: &[StarJob], motion: Motion<'_>, frame: &FrameSpec<'_>) -> Vec<Stamp> {
+    jobs.par_iter().filter_map(|j| integrate_star_cpu(j, motion, frame)).collect()
+}
+
+/// Add stamps into a row-major `n × n` image.
+pub fn add_stamps(image: &mut [f64], n: usize, stamps: &[Stamp]) {
+    for s in stamps {
+        for iy in 0..s.ny {
+            let y = s.y0 as usize + iy;
+            let row = &mut image[y * n + s.x0 as usize..y * n + s.x0 as usize + s.nx];
+            for (o, v) in row.iter_mut().zip(&s.data[iy * s.nx..(iy + 1) * s.nx]) {
+                *o += v;
+            }
+        }
+    }
+}

@@ -1,0 +1,320 @@
+//! The pixel-response table: one look-up replaces the sum over a pixel's subpixels, exactly.
+//!
+//! A pixel is split into s×s subpixels with centres at offsets `δ_k = ((k + ½)/s − ½)` px from its centre and
+//! sensitivities `w_k` (the intra-pixel map, mean 1). The signal of a pixel whose centre lies at `Δ` from the
+//! (jittered) star is the midpoint-rule integral of the bilinear PSF density ρ over the pixel area:
+//!
+//! `K(Δ) = Σ_k (w_k / s²) · ρ(Δ + δ_k)`      (fraction of the star's flux, per unit time)
+//!
+//! ρ is bilinear on the PSF grid (spacing 1/os px), so each term is bilinear between breakpoints
+//! `j/os − δ_k`. If every δ_k is a multiple of `1/G` with `G = os·m`, all breakpoints lie on the grid of
+//! spacing 1/G, and K tabulated on that grid **is exactly bilinear in between**: one bilinear look-up of K
+//! equals the s² look-ups of the reference to rounding. [`refinement`] finds the smallest such m
+//! (m = 1 when os is a multiple of 2s; the defaults os = 16, s = 8 give G = 16).
+//!
+//! The same exactness makes the fast method exact: cloud-in-cell deposits of the jitter track onto the
+//! G-grid, convolved with K at the grid nodes, reproduce the bilinear look-ups of K at every pixel centre.
+
+use crate::config::{Detector, IntraPixel};
+use crate::optics::psf::PsfTable;
+use rayon::prelude::*;
+use std::path::Path;
+
+/// Errors building the intra-pixel map.
+#[derive(Debug, thiserror::Error)]
+pub enum KernelError {
+    #[error("intra-pixel map {path}: {message}")]
+    MapFile { path: String, message: String },
+    #[error("pixel kernel grid too fine: psf_oversampling {os} with {s} subpixels needs {g} nodes per pixel (max 256); pick subpixels dividing the oversampling")]
+    TooFine { os: usize, s: usize, g: usize },
+}
+
+/// Intra-pixel sensitivity over s×s subpixels, mean 1, row-major `[ky * s + kx]`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct IntraPixelMap {
+    pub subpixels: usize,
+    pub weights: Vec<f64>,
+}
+
+impl IntraPixelMap {
+    pub fn uniform(s: usize) -> Self {
+        Self { subpixels: s, weights: vec![1.0; s * s] }
+    }
+
+    /// Resolve the configured map at `subpixels` per axis (a CSV map sets its own size).
+    pub fn from_config(det: &Detector, subpixels: usize) -> Result<Self, KernelError> {
+        let map = match &det.intra_pixel {
+            IntraPixel::Uniform => Self::uniform(subpixels),
+            IntraPixel::Separable { profile_x, profile_y } => {
+                let rs = |p: &[f64]| -> Vec<f64> {
+                    (0..subpixels).map(|k| p[(((k as f64 + 0.5) / subpixels as f64) * p.len() as f64) as usize]).collect()
+                };
+                let (px, py) = (rs(profile_x), rs(profile_y));
+                let mut w = vec![0.0; subpixels * subpixels];
+                for ky in 0..subpixels {
+                    for kx in 0..subpixels {
+                        w[ky * subpixels + kx] = px[kx] * py[ky];
+                    }
+                }
+                Self { subpixels, weights: w }
+            }
+            IntraPixel::Csv { path } => Self::from_csv(path)?,
+        };
+        Ok(map.normalised())
+    }
+
+    fn from_csv(path: &Path) -> Result<Self, KernelError> {
+        let err = |message: String| KernelError::MapFile { path: path.display().to_string(), message };
+        let text = std::fs::read_to_string(path).map_err(|e| err(e.to_string()))?;
+        let rows: Vec<Vec<f64>> = text
+            .lines()
+            .map(str::trim)
+            .filter(|l| !l.is_empty() && !l.starts_with('#'))
+            .map(|l| l.split(',').map(|v| v.trim().parse::<f64>().map_err(|e| err(format!("`{v}`: {e}")))).collect())
+            .collect::<Result<_, _>>()?;
+        let s = rows.len();
+        if s == 0 || rows.iter().any(|r| r.len() != s) {
+            return Err(err(format!("needs a square table (found {s} rows of unequal or different length)")));
+        }
+        let weights: Vec<f64> = rows.into_iter().flatten().collect();
+        if weights.iter().any(|w| !w.is_finite() || *w < 0.0) || weights.iter().sum::<f64>() <= 0.0 {
+            return Err(err("values must be finite, ≥ 0, with a positive mean".into()));
+        }
+        Ok(Self { subpixels: s, weights })
+    }
+
+    fn normalised(mut self) -> Self {
+        let mean = self.weights.iter().sum::<f64>() / self.weights.len() as f64;
+        if mean > 0.0 {
+            self.weights.iter_mut().for_each(|w| *w /= mean);
+        }
+        self
+    }
+
+    /// Subpixel-centre offset from the pixel centre, px.
+    pub fn offset_px(&self, k: usize) -> f64 {
+        (k as f64 + 0.5) / self.subpixels as f64 - 0.5
+    }
+}
+
+fn gcd(a: usize, b: usize) -> usize {
+    if b == 0 { a } else { gcd(b, a % b) }
+}
+
+/// Smallest m such that every subpixel offset is a multiple of `1/(os·m)` px.
+///
+/// Offsets are `(2k + 1 − s)/(2s)`: odd multiples of `1/(2s)` for even s, multiples of `1/s` for odd s.
+pub fn refinement(os: usize, s: usize) -> usize {
+    let q = if s % 2 == 0 { 2 * s } else { s };
+    q / gcd(os, q)
+}
+
+/// The pixel-response table K on a grid of `nodes_per_px` nodes per pixel, `(2·half_nodes + 1)²` nodes,
+/// centred on Δ = 0. Zero beyond the table.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PixelKernel {
+    pub nodes_per_px: usize,
+    pub half_nodes: usize,
+    pub data: Vec<f64>,
+}
+
+impl PixelKernel {
+    /// Build K from a PSF table and an intra-pixel map.
+    pub fn build(psf: &PsfTable, map: &IntraPixelMap) -> Result<Self, KernelError> {
+        let os = psf.oversampling;
+        let s = map.subpixels;
+        let m = refinement(os, s);
+        let g = os * m;
+        if g > 256 {
+            return Err(KernelError::TooFine { os, s, g });
+        }
+        // support: the PSF half-width plus half a pixel, plus one node
+        let half = psf.half_cells * m + g / 2 + 1;
+        let n = 2 * half + 1;
+        let inv_s2 = 1.0 / (s * s) as f64;
+        // Subpixel offsets in PSF cells are integers/m: integer part and the fractional step index.
+        let offs: Vec<f64> = (0..s).map(|k| map.offset_px(k) * os as f64).collect();
+        let mut data = vec![0.0; n * n];
+        data.par_chunks_mut(n).enumerate().for_each(|(iy, row)| {
+            let dy_cells = (iy as f64 - half as f64) / m as f64;
+            for (ix, out) in row.iter_mut().enumerate() {
+                let dx_cells = (ix as f64 - half as f64) / m as f64;
+                let mut acc = 0.0;
+                for ky in 0..s {
+                    let v = dy_cells + offs[ky];
+                    for kx in 0..s {
+                        let w = map.weights[ky * s + kx];
+                        if w != 0.0 {
+                            acc += w * bilinear_cells(psf, dx_cells + offs[kx], v);
+                        }
+                    }
+                }
+                *out = acc * inv_s2 * (os * os) as f64;
+            }
+        });
+        Ok(Self { nodes_per_px: g, half_nodes: half, data })
+    }
+
+    pub fn n(&self) -> usize {
+        2 * self.half_nodes + 1
+    }
+
+    /// Value at node offsets from the centre (0 outside).
+    #[inline]
+    pub fn node(&self, ix: i64, iy: i64) -> f64 {
+        let h = self.half_nodes as i64;
+        if ix.abs() > h || iy.abs() > h {
+            0.0
+        } else {
+            self.data[((iy + h) * self.n() as i64 + ix + h) as usize]
+        }
+    }
+
+    /// Bilinear look-up at Δ = (dx, dy) pixels (pixel centre minus star position).
+    #[inline]
+    pub fn eval(&self, dx_px: f64, dy_px: f64) -> f64 {
+        let g = self.nodes_per_px as f64;
+        let h = self.half_nodes as f64;
+        let (u, v) = (dx_px * g + h, dy_px * g + h);
+        let (fu, fv) = (u.floor(), v.floor());
+        let n = self.n();
+        if fu < 0.0 || fv < 0.0 || fu >= (n - 1) as f64 || fv >= (n - 1) as f64 {
+            // at the very edge (or beyond) the table is zero to within the PSF truncation
+            return self.node(fu as i64 - self.half_nodes as i64, fv as i64 - self.half_nodes as i64)
+                * ((fu - u + 1.0) * (fv - v + 1.0)).clamp(0.0, 1.0);
+        }
+        let (tu, tv) = (u - fu, v - fv);
+        let i = fv as usize * n + fu as usize;
+        let d = &self.data;
+        (1.0 - tv) * ((1.0 - tu) * d[i] + tu * d[i + 1]) + tv * ((1.0 - tu) * d[i + n] + tu * d[i + n + 1])
+    }
+
+    /// Σ over all pixel positions of a star at a given sub-pixel phase: the fraction of the flux the table
+    /// delivers to pixels (≈ the PSF table's sum for a uniform map).
+    pub fn pixel_sum(&self, phase_x: f64, phase_y: f64) -> f64 {
+        let r = (self.half_nodes / self.nodes_per_px) as i64 + 1;
+        let mut s = 0.0;
+        for py in -r..=r {
+            for px in -r..=r {
+                s += self.eval(px as f64 - phase_x, py as f64 - phase_y);
+            }
+        }
+        s
+    }
+
+    /// Largest |Δ| (px) with a non-zero table value.
+    pub fn support_px(&self) -> f64 {
+        self.half_nodes as f64 / self.nodes_per_px as f64
+    }
+}
+
+/// Bilinear PSF density per cell² at a position in PSF cells.
+#[inline]
+fn bilinear_cells(psf: &PsfTable, u: f64, v: f64) -> f64 {
+    let (fu, fv) = (u.floor(), v.floor());
+    let (tu, tv) = (u - fu, v - fv);
+    let (iu, iv) = (fu as i64, fv as i64);
+    (1.0 - tu) * (1.0 - tv) * psf.at(iu, iv)
+        + tu * (1.0 - tv) * psf.at(iu + 1, iv)
+        + (1.0 - tu) * tv * psf.at(iu, iv + 1)
+        + tu * tv * psf.at(iu + 1, iv + 1)
+}
+
+/// The reference sum over subpixels (what K replaces), for tests and the `reference` method.
+pub fn subpixel_sum(psf: &PsfTable, map: &IntraPixelMap, dx_px: f64, dy_px: f64) -> f64 {
+    let s = map.subpixels;
+    let mut acc = 0.0;
+    for ky in 0..s {
+        for kx in 0..s {
+            acc += map.weights[ky * s + kx] * psf.density_px2(dx_px + map.offset_px(kx), dy_px + map.offset_px(ky));
+        }
+    }
+    acc / (s * s) as f64
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn gaussian_psf(os: usize, half_px: usize, sigma_px: f64) -> PsfTable {
+        let half = half_px * os;
+        let n = 2 * half + 1;
+        let mut data = vec![0.0; n * n];
+        for iy in 0..n {
+            for ix in 0..n {
+                let (x, y) = ((ix as f64 - half as f64) / os as f64, (iy as f64 - half as f64) / os as f64);
+                // an asymmetric blob so that symmetry cannot hide an index error
+                data[iy * n + ix] = (-(x - 0.2).powi(2) / (2.0 * sigma_px * sigma_px) - y * y / (3.0 * sigma_px * sigma_px)).exp()
+                    * (1.0 + 0.3 * x);
+            }
+        }
+        let sum: f64 = data.iter().sum();
+        data.iter_mut().for_each(|v| *v /= sum);
+        PsfTable { oversampling: os, half_cells: half, data }
+    }
+
+    #[test]
+    fn refinement_makes_offsets_grid_multiples() {
+        for os in [4, 8, 13, 16] {
+            for s in [1, 2, 3, 4, 5, 8] {
+                let m = refinement(os, s);
+                let g = (os * m) as f64;
+                for k in 0..s {
+                    let off = ((k as f64 + 0.5) / s as f64 - 0.5) * g;
+                    assert!((off - off.round()).abs() < 1e-9, "os {os} s {s}: offset {off}");
+                }
+            }
+        }
+        assert_eq!(refinement(16, 8), 1);
+        assert_eq!(refinement(13, 8), 16);
+    }
+
+    #[test]
+    fn kernel_lookup_equals_subpixel_sum_exactly() {
+        for (os, s) in [(8, 4), (6, 3), (8, 8)] {
+            let psf = gaussian_psf(os, 4, 0.7);
+            let mut map = IntraPixelMap::uniform(s);
+            // a non-uniform map
+            for (i, w) in map.weights.iter_mut().enumerate() {
+                *w = 0.6 + 0.8 * ((i * 7) % 5) as f64 / 4.0;
+            }
+            let map = map.normalised();
+            let k = PixelKernel::build(&psf, &map).expect("kernel");
+            let mut worst: f64 = 0.0;
+            for t in 0..200 {
+                let dx = -3.0 + 6.0 * ((t as f64 * 0.618_034) % 1.0);
+                let dy = -3.0 + 6.0 * ((t as f64 * 0.414_214) % 1.0);
+                let a = k.eval(dx, dy);
+                let b = subpixel_sum(&psf, &map, dx, dy);
+                worst = worst.max((a - b).abs());
+            }
+            let peak = k.data.iter().cloned().fold(0.0, f64::max);
+            assert!(worst / peak < 1e-13, "os {os} s {s}: |K − Σ subpixels| / peak = {:e}", worst / peak);
+        }
+    }
+
+    #[test]
+    fn kernel_conserves_flux_for_uniform_map() {
+        // subpixels = PSF cells: the subpixel lattice samples the bilinear PSF at every cell, exactly
+        let psf = gaussian_psf(4, 5, 0.8);
+        let k = PixelKernel::build(&psf, &IntraPixelMap::uniform(4)).expect("kernel");
+        for (px, py) in [(0.0, 0.0), (0.3, -0.2), (0.49, 0.5)] {
+            let s = k.pixel_sum(px, py);
+            assert!((s - psf.sum()).abs() < 1e-12, "phase ({px},{py}): {s}");
+        }
+        // coarser subpixels: the midpoint rule's error is small but not zero
+        let psf = gaussian_psf(8, 5, 0.8);
+        let k = PixelKernel::build(&psf, &IntraPixelMap::uniform(4)).expect("kernel");
+        let s = k.pixel_sum(0.3, -0.2);
+        assert!((s - psf.sum()).abs() < 1e-4, "{s}");
+    }
+
+    #[test]
+    fn separable_map_is_normalised() {
+        let mut det = Detector::default();
+        det.intra_pixel = IntraPixel::Separable { profile_x: vec![0.55, 1.0, 1.35], profile_y: vec![1.0, 2.0] };
+        let m = IntraPixelMap::from_config(&det, 6).expect("map");
+        assert!((m.weights.iter().sum::<f64>() / 36.0 - 1.0).abs() < 1e-12);
+        assert!(m.weights[0] < m.weights[5]);
+    }
+}

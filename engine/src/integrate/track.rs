@@ -1,0 +1,159 @@
+//! The jitter track of one exposure on the integration time grid, and the weights of a pixel's window.
+//!
+//! Sample j represents the interval `[t₀ + (j − ½)Δt, t₀ + (j + ½)Δt)` (zero-order hold of the ACE series,
+//! every `time_stride`-th sample). A window `[a, b)` gives sample j the weight
+//! `w_j = |interval_j ∩ [a, b)| / Δt`, so Σ w_j Δt = b − a exactly: flux is conserved for any window.
+
+use crate::jitter::AceSeries;
+
+/// Star displacement (pixels) during one exposure, times relative to the exposure start.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Track {
+    pub dt_s: f64,
+    /// Centre time of sample 0, seconds from the exposure start.
+    pub t0_s: f64,
+    pub dx_px: Vec<f64>,
+    pub dy_px: Vec<f64>,
+}
+
+/// The samples overlapping a window: `first..=last`, with fractional weights at both ends.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct WindowWeights {
+    pub first: usize,
+    pub last: usize,
+    pub w_first: f64,
+    pub w_last: f64,
+}
+
+impl WindowWeights {
+    /// Weight of sample j.
+    #[inline]
+    pub fn weight(&self, j: usize) -> f64 {
+        if j < self.first || j > self.last {
+            0.0
+        } else if j == self.first {
+            self.w_first
+        } else if j == self.last {
+            self.w_last
+        } else {
+            1.0
+        }
+    }
+
+    /// Σ of the weights (window length / Δt).
+    pub fn total(&self) -> f64 {
+        if self.last == self.first {
+            self.w_first
+        } else {
+            self.w_first + self.w_last + (self.last - self.first - 1) as f64
+        }
+    }
+}
+
+impl Track {
+    /// Cut the exposure starting at absolute series time `t_start_s` and lasting `span_s` from the series,
+    /// converting mas to pixels, keeping every `stride`-th sample.
+    pub fn from_series(series: &AceSeries, t_start_s: f64, span_s: f64, stride: usize, plate_scale_mas: f64) -> Self {
+        let stride = stride.max(1);
+        let dt = series.dt_s * stride as f64;
+        // first sample whose interval reaches the exposure start
+        let j0 = ((t_start_s / dt) - 0.5).floor().max(0.0) as usize;
+        let j1 = (((t_start_s + span_s) / dt) + 1.5).ceil() as usize;
+        let mut dx = Vec::with_capacity(j1.saturating_sub(j0));
+        let mut dy = Vec::with_capacity(j1.saturating_sub(j0));
+        for j in j0..j1 {
+            let i = (j * stride).min(series.len().saturating_sub(1));
+            if series.is_empty() {
+                dx.push(0.0);
+                dy.push(0.0);
+            } else {
+                dx.push(series.x_mas[i] / plate_scale_mas);
+                dy.push(series.y_mas[i] / plate_scale_mas);
+            }
+        }
+        Self { dt_s: dt, t0_s: j0 as f64 * dt - t_start_s, dx_px: dx, dy_px: dy }
+    }
+
+    /// A still telescope over `[0, span_s)`, sampled every `dt_s`.
+    pub fn still(span_s: f64, dt_s: f64) -> Self {
+        let n = (span_s / dt_s).ceil() as usize + 2;
+        Self { dt_s, t0_s: 0.0, dx_px: vec![0.0; n], dy_px: vec![0.0; n] }
+    }
+
+    pub fn len(&self) -> usize {
+        self.dx_px.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.dx_px.is_empty()
+    }
+
+    /// Weights of the window `[a, b)` (seconds from the exposure start).
+    pub fn window(&self, a_s: f64, b_s: f64) -> WindowWeights {
+        let n = self.len();
+        if n == 0 || !(b_s > a_s) {
+            return WindowWeights { first: 0, last: 0, w_first: 0.0, w_last: 0.0 };
+        }
+        // sample j covers [t0 + (j − ½)dt, t0 + (j + ½)dt)
+        let ua = (a_s - self.t0_s) / self.dt_s + 0.5;
+        let ub = (b_s - self.t0_s) / self.dt_s + 0.5;
+        let first = (ua.floor().max(0.0) as usize).min(n - 1);
+        let last = ((ub.ceil() - 1.0).max(0.0) as usize).min(n - 1);
+        if first == last {
+            return WindowWeights { first, last, w_first: (ub - ua).max(0.0), w_last: (ub - ua).max(0.0) };
+        }
+        let w_first = (first as f64 + 1.0 - ua).clamp(0.0, 1.0);
+        let w_last = (ub - last as f64).clamp(0.0, 1.0);
+        WindowWeights { first, last, w_first, w_last }
+    }
+
+    /// Range of the displacement over all samples: (min_x, max_x, min_y, max_y), px.
+    pub fn extent(&self) -> (f64, f64, f64, f64) {
+        let f = |v: &[f64]| v.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &x| (lo.min(x), hi.max(x)));
+        let (a, b) = f(&self.dx_px);
+        let (c, d) = f(&self.dy_px);
+        if a.is_finite() { (a, b, c, d) } else { (0.0, 0.0, 0.0, 0.0) }
+    }
+
+    /// Weighted mean displacement over a window (px).
+    pub fn window_mean(&self, w: &WindowWeights) -> (f64, f64) {
+        let (mut sx, mut sy, mut s) = (0.0, 0.0, 0.0);
+        for j in w.first..=w.last {
+            let wj = w.weight(j);
+            sx += wj * self.dx_px[j];
+            sy += wj * self.dy_px[j];
+            s += wj;
+        }
+        if s > 0.0 { (sx / s, sy / s) } else { (0.0, 0.0) }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn window_weights_sum_to_window_length() {
+        let t = Track { dt_s: 0.15e-3, t0_s: -0.0001, dx_px: vec![0.0; 100_000], dy_px: vec![0.0; 100_000] };
+        for (a, b) in [(0.1, 12.6), (0.100_003, 12.600_003), (1.31, 13.81), (0.0, 0.0001), (2.0, 2.00001)] {
+            let w = t.window(a, b);
+            let total = w.total() * t.dt_s;
+            assert!((total - (b - a)).abs() < 1e-12, "[{a}, {b}): {total}");
+            let direct: f64 = (w.first..=w.last).map(|j| w.weight(j)).sum::<f64>() * t.dt_s;
+            assert!((direct - (b - a)).abs() < 1e-12);
+        }
+    }
+
+    #[test]
+    fn series_cut_covers_the_exposure() {
+        let s = AceSeries { dt_s: 1e-3, x_mas: (0..20_000).map(|i| i as f64).collect(), y_mas: vec![0.0; 20_000],
+            convention: crate::config::SigmaConvention::WholeSeries, achieved_sigma_mas: (0.0, 0.0) };
+        let t = Track::from_series(&s, 2.0, 13.81, 2, 472.0);
+        let w = t.window(0.0, 13.81);
+        assert!((w.total() * t.dt_s - 13.81).abs() < 1e-9);
+        // sample j's time ↔ the series value at that time
+        let j = 100;
+        let time = 2.0 + t.t0_s + j as f64 * t.dt_s;
+        assert!((t.dx_px[j] * 472.0 - time * 1e3).abs() < 1e-6);
+    }
+}
