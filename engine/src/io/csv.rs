@@ -1,0 +1,77 @@
+//! Plain CSV tables (readable by pandas/astropy): a header line, then rows, written atomically.
+
+use super::{IoError, write_atomic};
+use std::fmt::Write as _;
+use std::path::Path;
+
+/// A value of a CSV cell.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Cell {
+    F(f64),
+    I(i64),
+    S(String),
+}
+
+impl std::fmt::Display for Cell {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Cell::F(v) => write!(f, "{v}"),
+            Cell::I(v) => write!(f, "{v}"),
+            Cell::S(s) => {
+                if s.contains(',') || s.contains('"') {
+                    write!(f, "\"{}\"", s.replace('"', "\"\""))
+                } else {
+                    f.write_str(s)
+                }
+            }
+        }
+    }
+}
+
+/// Render a table as CSV text.
+pub fn render(header: &[&str], rows: &[Vec<Cell>]) -> String {
+    let mut s = header.join(",");
+    s.push('\n');
+    for r in rows {
+        let line: Vec<String> = r.iter().map(|c| c.to_string()).collect();
+        let _ = writeln!(s, "{}", line.join(","));
+    }
+    s
+}
+
+/// Write a CSV table atomically.
+pub fn write(path: &Path, header: &[&str], rows: &[Vec<Cell>]) -> Result<(), IoError> {
+    write_atomic(path, render(header, rows).as_bytes())
+}
+
+/// Read a CSV with a header into (header, rows of strings). Quoted cells are not supported beyond
+/// the plain comma-separated numbers and names this project writes.
+pub fn read(path: &Path) -> Result<(Vec<String>, Vec<Vec<String>>), IoError> {
+    let text = std::fs::read_to_string(path).map_err(|e| IoError::io(path, e))?;
+    let mut lines = text.lines().filter(|l| !l.trim().is_empty() && !l.starts_with('#'));
+    let header: Vec<String> = lines
+        .next()
+        .ok_or_else(|| IoError::Format { path: path.to_path_buf(), message: "empty file".into() })?
+        .split(',')
+        .map(|s| s.trim().to_string())
+        .collect();
+    let rows = lines.map(|l| l.split(',').map(|s| s.trim().trim_matches('"').to_string()).collect()).collect();
+    Ok((header, rows))
+}
+
+/// Column `name` of a table read with [`read`], parsed as f64.
+pub fn column_f64(path: &Path, header: &[String], rows: &[Vec<String>], name: &str) -> Result<Vec<f64>, IoError> {
+    let i = header
+        .iter()
+        .position(|h| h == name)
+        .ok_or_else(|| IoError::Format { path: path.to_path_buf(), message: format!("no column `{name}`") })?;
+    rows.iter()
+        .enumerate()
+        .map(|(k, r)| {
+            r.get(i).and_then(|v| v.parse::<f64>().ok()).filter(|v| v.is_finite()).ok_or_else(|| IoError::Format {
+                path: path.to_path_buf(),
+                message: format!("row {}: column `{name}` is not a finite number", k + 2),
+            })
+        })
+        .collect()
+}

@@ -1,0 +1,336 @@
+//! FITS output and input (cfitsio, bundled through `fitsio-src`).
+//!
+//! A simulated exposure is one file:
+//! * primary HDU: the image in ADU — `uint16` (BITPIX 16, BZERO 32768) when digitised with ≤ 16 bits,
+//!   `float32` otherwise — with the provenance headers (EXPTIME, GAIN, RDNOISE, BUNIT, SEED, READOUT,
+//!   ACECASE, ACESIGMA, CONFHASH, ENGINE, …);
+//! * `DQ`: data-quality bits (uint8, see [`crate::detector::dq`]);
+//! * `TRUTH`: the input catalogue (binary table: id, x, y, flux_e, …; 0-based pixel coordinates);
+//! * `CONFIG`: the full configuration as TOML text, one line per row.
+//!
+//! FITS dimensions are `[ny, nx]` (NAXIS2, NAXIS1) and the data row-major, so astropy's `data[y, x]`
+//! is our pixel (x, y); ds9 shows it at (x + 1, y + 1).
+
+use super::{IoError, temp_path};
+use fitsio::FitsFile;
+use fitsio::images::{ImageDescription, ImageType};
+use fitsio::tables::{ColumnDataType, ColumnDescription};
+use std::path::Path;
+
+/// A header card value.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Value {
+    F(f64),
+    I(i64),
+    S(String),
+}
+
+/// A header card: key (≤ 8 characters), value, comment.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Card {
+    pub key: String,
+    pub value: Value,
+    pub comment: String,
+}
+
+impl Card {
+    pub fn f(key: &str, v: f64, comment: &str) -> Self {
+        Self { key: key.into(), value: Value::F(v), comment: comment.into() }
+    }
+    pub fn i(key: &str, v: i64, comment: &str) -> Self {
+        Self { key: key.into(), value: Value::I(v), comment: comment.into() }
+    }
+    pub fn s(key: &str, v: impl Into<String>, comment: &str) -> Self {
+        Self { key: key.into(), value: Value::S(v.into()), comment: comment.into() }
+    }
+}
+
+/// A numeric column of a binary table.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Column {
+    F64(String, Vec<f64>),
+    I64(String, Vec<i64>),
+}
+
+impl Column {
+    fn name(&self) -> &str {
+        match self {
+            Column::F64(n, _) | Column::I64(n, _) => n,
+        }
+    }
+    fn len(&self) -> usize {
+        match self {
+            Column::F64(_, v) => v.len(),
+            Column::I64(_, v) => v.len(),
+        }
+    }
+}
+
+/// Image pixel storage.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Pixels<'a> {
+    U16(&'a [u16]),
+    F32(&'a [f32]),
+    F64(&'a [f64]),
+}
+
+/// One HDU to write.
+#[derive(Debug, Clone)]
+pub enum Hdu<'a> {
+    Image { name: &'a str, nx: usize, ny: usize, pixels: Pixels<'a>, cards: Vec<Card> },
+    U8Image { name: &'a str, nx: usize, ny: usize, data: &'a [u8] },
+    Table { name: &'a str, columns: Vec<Column>, cards: Vec<Card> },
+    Text { name: &'a str, text: &'a str },
+}
+
+fn write_cards(f: &mut FitsFile, hdu: &fitsio::hdu::FitsHdu, cards: &[Card], path: &Path) -> Result<(), IoError> {
+    for c in cards {
+        let r = match &c.value {
+            Value::F(v) => hdu.write_key(f, &c.key, (*v, c.comment.as_str())),
+            Value::I(v) => hdu.write_key(f, &c.key, (*v, c.comment.as_str())),
+            Value::S(v) => hdu.write_key(f, &c.key, (v.clone(), c.comment.as_str())),
+        };
+        r.map_err(|e| IoError::fits(path, format!("header {}: {e}", c.key)))?;
+    }
+    Ok(())
+}
+
+/// Write a multi-HDU FITS file atomically. The first HDU must be an image (the primary).
+pub fn write(path: &Path, hdus: &[Hdu<'_>]) -> Result<(), IoError> {
+    let tmp = temp_path(path);
+    let _ = std::fs::remove_file(&tmp);
+    let result = write_inner(&tmp, hdus);
+    match result {
+        Ok(()) => std::fs::rename(&tmp, path).map_err(|e| {
+            let _ = std::fs::remove_file(&tmp);
+            IoError::io(path, e)
+        }),
+        Err(e) => {
+            let _ = std::fs::remove_file(&tmp);
+            Err(e)
+        }
+    }
+}
+
+fn write_inner(path: &Path, hdus: &[Hdu<'_>]) -> Result<(), IoError> {
+    let fe = |e: fitsio::errors::Error| IoError::fits(path, e);
+    let Some(Hdu::Image { nx, ny, pixels, cards, .. }) = hdus.first() else {
+        return Err(IoError::fits(path, "the primary HDU must be an image"));
+    };
+    let primary_type = match pixels {
+        Pixels::U16(_) => ImageType::UnsignedShort,
+        Pixels::F32(_) => ImageType::Float,
+        Pixels::F64(_) => ImageType::Double,
+    };
+    let dims = [*ny, *nx];
+    let desc = ImageDescription { data_type: primary_type, dimensions: &dims };
+    let mut f = FitsFile::create(path).with_custom_primary(&desc).open().map_err(fe)?;
+    let primary = f.primary_hdu().map_err(fe)?;
+    match pixels {
+        Pixels::U16(d) => primary.write_image(&mut f, d),
+        Pixels::F32(d) => primary.write_image(&mut f, d),
+        Pixels::F64(d) => primary.write_image(&mut f, d),
+    }
+    .map_err(fe)?;
+    write_cards(&mut f, &primary, cards, path)?;
+    for h in &hdus[1..] {
+        match h {
+            Hdu::Image { name, nx, ny, pixels, cards } => {
+                let t = match pixels {
+                    Pixels::U16(_) => ImageType::UnsignedShort,
+                    Pixels::F32(_) => ImageType::Float,
+                    Pixels::F64(_) => ImageType::Double,
+                };
+                let dims = [*ny, *nx];
+                let hdu = f.create_image(*name, &ImageDescription { data_type: t, dimensions: &dims }).map_err(fe)?;
+                match pixels {
+                    Pixels::U16(d) => hdu.write_image(&mut f, d),
+                    Pixels::F32(d) => hdu.write_image(&mut f, d),
+                    Pixels::F64(d) => hdu.write_image(&mut f, d),
+                }
+                .map_err(fe)?;
+                write_cards(&mut f, &hdu, cards, path)?;
+            }
+            Hdu::U8Image { name, nx, ny, data } => {
+                let dims = [*ny, *nx];
+                let hdu = f
+                    .create_image(*name, &ImageDescription { data_type: ImageType::UnsignedByte, dimensions: &dims })
+                    .map_err(fe)?;
+                hdu.write_image(&mut f, data).map_err(fe)?;
+            }
+            Hdu::Table { name, columns, cards } => {
+                let descs = columns
+                    .iter()
+                    .map(|c| {
+                        let t = match c {
+                            Column::F64(..) => ColumnDataType::Double,
+                            Column::I64(..) => ColumnDataType::Long,
+                        };
+                        ColumnDescription::new(c.name()).with_type(t).create()
+                    })
+                    .collect::<Result<Vec<_>, _>>()
+                    .map_err(fe)?;
+                let hdu = f.create_table(*name, &descs).map_err(fe)?;
+                for c in columns {
+                    if c.len() == 0 {
+                        continue;
+                    }
+                    match c {
+                        Column::F64(n, v) => hdu.write_col(&mut f, n.as_str(), v),
+                        Column::I64(n, v) => hdu.write_col(&mut f, n.as_str(), v),
+                    }
+                    .map_err(fe)?;
+                }
+                write_cards(&mut f, &hdu, cards, path)?;
+            }
+            Hdu::Text { name, text } => {
+                let lines: Vec<String> = text.lines().map(|l| if l.is_empty() { " ".to_string() } else { l.to_string() }).collect();
+                let width = lines.iter().map(|l| l.len()).max().unwrap_or(1).max(1);
+                let desc = ColumnDescription::new("LINE").with_type(ColumnDataType::String).that_repeats(width).create().map_err(fe)?;
+                let hdu = f.create_table(*name, &[desc]).map_err(fe)?;
+                if !lines.is_empty() {
+                    hdu.write_col(&mut f, "LINE", &lines).map_err(fe)?;
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
+/// An image read back, with the headers the analysis needs.
+#[derive(Debug, Clone)]
+pub struct ImageRead {
+    pub nx: usize,
+    pub ny: usize,
+    /// Pixel values as stored (ADU), as f32.
+    pub data: Vec<f32>,
+    pub dq: Option<Vec<u8>>,
+    pub gain_e_per_adu: f64,
+    pub read_noise_e: f64,
+    pub bias_adu: f64,
+    pub exposure_s: f64,
+    pub saturation_adu: Option<f64>,
+}
+
+/// Read a float header with a default.
+fn key_f64(f: &mut FitsFile, hdu: &fitsio::hdu::FitsHdu, key: &str) -> Option<f64> {
+    hdu.read_key::<f64>(f, key).ok()
+}
+
+/// Read the primary image (and DQ extension, if any) of a file.
+pub fn read_image(path: &Path) -> Result<ImageRead, IoError> {
+    if !path.exists() {
+        return Err(IoError::io(path, std::io::Error::new(std::io::ErrorKind::NotFound, "no such file")));
+    }
+    let fe = |e: fitsio::errors::Error| IoError::fits(path, e);
+    let mut f = FitsFile::open(path).map_err(fe)?;
+    let hdu = f.primary_hdu().map_err(fe)?;
+    let (nx, ny) = match &hdu.info {
+        fitsio::hdu::HduInfo::ImageInfo { shape, .. } if shape.len() == 2 => (shape[1], shape[0]),
+        _ => return Err(IoError::fits(path, "the primary HDU is not a 2-D image")),
+    };
+    let data: Vec<f32> = hdu.read_image(&mut f).map_err(fe)?;
+    let gain = key_f64(&mut f, &hdu, "GAIN").unwrap_or(1.0);
+    let rn = key_f64(&mut f, &hdu, "RDNOISE").unwrap_or(0.0);
+    let bias = key_f64(&mut f, &hdu, "BIASADU").unwrap_or(0.0);
+    let exptime = key_f64(&mut f, &hdu, "EXPTIME").unwrap_or(1.0);
+    let sat = key_f64(&mut f, &hdu, "SATURATE");
+    let dq = match f.hdu("DQ") {
+        Ok(h) => h.read_image::<Vec<u8>>(&mut f).ok().filter(|d| d.len() == nx * ny),
+        Err(_) => None,
+    };
+    Ok(ImageRead {
+        nx,
+        ny,
+        data,
+        dq,
+        gain_e_per_adu: gain,
+        read_noise_e: rn,
+        bias_adu: bias,
+        exposure_s: exptime,
+        saturation_adu: sat,
+    })
+}
+
+/// Read numeric columns of a binary-table extension.
+pub fn read_table(path: &Path, ext: &str, columns: &[&str]) -> Result<Vec<Vec<f64>>, IoError> {
+    let fe = |e: fitsio::errors::Error| IoError::fits(path, e);
+    let mut f = FitsFile::open(path).map_err(fe)?;
+    let hdu = f.hdu(ext).map_err(|e| IoError::fits(path, format!("extension {ext}: {e}")))?;
+    columns
+        .iter()
+        .map(|c| hdu.read_col::<f64>(&mut f, c).map_err(|e| IoError::fits(path, format!("column {c}: {e}"))))
+        .collect()
+}
+
+/// Read a string header of the primary HDU.
+pub fn read_string_key(path: &Path, key: &str) -> Result<String, IoError> {
+    let fe = |e: fitsio::errors::Error| IoError::fits(path, e);
+    let mut f = FitsFile::open(path).map_err(fe)?;
+    let hdu = f.primary_hdu().map_err(fe)?;
+    hdu.read_key::<String>(&mut f, key).map_err(|e| IoError::fits(path, format!("header {key}: {e}")))
+}
+
+/// Read the CONFIG text extension (the TOML the file was made with).
+pub fn read_text(path: &Path, ext: &str) -> Result<String, IoError> {
+    let fe = |e: fitsio::errors::Error| IoError::fits(path, e);
+    let mut f = FitsFile::open(path).map_err(fe)?;
+    let hdu = f.hdu(ext).map_err(|e| IoError::fits(path, format!("extension {ext}: {e}")))?;
+    let lines: Vec<String> = hdu.read_col(&mut f, "LINE").map_err(fe)?;
+    Ok(lines.iter().map(|l| l.trim_end()).collect::<Vec<_>>().join("\n"))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn round_trip_image_table_and_text() {
+        let dir = std::env::temp_dir().join(format!("jsim-fits-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("tmp");
+        let path = dir.join("t.fits");
+        let (nx, ny) = (5usize, 3usize);
+        let img: Vec<u16> = (0..15).map(|v| v * 1000).collect();
+        let dq: Vec<u8> = (0..15).map(|v| (v % 3) as u8).collect();
+        write(
+            &path,
+            &[
+                Hdu::Image {
+                    name: "",
+                    nx,
+                    ny,
+                    pixels: Pixels::U16(&img),
+                    cards: vec![Card::f("GAIN", 3.0, "e/ADU"), Card::s("READOUT", "rolling", "order")],
+                },
+                Hdu::U8Image { name: "DQ", nx, ny, data: &dq },
+                Hdu::Table {
+                    name: "TRUTH",
+                    columns: vec![Column::F64("x".into(), vec![1.5, 2.5]), Column::I64("id".into(), vec![7, 8])],
+                    cards: vec![],
+                },
+                Hdu::Text { name: "CONFIG", text: "a = 1\n\n[b]\nc = \"x\"" },
+            ],
+        )
+        .expect("write");
+        let r = read_image(&path).expect("read");
+        assert_eq!((r.nx, r.ny), (5, 3));
+        assert_eq!(r.data[7], 7000.0);
+        assert_eq!(r.data[14], 14000.0); // above 32767: BZERO handled
+        assert_eq!(r.gain_e_per_adu, 3.0);
+        assert_eq!(r.dq.as_deref(), Some(&dq[..]));
+        let t = read_table(&path, "TRUTH", &["x", "id"]).expect("table");
+        assert_eq!(t[0], vec![1.5, 2.5]);
+        assert_eq!(t[1], vec![7.0, 8.0]);
+        assert_eq!(read_string_key(&path, "READOUT").expect("key"), "rolling");
+        assert!(read_text(&path, "CONFIG").expect("text").contains("c = \"x\""));
+        // no temporary file left behind
+        let left: Vec<_> = std::fs::read_dir(&dir).expect("dir").filter_map(|e| e.ok()).collect();
+        assert_eq!(left.len(), 1);
+    }
+
+    #[test]
+    fn missing_file_names_the_path() {
+        let e = read_image(Path::new("/nonexistent/img.fits")).expect_err("missing");
+        assert!(e.to_string().contains("/nonexistent/img.fits"));
+    }
+}
