@@ -69,49 +69,54 @@ pub fn expose(cfg: &Config, star_e: &[f64], flat: &[f32], image_index: u64) -> D
     let read = Normal::new(0.0, d.read_noise_e.max(0.0)).ok();
     let mut adu = vec![0.0f32; n * n];
     let mut dqv = vec![0u8; n * n];
-    adu.par_chunks_mut(n).zip(dqv.par_chunks_mut(n)).enumerate().for_each(|(y, (out, dq_row))| {
-        let stream_index = image_index.wrapping_mul(1 << 20) + y as u64;
-        let mut shot_rng = rng::stream(cfg.seed, Stream::ShotNoise, stream_index);
-        let mut read_rng = rng::stream(cfg.seed, Stream::ReadNoise, stream_index);
-        for x in 0..n {
-            let i = y * n + x;
-            let mut flags = 0u8;
-            let mean_e = if photosensitive(cfg, x, y) {
-                star_e[i].max(0.0) * flat[i] as f64 + dark_e
-            } else {
-                flags |= dq::BORDER;
-                0.0
-            };
-            let mut e = if d.shot_noise && mean_e > 0.0 {
-                Poisson::new(mean_e).map(|p| p.sample(&mut shot_rng)).unwrap_or(mean_e)
-            } else {
-                mean_e
-            };
-            if e >= d.full_well_e {
-                e = d.full_well_e;
-                flags |= dq::SATURATED;
-            }
-            if d.read_noise {
-                if let Some(rn) = &read {
-                    e += rn.sample(&mut read_rng);
+    adu.par_chunks_mut(n)
+        .zip(dqv.par_chunks_mut(n))
+        .enumerate()
+        .for_each(|(y, (out, dq_row))| {
+            let stream_index = image_index.wrapping_mul(1 << 20) + y as u64;
+            let mut shot_rng = rng::stream(cfg.seed, Stream::ShotNoise, stream_index);
+            let mut read_rng = rng::stream(cfg.seed, Stream::ReadNoise, stream_index);
+            for x in 0..n {
+                let i = y * n + x;
+                let mut flags = 0u8;
+                let mean_e = if photosensitive(cfg, x, y) {
+                    star_e[i].max(0.0) * flat[i] as f64 + dark_e
+                } else {
+                    flags |= dq::BORDER;
+                    0.0
+                };
+                let mut e = if d.shot_noise && mean_e > 0.0 {
+                    Poisson::new(mean_e)
+                        .map(|p| p.sample(&mut shot_rng))
+                        .unwrap_or(mean_e)
+                } else {
+                    mean_e
+                };
+                if e >= d.full_well_e {
+                    e = d.full_well_e;
+                    flags |= dq::SATURATED;
                 }
-            }
-            let mut v = e / d.gain_e_per_adu + d.bias_adu;
-            if d.digitise {
-                v = v.round();
-                if v >= adc_max {
-                    v = adc_max;
-                    flags |= dq::ADC_HIGH;
+                if d.read_noise {
+                    if let Some(rn) = &read {
+                        e += rn.sample(&mut read_rng);
+                    }
                 }
-                if v <= 0.0 {
-                    v = 0.0;
-                    flags |= dq::ADC_LOW;
+                let mut v = e / d.gain_e_per_adu + d.bias_adu;
+                if d.digitise {
+                    v = v.round();
+                    if v >= adc_max {
+                        v = adc_max;
+                        flags |= dq::ADC_HIGH;
+                    }
+                    if v <= 0.0 {
+                        v = 0.0;
+                        flags |= dq::ADC_LOW;
+                    }
                 }
+                out[x] = v as f32;
+                dq_row[x] = flags;
             }
-            out[x] = v as f32;
-            dq_row[x] = flags;
-        }
-    });
+        });
     DetectorImage { n, adu, dq: dqv }
 }
 
@@ -145,7 +150,10 @@ mod tests {
         c.detector.read_noise = false;
         c.detector.digitise = false;
         let (m, v) = moments(&expose(&c, &zero, &flat, 0));
-        assert!((m - dark / g).abs() < 4.0 * (dark.sqrt() / g) / n as f64, "shot mean {m}");
+        assert!(
+            (m - dark / g).abs() < 4.0 * (dark.sqrt() / g) / n as f64,
+            "shot mean {m}"
+        );
         assert!((v / (dark / g / g) - 1.0).abs() < 0.015, "shot var {v}");
         // read noise only: var = 15²/g²
         let mut c = cfg(n);

@@ -23,9 +23,16 @@ pub struct Star {
 #[derive(Debug, thiserror::Error)]
 pub enum SceneError {
     #[error("star catalogue {path}: {source}")]
-    Io { path: String, source: std::io::Error },
+    Io {
+        path: String,
+        source: std::io::Error,
+    },
     #[error("star catalogue {path}, line {line}: {message}")]
-    Parse { path: String, line: usize, message: String },
+    Parse {
+        path: String,
+        line: usize,
+        message: String,
+    },
     #[error("star catalogue {path} holds no stars")]
     Empty { path: String },
 }
@@ -66,9 +73,16 @@ pub fn grid(cfg: &Config) -> Vec<Star> {
 
 /// Read `x,y[,hw[,j_h]]` rows (pixels; a header line and `#` comments are skipped). Missing magnitudes
 /// and colours take the scene defaults.
-pub fn read_catalogue(path: &Path, default_mag: f64, default_jh: f64) -> Result<Vec<Star>, SceneError> {
+pub fn read_catalogue(
+    path: &Path,
+    default_mag: f64,
+    default_jh: f64,
+) -> Result<Vec<Star>, SceneError> {
     let p = path.display().to_string();
-    let text = std::fs::read_to_string(path).map_err(|source| SceneError::Io { path: p.clone(), source })?;
+    let text = std::fs::read_to_string(path).map_err(|source| SceneError::Io {
+        path: p.clone(),
+        source,
+    })?;
     let mut stars = Vec::new();
     for (k, line) in text.lines().enumerate() {
         let l = line.trim();
@@ -90,7 +104,11 @@ pub fn read_catalogue(path: &Path, default_mag: f64, default_jh: f64) -> Result<
                     if x.is_finite() {
                         Ok(x)
                     } else {
-                        Err(SceneError::Parse { path: p.clone(), line: k + 1, message: format!("column {name} is {x}") })
+                        Err(SceneError::Parse {
+                            path: p.clone(),
+                            line: k + 1,
+                            message: format!("column {name} is {x}"),
+                        })
                     }
                 }
                 _ => default.ok_or_else(|| SceneError::Parse {
@@ -123,7 +141,9 @@ mod tests {
         let cfg = Config::default();
         let s = grid(&cfg);
         assert_eq!(s.len(), 400);
-        let (xmin, xmax) = s.iter().fold((f64::MAX, f64::MIN), |(a, b), st| (a.min(st.x_px), b.max(st.x_px)));
+        let (xmin, xmax) = s.iter().fold((f64::MAX, f64::MIN), |(a, b), st| {
+            (a.min(st.x_px), b.max(st.x_px))
+        });
         assert!(xmin > 8.0 && xmax < 1960.0, "{xmin} {xmax}");
         // spacing and random phases
         let d = s[1].x_px - s[0].x_px;
@@ -138,7 +158,11 @@ mod tests {
         let dir = std::env::temp_dir().join(format!("jsim-cat-{}", std::process::id()));
         std::fs::create_dir_all(&dir).expect("tmp");
         let good = dir.join("good.csv");
-        std::fs::write(&good, "x,y,hw,j_h\n10.5, 20.25, 12.0, 1.5\n# comment\n30,40\n").expect("write");
+        std::fs::write(
+            &good,
+            "x,y,hw,j_h\n10.5, 20.25, 12.0, 1.5\n# comment\n30,40\n",
+        )
+        .expect("write");
         let s = read_catalogue(&good, 13.0, 2.0).expect("parse");
         assert_eq!(s.len(), 2);
         assert_eq!((s[1].mag_hw, s[1].j_minus_h), (13.0, 2.0));

@@ -1,1 +1,388 @@
-//! TODO
+//! One simulated exposure, end to end: scene → PSF bank → pixel kernels → ACE track → integration
+//! (CPU or GPU) → detector → image + truth. [`Simulator`] holds everything that is shared between the
+//! exposures of a dataset (PSFs, kernels, the ACE series, the flat), so a dataset costs one PSF per
+//! distinct colour/zone and one integration per exposure.
+
+use crate::config::{AceCase, Backend, Config, Method};
+use crate::detector::{self, DetectorImage};
+use crate::gpu::GpuIntegrator;
+use crate::integrate::kernel::{IntraPixelMap, KernelError, PixelKernel};
+use crate::integrate::track::Track;
+use crate::integrate::{self, FrameSpec, Motion, StarJob, StarSpec};
+use crate::jitter::AceSeries;
+use crate::optics::PsfBank;
+use crate::optics::psf::PsfTable;
+use crate::photometry;
+use crate::readout::ReadoutTiming;
+use crate::scene::{self, SceneError, Star};
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex};
+use std::time::Instant;
+
+#[derive(Debug, thiserror::Error)]
+pub enum SimError {
+    #[error(transparent)]
+    Config(#[from] crate::config::ConfigError),
+    #[error(transparent)]
+    Scene(#[from] SceneError),
+    #[error(transparent)]
+    Kernel(#[from] KernelError),
+    #[error("GPU integration failed: {0}")]
+    Gpu(String),
+}
+
+/// The true parameters of one star in one exposure.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TruthRow {
+    pub id: usize,
+    /// True position (0-based pixels), without jitter.
+    pub x_px: f64,
+    pub y_px: f64,
+    pub mag_hw: f64,
+    pub j_minus_h: f64,
+    /// Electrons the star delivered during its window (all light, modelled or not).
+    pub flux_e: f64,
+    /// Fraction of that light the PSF table models (the rest, beyond `psf_radius_px`, is dropped).
+    pub modelled_fraction: f64,
+    /// Integration window of the star's central pixel (s from the exposure start) and its length.
+    pub t_start_s: f64,
+    pub exptime_s: f64,
+    /// Mean ACE displacement over the star's window (px): the photocentre shift the jitter predicts.
+    pub jitter_dx_px: f64,
+    pub jitter_dy_px: f64,
+}
+
+/// Per-exposure ACE statistics over the nominal window (mas).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct AceStats {
+    pub mean_x_mas: f64,
+    pub mean_y_mas: f64,
+    pub sigma_x_mas: f64,
+    pub sigma_y_mas: f64,
+    /// |mean over the last 10 % − mean over the first 10 %| of the window, combined.
+    pub drift_mas: f64,
+}
+
+/// Wall-clock times of the stages of one exposure, seconds.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct StageTimes {
+    pub integrate_s: f64,
+    pub detector_s: f64,
+}
+
+/// One simulated exposure.
+#[derive(Debug, Clone)]
+pub struct Exposure {
+    pub index: usize,
+    /// Start of the exposure in the ACE series, s.
+    pub t_start_s: f64,
+    /// Noise-free star electrons per pixel (before the flat), row-major.
+    pub star_e: Vec<f64>,
+    pub image: DetectorImage,
+    pub truth: Vec<TruthRow>,
+    pub ace: AceStats,
+    pub times: StageTimes,
+    /// Where the integration ran: "cpu" or the GPU adapter's name.
+    pub backend: String,
+}
+
+/// Shared state of a dataset's simulation.
+pub struct Simulator {
+    pub cfg: Config,
+    pub stars: Vec<Star>,
+    pub timing: ReadoutTiming,
+    bank: Arc<PsfBank>,
+    map: IntraPixelMap,
+    kernels: Mutex<HashMap<(usize, u64), Arc<PixelKernel>>>,
+    series: Option<Arc<AceSeries>>,
+    flat: Vec<f32>,
+    gpu: Option<Arc<GpuIntegrator>>,
+    /// Why the GPU is not used (said once), if it is not.
+    pub gpu_note: Option<String>,
+}
+
+impl Simulator {
+    /// Build with a fresh PSF bank and the configured backend.
+    pub fn new(cfg: &Config) -> Result<Self, SimError> {
+        Self::with_bank(cfg, Arc::new(PsfBank::new(cfg)), None)
+    }
+
+    /// Build reusing a PSF bank (if it serves this configuration) and, optionally, a GPU context.
+    pub fn with_bank(
+        cfg: &Config,
+        bank: Arc<PsfBank>,
+        gpu: Option<Arc<GpuIntegrator>>,
+    ) -> Result<Self, SimError> {
+        cfg.validate()?;
+        let bank = if bank.serves(cfg) {
+            bank
+        } else {
+            Arc::new(PsfBank::new(cfg))
+        };
+        let stars = scene::build(cfg)?;
+        let timing = ReadoutTiming::new(cfg);
+        let map = IntraPixelMap::from_config(&cfg.detector, cfg.fidelity.subpixels)?;
+        let series = match cfg.ace.case {
+            AceCase::Realistic => {
+                let need = cfg.ace.first_exposure_start_s
+                    + (cfg.fidelity.images.saturating_sub(1)) as f64 * timing.cadence_s()
+                    + timing.span_s();
+                if need > cfg.ace.span_s {
+                    return Err(crate::config::ConfigError::Invalid {
+                        field: "ace.span_s".into(),
+                        value: cfg.ace.span_s.to_string(),
+                        allowed: format!(
+                            "must cover {} exposures of {:.2} s cadence: at least {need:.1} s (or lower fidelity.images)",
+                            cfg.fidelity.images,
+                            timing.cadence_s()
+                        ),
+                    }
+                    .into());
+                }
+                Some(Arc::new(AceSeries::generate(cfg, cfg.seed, 0)))
+            }
+            _ => None,
+        };
+        let flat = detector::inter_pixel_flat(cfg);
+        let (gpu, gpu_note) = match cfg.fidelity.backend {
+            Backend::Cpu => (None, None),
+            Backend::Gpu | Backend::Auto => match gpu {
+                Some(g) => (Some(g), None),
+                None => match GpuIntegrator::shared(cfg.fidelity.backend == Backend::Gpu) {
+                    Ok(g) => (Some(g), None),
+                    Err(e) => (None, Some(e.to_string())),
+                },
+            },
+        };
+        Ok(Self {
+            cfg: cfg.clone(),
+            stars,
+            timing,
+            bank,
+            map,
+            kernels: Mutex::new(HashMap::new()),
+            series,
+            flat,
+            gpu,
+            gpu_note,
+        })
+    }
+
+    /// The PSF bank (shareable with other simulators of the same optics).
+    pub fn bank(&self) -> Arc<PsfBank> {
+        self.bank.clone()
+    }
+
+    /// The ACE series (realistic case).
+    pub fn series(&self) -> Option<&AceSeries> {
+        self.series.as_deref()
+    }
+
+    /// The backend integration runs on: "cpu" or the adapter name.
+    pub fn backend_name(&self) -> String {
+        self.gpu
+            .as_ref()
+            .map(|g| g.adapter_name())
+            .unwrap_or_else(|| "cpu".to_string())
+    }
+
+    /// Jitter blur folded into the kernels (Gaussian ACE), px.
+    fn blur_px(&self) -> f64 {
+        match self.cfg.ace.case {
+            AceCase::Gaussian => self.cfg.ace.sigma_mas / self.cfg.instrument.plate_scale_mas(),
+            _ => 0.0,
+        }
+    }
+
+    /// The PSF of a star (from the bank).
+    pub fn psf_for(&self, star: &Star) -> Arc<PsfTable> {
+        self.bank
+            .get(star.j_minus_h, self.bank.zone_of(star.x_px, star.y_px))
+    }
+
+    /// The pixel kernel of a PSF with this simulation's blur and intra-pixel map (cached).
+    pub fn kernel_for(&self, psf: &Arc<PsfTable>) -> Result<Arc<PixelKernel>, SimError> {
+        let blur = self.blur_px();
+        let key = (Arc::as_ptr(psf) as usize, blur.to_bits());
+        if let Some(k) = self
+            .kernels
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .get(&key)
+        {
+            return Ok(k.clone());
+        }
+        let table = if blur > 0.0 {
+            Arc::new(psf.gaussian_blurred(blur))
+        } else {
+            psf.clone()
+        };
+        let k = Arc::new(PixelKernel::build(&table, &self.map)?);
+        self.kernels
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .insert(key, k.clone());
+        Ok(k)
+    }
+
+    /// Start time of exposure `index` in the ACE series.
+    pub fn exposure_start_s(&self, index: usize) -> f64 {
+        self.cfg.ace.first_exposure_start_s + index as f64 * self.timing.cadence_s()
+    }
+
+    /// The jitter track of exposure `index` (realistic case).
+    pub fn track(&self, index: usize) -> Option<Track> {
+        self.series.as_ref().map(|s| {
+            Track::from_series(
+                s,
+                self.exposure_start_s(index),
+                self.timing.span_s(),
+                self.cfg.fidelity.time_stride,
+                self.cfg.instrument.plate_scale_mas(),
+            )
+        })
+    }
+
+    /// Star jobs for integration (PSF, kernel, rate).
+    pub fn jobs(&self) -> Result<Vec<StarJob>, SimError> {
+        self.stars
+            .iter()
+            .map(|s| {
+                let psf = self.psf_for(s);
+                let kernel = self.kernel_for(&psf)?;
+                Ok(StarJob {
+                    star: StarSpec {
+                        x_px: s.x_px,
+                        y_px: s.y_px,
+                        rate_e_per_s: photometry::electrons_per_s(
+                            s.mag_hw,
+                            self.cfg.photometry.zero_point_e_per_s,
+                        ),
+                    },
+                    kernel,
+                    psf,
+                })
+            })
+            .collect()
+    }
+
+    /// Noise-free star electrons of exposure `index` (the integration stage alone).
+    pub fn integrate(
+        &self,
+        index: usize,
+        jobs: &[StarJob],
+    ) -> Result<(Vec<f64>, Option<Track>), SimError> {
+        let n = self.cfg.instrument.detector_px;
+        let track = self.track(index);
+        let motion = match &track {
+            Some(t) => Motion::Track(t),
+            None => Motion::Static,
+        };
+        let frame = FrameSpec {
+            timing: &self.timing,
+            detector_px: n,
+            stamp_radius_px: self.cfg.fidelity.stamp_radius_px,
+            method: self.cfg.fidelity.method,
+            map: &self.map,
+        };
+        let stamps = match (&self.gpu, self.cfg.fidelity.method) {
+            (Some(g), Method::Direct | Method::Fast) => g
+                .integrate(jobs, motion, &frame)
+                .map_err(|e| SimError::Gpu(e.to_string()))?,
+            _ => integrate::integrate_cpu(jobs, motion, &frame),
+        };
+        let mut img = vec![0.0; n * n];
+        integrate::add_stamps(&mut img, n, &stamps);
+        Ok((img, track))
+    }
+
+    /// Simulate exposure `index` of the dataset.
+    pub fn exposure(&self, index: usize) -> Result<Exposure, SimError> {
+        let jobs = self.jobs()?;
+        let t0 = Instant::now();
+        let (star_e, track) = self.integrate(index, &jobs)?;
+        let t1 = Instant::now();
+        let image = detector::expose(&self.cfg, &star_e, &self.flat, index as u64);
+        let t2 = Instant::now();
+        let truth = self.truth(&jobs, track.as_ref());
+        let ace = self.ace_stats(index);
+        Ok(Exposure {
+            index,
+            t_start_s: self.exposure_start_s(index),
+            star_e,
+            image,
+            truth,
+            ace,
+            times: StageTimes {
+                integrate_s: (t1 - t0).as_secs_f64(),
+                detector_s: (t2 - t1).as_secs_f64(),
+            },
+            backend: if matches!(self.cfg.fidelity.method, Method::Reference) {
+                "cpu".into()
+            } else {
+                self.backend_name()
+            },
+        })
+    }
+
+    /// Truth rows for the jobs of an exposure.
+    pub fn truth(&self, jobs: &[StarJob], track: Option<&Track>) -> Vec<TruthRow> {
+        let n = self.cfg.instrument.detector_px as i64;
+        self.stars
+            .iter()
+            .zip(jobs)
+            .map(|(s, j)| {
+                let (cx, cy) = (
+                    s.x_px.round().clamp(0.0, (n - 1) as f64) as usize,
+                    s.y_px.round().clamp(0.0, (n - 1) as f64) as usize,
+                );
+                let (a, b) = self.timing.window_s(cx, cy);
+                let (jx, jy) = match track {
+                    Some(t) => t.window_mean(&t.window(a, b)),
+                    None => (0.0, 0.0),
+                };
+                let (a, b) = if track.is_some() {
+                    (a, b)
+                } else {
+                    (
+                        self.timing.t_overhead_s,
+                        self.timing.t_overhead_s + self.timing.exposure_s,
+                    )
+                };
+                TruthRow {
+                    id: s.id,
+                    x_px: s.x_px,
+                    y_px: s.y_px,
+                    mag_hw: s.mag_hw,
+                    j_minus_h: s.j_minus_h,
+                    flux_e: j.star.rate_e_per_s * (b - a),
+                    modelled_fraction: j.psf.sum(),
+                    t_start_s: a,
+                    exptime_s: b - a,
+                    jitter_dx_px: jx,
+                    jitter_dy_px: jy,
+                }
+            })
+            .collect()
+    }
+
+    /// ACE statistics over exposure `index`'s nominal window.
+    pub fn ace_stats(&self, index: usize) -> AceStats {
+        let Some(s) = &self.series else {
+            return AceStats::default();
+        };
+        let t0 = self.exposure_start_s(index) + self.timing.t_overhead_s;
+        let t1 = t0 + self.timing.exposure_s;
+        let ((mx, sx), (my, sy)) = s.window_stats(t0, t1);
+        let tenth = 0.1 * self.timing.exposure_s;
+        let ((ax, _), (ay, _)) = s.window_stats(t0, t0 + tenth);
+        let ((bx, _), (by, _)) = s.window_stats(t1 - tenth, t1);
+        AceStats {
+            mean_x_mas: mx,
+            mean_y_mas: my,
+            sigma_x_mas: sx,
+            sigma_y_mas: sy,
+            drift_mas: ((bx - ax).powi(2) + (by - ay).powi(2)).sqrt(),
+        }
+    }
+}

@@ -40,7 +40,13 @@ impl Stamp {
 
 /// Where a star's stamp lies: centred on its mean jittered position, `radius + ⌈excursion⌉` pixels around,
 /// clipped to the detector. `None` if it misses the detector entirely.
-pub fn stamp_bounds(x: f64, y: f64, track: Option<&Track>, radius_px: usize, detector_px: usize) -> Option<(i64, i64, usize, usize)> {
+pub fn stamp_bounds(
+    x: f64,
+    y: f64,
+    track: Option<&Track>,
+    radius_px: usize,
+    detector_px: usize,
+) -> Option<(i64, i64, usize, usize)> {
     let (mx, my, ex) = match track {
         Some(t) if !t.is_empty() => {
             let n = t.len() as f64;
@@ -72,7 +78,12 @@ pub struct StarSpec {
 }
 
 /// Static star (no time dependence): `r · T · K(X − x, Y − y)`.
-pub fn static_stamp(star: &StarSpec, kernel: &PixelKernel, exposure_s: f64, bounds: (i64, i64, usize, usize)) -> Stamp {
+pub fn static_stamp(
+    star: &StarSpec,
+    kernel: &PixelKernel,
+    exposure_s: f64,
+    bounds: (i64, i64, usize, usize),
+) -> Stamp {
     let (x0, y0, nx, ny) = bounds;
     let mut data = vec![0.0; nx * ny];
     let f = star.rate_e_per_s * exposure_s;
@@ -83,7 +94,13 @@ pub fn static_stamp(star: &StarSpec, kernel: &PixelKernel, exposure_s: f64, boun
             data[iy * nx + ix] = f * kernel.eval(dx, dy);
         }
     }
-    Stamp { x0, y0, nx, ny, data }
+    Stamp {
+        x0,
+        y0,
+        nx,
+        ny,
+        data,
+    }
 }
 
 /// Reference method: explicit subpixels × samples.
@@ -112,7 +129,13 @@ pub fn reference_stamp(
             data[iy * nx + ix] = acc * star.rate_e_per_s * track.dt_s;
         }
     }
-    Stamp { x0, y0, nx, ny, data }
+    Stamp {
+        x0,
+        y0,
+        nx,
+        ny,
+        data,
+    }
 }
 
 /// Direct method: one pixel-kernel look-up per (pixel, sample).
@@ -139,7 +162,13 @@ pub fn direct_stamp(
             data[iy * nx + ix] = acc * star.rate_e_per_s * track.dt_s;
         }
     }
-    Stamp { x0, y0, nx, ny, data }
+    Stamp {
+        x0,
+        y0,
+        nx,
+        ny,
+        data,
+    }
 }
 
 /// The cloud-in-cell histogram of a track over a window, on K's node grid, relative to a stamp origin.
@@ -155,10 +184,21 @@ pub struct Histogram {
 
 impl Histogram {
     /// Deposit positions `q_j = star + track_j − origin` (px) × G with the window's weights.
-    pub fn deposit(star: &StarSpec, track: &Track, w: &super::track::WindowWeights, origin: (i64, i64), g: usize) -> Option<Self> {
+    pub fn deposit(
+        star: &StarSpec,
+        track: &Track,
+        w: &super::track::WindowWeights,
+        origin: (i64, i64),
+        g: usize,
+    ) -> Option<Self> {
         let gf = g as f64;
         let (ox, oy) = (star.x_px - origin.0 as f64, star.y_px - origin.1 as f64);
-        let (mut umin, mut umax, mut vmin, mut vmax) = (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
+        let (mut umin, mut umax, mut vmin, mut vmax) = (
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+        );
         for j in w.first..=w.last {
             let u = (ox + track.dx_px[j]) * gf;
             let v = (oy + track.dy_px[j]) * gf;
@@ -192,7 +232,13 @@ impl Histogram {
             data[i + nu] += wj * (1.0 - tu) * tv;
             data[i + nu + 1] += wj * tu * tv;
         }
-        Some(Self { u0, v0, nu, nv, data })
+        Some(Self {
+            u0,
+            v0,
+            nu,
+            nv,
+            data,
+        })
     }
 
     /// For each row, the first and one-past-last non-zero column (empty rows: start == end).
@@ -212,7 +258,13 @@ impl Histogram {
     }
 
     /// `Σ_u H(u) K(P − u)` for the pixel at node coordinates P = (pu, pv) relative to the origin.
-    pub fn convolve_at(&self, kernel: &PixelKernel, runs: &[(usize, usize)], pu: i64, pv: i64) -> f64 {
+    pub fn convolve_at(
+        &self,
+        kernel: &PixelKernel,
+        runs: &[(usize, usize)],
+        pu: i64,
+        pv: i64,
+    ) -> f64 {
         let h = kernel.half_nodes as i64;
         let n = kernel.n() as i64;
         let mut acc = 0.0;
@@ -253,10 +305,15 @@ pub fn fast_stamp(
 ) -> Stamp {
     let (x0, y0, nx, ny) = bounds;
     let windows: Vec<(f64, f64)> = (0..ny)
-        .flat_map(|iy| (0..nx).map(move |ix| ((x0 + ix as i64) as usize, (y0 + iy as i64) as usize)))
+        .flat_map(|iy| {
+            (0..nx).map(move |ix| ((x0 + ix as i64) as usize, (y0 + iy as i64) as usize))
+        })
         .map(|(x, y)| timing.window_s(x, y))
         .collect();
-    let a_max = windows.iter().map(|w| w.0).fold(f64::NEG_INFINITY, f64::max);
+    let a_max = windows
+        .iter()
+        .map(|w| w.0)
+        .fold(f64::NEG_INFINITY, f64::max);
     let b_min = windows.iter().map(|w| w.1).fold(f64::INFINITY, f64::min);
     if !(b_min > a_max) {
         return direct_stamp(star, kernel, track, timing, bounds);
@@ -294,7 +351,13 @@ pub fn fast_stamp(
             data[iy * nx + ix] = acc * star.rate_e_per_s * track.dt_s;
         }
     }
-    Stamp { x0, y0, nx, ny, data }
+    Stamp {
+        x0,
+        y0,
+        nx,
+        ny,
+        data,
+    }
 }
 
 #[cfg(test)]
@@ -308,19 +371,38 @@ mod tests {
         let mut data = vec![0.0; n * n];
         for iy in 0..n {
             for ix in 0..n {
-                let (x, y) = ((ix as f64 - half as f64) / os as f64, (iy as f64 - half as f64) / os as f64);
-                data[iy * n + ix] = (-(x * x + 0.8 * y * y) / (2.0 * 0.6 * 0.6)).exp() * (1.0 + 0.2 * x - 0.1 * y).max(0.0);
+                let (x, y) = (
+                    (ix as f64 - half as f64) / os as f64,
+                    (iy as f64 - half as f64) / os as f64,
+                );
+                data[iy * n + ix] = (-(x * x + 0.8 * y * y) / (2.0 * 0.6 * 0.6)).exp()
+                    * (1.0 + 0.2 * x - 0.1 * y).max(0.0);
             }
         }
         let s: f64 = data.iter().sum();
         data.iter_mut().for_each(|v| *v /= s);
-        PsfTable { oversampling: os, half_cells: half, data }
+        PsfTable {
+            oversampling: os,
+            half_cells: half,
+            data,
+        }
     }
 
     fn wiggly_track(n: usize, dt: f64, amp_px: f64) -> Track {
-        let dx = (0..n).map(|j| amp_px * ((j as f64 * dt * 3.1).sin() + 0.3 * (j as f64 * dt * 130.0).sin())).collect();
-        let dy = (0..n).map(|j| amp_px * ((j as f64 * dt * 1.7).cos() * 0.8 + 0.2 * (j as f64 * dt * 95.0).cos())).collect();
-        Track { dt_s: dt, t0_s: 0.0, dx_px: dx, dy_px: dy }
+        let dx = (0..n)
+            .map(|j| amp_px * ((j as f64 * dt * 3.1).sin() + 0.3 * (j as f64 * dt * 130.0).sin()))
+            .collect();
+        let dy = (0..n)
+            .map(|j| {
+                amp_px * ((j as f64 * dt * 1.7).cos() * 0.8 + 0.2 * (j as f64 * dt * 95.0).cos())
+            })
+            .collect();
+        Track {
+            dt_s: dt,
+            t0_s: 0.0,
+            dx_px: dx,
+            dy_px: dy,
+        }
     }
 
     fn timing(order: ReadoutOrder, exposure_s: f64) -> ReadoutTiming {
@@ -342,14 +424,30 @@ mod tests {
         let track = wiggly_track(3000, 1e-3, 0.4);
         for order in ReadoutOrder::ALL {
             let t = timing(order, 2.5);
-            let star = StarSpec { x_px: 18.37, y_px: 30.81, rate_e_per_s: 1000.0 };
+            let star = StarSpec {
+                x_px: 18.37,
+                y_px: 30.81,
+                rate_e_per_s: 1000.0,
+            };
             let b = stamp_bounds(star.x_px, star.y_px, Some(&track), 4, 200).expect("on detector");
             let r = reference_stamp(&star, &psf, &map, &track, &t, b);
             let d = direct_stamp(&star, &k, &track, &t, b);
             let f = fast_stamp(&star, &k, &track, &t, b);
             let peak = r.data.iter().cloned().fold(0.0, f64::max);
-            let e_dr = r.data.iter().zip(&d.data).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max) / peak;
-            let e_fd = d.data.iter().zip(&f.data).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max) / peak;
+            let e_dr = r
+                .data
+                .iter()
+                .zip(&d.data)
+                .map(|(a, b)| (a - b).abs())
+                .fold(0.0, f64::max)
+                / peak;
+            let e_fd = d
+                .data
+                .iter()
+                .zip(&f.data)
+                .map(|(a, b)| (a - b).abs())
+                .fold(0.0, f64::max)
+                / peak;
             assert!(e_dr < 1e-12, "{order:?}: direct vs reference {e_dr:e}");
             assert!(e_fd < 1e-12, "{order:?}: fast vs direct {e_fd:e}");
         }
@@ -361,11 +459,20 @@ mod tests {
         let k = PixelKernel::build(&psf, &IntraPixelMap::uniform(8)).expect("kernel");
         let t = timing(ReadoutOrder::Rolling, 2.0);
         let track = Track::still(3.0 + t.span_s(), 1e-3);
-        let star = StarSpec { x_px: 50.3, y_px: 41.7, rate_e_per_s: 500.0 };
+        let star = StarSpec {
+            x_px: 50.3,
+            y_px: 41.7,
+            rate_e_per_s: 500.0,
+        };
         let b = stamp_bounds(star.x_px, star.y_px, Some(&track), 6, 200).expect("on detector");
         let s = static_stamp(&star, &k, 2.0, b);
         let f = fast_stamp(&star, &k, &track, &t, b);
-        let err = s.data.iter().zip(&f.data).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+        let err = s
+            .data
+            .iter()
+            .zip(&f.data)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f64::max);
         assert!(err < 1e-9 * 1000.0, "{err}");
         // flux: rate × T × table sum (the 6-px stamp holds the whole 5-px table)
         assert!((s.sum() / (500.0 * 2.0) - psf.sum()).abs() < 1e-9);

@@ -25,7 +25,9 @@ use std::path::Path;
 pub enum KernelError {
     #[error("intra-pixel map {path}: {message}")]
     MapFile { path: String, message: String },
-    #[error("pixel kernel grid too fine: psf_oversampling {os} with {s} subpixels needs {g} nodes per pixel (max 256); pick subpixels dividing the oversampling")]
+    #[error(
+        "pixel kernel grid too fine: psf_oversampling {os} with {s} subpixels needs {g} nodes per pixel (max 256); pick subpixels dividing the oversampling"
+    )]
     TooFine { os: usize, s: usize, g: usize },
 }
 
@@ -38,16 +40,26 @@ pub struct IntraPixelMap {
 
 impl IntraPixelMap {
     pub fn uniform(s: usize) -> Self {
-        Self { subpixels: s, weights: vec![1.0; s * s] }
+        Self {
+            subpixels: s,
+            weights: vec![1.0; s * s],
+        }
     }
 
     /// Resolve the configured map at `subpixels` per axis (a CSV map sets its own size).
     pub fn from_config(det: &Detector, subpixels: usize) -> Result<Self, KernelError> {
         let map = match &det.intra_pixel {
             IntraPixel::Uniform => Self::uniform(subpixels),
-            IntraPixel::Separable { profile_x, profile_y } => {
+            IntraPixel::Separable {
+                profile_x,
+                profile_y,
+            } => {
                 let rs = |p: &[f64]| -> Vec<f64> {
-                    (0..subpixels).map(|k| p[(((k as f64 + 0.5) / subpixels as f64) * p.len() as f64) as usize]).collect()
+                    (0..subpixels)
+                        .map(|k| {
+                            p[(((k as f64 + 0.5) / subpixels as f64) * p.len() as f64) as usize]
+                        })
+                        .collect()
                 };
                 let (px, py) = (rs(profile_x), rs(profile_y));
                 let mut w = vec![0.0; subpixels * subpixels];
@@ -56,7 +68,10 @@ impl IntraPixelMap {
                         w[ky * subpixels + kx] = px[kx] * py[ky];
                     }
                 }
-                Self { subpixels, weights: w }
+                Self {
+                    subpixels,
+                    weights: w,
+                }
             }
             IntraPixel::Csv { path } => Self::from_csv(path)?,
         };
@@ -64,23 +79,42 @@ impl IntraPixelMap {
     }
 
     fn from_csv(path: &Path) -> Result<Self, KernelError> {
-        let err = |message: String| KernelError::MapFile { path: path.display().to_string(), message };
+        let err = |message: String| KernelError::MapFile {
+            path: path.display().to_string(),
+            message,
+        };
         let text = std::fs::read_to_string(path).map_err(|e| err(e.to_string()))?;
         let rows: Vec<Vec<f64>> = text
             .lines()
             .map(str::trim)
             .filter(|l| !l.is_empty() && !l.starts_with('#'))
-            .map(|l| l.split(',').map(|v| v.trim().parse::<f64>().map_err(|e| err(format!("`{v}`: {e}")))).collect())
+            .map(|l| {
+                l.split(',')
+                    .map(|v| {
+                        v.trim()
+                            .parse::<f64>()
+                            .map_err(|e| err(format!("`{v}`: {e}")))
+                    })
+                    .collect()
+            })
             .collect::<Result<_, _>>()?;
         let s = rows.len();
         if s == 0 || rows.iter().any(|r| r.len() != s) {
-            return Err(err(format!("needs a square table (found {s} rows of unequal or different length)")));
+            return Err(err(format!(
+                "needs a square table (found {s} rows of unequal or different length)"
+            )));
         }
         let weights: Vec<f64> = rows.into_iter().flatten().collect();
-        if weights.iter().any(|w| !w.is_finite() || *w < 0.0) || weights.iter().sum::<f64>() <= 0.0 {
-            return Err(err("values must be finite, ≥ 0, with a positive mean".into()));
+        if weights.iter().any(|w| !w.is_finite() || *w < 0.0) || weights.iter().sum::<f64>() <= 0.0
+        {
+            return Err(err(
+                "values must be finite, ≥ 0, with a positive mean".into()
+            ));
         }
-        Ok(Self { subpixels: s, weights })
+        Ok(Self {
+            subpixels: s,
+            weights,
+        })
     }
 
     fn normalised(mut self) -> Self {
@@ -128,8 +162,9 @@ impl PixelKernel {
         if g > 256 {
             return Err(KernelError::TooFine { os, s, g });
         }
-        // support: the PSF half-width plus half a pixel, plus one node
-        let half = psf.half_cells * m + g / 2 + 1;
+        // support: the PSF half-width (+1 cell of bilinear ramp) plus half a pixel; one more node, always
+        // zero, closes the table so that look-ups beyond it can return 0
+        let half = (psf.half_cells + 1) * m + g / 2 + 1;
         let n = 2 * half + 1;
         let inv_s2 = 1.0 / (s * s) as f64;
         // Subpixel offsets in PSF cells are integers/m: integer part and the fractional step index.
@@ -152,7 +187,11 @@ impl PixelKernel {
                 *out = acc * inv_s2 * (os * os) as f64;
             }
         });
-        Ok(Self { nodes_per_px: g, half_nodes: half, data })
+        Ok(Self {
+            nodes_per_px: g,
+            half_nodes: half,
+            data,
+        })
     }
 
     pub fn n(&self) -> usize {
@@ -178,15 +217,16 @@ impl PixelKernel {
         let (u, v) = (dx_px * g + h, dy_px * g + h);
         let (fu, fv) = (u.floor(), v.floor());
         let n = self.n();
+        // the outermost ring of nodes is zero (the table extends one node past the support), so
+        // everything at or beyond it is zero
         if fu < 0.0 || fv < 0.0 || fu >= (n - 1) as f64 || fv >= (n - 1) as f64 {
-            // at the very edge (or beyond) the table is zero to within the PSF truncation
-            return self.node(fu as i64 - self.half_nodes as i64, fv as i64 - self.half_nodes as i64)
-                * ((fu - u + 1.0) * (fv - v + 1.0)).clamp(0.0, 1.0);
+            return 0.0;
         }
         let (tu, tv) = (u - fu, v - fv);
         let i = fv as usize * n + fu as usize;
         let d = &self.data;
-        (1.0 - tv) * ((1.0 - tu) * d[i] + tu * d[i + 1]) + tv * ((1.0 - tu) * d[i + n] + tu * d[i + n + 1])
+        (1.0 - tv) * ((1.0 - tu) * d[i] + tu * d[i + 1])
+            + tv * ((1.0 - tu) * d[i + n] + tu * d[i + n + 1])
     }
 
     /// Σ over all pixel positions of a star at a given sub-pixel phase: the fraction of the flux the table
@@ -226,7 +266,8 @@ pub fn subpixel_sum(psf: &PsfTable, map: &IntraPixelMap, dx_px: f64, dy_px: f64)
     let mut acc = 0.0;
     for ky in 0..s {
         for kx in 0..s {
-            acc += map.weights[ky * s + kx] * psf.density_px2(dx_px + map.offset_px(kx), dy_px + map.offset_px(ky));
+            acc += map.weights[ky * s + kx]
+                * psf.density_px2(dx_px + map.offset_px(kx), dy_px + map.offset_px(ky));
         }
     }
     acc / (s * s) as f64
@@ -242,15 +283,24 @@ mod tests {
         let mut data = vec![0.0; n * n];
         for iy in 0..n {
             for ix in 0..n {
-                let (x, y) = ((ix as f64 - half as f64) / os as f64, (iy as f64 - half as f64) / os as f64);
+                let (x, y) = (
+                    (ix as f64 - half as f64) / os as f64,
+                    (iy as f64 - half as f64) / os as f64,
+                );
                 // an asymmetric blob so that symmetry cannot hide an index error
-                data[iy * n + ix] = (-(x - 0.2).powi(2) / (2.0 * sigma_px * sigma_px) - y * y / (3.0 * sigma_px * sigma_px)).exp()
+                data[iy * n + ix] = (-(x - 0.2).powi(2) / (2.0 * sigma_px * sigma_px)
+                    - y * y / (3.0 * sigma_px * sigma_px))
+                    .exp()
                     * (1.0 + 0.3 * x);
             }
         }
         let sum: f64 = data.iter().sum();
         data.iter_mut().for_each(|v| *v /= sum);
-        PsfTable { oversampling: os, half_cells: half, data }
+        PsfTable {
+            oversampling: os,
+            half_cells: half,
+            data,
+        }
     }
 
     #[test]
@@ -261,7 +311,10 @@ mod tests {
                 let g = (os * m) as f64;
                 for k in 0..s {
                     let off = ((k as f64 + 0.5) / s as f64 - 0.5) * g;
-                    assert!((off - off.round()).abs() < 1e-9, "os {os} s {s}: offset {off}");
+                    assert!(
+                        (off - off.round()).abs() < 1e-9,
+                        "os {os} s {s}: offset {off}"
+                    );
                 }
             }
         }
@@ -289,7 +342,11 @@ mod tests {
                 worst = worst.max((a - b).abs());
             }
             let peak = k.data.iter().cloned().fold(0.0, f64::max);
-            assert!(worst / peak < 1e-13, "os {os} s {s}: |K − Σ subpixels| / peak = {:e}", worst / peak);
+            assert!(
+                worst / peak < 1e-13,
+                "os {os} s {s}: |K − Σ subpixels| / peak = {:e}",
+                worst / peak
+            );
         }
     }
 
@@ -312,7 +369,10 @@ mod tests {
     #[test]
     fn separable_map_is_normalised() {
         let mut det = Detector::default();
-        det.intra_pixel = IntraPixel::Separable { profile_x: vec![0.55, 1.0, 1.35], profile_y: vec![1.0, 2.0] };
+        det.intra_pixel = IntraPixel::Separable {
+            profile_x: vec![0.55, 1.0, 1.35],
+            profile_y: vec![1.0, 2.0],
+        };
         let m = IntraPixelMap::from_config(&det, 6).expect("map");
         assert!((m.weights.iter().sum::<f64>() / 36.0 - 1.0).abs() < 1e-12);
         assert!(m.weights[0] < m.weights[5]);

@@ -15,7 +15,7 @@ pub mod track;
 use crate::config::Method;
 use crate::optics::psf::PsfTable;
 use crate::readout::ReadoutTiming;
-pub use cpu::{StarSpec, Stamp};
+pub use cpu::{Stamp, StarSpec};
 use kernel::{IntraPixelMap, PixelKernel};
 use rayon::prelude::*;
 use std::sync::Arc;
@@ -50,21 +50,37 @@ pub struct FrameSpec<'a> {
 }
 
 /// Stamp bounds of a job, or `None` when it misses the detector.
-pub fn bounds_of(job: &StarJob, motion: Motion<'_>, frame: &FrameSpec<'_>) -> Option<(i64, i64, usize, usize)> {
+pub fn bounds_of(
+    job: &StarJob,
+    motion: Motion<'_>,
+    frame: &FrameSpec<'_>,
+) -> Option<(i64, i64, usize, usize)> {
     let track = match motion {
         Motion::Static => None,
         Motion::Track(t) => Some(t),
     };
-    cpu::stamp_bounds(job.star.x_px, job.star.y_px, track, frame.stamp_radius_px, frame.detector_px)
+    cpu::stamp_bounds(
+        job.star.x_px,
+        job.star.y_px,
+        track,
+        frame.stamp_radius_px,
+        frame.detector_px,
+    )
 }
 
 /// Integrate one star on the CPU.
-pub fn integrate_star_cpu(job: &StarJob, motion: Motion<'_>, frame: &FrameSpec<'_>) -> Option<Stamp> {
+pub fn integrate_star_cpu(
+    job: &StarJob,
+    motion: Motion<'_>,
+    frame: &FrameSpec<'_>,
+) -> Option<Stamp> {
     let b = bounds_of(job, motion, frame)?;
     Some(match motion {
         Motion::Static => cpu::static_stamp(&job.star, &job.kernel, frame.timing.exposure_s, b),
         Motion::Track(t) => match frame.method {
-            Method::Reference => cpu::reference_stamp(&job.star, &job.psf, frame.map, t, frame.timing, b),
+            Method::Reference => {
+                cpu::reference_stamp(&job.star, &job.psf, frame.map, t, frame.timing, b)
+            }
             Method::Direct => cpu::direct_stamp(&job.star, &job.kernel, t, frame.timing, b),
             Method::Fast => cpu::fast_stamp(&job.star, &job.kernel, t, frame.timing, b),
         },
@@ -73,7 +89,9 @@ pub fn integrate_star_cpu(job: &StarJob, motion: Motion<'_>, frame: &FrameSpec<'
 
 /// Integrate all stars on the CPU (parallel over stars).
 pub fn integrate_cpu(jobs: &[StarJob], motion: Motion<'_>, frame: &FrameSpec<'_>) -> Vec<Stamp> {
-    jobs.par_iter().filter_map(|j| integrate_star_cpu(j, motion, frame)).collect()
+    jobs.par_iter()
+        .filter_map(|j| integrate_star_cpu(j, motion, frame))
+        .collect()
 }
 
 /// Add stamps into a row-major `n × n` image.

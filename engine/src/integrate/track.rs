@@ -53,7 +53,13 @@ impl WindowWeights {
 impl Track {
     /// Cut the exposure starting at absolute series time `t_start_s` and lasting `span_s` from the series,
     /// converting mas to pixels, keeping every `stride`-th sample.
-    pub fn from_series(series: &AceSeries, t_start_s: f64, span_s: f64, stride: usize, plate_scale_mas: f64) -> Self {
+    pub fn from_series(
+        series: &AceSeries,
+        t_start_s: f64,
+        span_s: f64,
+        stride: usize,
+        plate_scale_mas: f64,
+    ) -> Self {
         let stride = stride.max(1);
         let dt = series.dt_s * stride as f64;
         // first sample whose interval reaches the exposure start
@@ -71,13 +77,23 @@ impl Track {
                 dy.push(series.y_mas[i] / plate_scale_mas);
             }
         }
-        Self { dt_s: dt, t0_s: j0 as f64 * dt - t_start_s, dx_px: dx, dy_px: dy }
+        Self {
+            dt_s: dt,
+            t0_s: j0 as f64 * dt - t_start_s,
+            dx_px: dx,
+            dy_px: dy,
+        }
     }
 
     /// A still telescope over `[0, span_s)`, sampled every `dt_s`.
     pub fn still(span_s: f64, dt_s: f64) -> Self {
         let n = (span_s / dt_s).ceil() as usize + 2;
-        Self { dt_s, t0_s: 0.0, dx_px: vec![0.0; n], dy_px: vec![0.0; n] }
+        Self {
+            dt_s,
+            t0_s: 0.0,
+            dx_px: vec![0.0; n],
+            dy_px: vec![0.0; n],
+        }
     }
 
     pub fn len(&self) -> usize {
@@ -92,7 +108,12 @@ impl Track {
     pub fn window(&self, a_s: f64, b_s: f64) -> WindowWeights {
         let n = self.len();
         if n == 0 || !(b_s > a_s) {
-            return WindowWeights { first: 0, last: 0, w_first: 0.0, w_last: 0.0 };
+            return WindowWeights {
+                first: 0,
+                last: 0,
+                w_first: 0.0,
+                w_last: 0.0,
+            };
         }
         // sample j covers [t0 + (j − ½)dt, t0 + (j + ½)dt)
         let ua = (a_s - self.t0_s) / self.dt_s + 0.5;
@@ -100,19 +121,38 @@ impl Track {
         let first = (ua.floor().max(0.0) as usize).min(n - 1);
         let last = ((ub.ceil() - 1.0).max(0.0) as usize).min(n - 1);
         if first == last {
-            return WindowWeights { first, last, w_first: (ub - ua).max(0.0), w_last: (ub - ua).max(0.0) };
+            return WindowWeights {
+                first,
+                last,
+                w_first: (ub - ua).max(0.0),
+                w_last: (ub - ua).max(0.0),
+            };
         }
         let w_first = (first as f64 + 1.0 - ua).clamp(0.0, 1.0);
         let w_last = (ub - last as f64).clamp(0.0, 1.0);
-        WindowWeights { first, last, w_first, w_last }
+        WindowWeights {
+            first,
+            last,
+            w_first,
+            w_last,
+        }
     }
 
     /// Range of the displacement over all samples: (min_x, max_x, min_y, max_y), px.
     pub fn extent(&self) -> (f64, f64, f64, f64) {
-        let f = |v: &[f64]| v.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &x| (lo.min(x), hi.max(x)));
+        let f = |v: &[f64]| {
+            v.iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &x| {
+                    (lo.min(x), hi.max(x))
+                })
+        };
         let (a, b) = f(&self.dx_px);
         let (c, d) = f(&self.dy_px);
-        if a.is_finite() { (a, b, c, d) } else { (0.0, 0.0, 0.0, 0.0) }
+        if a.is_finite() {
+            (a, b, c, d)
+        } else {
+            (0.0, 0.0, 0.0, 0.0)
+        }
     }
 
     /// Weighted mean displacement over a window (px).
@@ -124,7 +164,11 @@ impl Track {
             sy += wj * self.dy_px[j];
             s += wj;
         }
-        if s > 0.0 { (sx / s, sy / s) } else { (0.0, 0.0) }
+        if s > 0.0 {
+            (sx / s, sy / s)
+        } else {
+            (0.0, 0.0)
+        }
     }
 }
 
@@ -134,8 +178,19 @@ mod tests {
 
     #[test]
     fn window_weights_sum_to_window_length() {
-        let t = Track { dt_s: 0.15e-3, t0_s: -0.0001, dx_px: vec![0.0; 100_000], dy_px: vec![0.0; 100_000] };
-        for (a, b) in [(0.1, 12.6), (0.100_003, 12.600_003), (1.31, 13.81), (0.0, 0.0001), (2.0, 2.00001)] {
+        let t = Track {
+            dt_s: 0.15e-3,
+            t0_s: -0.0001,
+            dx_px: vec![0.0; 100_000],
+            dy_px: vec![0.0; 100_000],
+        };
+        for (a, b) in [
+            (0.1, 12.6),
+            (0.100_003, 12.600_003),
+            (1.31, 13.81),
+            (0.0, 0.0001),
+            (2.0, 2.00001),
+        ] {
             let w = t.window(a, b);
             let total = w.total() * t.dt_s;
             assert!((total - (b - a)).abs() < 1e-12, "[{a}, {b}): {total}");
@@ -146,8 +201,13 @@ mod tests {
 
     #[test]
     fn series_cut_covers_the_exposure() {
-        let s = AceSeries { dt_s: 1e-3, x_mas: (0..20_000).map(|i| i as f64).collect(), y_mas: vec![0.0; 20_000],
-            convention: crate::config::SigmaConvention::WholeSeries, achieved_sigma_mas: (0.0, 0.0) };
+        let s = AceSeries {
+            dt_s: 1e-3,
+            x_mas: (0..20_000).map(|i| i as f64).collect(),
+            y_mas: vec![0.0; 20_000],
+            convention: crate::config::SigmaConvention::WholeSeries,
+            achieved_sigma_mas: (0.0, 0.0),
+        };
         let t = Track::from_series(&s, 2.0, 13.81, 2, 472.0);
         let w = t.window(0.0, 13.81);
         assert!((w.total() * t.dt_s - 13.81).abs() < 1e-9);

@@ -48,30 +48,52 @@ pub fn write(path: &Path, header: &[&str], rows: &[Vec<Cell>]) -> Result<(), IoE
 /// the plain comma-separated numbers and names this project writes.
 pub fn read(path: &Path) -> Result<(Vec<String>, Vec<Vec<String>>), IoError> {
     let text = std::fs::read_to_string(path).map_err(|e| IoError::io(path, e))?;
-    let mut lines = text.lines().filter(|l| !l.trim().is_empty() && !l.starts_with('#'));
+    let mut lines = text
+        .lines()
+        .filter(|l| !l.trim().is_empty() && !l.starts_with('#'));
     let header: Vec<String> = lines
         .next()
-        .ok_or_else(|| IoError::Format { path: path.to_path_buf(), message: "empty file".into() })?
+        .ok_or_else(|| IoError::Format {
+            path: path.to_path_buf(),
+            message: "empty file".into(),
+        })?
         .split(',')
         .map(|s| s.trim().to_string())
         .collect();
-    let rows = lines.map(|l| l.split(',').map(|s| s.trim().trim_matches('"').to_string()).collect()).collect();
+    let rows = lines
+        .map(|l| {
+            l.split(',')
+                .map(|s| s.trim().trim_matches('"').to_string())
+                .collect()
+        })
+        .collect();
     Ok((header, rows))
 }
 
 /// Column `name` of a table read with [`read`], parsed as f64.
-pub fn column_f64(path: &Path, header: &[String], rows: &[Vec<String>], name: &str) -> Result<Vec<f64>, IoError> {
+pub fn column_f64(
+    path: &Path,
+    header: &[String],
+    rows: &[Vec<String>],
+    name: &str,
+) -> Result<Vec<f64>, IoError> {
     let i = header
         .iter()
         .position(|h| h == name)
-        .ok_or_else(|| IoError::Format { path: path.to_path_buf(), message: format!("no column `{name}`") })?;
+        .ok_or_else(|| IoError::Format {
+            path: path.to_path_buf(),
+            message: format!("no column `{name}`"),
+        })?;
     rows.iter()
         .enumerate()
         .map(|(k, r)| {
-            r.get(i).and_then(|v| v.parse::<f64>().ok()).filter(|v| v.is_finite()).ok_or_else(|| IoError::Format {
-                path: path.to_path_buf(),
-                message: format!("row {}: column `{name}` is not a finite number", k + 2),
-            })
+            r.get(i)
+                .and_then(|v| v.parse::<f64>().ok())
+                .filter(|v| v.is_finite())
+                .ok_or_else(|| IoError::Format {
+                    path: path.to_path_buf(),
+                    message: format!("row {}: column `{name}` is not a finite number", k + 2),
+                })
         })
         .collect()
 }

@@ -35,13 +35,25 @@ pub struct Card {
 
 impl Card {
     pub fn f(key: &str, v: f64, comment: &str) -> Self {
-        Self { key: key.into(), value: Value::F(v), comment: comment.into() }
+        Self {
+            key: key.into(),
+            value: Value::F(v),
+            comment: comment.into(),
+        }
     }
     pub fn i(key: &str, v: i64, comment: &str) -> Self {
-        Self { key: key.into(), value: Value::I(v), comment: comment.into() }
+        Self {
+            key: key.into(),
+            value: Value::I(v),
+            comment: comment.into(),
+        }
     }
     pub fn s(key: &str, v: impl Into<String>, comment: &str) -> Self {
-        Self { key: key.into(), value: Value::S(v.into()), comment: comment.into() }
+        Self {
+            key: key.into(),
+            value: Value::S(v.into()),
+            comment: comment.into(),
+        }
     }
 }
 
@@ -77,13 +89,36 @@ pub enum Pixels<'a> {
 /// One HDU to write.
 #[derive(Debug, Clone)]
 pub enum Hdu<'a> {
-    Image { name: &'a str, nx: usize, ny: usize, pixels: Pixels<'a>, cards: Vec<Card> },
-    U8Image { name: &'a str, nx: usize, ny: usize, data: &'a [u8] },
-    Table { name: &'a str, columns: Vec<Column>, cards: Vec<Card> },
-    Text { name: &'a str, text: &'a str },
+    Image {
+        name: &'a str,
+        nx: usize,
+        ny: usize,
+        pixels: Pixels<'a>,
+        cards: Vec<Card>,
+    },
+    U8Image {
+        name: &'a str,
+        nx: usize,
+        ny: usize,
+        data: &'a [u8],
+    },
+    Table {
+        name: &'a str,
+        columns: Vec<Column>,
+        cards: Vec<Card>,
+    },
+    Text {
+        name: &'a str,
+        text: &'a str,
+    },
 }
 
-fn write_cards(f: &mut FitsFile, hdu: &fitsio::hdu::FitsHdu, cards: &[Card], path: &Path) -> Result<(), IoError> {
+fn write_cards(
+    f: &mut FitsFile,
+    hdu: &fitsio::hdu::FitsHdu,
+    cards: &[Card],
+    path: &Path,
+) -> Result<(), IoError> {
     for c in cards {
         let r = match &c.value {
             Value::F(v) => hdu.write_key(f, &c.key, (*v, c.comment.as_str())),
@@ -114,7 +149,14 @@ pub fn write(path: &Path, hdus: &[Hdu<'_>]) -> Result<(), IoError> {
 
 fn write_inner(path: &Path, hdus: &[Hdu<'_>]) -> Result<(), IoError> {
     let fe = |e: fitsio::errors::Error| IoError::fits(path, e);
-    let Some(Hdu::Image { nx, ny, pixels, cards, .. }) = hdus.first() else {
+    let Some(Hdu::Image {
+        nx,
+        ny,
+        pixels,
+        cards,
+        ..
+    }) = hdus.first()
+    else {
         return Err(IoError::fits(path, "the primary HDU must be an image"));
     };
     let primary_type = match pixels {
@@ -123,8 +165,14 @@ fn write_inner(path: &Path, hdus: &[Hdu<'_>]) -> Result<(), IoError> {
         Pixels::F64(_) => ImageType::Double,
     };
     let dims = [*ny, *nx];
-    let desc = ImageDescription { data_type: primary_type, dimensions: &dims };
-    let mut f = FitsFile::create(path).with_custom_primary(&desc).open().map_err(fe)?;
+    let desc = ImageDescription {
+        data_type: primary_type,
+        dimensions: &dims,
+    };
+    let mut f = FitsFile::create(path)
+        .with_custom_primary(&desc)
+        .open()
+        .map_err(fe)?;
     let primary = f.primary_hdu().map_err(fe)?;
     match pixels {
         Pixels::U16(d) => primary.write_image(&mut f, d),
@@ -135,14 +183,28 @@ fn write_inner(path: &Path, hdus: &[Hdu<'_>]) -> Result<(), IoError> {
     write_cards(&mut f, &primary, cards, path)?;
     for h in &hdus[1..] {
         match h {
-            Hdu::Image { name, nx, ny, pixels, cards } => {
+            Hdu::Image {
+                name,
+                nx,
+                ny,
+                pixels,
+                cards,
+            } => {
                 let t = match pixels {
                     Pixels::U16(_) => ImageType::UnsignedShort,
                     Pixels::F32(_) => ImageType::Float,
                     Pixels::F64(_) => ImageType::Double,
                 };
                 let dims = [*ny, *nx];
-                let hdu = f.create_image(*name, &ImageDescription { data_type: t, dimensions: &dims }).map_err(fe)?;
+                let hdu = f
+                    .create_image(
+                        *name,
+                        &ImageDescription {
+                            data_type: t,
+                            dimensions: &dims,
+                        },
+                    )
+                    .map_err(fe)?;
                 match pixels {
                     Pixels::U16(d) => hdu.write_image(&mut f, d),
                     Pixels::F32(d) => hdu.write_image(&mut f, d),
@@ -154,11 +216,21 @@ fn write_inner(path: &Path, hdus: &[Hdu<'_>]) -> Result<(), IoError> {
             Hdu::U8Image { name, nx, ny, data } => {
                 let dims = [*ny, *nx];
                 let hdu = f
-                    .create_image(*name, &ImageDescription { data_type: ImageType::UnsignedByte, dimensions: &dims })
+                    .create_image(
+                        *name,
+                        &ImageDescription {
+                            data_type: ImageType::UnsignedByte,
+                            dimensions: &dims,
+                        },
+                    )
                     .map_err(fe)?;
                 hdu.write_image(&mut f, data).map_err(fe)?;
             }
-            Hdu::Table { name, columns, cards } => {
+            Hdu::Table {
+                name,
+                columns,
+                cards,
+            } => {
                 let descs = columns
                     .iter()
                     .map(|c| {
@@ -184,9 +256,22 @@ fn write_inner(path: &Path, hdus: &[Hdu<'_>]) -> Result<(), IoError> {
                 write_cards(&mut f, &hdu, cards, path)?;
             }
             Hdu::Text { name, text } => {
-                let lines: Vec<String> = text.lines().map(|l| if l.is_empty() { " ".to_string() } else { l.to_string() }).collect();
+                let lines: Vec<String> = text
+                    .lines()
+                    .map(|l| {
+                        if l.is_empty() {
+                            " ".to_string()
+                        } else {
+                            l.to_string()
+                        }
+                    })
+                    .collect();
                 let width = lines.iter().map(|l| l.len()).max().unwrap_or(1).max(1);
-                let desc = ColumnDescription::new("LINE").with_type(ColumnDataType::String).that_repeats(width).create().map_err(fe)?;
+                let desc = ColumnDescription::new("LINE")
+                    .with_type(ColumnDataType::String)
+                    .that_repeats(width)
+                    .create()
+                    .map_err(fe)?;
                 let hdu = f.create_table(*name, &[desc]).map_err(fe)?;
                 if !lines.is_empty() {
                     hdu.write_col(&mut f, "LINE", &lines).map_err(fe)?;
@@ -220,7 +305,10 @@ fn key_f64(f: &mut FitsFile, hdu: &fitsio::hdu::FitsHdu, key: &str) -> Option<f6
 /// Read the primary image (and DQ extension, if any) of a file.
 pub fn read_image(path: &Path) -> Result<ImageRead, IoError> {
     if !path.exists() {
-        return Err(IoError::io(path, std::io::Error::new(std::io::ErrorKind::NotFound, "no such file")));
+        return Err(IoError::io(
+            path,
+            std::io::Error::new(std::io::ErrorKind::NotFound, "no such file"),
+        ));
     }
     let fe = |e: fitsio::errors::Error| IoError::fits(path, e);
     let mut f = FitsFile::open(path).map_err(fe)?;
@@ -236,7 +324,10 @@ pub fn read_image(path: &Path) -> Result<ImageRead, IoError> {
     let exptime = key_f64(&mut f, &hdu, "EXPTIME").unwrap_or(1.0);
     let sat = key_f64(&mut f, &hdu, "SATURATE");
     let dq = match f.hdu("DQ") {
-        Ok(h) => h.read_image::<Vec<u8>>(&mut f).ok().filter(|d| d.len() == nx * ny),
+        Ok(h) => h
+            .read_image::<Vec<u8>>(&mut f)
+            .ok()
+            .filter(|d| d.len() == nx * ny),
         Err(_) => None,
     };
     Ok(ImageRead {
@@ -256,10 +347,15 @@ pub fn read_image(path: &Path) -> Result<ImageRead, IoError> {
 pub fn read_table(path: &Path, ext: &str, columns: &[&str]) -> Result<Vec<Vec<f64>>, IoError> {
     let fe = |e: fitsio::errors::Error| IoError::fits(path, e);
     let mut f = FitsFile::open(path).map_err(fe)?;
-    let hdu = f.hdu(ext).map_err(|e| IoError::fits(path, format!("extension {ext}: {e}")))?;
+    let hdu = f
+        .hdu(ext)
+        .map_err(|e| IoError::fits(path, format!("extension {ext}: {e}")))?;
     columns
         .iter()
-        .map(|c| hdu.read_col::<f64>(&mut f, c).map_err(|e| IoError::fits(path, format!("column {c}: {e}"))))
+        .map(|c| {
+            hdu.read_col::<f64>(&mut f, c)
+                .map_err(|e| IoError::fits(path, format!("column {c}: {e}")))
+        })
         .collect()
 }
 
@@ -268,16 +364,23 @@ pub fn read_string_key(path: &Path, key: &str) -> Result<String, IoError> {
     let fe = |e: fitsio::errors::Error| IoError::fits(path, e);
     let mut f = FitsFile::open(path).map_err(fe)?;
     let hdu = f.primary_hdu().map_err(fe)?;
-    hdu.read_key::<String>(&mut f, key).map_err(|e| IoError::fits(path, format!("header {key}: {e}")))
+    hdu.read_key::<String>(&mut f, key)
+        .map_err(|e| IoError::fits(path, format!("header {key}: {e}")))
 }
 
 /// Read the CONFIG text extension (the TOML the file was made with).
 pub fn read_text(path: &Path, ext: &str) -> Result<String, IoError> {
     let fe = |e: fitsio::errors::Error| IoError::fits(path, e);
     let mut f = FitsFile::open(path).map_err(fe)?;
-    let hdu = f.hdu(ext).map_err(|e| IoError::fits(path, format!("extension {ext}: {e}")))?;
+    let hdu = f
+        .hdu(ext)
+        .map_err(|e| IoError::fits(path, format!("extension {ext}: {e}")))?;
     let lines: Vec<String> = hdu.read_col(&mut f, "LINE").map_err(fe)?;
-    Ok(lines.iter().map(|l| l.trim_end()).collect::<Vec<_>>().join("\n"))
+    Ok(lines
+        .iter()
+        .map(|l| l.trim_end())
+        .collect::<Vec<_>>()
+        .join("\n"))
 }
 
 #[cfg(test)]
@@ -300,15 +403,29 @@ mod tests {
                     nx,
                     ny,
                     pixels: Pixels::U16(&img),
-                    cards: vec![Card::f("GAIN", 3.0, "e/ADU"), Card::s("READOUT", "rolling", "order")],
+                    cards: vec![
+                        Card::f("GAIN", 3.0, "e/ADU"),
+                        Card::s("READOUT", "rolling", "order"),
+                    ],
                 },
-                Hdu::U8Image { name: "DQ", nx, ny, data: &dq },
+                Hdu::U8Image {
+                    name: "DQ",
+                    nx,
+                    ny,
+                    data: &dq,
+                },
                 Hdu::Table {
                     name: "TRUTH",
-                    columns: vec![Column::F64("x".into(), vec![1.5, 2.5]), Column::I64("id".into(), vec![7, 8])],
+                    columns: vec![
+                        Column::F64("x".into(), vec![1.5, 2.5]),
+                        Column::I64("id".into(), vec![7, 8]),
+                    ],
                     cards: vec![],
                 },
-                Hdu::Text { name: "CONFIG", text: "a = 1\n\n[b]\nc = \"x\"" },
+                Hdu::Text {
+                    name: "CONFIG",
+                    text: "a = 1\n\n[b]\nc = \"x\"",
+                },
             ],
         )
         .expect("write");
@@ -322,9 +439,16 @@ mod tests {
         assert_eq!(t[0], vec![1.5, 2.5]);
         assert_eq!(t[1], vec![7.0, 8.0]);
         assert_eq!(read_string_key(&path, "READOUT").expect("key"), "rolling");
-        assert!(read_text(&path, "CONFIG").expect("text").contains("c = \"x\""));
+        assert!(
+            read_text(&path, "CONFIG")
+                .expect("text")
+                .contains("c = \"x\"")
+        );
         // no temporary file left behind
-        let left: Vec<_> = std::fs::read_dir(&dir).expect("dir").filter_map(|e| e.ok()).collect();
+        let left: Vec<_> = std::fs::read_dir(&dir)
+            .expect("dir")
+            .filter_map(|e| e.ok())
+            .collect();
         assert_eq!(left.len(), 1);
     }
 

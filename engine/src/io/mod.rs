@@ -10,7 +10,10 @@ use std::path::{Path, PathBuf};
 #[derive(Debug, thiserror::Error)]
 pub enum IoError {
     #[error("{path}: {source}")]
-    Io { path: PathBuf, source: std::io::Error },
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
     #[error("FITS file {path}: {message}")]
     Fits { path: PathBuf, message: String },
     #[error("{path}: {message}")]
@@ -19,16 +22,25 @@ pub enum IoError {
 
 impl IoError {
     pub fn io(path: &Path, source: std::io::Error) -> Self {
-        IoError::Io { path: path.to_path_buf(), source }
+        IoError::Io {
+            path: path.to_path_buf(),
+            source,
+        }
     }
     pub fn fits(path: &Path, e: impl std::fmt::Display) -> Self {
-        IoError::Fits { path: path.to_path_buf(), message: e.to_string() }
+        IoError::Fits {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        }
     }
 }
 
 /// The temporary sibling a file is written to before the rename.
 pub fn temp_path(path: &Path) -> PathBuf {
-    let mut name = path.file_name().map(|n| n.to_os_string()).unwrap_or_default();
+    let mut name = path
+        .file_name()
+        .map(|n| n.to_os_string())
+        .unwrap_or_default();
     name.push(format!(".{}.tmp", std::process::id()));
     path.with_file_name(name)
 }
