@@ -679,6 +679,60 @@ impl Config {
             .unwrap_or_else(|e| format!("# could not serialise config: {e}\n"))
     }
 
+    /// A copy with one field set from text, by dotted path (`ace.sigma_mas`, `readout.order`,
+    /// `ace.modes.0.freq_hz` for array elements). The value is read as TOML (`300`, `"rolling"`, `true`,
+    /// `[1.0, 2.0]`), or as a plain string when it is not valid TOML. Unknown fields and bad values are
+    /// errors naming the field.
+    pub fn with_override(&self, path: &str, value: &str) -> Result<Config, ConfigError> {
+        let parsed: toml::Value = toml::from_str::<toml::Table>(&format!("v = {value}"))
+            .ok()
+            .and_then(|mut t| t.remove("v"))
+            .unwrap_or_else(|| toml::Value::String(value.to_string()));
+        let mut root = toml::Value::try_from(self)
+            .map_err(|e| invalid(path, value, &format!("cannot represent the config: {e}")))?;
+        let keys: Vec<&str> = path.split('.').collect();
+        if keys.iter().any(|k| k.is_empty()) {
+            return Err(invalid(
+                path,
+                value,
+                "a dotted field path such as ace.sigma_mas",
+            ));
+        }
+        let mut node = &mut root;
+        for (depth, key) in keys.iter().enumerate() {
+            let last = depth + 1 == keys.len();
+            let here = keys[..=depth].join(".");
+            node = match node {
+                toml::Value::Table(t) => {
+                    if !t.contains_key(*key) {
+                        // optional fields that are unset (e.g. scene.catalogue) may be created at the leaf
+                        if !last {
+                            return Err(invalid(&here, value, "no such config field"));
+                        }
+                        t.insert((*key).to_string(), parsed.clone());
+                    }
+                    t.get_mut(*key)
+                        .ok_or_else(|| invalid(&here, value, "no such config field"))?
+                }
+                toml::Value::Array(a) => {
+                    let i: usize = key
+                        .parse()
+                        .map_err(|_| invalid(&here, value, "an array index"))?;
+                    let len = a.len();
+                    a.get_mut(i)
+                        .ok_or_else(|| invalid(&here, value, &format!("index < {len}")))?
+                }
+                _ => return Err(invalid(&here, value, "is not a section or array")),
+            };
+        }
+        *node = parsed;
+        let cfg: Config = root
+            .try_into()
+            .map_err(|e: toml::de::Error| invalid(path, value, &e.to_string()))?;
+        cfg.validate()?;
+        Ok(cfg)
+    }
+
     /// SHA-256 of the canonical TOML, first 16 hex digits: identifies a configuration in outputs.
     pub fn hash_hex(&self) -> String {
         let digest = Sha256::digest(self.to_toml().as_bytes());
@@ -1035,6 +1089,44 @@ mod tests {
         expect_field("[ace]\nspan_s = 5.0", "ace.span_s");
         expect_field("unknown_key = 3", "unknown_key");
         expect_field("[scene]\nkind = \"catalogue\"", "scene.catalogue");
+    }
+
+    #[test]
+    fn overrides_by_dotted_path() {
+        let c = Config::default();
+        let d = c.with_override("ace.sigma_mas", "150").expect("number");
+        assert_eq!(d.ace.sigma_mas, 150.0);
+        let d = c
+            .with_override("readout.order", "sample-hold")
+            .expect("bare string");
+        assert_eq!(d.readout.order, ReadoutOrder::SampleHold);
+        let d = c
+            .with_override("ace.modes.2.freq_hz", "65")
+            .expect("array element");
+        assert_eq!(d.ace.modes[2].freq_hz, 65.0);
+        let d = c
+            .with_override("scene.catalogue", "stars.csv")
+            .expect("optional field");
+        assert_eq!(d.scene.catalogue.as_deref(), Some(Path::new("stars.csv")));
+        assert!(
+            c.with_override("ace.sigma_mass", "1")
+                .expect_err("typo")
+                .to_string()
+                .contains("sigma_mass")
+        );
+        assert!(
+            c.with_override("nosuch.field", "1")
+                .expect_err("section")
+                .to_string()
+                .contains("nosuch")
+        );
+        assert!(
+            c.with_override("ace.sigma_mas", "-5")
+                .expect_err("range")
+                .to_string()
+                .contains("ace.sigma_mas")
+        );
+        assert!(c.with_override("readout.order", "diagonal").is_err());
     }
 
     #[test]

@@ -1,10 +1,10 @@
 //! Detector and electronics (SPEC §1, §4), in this order, per pixel:
 //!
 //! 1. star electrons × inter-pixel flat (1 + σ·z, z ~ N(0,1), fixed per detector: seeded once);
-//! 2. + (dark + stray light)·T — only the photosensitive region sees light; the border of
+//! 2. plus (dark + stray light)·T — only the photosensitive region sees light; the border of
 //!    `(detector_px − photosensitive_px)/2` pixels holds no signal and is read for noise only;
 //! 3. Poisson shot noise on the total; charge clipped at the full well (flagged);
-//! 4. + Gaussian CDS read noise;
+//! 4. plus Gaussian CDS read noise;
 //! 5. ÷ gain + bias, rounded, clipped to `[0, 2^bits − 1]` ADU (flagged).
 //!
 //! Every stage can be switched off (`shot_noise`, `read_noise`, `digitise`, σ_flat = 0). Noise streams are
@@ -96,10 +96,8 @@ pub fn expose(cfg: &Config, star_e: &[f64], flat: &[f32], image_index: u64) -> D
                     e = d.full_well_e;
                     flags |= dq::SATURATED;
                 }
-                if d.read_noise {
-                    if let Some(rn) = &read {
-                        e += rn.sample(&mut read_rng);
-                    }
+                if let (true, Some(rn)) = (d.read_noise, &read) {
+                    e += rn.sample(&mut read_rng);
                 }
                 let mut v = e / d.gain_e_per_adu + d.bias_adu;
                 if d.digitise {

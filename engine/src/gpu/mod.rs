@@ -113,7 +113,7 @@ pub struct GpuParams {
     pub accumulate: u32,
     pub pad: u32,
 }
-const _: () = assert!(std::mem::size_of::<GpuParams>() % 16 == 0);
+const _: () = assert!(std::mem::size_of::<GpuParams>().is_multiple_of(16));
 
 impl From<WindowWeights> for GpuWindow {
     fn from(w: WindowWeights) -> Self {
@@ -254,10 +254,8 @@ impl GpuIntegrator {
         keys.sort_unstable();
         keys.dedup();
         let mut cache = self.kernel_cache.lock().unwrap_or_else(|e| e.into_inner());
-        if let Some((k, buf, offs)) = cache.as_ref() {
-            if *k == keys {
-                return (buf.clone(), offs.clone());
-            }
+        if let Some((_, buf, offs)) = cache.as_ref().filter(|(k, _, _)| *k == keys) {
+            return (buf.clone(), offs.clone());
         }
         let mut data: Vec<f32> = Vec::new();
         let mut offsets = HashMap::new();

@@ -139,7 +139,7 @@ fn gcd(a: usize, b: usize) -> usize {
 ///
 /// Offsets are `(2k + 1 − s)/(2s)`: odd multiples of `1/(2s)` for even s, multiples of `1/s` for odd s.
 pub fn refinement(os: usize, s: usize) -> usize {
-    let q = if s % 2 == 0 { 2 * s } else { s };
+    let q = if s.is_multiple_of(2) { 2 * s } else { s };
     q / gcd(os, q)
 }
 

@@ -2,7 +2,9 @@
 //! name and renamed into place, so an interrupted run never leaves a half-written output.
 
 pub mod csv;
+pub mod exposure;
 pub mod fits;
+pub mod plot;
 
 use std::path::{Path, PathBuf};
 
