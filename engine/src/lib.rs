@@ -24,6 +24,7 @@
 pub mod astrometry;
 pub mod bench;
 pub mod config;
+pub mod countermeasures;
 pub mod detector;
 pub mod epsf;
 pub mod experiment;

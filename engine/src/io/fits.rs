@@ -368,6 +368,15 @@ pub fn read_string_key(path: &Path, key: &str) -> Result<String, IoError> {
         .map_err(|e| IoError::fits(path, format!("header {key}: {e}")))
 }
 
+/// Read a numeric header of the primary HDU.
+pub fn read_f64_key(path: &Path, key: &str) -> Result<f64, IoError> {
+    let fe = |e: fitsio::errors::Error| IoError::fits(path, e);
+    let mut f = FitsFile::open(path).map_err(fe)?;
+    let hdu = f.primary_hdu().map_err(fe)?;
+    hdu.read_key::<f64>(&mut f, key)
+        .map_err(|e| IoError::fits(path, format!("header {key}: {e}")))
+}
+
 /// Read the CONFIG text extension (the TOML the file was made with).
 pub fn read_text(path: &Path, ext: &str) -> Result<String, IoError> {
     let fe = |e: fitsio::errors::Error| IoError::fits(path, e);

@@ -160,14 +160,20 @@ impl PsfTable {
     /// The PSF convolved with an isotropic Gaussian of `sigma_px` (the "Gaussian ACE" blur), by FFT with
     /// zero padding; flux blurred beyond the table's edge is dropped like any flux beyond it.
     pub fn gaussian_blurred(&self, sigma_px: f64) -> PsfTable {
-        if !(sigma_px > 0.0) {
+        self.gaussian_blurred_xy(sigma_px, sigma_px)
+    }
+
+    /// The PSF convolved with an axis-aligned Gaussian of σx, σy pixels.
+    pub fn gaussian_blurred_xy(&self, sigma_x_px: f64, sigma_y_px: f64) -> PsfTable {
+        let os = self.oversampling as f64;
+        let (sx, sy) = (sigma_x_px.max(0.0) * os, sigma_y_px.max(0.0) * os);
+        if !(sx > 0.0 || sy > 0.0) {
             return self.clone();
         }
-        let s = sigma_px * self.oversampling as f64;
-        let pad = (6.0 * s).ceil() as usize + 2;
-        let two_pi2_s2 = 2.0 * std::f64::consts::PI.powi(2) * s * s;
+        let pad = (6.0 * sx.max(sy)).ceil() as usize + 2;
+        let k = 2.0 * std::f64::consts::PI.powi(2);
         let data = crate::numerics::fft2::convolve_transfer(&self.data, self.n(), pad, |fx, fy| {
-            (-two_pi2_s2 * (fx * fx + fy * fy)).exp()
+            (-k * (sx * sx * fx * fx + sy * sy * fy * fy)).exp()
         });
         PsfTable {
             data,

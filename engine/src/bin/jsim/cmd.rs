@@ -232,3 +232,543 @@ pub fn simulate(cfg: &Config, out: &Path) -> Result<()> {
     );
     Ok(())
 }
+
+/// Options of the analysis commands.
+pub struct AnalyzeArgs {
+    pub image: std::path::PathBuf,
+    pub truth: Option<std::path::PathBuf>,
+    pub zones: Option<usize>,
+    pub countermeasure: String,
+    pub telemetry: engine::experiment::TelemetrySpec,
+    pub reference_error_mas: f64,
+    pub out: std::path::PathBuf,
+}
+
+/// The configuration a FITS image was made with (its CONFIG extension), else `fallback`.
+fn image_config(path: &Path, fallback: &Config) -> Config {
+    fits::read_text(path, "CONFIG")
+        .ok()
+        .and_then(|t| Config::from_toml_str(&t).ok())
+        .unwrap_or_else(|| fallback.clone())
+}
+
+/// Write the deviation vector map (CSV + PNG) of star results.
+pub fn write_vectors(
+    dir: &Path,
+    stem: &str,
+    stars: &[engine::astrometry::StarResult],
+    scale: f64,
+    extent: f64,
+    title: &str,
+) -> Result<()> {
+    use engine::epsf::fit::flags;
+    let used: Vec<&engine::astrometry::StarResult> = stars
+        .iter()
+        .filter(|s| s.truth.is_some() && s.flags & flags::REJECT == 0 && s.dx_px.is_finite())
+        .collect();
+    let (mx, my) = if used.is_empty() {
+        (0.0, 0.0)
+    } else {
+        (
+            used.iter().map(|s| s.dx_px).sum::<f64>() / used.len() as f64,
+            used.iter().map(|s| s.dy_px).sum::<f64>() / used.len() as f64,
+        )
+    };
+    let (pmx, pmy) = if used.is_empty() {
+        (0.0, 0.0)
+    } else {
+        (
+            used.iter().map(|s| s.predicted_dx_px).sum::<f64>() / used.len() as f64,
+            used.iter().map(|s| s.predicted_dy_px).sum::<f64>() / used.len() as f64,
+        )
+    };
+    let rows: Vec<Vec<csv::Cell>> = used
+        .iter()
+        .map(|s| {
+            vec![
+                csv::Cell::F(s.x),
+                csv::Cell::F(s.y),
+                csv::Cell::F((s.dx_px - mx) * scale),
+                csv::Cell::F((s.dy_px - my) * scale),
+                csv::Cell::F((s.predicted_dx_px - pmx) * scale),
+                csv::Cell::F((s.predicted_dy_px - pmy) * scale),
+            ]
+        })
+        .collect();
+    csv::write(
+        &dir.join(format!("{stem}.csv")),
+        &[
+            "x",
+            "y",
+            "dx_mas",
+            "dy_mas",
+            "predicted_dx_mas",
+            "predicted_dy_mas",
+        ],
+        &rows,
+    )?;
+    let measured: Vec<(f64, f64, f64, f64)> = used
+        .iter()
+        .map(|s| (s.x, s.y, (s.dx_px - mx) * scale, (s.dy_px - my) * scale))
+        .collect();
+    let predicted: Vec<(f64, f64, f64, f64)> = used
+        .iter()
+        .map(|s| {
+            (
+                s.x,
+                s.y,
+                (s.predicted_dx_px - pmx) * scale,
+                (s.predicted_dy_px - pmy) * scale,
+            )
+        })
+        .collect();
+    let mut sets = vec![("fitted − true (mean removed)".to_string(), measured)];
+    if predicted.iter().any(|p| p.2 != 0.0 || p.3 != 0.0) {
+        sets.push(("ACE-predicted displacement".to_string(), predicted));
+    }
+    let rms = (rows
+        .iter()
+        .map(|r| {
+            if let (csv::Cell::F(a), csv::Cell::F(b)) = (&r[2], &r[3]) {
+                a * a + b * b
+            } else {
+                0.0
+            }
+        })
+        .sum::<f64>()
+        / rows.len().max(1) as f64)
+        .sqrt();
+    let reference = [1.0, 2.0, 5.0, 10.0, 20.0, 50.0]
+        .into_iter()
+        .find(|r| *r >= rms)
+        .unwrap_or(100.0);
+    engine::io::plot::vector_map(
+        &dir.join(format!("{stem}.png")),
+        title,
+        &sets,
+        extent,
+        reference,
+        40.0,
+    )?;
+    Ok(())
+}
+
+/// `jsim analyze`
+pub fn analyze(cfg_fallback: &Config, a: &AnalyzeArgs) -> Result<()> {
+    use engine::astrometry::{self, AnalysisImage, Options};
+    use engine::countermeasures::{Countermeasure, Telemetry};
+    crate::ensure_dir(&a.out)?;
+    let t0 = Instant::now();
+    let read = fits::read_image(&a.image)?;
+    let cfg = image_config(&a.image, cfg_fallback);
+    let scale =
+        fits::read_f64_key(&a.image, "PLTSCALE").unwrap_or(cfg.instrument.plate_scale_mas());
+    let truth = match &a.truth {
+        Some(p) => Some(exposure::read_truth(p)?),
+        None => exposure::read_truth(&a.image).ok(),
+    };
+    let img = AnalysisImage::from_fits(&read, scale)?;
+    let mut opts = Options::new(&cfg_fallback.analysis);
+    if let Some(z) = a.zones {
+        opts.cfg.epsf_zones = z;
+    }
+    opts.countermeasure = if a.countermeasure == "telemetry" {
+        if cfg.ace.case != engine::config::AceCase::Realistic {
+            Countermeasure::None
+        } else {
+            let series = AceSeries::generate(&cfg, cfg.seed, 0);
+            let t_start = fits::read_f64_key(&a.image, "TSTART").ok();
+            let tel = Telemetry::from_series(
+                &series,
+                engine::readout::ReadoutTiming::new(&cfg),
+                t_start.unwrap_or(0.0),
+                scale,
+                a.telemetry.noise_mas,
+                a.telemetry.rate_hz,
+                a.telemetry.latency_s,
+                cfg.seed,
+            )?;
+            Countermeasure::Telemetry(std::sync::Arc::new(tel))
+        }
+    } else {
+        Countermeasure::parse(&a.countermeasure, opts.cfg.epsf_zones.max(2))?
+            .with_reference_error(a.reference_error_mas, cfg.seed)
+    };
+    let res = astrometry::analyze(&img, truth.as_deref(), &opts)?;
+    // catalogue
+    let rows: Vec<Vec<csv::Cell>> = res
+        .stars
+        .iter()
+        .map(|s| {
+            vec![
+                csv::Cell::F(s.x),
+                csv::Cell::F(s.y),
+                csv::Cell::F(s.flux_e),
+                csv::Cell::F(s.sky_e),
+                csv::Cell::F(s.crlb_x_px * scale),
+                csv::Cell::F(s.crlb_y_px * scale),
+                csv::Cell::I(s.flags as i64),
+                csv::Cell::I(s.truth.map(|t| t as i64).unwrap_or(-1)),
+                csv::Cell::F(s.dx_px * scale),
+                csv::Cell::F(s.dy_px * scale),
+            ]
+        })
+        .collect();
+    csv::write(
+        &a.out.join("catalogue.csv"),
+        &[
+            "x",
+            "y",
+            "flux_e",
+            "sky_e",
+            "crlb_x_mas",
+            "crlb_y_mas",
+            "flags",
+            "truth_id",
+            "dx_mas",
+            "dy_mas",
+        ],
+        &rows,
+    )?;
+    let e = &res.epsf;
+    let n = e.n();
+    fits::write(
+        &a.out.join("epsf.fits"),
+        &[Hdu::Image {
+            name: "",
+            nx: n,
+            ny: n,
+            pixels: Pixels::F64(&e.data),
+            cards: vec![
+                Card::i("OVERSAMP", e.oversampling as i64, "ePSF nodes per pixel"),
+                Card::f("CRPIX1", e.half_nodes as f64 + 1.0, "origin (1-based)"),
+                Card::f("CRPIX2", e.half_nodes as f64 + 1.0, "origin (1-based)"),
+                Card::s("NORM", "sum = oversampling^2", "a star's pixels sum to 1"),
+                Card::i(
+                    "ITER",
+                    res.report.epsf_iterations as i64,
+                    "builder iterations",
+                ),
+            ],
+        }],
+    )?;
+    let summary = serde_json::json!({
+        "image": a.image.display().to_string(),
+        "plate_scale_mas": scale,
+        "countermeasure": res.report.countermeasure,
+        "report": res.report,
+        "seconds": t0.elapsed().as_secs_f64(),
+    });
+    engine::io::write_atomic(
+        &a.out.join("summary.json"),
+        serde_json::to_string_pretty(&summary)?.as_bytes(),
+    )?;
+    if truth.is_some() {
+        write_vectors(
+            &a.out,
+            "vectors",
+            &res.stars,
+            scale,
+            read.nx as f64,
+            &format!(
+                "{} — deviations ({})",
+                a.image.display(),
+                res.report.countermeasure
+            ),
+        )?;
+    }
+    let r = &res.report;
+    println!(
+        "{}: {} stars detected, {} used; accuracy {:.2} mas (x {:.2}, y {:.2}), median CRLB {:.2} mas (ratio {:.2}), phase bias {:.2}/{:.2} mas [{}] in {:.2} s",
+        a.image.display(),
+        r.n_detected,
+        r.n_used,
+        r.accuracy_mas,
+        r.accuracy_x_mas,
+        r.accuracy_y_mas,
+        r.crlb_median_mas,
+        r.accuracy_over_crlb,
+        r.phase_bias_x_mas,
+        r.phase_bias_y_mas,
+        r.countermeasure,
+        t0.elapsed().as_secs_f64()
+    );
+    Ok(())
+}
+
+/// Options of `jsim experiment`.
+pub struct ExperimentArgs {
+    pub aces: Vec<engine::config::AceCase>,
+    pub readouts: Vec<engine::config::ReadoutOrder>,
+    pub mags: Vec<f64>,
+    pub plan: engine::experiment::Plan,
+    pub out: std::path::PathBuf,
+}
+
+/// `jsim experiment`
+pub fn experiment(base: &Config, a: &ExperimentArgs) -> Result<()> {
+    use engine::experiment::{self, CSV_HEADER};
+    crate::ensure_dir(&a.out)?;
+    let t0 = Instant::now();
+    let datasets = experiment::grid(base, &a.aces, &a.readouts, &a.mags);
+    let total = (datasets.len() * base.fidelity.images) as u64;
+    let pb = progress(total, "experiment");
+    let bank = std::sync::Arc::new(PsfBank::new(base));
+    let gpu = match base.fidelity.backend {
+        engine::config::Backend::Cpu => None,
+        b => match engine::gpu::GpuIntegrator::shared(b == engine::config::Backend::Gpu) {
+            Ok(g) => Some(g),
+            Err(e) => {
+                pb.suspend(|| eprintln!("jsim: {e}"));
+                None
+            }
+        },
+    };
+    let mut rows = Vec::new();
+    let mut image_rows: Vec<Vec<csv::Cell>> = Vec::new();
+    for cfg in &datasets {
+        pb.set_message(format!(
+            "{} {} {}",
+            cfg.ace.case.name(),
+            cfg.readout.order.name(),
+            cfg.scene.mag_hw
+        ));
+        let (r, images) =
+            experiment::run_dataset(cfg, &a.plan, Some(bank.clone()), gpu.clone(), &mut |_| {
+                pb.inc(1)
+            })?;
+        for im in &images {
+            for m in &im.measured {
+                image_rows.push(vec![
+                    csv::Cell::S(cfg.ace.case.name().into()),
+                    csv::Cell::S(cfg.readout.order.name().into()),
+                    csv::Cell::S(m.countermeasure.clone()),
+                    csv::Cell::F(cfg.scene.mag_hw),
+                    csv::Cell::I(im.index as i64),
+                    csv::Cell::F(m.report.accuracy_mas),
+                    csv::Cell::F(m.report.accuracy_x_mas),
+                    csv::Cell::F(m.report.accuracy_y_mas),
+                    csv::Cell::F(m.report.crlb_median_mas),
+                    csv::Cell::F(m.report.phase_bias_x_mas.max(m.report.phase_bias_y_mas)),
+                    csv::Cell::F(m.report.predicted_rms_mas),
+                    csv::Cell::F(m.report.predicted_corr_x),
+                    csv::Cell::F(m.report.predicted_corr_y),
+                    csv::Cell::F(m.report.predicted_slope_x),
+                    csv::Cell::F(m.report.predicted_slope_y),
+                    csv::Cell::I(m.report.n_used as i64),
+                    csv::Cell::I(m.report.dof_absorbed as i64),
+                    csv::Cell::F(im.ace_sigma_mas),
+                    csv::Cell::F(im.ace_drift_mas),
+                    csv::Cell::F(im.simulate_s),
+                    csv::Cell::F(im.analyse_s),
+                ]);
+            }
+        }
+        if let Some(stars) = images.first().and_then(|im| im.stars.as_ref()) {
+            if cfg.scene.mag_hw == a.mags[0] {
+                let stem = format!(
+                    "vectors_{}_{}_{}",
+                    cfg.ace.case.name(),
+                    cfg.readout.order.name(),
+                    cfg.scene.mag_hw
+                );
+                let title = format!(
+                    "Hw {} {} ACE, {} readout, image 0",
+                    cfg.scene.mag_hw,
+                    cfg.ace.case.name(),
+                    cfg.readout.order.name()
+                );
+                pb.suspend(|| {
+                    write_vectors(
+                        &a.out,
+                        &stem,
+                        stars,
+                        cfg.instrument.plate_scale_mas(),
+                        cfg.instrument.detector_px as f64,
+                        &title,
+                    )
+                })?;
+            }
+        }
+        rows.extend(r);
+        // keep the CSV current so an interrupted experiment still leaves its finished datasets
+        write_experiment_csv(&a.out, &rows)?;
+    }
+    pb.finish_and_clear();
+    csv::write(
+        &a.out.join("images.csv"),
+        &[
+            "ace",
+            "readout",
+            "countermeasure",
+            "mag",
+            "image",
+            "accuracy_mas",
+            "accuracy_x_mas",
+            "accuracy_y_mas",
+            "crlb_mas",
+            "phase_bias_mas",
+            "predicted_rms_mas",
+            "pred_corr_x",
+            "pred_corr_y",
+            "pred_slope_x",
+            "pred_slope_y",
+            "n_used",
+            "dof_absorbed",
+            "ace_sigma_mas",
+            "ace_drift_mas",
+            "simulate_s",
+            "analyse_s",
+        ],
+        &image_rows,
+    )?;
+    plot_experiment(&a.out, &rows)?;
+    println!("{}", render_table(&rows));
+    println!(
+        "wrote {}/experiment.csv, images.csv, accuracy.png in {:.1} s",
+        a.out.display(),
+        t0.elapsed().as_secs_f64()
+    );
+    let _ = CSV_HEADER;
+    Ok(())
+}
+
+fn write_experiment_csv(dir: &Path, rows: &[engine::experiment::Row]) -> Result<()> {
+    let cells: Vec<Vec<csv::Cell>> = rows
+        .iter()
+        .map(|r| {
+            vec![
+                csv::Cell::S(r.ace.clone()),
+                csv::Cell::S(r.readout.clone()),
+                csv::Cell::S(r.countermeasure.clone()),
+                csv::Cell::F(r.mag),
+                csv::Cell::F(r.accuracy_mas),
+                csv::Cell::F(r.sem_mas),
+                csv::Cell::F(r.crlb_mas),
+                csv::Cell::F(r.predicted_mas),
+                csv::Cell::I(r.n_images as i64),
+                csv::Cell::F(r.time_s),
+            ]
+        })
+        .collect();
+    csv::write(
+        &dir.join("experiment.csv"),
+        &engine::experiment::CSV_HEADER,
+        &cells,
+    )?;
+    Ok(())
+}
+
+fn render_table(rows: &[engine::experiment::Row]) -> String {
+    let mut s = format!(
+        "{:<10} {:<13} {:<14} {:>5} {:>10} {:>7} {:>8} {:>10}\n",
+        "ace", "readout", "countermeasure", "mag", "acc [mas]", "±sem", "CRLB", "predicted"
+    );
+    for r in rows {
+        s.push_str(&format!(
+            "{:<10} {:<13} {:<14} {:>5.1} {:>10.2} {:>7.2} {:>8.2} {:>10.2}\n",
+            r.ace,
+            r.readout,
+            r.countermeasure,
+            r.mag,
+            r.accuracy_mas,
+            r.sem_mas,
+            r.crlb_mas,
+            r.predicted_mas
+        ));
+    }
+    s
+}
+
+fn plot_experiment(dir: &Path, rows: &[engine::experiment::Row]) -> Result<()> {
+    use engine::io::plot::{Scale, Series, line_plot};
+    let mut keys: Vec<(String, String, String)> = Vec::new();
+    for r in rows {
+        let k = (r.ace.clone(), r.readout.clone(), r.countermeasure.clone());
+        if !keys.contains(&k) {
+            keys.push(k);
+        }
+    }
+    let mut series: Vec<Series> = keys
+        .iter()
+        .map(|(a, ro, c)| {
+            let pts: Vec<&engine::experiment::Row> = rows
+                .iter()
+                .filter(|r| &r.ace == a && &r.readout == ro && &r.countermeasure == c)
+                .collect();
+            let label = if a == "realistic" {
+                format!("{a} ACE, {ro}, {c}")
+            } else {
+                format!("{a} ACE, {c}")
+            };
+            Series {
+                label,
+                x: pts.iter().map(|r| r.mag).collect(),
+                y: pts.iter().map(|r| r.accuracy_mas).collect(),
+                yerr: Some(pts.iter().map(|r| r.sem_mas).collect()),
+            }
+        })
+        .collect();
+    // the bound of the plain analysis, once per ACE case
+    for a in ["gaussian", "realistic"] {
+        let pts: Vec<&engine::experiment::Row> = rows
+            .iter()
+            .filter(|r| r.ace == a && r.countermeasure == "none")
+            .collect();
+        if !pts.is_empty() && (a == "gaussian" || !rows.iter().any(|r| r.ace == "gaussian")) {
+            let mut seen = Vec::new();
+            let mut x = Vec::new();
+            let mut y = Vec::new();
+            for p in pts {
+                if !seen.contains(&p.mag.to_bits()) {
+                    seen.push(p.mag.to_bits());
+                    x.push(p.mag);
+                    y.push(p.crlb_mas);
+                }
+            }
+            series.push(Series {
+                label: format!("Cramér–Rao bound ({a})"),
+                x,
+                y,
+                yerr: None,
+            });
+        }
+    }
+    line_plot(
+        &dir.join("accuracy.png"),
+        "Single-exposure position accuracy (mean over images ± s.e.m.)",
+        "Hw magnitude",
+        "accuracy per axis [mas]",
+        &series,
+        &[(4.0, "4 mas requirement".to_string())],
+        Scale::Linear,
+        Scale::Log,
+    )?;
+    Ok(())
+}
+
+/// `jsim predict`
+pub fn predict(cfg: &Config, names: &[String], plan: &engine::experiment::Plan) -> Result<()> {
+    let t0 = Instant::now();
+    let sim = Simulator::new(cfg)?;
+    let setup = t0.elapsed().as_secs_f64();
+    let t1 = Instant::now();
+    let p = engine::predict::Predictor::new(&sim)?;
+    println!(
+        "Hw {} {} ACE, {} readout, {} images:",
+        cfg.scene.mag_hw,
+        cfg.ace.case.name(),
+        cfg.readout.order.name(),
+        cfg.fidelity.images
+    );
+    for n in names {
+        let v = p.predict(n, plan).unwrap_or(f64::NAN);
+        println!("  {n:<14} predicted accuracy {v:7.2} mas");
+    }
+    println!(
+        "prediction {:.0} ms (after {:.2} s building the PSF and the ACE series, shared with a simulation)",
+        t1.elapsed().as_secs_f64() * 1e3,
+        setup
+    );
+    Ok(())
+}

@@ -135,6 +135,124 @@ enum Command {
         #[arg(long, default_value = "out/simulate")]
         out: PathBuf,
     },
+    /// Measure positions in an image with the ePSF method: catalogue, ePSF, summary, vector map.
+    Analyze {
+        #[command(flatten)]
+        cfg: ConfigArgs,
+        /// Image to analyse (FITS from `jsim simulate`, or any image with GAIN/RDNOISE headers).
+        #[arg(long)]
+        image: PathBuf,
+        /// Truth catalogue (CSV or FITS TRUTH table; default: the image's TRUTH extension).
+        #[arg(long)]
+        truth: Option<PathBuf>,
+        /// Y zones of the position-dependent ePSF (with --countermeasure yzones|yzones-shared).
+        #[arg(long = "epsf-zones")]
+        epsf_zones: Option<usize>,
+        #[command(flatten)]
+        cm: CountermeasureArgs,
+        #[arg(long, default_value = "out/analyze")]
+        out: PathBuf,
+    },
+    /// The paper's experiment: accuracy vs magnitude for each ACE case, readout order and countermeasure.
+    Experiment {
+        #[command(flatten)]
+        cfg: ConfigArgs,
+        /// ACE cases (comma separated).
+        #[arg(long, default_value = "gaussian,realistic", value_delimiter = ',')]
+        aces: Vec<String>,
+        /// Readout orders (comma separated).
+        #[arg(long, default_value = "rolling", value_delimiter = ',')]
+        readouts: Vec<String>,
+        /// Magnitudes (comma separated).
+        #[arg(long, default_value = "12,12.5,13,13.5,14,14.5", value_delimiter = ',')]
+        mags: Vec<f64>,
+        /// Countermeasures (comma separated): none, yzones, yzones-shared, plate-affine, plate-poly:N, telemetry,
+        /// exact-epsf (control fit with the exact ePSF, static ACE only).
+        #[arg(long, default_value = "none,yzones", value_delimiter = ',')]
+        countermeasures: Vec<String>,
+        #[command(flatten)]
+        tel: TelemetryArgs,
+        #[arg(long, default_value = "out/experiment")]
+        out: PathBuf,
+    },
+    /// Predict the accuracy of a configuration per countermeasure, without simulating images.
+    Predict {
+        #[command(flatten)]
+        cfg: ConfigArgs,
+        #[arg(
+            long,
+            default_value = "none,yzones,plate-affine,plate-poly:3,telemetry",
+            value_delimiter = ','
+        )]
+        countermeasures: Vec<String>,
+        #[command(flatten)]
+        tel: TelemetryArgs,
+    },
+}
+
+/// Telemetry quality and reference-catalogue error for the countermeasures.
+#[derive(Args, Clone, Debug)]
+pub struct TelemetryArgs {
+    /// Telemetry noise per sample, mas.
+    #[arg(long = "telemetry-noise-mas", default_value_t = 0.0)]
+    pub noise_mas: f64,
+    /// Telemetry sampling rate, Hz.
+    #[arg(long = "telemetry-rate-hz", default_value_t = 1000.0)]
+    pub rate_hz: f64,
+    /// Telemetry latency, s.
+    #[arg(long = "telemetry-latency-s", default_value_t = 0.0)]
+    pub latency_s: f64,
+    /// Error of the plate models' reference positions, mas.
+    #[arg(long = "reference-error-mas", default_value_t = 0.0)]
+    pub reference_error_mas: f64,
+}
+
+impl TelemetryArgs {
+    fn spec(&self) -> engine::experiment::TelemetrySpec {
+        engine::experiment::TelemetrySpec {
+            noise_mas: self.noise_mas,
+            rate_hz: self.rate_hz,
+            latency_s: self.latency_s,
+        }
+    }
+    fn plan(&self, names: &[String]) -> Result<engine::experiment::Plan> {
+        for n in names {
+            if !engine::predict::known(n) {
+                bail!(
+                    "unknown countermeasure `{n}` (none, yzones, yzones-shared, plate-affine, plate-poly:N, telemetry, exact-epsf)"
+                );
+            }
+        }
+        for (v, what) in [
+            (self.noise_mas, "--telemetry-noise-mas"),
+            (self.reference_error_mas, "--reference-error-mas"),
+        ] {
+            if !(v >= 0.0) || !v.is_finite() {
+                bail!("{what} {v}: must be a finite number ≥ 0");
+            }
+        }
+        if !(self.rate_hz > 0.0) || !self.rate_hz.is_finite() {
+            bail!("--telemetry-rate-hz {}: must be > 0", self.rate_hz);
+        }
+        if !self.latency_s.is_finite() {
+            bail!("--telemetry-latency-s {}: must be finite", self.latency_s);
+        }
+        Ok(engine::experiment::Plan {
+            countermeasures: names.to_vec(),
+            telemetry: self.spec(),
+            reference_error_mas: self.reference_error_mas,
+        })
+    }
+}
+
+/// The countermeasure of `jsim analyze`.
+#[derive(Args, Clone, Debug)]
+pub struct CountermeasureArgs {
+    /// none, yzones, yzones-shared, plate-affine, plate-poly:N or telemetry.
+    #[arg(long, default_value = "none")]
+    pub countermeasure: String,
+    #[command(flatten)]
+    pub tel: TelemetryArgs,
 }
 
 fn main() {
@@ -165,6 +283,71 @@ fn run(cli: Cli) -> Result<()> {
         Command::Psf { cfg, out } => cmd::psf(&cfg.load()?, &out),
         Command::Ace { cfg, out, every } => cmd::ace(&cfg.load()?, &out, every),
         Command::Simulate { cfg, out } => cmd::simulate(&cfg.load()?, &out),
+        Command::Analyze {
+            cfg,
+            image,
+            truth,
+            epsf_zones,
+            cm,
+            out,
+        } => {
+            let c = cfg.load()?;
+            cm.tel.plan(std::slice::from_ref(&cm.countermeasure))?;
+            cmd::analyze(
+                &c,
+                &cmd::AnalyzeArgs {
+                    image,
+                    truth,
+                    zones: epsf_zones,
+                    countermeasure: cm.countermeasure,
+                    telemetry: cm.tel.spec(),
+                    reference_error_mas: cm.tel.reference_error_mas,
+                    out,
+                },
+            )
+        }
+        Command::Experiment {
+            cfg,
+            aces,
+            readouts,
+            mags,
+            countermeasures,
+            tel,
+            out,
+        } => {
+            let c = cfg.load()?;
+            let aces = aces
+                .iter()
+                .map(|a| AceCase::parse(a.trim()))
+                .collect::<Result<Vec<_>, _>>()?;
+            let readouts = readouts
+                .iter()
+                .map(|r| ReadoutOrder::parse(r.trim()))
+                .collect::<Result<Vec<_>, _>>()?;
+            if mags.is_empty() || mags.iter().any(|m| !m.is_finite()) {
+                bail!("--mags: give finite magnitudes, e.g. 12,12.5");
+            }
+            let plan = tel.plan(&countermeasures)?;
+            cmd::experiment(
+                &c,
+                &cmd::ExperimentArgs {
+                    aces,
+                    readouts,
+                    mags,
+                    plan,
+                    out,
+                },
+            )
+        }
+        Command::Predict {
+            cfg,
+            countermeasures,
+            tel,
+        } => {
+            let c = cfg.load()?;
+            let plan = tel.plan(&countermeasures)?;
+            cmd::predict(&c, &countermeasures, &plan)
+        }
     }
 }
 
