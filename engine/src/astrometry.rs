@@ -184,9 +184,12 @@ pub struct StarResult {
     /// fitted − true (px), after any countermeasure correction.
     pub dx_px: f64,
     pub dy_px: f64,
-    /// The displacement the ACE series predicts for this star (px), from the truth catalogue.
+    /// The displacement the ACE series predicts for this star (px): the mean jitter over its window (truth).
     pub predicted_dx_px: f64,
     pub predicted_dy_px: f64,
+    /// The fit displacement the ACE series predicts through the fit's response ([`crate::response`]), px.
+    pub predicted_fit_dx_px: f64,
+    pub predicted_fit_dy_px: f64,
 }
 
 /// Summary of an image's analysis (all angles in mas).
@@ -212,6 +215,12 @@ pub struct Report {
     pub predicted_slope_y: f64,
     /// RMS over stars of the predicted displacement (mean removed), combined per axis.
     pub predicted_rms_mas: f64,
+    /// The same against the fit-response prediction (slope ≈ 1 when the mechanism is understood).
+    pub response_corr_x: f64,
+    pub response_corr_y: f64,
+    pub response_slope_x: f64,
+    pub response_slope_y: f64,
+    pub response_rms_mas: f64,
     pub epsf_iterations: usize,
     pub countermeasure: String,
     /// Parameters a countermeasure fitted per exposure (degrees of freedom absorbed).
@@ -422,6 +431,24 @@ pub fn summarise(
     report.predicted_slope_y = stats::slope(&pdy, &dy);
     report.predicted_rms_mas =
         ((stats::std_dev(&pdx).powi(2) + stats::std_dev(&pdy).powi(2)) / 2.0).sqrt();
+    let rdx: Vec<f64> = used.iter().map(|s| s.predicted_fit_dx_px * scale).collect();
+    let rdy: Vec<f64> = used.iter().map(|s| s.predicted_fit_dy_px * scale).collect();
+    report.response_corr_x = stats::correlation(&rdx, &dx);
+    report.response_corr_y = stats::correlation(&rdy, &dy);
+    report.response_slope_x = stats::slope(&rdx, &dx);
+    report.response_slope_y = stats::slope(&rdy, &dy);
+    report.response_rms_mas =
+        ((stats::std_dev(&rdx).powi(2) + stats::std_dev(&rdy).powi(2)) / 2.0).sqrt();
+}
+
+/// Attach per-truth-star fit-response predictions (px) to the star results.
+pub fn attach_fit_prediction(stars: &mut [StarResult], per_truth: &[(f64, f64)]) {
+    for s in stars.iter_mut() {
+        if let Some(&(px, py)) = s.truth.and_then(|k| per_truth.get(k)) {
+            s.predicted_fit_dx_px = px;
+            s.predicted_fit_dy_px = py;
+        }
+    }
 }
 
 /// Turn fits into star results (residuals against the truth where matched).
@@ -447,6 +474,8 @@ pub fn star_results(
                 dy_px: t.map(|t| f.y - t.y_px).unwrap_or(f64::NAN),
                 predicted_dx_px: t.map(|t| t.jitter_dx_px).unwrap_or(0.0),
                 predicted_dy_px: t.map(|t| t.jitter_dy_px).unwrap_or(0.0),
+                predicted_fit_dx_px: 0.0,
+                predicted_fit_dy_px: 0.0,
             }
         })
         .collect()

@@ -13,17 +13,21 @@
 //!   as an astrometric pipeline does against a reference catalogue: affine (6 parameters) or
 //!   `Δx = a₀ + a₁x + Σₖ₌₁..N bₖ yᵏ` and the same for Δy (2(N + 2) parameters). The parameters absorbed are
 //!   reported (`dof_absorbed`): with n stars the residual variance of pure noise shrinks by (1 − p/n).
-//! * `telemetry` — subtract, from each star, the displacement predicted by the attitude telemetry over its
-//!   pixels' window: the ACE series sampled at `rate_hz`, delayed by `latency_s`, with Gaussian noise
-//!   `noise_mas` per sample, linearly interpolated and averaged over the window.
+//! * `telemetry` — subtract, from each star, the displacement the attitude telemetry predicts for its fit:
+//!   the ACE series sampled at `rate_hz`, delayed by `latency_s`, with Gaussian noise `noise_mas` per sample,
+//!   linearly interpolated, and turned into each star's fitted shift through the fit's response to the jitter
+//!   of its pixels' window ([`crate::response`]; the optical PSF is taken as known from calibration).
 
 use crate::astrometry::{AnalysisImage, StarResult};
 use crate::epsf::Epsf;
 use crate::epsf::build::{self, BuildOptions, StarStart};
 use crate::epsf::fit::{PixelData, fit_star, flags};
+use crate::integrate::kernel::PixelKernel;
+use crate::integrate::track::Track;
 use crate::jitter::AceSeries;
 use crate::numerics::linalg;
 use crate::readout::ReadoutTiming;
+use crate::response::{FitNoise, FitResponse};
 use crate::rng::{self, Stream};
 use crate::simulate::TruthRow;
 use rand_distr::{Distribution, Normal};
@@ -50,22 +54,21 @@ pub enum CountermeasureError {
     Telemetry(String),
 }
 
-/// Degraded attitude telemetry of one exposure.
+/// Degraded attitude telemetry of one exposure, and the fit displacements it predicts.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Telemetry {
-    /// Sample times (s from the series start) and pointing (mas).
-    pub t_s: Vec<f64>,
-    pub x_mas: Vec<f64>,
-    pub y_mas: Vec<f64>,
+    /// Telemetry resampled (linearly) onto a regular grid, px, times relative to the exposure start.
+    pub track: Track,
     pub timing: ReadoutTiming,
-    /// Start of this exposure in the series, s.
-    pub exposure_start_s: f64,
-    pub plate_scale_mas: f64,
+    /// The ePSF fit's response to jitter under this telemetry ([`crate::response`]).
+    pub response: FitResponse,
 }
 
 impl Telemetry {
     /// Sample `series` at `rate_hz` with `noise_mas` Gaussian noise per sample (seeded), reporting at time t
-    /// the attitude of time t − `latency_s`, over the span of one exposure (plus margins).
+    /// the attitude of time t − `latency_s`, over one exposure; interpolate linearly between samples; and
+    /// build the fit response from the PSF's pixel kernel.
+    #[allow(clippy::too_many_arguments)]
     pub fn from_series(
         series: &AceSeries,
         timing: ReadoutTiming,
@@ -75,6 +78,8 @@ impl Telemetry {
         rate_hz: f64,
         latency_s: f64,
         seed: u64,
+        kernel: &PixelKernel,
+        noise: &FitNoise,
     ) -> Result<Self, CountermeasureError> {
         if !(noise_mas >= 0.0) || !noise_mas.is_finite() {
             return Err(CountermeasureError::Telemetry(format!(
@@ -97,9 +102,10 @@ impl Telemetry {
             ));
         }
         let dt = 1.0 / rate_hz;
+        let span = timing.span_s();
         let (t0, t1) = (
             exposure_start_s - 2.0 * dt,
-            exposure_start_s + timing.span_s() + 2.0 * dt,
+            exposure_start_s + span + 2.0 * dt,
         );
         let n = ((t1 - t0) / dt).ceil() as usize + 1;
         if n > 50_000_000 {
@@ -114,55 +120,48 @@ impl Telemetry {
             let i = (t / series.dt_s).round().clamp(0.0, (v.len() - 1) as f64) as usize;
             v[i]
         };
-        let (mut ts, mut xs, mut ys) = (
-            Vec::with_capacity(n),
-            Vec::with_capacity(n),
-            Vec::with_capacity(n),
-        );
+        let (mut xs, mut ys) = (Vec::with_capacity(n), Vec::with_capacity(n));
         for k in 0..n {
             let t = t0 + k as f64 * dt;
-            ts.push(t);
             xs.push(at(t - latency_s, &series.x_mas) + normal.sample(&mut r));
             ys.push(at(t - latency_s, &series.y_mas) + normal.sample(&mut r));
         }
+        // resample on the integration grid (at most 1 ms, and no coarser than the series)
+        let step = series.dt_s.max(dt.min(1e-3) / 4.0).min(1e-3);
+        let m = (span / step).ceil() as usize + 2;
+        let lin = |t_abs: f64, v: &[f64]| -> f64 {
+            let u = ((t_abs - t0) / dt).clamp(0.0, (n - 1) as f64);
+            let i = (u.floor() as usize).min(n.saturating_sub(2));
+            let f = u - i as f64;
+            if n < 2 {
+                v[0]
+            } else {
+                v[i] * (1.0 - f) + v[i + 1] * f
+            }
+        };
+        let track = Track {
+            dt_s: step,
+            t0_s: 0.0,
+            dx_px: (0..m)
+                .map(|j| lin(exposure_start_s + j as f64 * step, &xs) / plate_scale_mas)
+                .collect(),
+            dy_px: (0..m)
+                .map(|j| lin(exposure_start_s + j as f64 * step, &ys) / plate_scale_mas)
+                .collect(),
+        };
+        let nominal = track.window(timing.t_overhead_s, timing.t_overhead_s + timing.exposure_s);
+        let response = FitResponse::build(kernel, &track, &nominal, noise);
         Ok(Self {
-            t_s: ts,
-            x_mas: xs,
-            y_mas: ys,
+            track,
             timing,
-            exposure_start_s,
-            plate_scale_mas,
+            response,
         })
     }
 
-    /// Mean telemetry pointing over [a, b) (s from the series start), linear interpolation, px.
-    pub fn mean_px(&self, a: f64, b: f64) -> (f64, f64) {
-        let m = 64usize;
-        let (mut sx, mut sy) = (0.0, 0.0);
-        for k in 0..m {
-            let t = a + (k as f64 + 0.5) / m as f64 * (b - a);
-            let u = ((t - self.t_s[0]) / (self.t_s[1] - self.t_s[0]))
-                .clamp(0.0, (self.t_s.len() - 1) as f64);
-            let i = (u.floor() as usize).min(self.t_s.len() - 2);
-            let f = u - i as f64;
-            sx += self.x_mas[i] * (1.0 - f) + self.x_mas[i + 1] * f;
-            sy += self.y_mas[i] * (1.0 - f) + self.y_mas[i + 1] * f;
-        }
-        (
-            sx / m as f64 / self.plate_scale_mas,
-            sy / m as f64 / self.plate_scale_mas,
-        )
-    }
-
-    /// The displacement telemetry predicts for a star at (x, y): its central pixel's window.
-    pub fn predicted_px(&self, x: f64, y: f64) -> (f64, f64) {
-        let n = self.timing.rows as f64;
-        let (cx, cy) = (
-            x.round().clamp(0.0, n - 1.0) as usize,
-            y.round().clamp(0.0, n - 1.0) as usize,
-        );
-        let (a, b) = self.timing.window_s(cx, cy);
-        self.mean_px(self.exposure_start_s + a, self.exposure_start_s + b)
+    /// The fit displacement (px) telemetry predicts for stars at these positions.
+    pub fn predicted_px(&self, positions: &[(f64, f64)]) -> Vec<(f64, f64)> {
+        self.response
+            .displacements(&self.track, &self.timing, positions)
     }
 }
 
@@ -482,8 +481,8 @@ pub fn apply(
             )
         }
         Countermeasure::Telemetry(tel) => {
-            for s in stars.iter_mut() {
-                let (px, py) = tel.predicted_px(s.x, s.y);
+            let pos: Vec<(f64, f64)> = stars.iter().map(|s| (s.x, s.y)).collect();
+            for (s, (px, py)) in stars.iter_mut().zip(tel.predicted_px(&pos)) {
                 s.x -= px;
                 s.y -= py;
                 s.dx_px -= px;
@@ -512,6 +511,8 @@ mod tests {
             dy_px: dy,
             predicted_dx_px: 0.0,
             predicted_dy_px: 0.0,
+            predicted_fit_dx_px: 0.0,
+            predicted_fit_dy_px: 0.0,
         }
     }
 
@@ -608,13 +609,25 @@ mod tests {
     fn telemetry_input_errors_are_named() {
         let cfg = crate::config::Config::default();
         let timing = ReadoutTiming::new(&cfg);
+        let psf = crate::integrate::cpu::tests::test_psf(4, 4);
+        let k = PixelKernel::build(&psf, &crate::integrate::kernel::IntraPixelMap::uniform(4))
+            .expect("kernel");
+        let nm = FitNoise {
+            flux_e: 7e4,
+            sky_e: 300.0,
+            floor_e2: 226.0,
+            radius_px: 2.5,
+        };
         let empty = AceSeries::still(1e-3, 0);
-        let e = Telemetry::from_series(&empty, timing, 0.0, 472.0, 1.0, 10.0, 0.0, 1)
+        let e = Telemetry::from_series(&empty, timing, 0.0, 472.0, 1.0, 10.0, 0.0, 1, &k, &nm)
             .expect_err("empty");
         assert!(e.to_string().contains("zero-length"));
         let s = AceSeries::still(1e-3, 20_000);
-        assert!(Telemetry::from_series(&s, timing, 0.0, 472.0, f64::NAN, 10.0, 0.0, 1).is_err());
-        assert!(Telemetry::from_series(&s, timing, 0.0, 472.0, 1.0, 0.0, 0.0, 1).is_err());
+        assert!(
+            Telemetry::from_series(&s, timing, 0.0, 472.0, f64::NAN, 10.0, 0.0, 1, &k, &nm)
+                .is_err()
+        );
+        assert!(Telemetry::from_series(&s, timing, 0.0, 472.0, 1.0, 0.0, 0.0, 1, &k, &nm).is_err());
         assert!(Countermeasure::parse("plate-poly:x", 4).is_err());
         assert_eq!(
             Countermeasure::parse("plate-poly:3", 4).expect("ok").name(),

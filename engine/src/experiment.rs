@@ -13,6 +13,7 @@ use crate::gpu::GpuIntegrator;
 use crate::integrate::kernel::PixelKernel;
 use crate::numerics::stats;
 use crate::optics::PsfBank;
+use crate::response::FitResponse;
 use crate::simulate::{SimError, Simulator};
 use serde::Serialize;
 use std::sync::Arc;
@@ -141,7 +142,25 @@ pub fn analyse_image(
     let base = Options::new(&sim.cfg.analysis);
     let mut measured = Vec::new();
     // one global build shared by the countermeasures that start from it
-    let global = astrometry::analyze(&img, Some(&exp.truth), &base)?;
+    let mut global = astrometry::analyze(&img, Some(&exp.truth), &base)?;
+    // the fit displacement the true ACE predicts for every star (the mechanism, shown beside the errors)
+    if let Some(track) = sim.track(index) {
+        let resp = FitResponse::build(
+            &*sim.optical_kernel()?,
+            &track,
+            &sim.nominal_window(&track),
+            &sim.fit_noise(),
+        );
+        let pos: Vec<(f64, f64)> = exp.truth.iter().map(|t| (t.x_px, t.y_px)).collect();
+        let pred = resp.displacements(&track, &sim.timing, &pos);
+        astrometry::attach_fit_prediction(&mut global.stars, &pred);
+        astrometry::summarise(
+            &global.stars,
+            Some(&exp.truth),
+            img.plate_scale_mas,
+            &mut global.report,
+        );
+    }
     for name in &plan.countermeasures {
         let report = match name.as_str() {
             "none" => global.report.clone(),
@@ -173,6 +192,8 @@ pub fn analyse_image(
                     plan.telemetry.rate_hz,
                     plan.telemetry.latency_s,
                     sim.cfg.seed,
+                    &*sim.optical_kernel()?,
+                    &sim.fit_noise(),
                 )?;
                 let mut o = base.clone();
                 o.countermeasure = Countermeasure::Telemetry(Arc::new(tel));

@@ -37,6 +37,7 @@ pub mod optics;
 pub mod photometry;
 pub mod predict;
 pub mod readout;
+pub mod response;
 pub mod rng;
 pub mod scene;
 pub mod simulate;

@@ -178,6 +178,11 @@ impl Simulator {
         self.series.as_deref()
     }
 
+    /// The ACE series, shareable.
+    pub fn series_arc(&self) -> Option<Arc<AceSeries>> {
+        self.series.clone()
+    }
+
     /// The backend integration runs on: "cpu" or the adapter name.
     pub fn backend_name(&self) -> String {
         self.gpu
@@ -202,7 +207,15 @@ impl Simulator {
 
     /// The pixel kernel of a PSF with this simulation's blur and intra-pixel map (cached).
     pub fn kernel_for(&self, psf: &Arc<PsfTable>) -> Result<Arc<PixelKernel>, SimError> {
-        let blur = self.blur_px();
+        self.kernel_with_blur(psf, self.blur_px())
+    }
+
+    /// The pixel kernel of a PSF blurred by a Gaussian of `blur` px (cached).
+    pub fn kernel_with_blur(
+        &self,
+        psf: &Arc<PsfTable>,
+        blur: f64,
+    ) -> Result<Arc<PixelKernel>, SimError> {
         let key = (Arc::as_ptr(psf) as usize, blur.to_bits());
         if let Some(k) = self
             .kernels
@@ -223,6 +236,40 @@ impl Simulator {
             .unwrap_or_else(|e| e.into_inner())
             .insert(key, k.clone());
         Ok(k)
+    }
+
+    /// Noise parameters of a typical star's fit (median flux, sky, read/quantisation floor).
+    pub fn fit_noise(&self) -> crate::response::FitNoise {
+        let d = &self.cfg.detector;
+        let rates: Vec<f64> = self
+            .stars
+            .iter()
+            .map(|s| photometry::electrons_per_s(s.mag_hw, self.cfg.photometry.zero_point_e_per_s))
+            .collect();
+        crate::response::FitNoise {
+            flux_e: crate::numerics::stats::median(&rates) * d.exposure_s,
+            sky_e: d.dark_e_per_s * d.exposure_s,
+            floor_e2: d.read_noise_e.powi(2) + d.gain_e_per_adu.powi(2) / 12.0,
+            radius_px: self.cfg.analysis.fit_radius_px,
+        }
+    }
+
+    /// The unblurred pixel kernel of a typical star (its PSF with this simulation's pixel model): the PSF
+    /// a calibrated pipeline would know.
+    pub fn optical_kernel(&self) -> Result<Arc<PixelKernel>, SimError> {
+        let psf = match self.stars.first() {
+            Some(s) => self.psf_for(s),
+            None => self.bank.get(self.cfg.scene.j_minus_h, 0),
+        };
+        self.kernel_with_blur(&psf, 0.0)
+    }
+
+    /// The nominal window (first pixel's) of exposure `index` on its track.
+    pub fn nominal_window(&self, track: &Track) -> crate::integrate::track::WindowWeights {
+        track.window(
+            self.timing.t_overhead_s,
+            self.timing.t_overhead_s + self.timing.exposure_s,
+        )
     }
 
     /// Start time of exposure `index` in the ACE series.

@@ -361,7 +361,7 @@ pub fn fast_stamp(
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::config::{Config, ReadoutOrder};
 

@@ -376,17 +376,26 @@ pub fn analyze(cfg_fallback: &Config, a: &AnalyzeArgs) -> Result<()> {
         if cfg.ace.case != engine::config::AceCase::Realistic {
             Countermeasure::None
         } else {
-            let series = AceSeries::generate(&cfg, cfg.seed, 0);
-            let t_start = fits::read_f64_key(&a.image, "TSTART").ok();
+            // the image's own configuration gives back its ACE series, PSF and noise
+            let mut c = cfg.clone();
+            c.fidelity.backend = engine::config::Backend::Cpu;
+            c.fidelity.images = 1;
+            let sim = Simulator::new(&c)?;
+            let series = sim
+                .series()
+                .context("the image's configuration has no ACE series")?;
+            let t_start = fits::read_f64_key(&a.image, "TSTART").unwrap_or(0.0);
             let tel = Telemetry::from_series(
-                &series,
-                engine::readout::ReadoutTiming::new(&cfg),
-                t_start.unwrap_or(0.0),
+                series,
+                sim.timing,
+                t_start,
                 scale,
                 a.telemetry.noise_mas,
                 a.telemetry.rate_hz,
                 a.telemetry.latency_s,
                 cfg.seed,
+                &*sim.optical_kernel()?,
+                &sim.fit_noise(),
             )?;
             Countermeasure::Telemetry(std::sync::Arc::new(tel))
         }
