@@ -1,1 +1,487 @@
-//! TODO
+//! Speed against error: every approximation has a knob, and this measures what each setting costs in time
+//! and in error against the reference (finest) setting. Used by `jsim bench`; tests never assert times.
+//!
+//! Errors of an integration are measured on the noise-free star electrons: per stamp, the largest
+//! |value − reference| relative to the stamp's peak pixel (the worst stamp is reported) and the rms of the
+//! same over all stamp pixels; flux error = |Σ − Σ_ref| / Σ_ref. The astrometric cost of a knob is the rms
+//! (mean removed, per axis) of the difference between the positions fitted on noise-free images made with
+//! the knob and with the reference setting, each with its own ePSF built from the image.
+
+use crate::astrometry::{self, AnalysisImage, Options};
+use crate::config::{AceCase, Backend, Config, Method};
+use crate::gpu::GpuIntegrator;
+use crate::integrate::{self, FrameSpec, Motion, Stamp};
+use crate::numerics::stats;
+use crate::simulate::{SimError, Simulator};
+use serde::Serialize;
+use std::sync::Arc;
+use std::time::Instant;
+
+/// One line of the benchmark.
+#[derive(Debug, Clone, Serialize)]
+pub struct BenchRow {
+    pub group: String,
+    pub setting: String,
+    pub backend: String,
+    pub stars: usize,
+    pub time_s: f64,
+    pub max_err: f64,
+    pub rms_err: f64,
+    pub flux_err: f64,
+    pub astro_mas: f64,
+    pub note: String,
+}
+
+/// The CSV header of `bench.csv`.
+pub const CSV_HEADER: [&str; 10] = [
+    "group",
+    "setting",
+    "backend",
+    "stars",
+    "time_s",
+    "max_err",
+    "rms_err",
+    "flux_err",
+    "astro_mas",
+    "note",
+];
+
+/// Per-stamp error statistics of `a` against the reference `r` (same stamps in the same order).
+pub fn compare(a: &[Stamp], r: &[Stamp]) -> (f64, f64, f64) {
+    let (mut worst, mut sq, mut n) = (0.0f64, 0.0, 0usize);
+    let (mut fa, mut fr) = (0.0, 0.0);
+    for (x, y) in a.iter().zip(r) {
+        let peak = y.data.iter().cloned().fold(0.0, f64::max).max(1e-300);
+        // stamps may differ in size (a knob changes the stamp): compare on the reference's pixels
+        for iy in 0..y.ny {
+            for ix in 0..y.nx {
+                let (gx, gy) = (y.x0 + ix as i64, y.y0 + iy as i64);
+                let v = if gx >= x.x0
+                    && gy >= x.y0
+                    && gx < x.x0 + x.nx as i64
+                    && gy < x.y0 + x.ny as i64
+                {
+                    x.data[(gy - x.y0) as usize * x.nx + (gx - x.x0) as usize]
+                } else {
+                    0.0
+                };
+                let e = (v - y.data[iy * y.nx + ix]).abs() / peak;
+                worst = worst.max(e);
+                sq += e * e;
+                n += 1;
+            }
+        }
+        fa += x.sum();
+        fr += y.sum();
+    }
+    (
+        worst,
+        (sq / n.max(1) as f64).sqrt(),
+        ((fa - fr) / fr.max(1e-300)).abs(),
+    )
+}
+
+/// Integrate the stars of `sim` (optionally the first `limit`) for exposure 0, timed.
+pub fn integrate_stamps(
+    sim: &Simulator,
+    method: Method,
+    gpu: Option<&GpuIntegrator>,
+    limit: Option<usize>,
+) -> Result<(Vec<Stamp>, f64), SimError> {
+    let mut jobs = sim.jobs()?;
+    if let Some(l) = limit {
+        jobs.truncate(l);
+    }
+    let track = sim.track(0);
+    let motion = match &track {
+        Some(t) => Motion::Track(t),
+        None => Motion::Static,
+    };
+    let map = crate::integrate::kernel::IntraPixelMap::from_config(
+        &sim.cfg.detector,
+        sim.cfg.fidelity.subpixels,
+    )?;
+    let frame = FrameSpec {
+        timing: &sim.timing,
+        detector_px: sim.cfg.instrument.detector_px,
+        stamp_radius_px: sim.cfg.fidelity.stamp_radius_px,
+        method,
+        map: &map,
+    };
+    let t0 = Instant::now();
+    let stamps = match (gpu, method) {
+        (Some(g), Method::Direct | Method::Fast) => g
+            .integrate(&jobs, motion, &frame)
+            .map_err(|e| SimError::Gpu(e.to_string()))?,
+        _ => integrate::integrate_cpu(&jobs, motion, &frame),
+    };
+    Ok((stamps, t0.elapsed().as_secs_f64()))
+}
+
+/// Fitted positions (px) of the stars in the noise-free image of `sim`'s exposure 0.
+pub fn noise_free_positions(sim: &Simulator) -> Result<Vec<Option<(f64, f64)>>, SimError> {
+    let jobs = sim.jobs()?;
+    let (e, _) = sim.integrate(0, &jobs)?;
+    let n = sim.cfg.instrument.detector_px;
+    let sky = sim.cfg.detector.dark_e_per_s * sim.cfg.detector.exposure_s;
+    let img = AnalysisImage {
+        nx: n,
+        ny: n,
+        e: e.iter().map(|v| v + sky).collect(),
+        bad: vec![false; n * n],
+        var_floor_e2: sim.cfg.detector.read_noise_e.powi(2)
+            + sim.cfg.detector.gain_e_per_adu.powi(2) / 12.0,
+        plate_scale_mas: sim.cfg.instrument.plate_scale_mas(),
+    };
+    let truth = sim.truth(&jobs, sim.track(0).as_ref());
+    let a = astrometry::analyze(&img, Some(&truth), &Options::new(&sim.cfg.analysis))
+        .map_err(|e| SimError::Gpu(e.to_string()))?;
+    let mut out = vec![None; truth.len()];
+    for s in &a.stars {
+        if let Some(k) = s.truth {
+            out[k] = Some((s.x, s.y));
+        }
+    }
+    Ok(out)
+}
+
+/// Per-axis rms (mas, mean removed) of position differences between two fits of the same stars.
+pub fn position_rms_mas(a: &[Option<(f64, f64)>], b: &[Option<(f64, f64)>], scale: f64) -> f64 {
+    let (mut dx, mut dy) = (Vec::new(), Vec::new());
+    for (p, q) in a.iter().zip(b) {
+        if let (Some(p), Some(q)) = (p, q) {
+            dx.push((p.0 - q.0) * scale);
+            dy.push((p.1 - q.1) * scale);
+        }
+    }
+    ((stats::std_dev(&dx).powi(2) + stats::std_dev(&dy).powi(2)) / 2.0).sqrt()
+}
+
+/// A configuration for benchmarking: CPU backend, one image, noise-free detector.
+pub fn bench_config(base: &Config) -> Config {
+    let mut c = base.clone();
+    c.fidelity.images = 1;
+    c.fidelity.backend = Backend::Cpu;
+    c
+}
+
+/// A sweep of one knob: `settings` are (label, configuration); the last one is the reference.
+pub fn knob_sweep(
+    group: &str,
+    settings: &[(String, Config)],
+    astro: bool,
+) -> Result<Vec<BenchRow>, SimError> {
+    let mut runs = Vec::new();
+    for (label, cfg) in settings {
+        let t0 = Instant::now();
+        let sim = Simulator::new(cfg)?;
+        let (stamps, t_int) = integrate_stamps(&sim, cfg.fidelity.method, None, None)?;
+        let setup = t0.elapsed().as_secs_f64() - t_int;
+        let pos = if astro {
+            Some(noise_free_positions(&sim)?)
+        } else {
+            None
+        };
+        runs.push((label.clone(), stamps, t_int, setup, pos, sim.stars.len()));
+    }
+    let Some((_, ref_stamps, _, _, ref_pos, _)) = runs
+        .last()
+        .map(|r| (r.0.clone(), r.1.clone(), r.2, r.3, r.4.clone(), r.5))
+    else {
+        return Ok(Vec::new());
+    };
+    let scale = settings[0].1.instrument.plate_scale_mas();
+    Ok(runs
+        .into_iter()
+        .map(|(label, stamps, t_int, setup, pos, n)| {
+            let (max_err, rms_err, flux_err) = compare(&stamps, &ref_stamps);
+            let astro_mas = match (&pos, &ref_pos) {
+                (Some(p), Some(r)) => position_rms_mas(p, r, scale),
+                _ => f64::NAN,
+            };
+            BenchRow {
+                group: group.into(),
+                setting: label,
+                backend: "cpu".into(),
+                stars: n,
+                time_s: t_int,
+                max_err,
+                rms_err,
+                flux_err,
+                astro_mas,
+                note: format!("set-up (PSF + kernel) {setup:.2} s"),
+            }
+        })
+        .collect())
+}
+
+/// Methods × backends on one configuration: errors against the CPU direct method on `ref_stars` stars;
+/// times of the full frame (the direct CPU time is measured on the subset and scaled, as noted).
+pub fn methods(
+    cfg: &Config,
+    ref_stars: usize,
+    gpu: Option<Arc<GpuIntegrator>>,
+) -> Result<Vec<BenchRow>, SimError> {
+    let sim = Simulator::new(&bench_config(cfg))?;
+    let n_all = sim.stars.len();
+    let sub = ref_stars.min(n_all).max(1);
+    let (reference, t_ref) = integrate_stamps(&sim, Method::Direct, None, Some(sub))?;
+    let mut rows = vec![BenchRow {
+        group: "method".into(),
+        setting: "direct (reference)".into(),
+        backend: "cpu".into(),
+        stars: n_all,
+        time_s: t_ref * n_all as f64 / sub as f64,
+        max_err: 0.0,
+        rms_err: 0.0,
+        flux_err: 0.0,
+        astro_mas: 0.0,
+        note: format!("measured on {sub} stars ({t_ref:.2} s), scaled to {n_all}"),
+    }];
+    let mut push = |setting: &str, backend: &str, full: (Vec<Stamp>, f64)| {
+        let part: Vec<Stamp> = full.0.iter().take(sub).cloned().collect();
+        let (max_err, rms_err, flux_err) = compare(&part, &reference);
+        rows.push(BenchRow {
+            group: "method".into(),
+            setting: setting.into(),
+            backend: backend.into(),
+            stars: n_all,
+            time_s: full.1,
+            max_err,
+            rms_err,
+            flux_err,
+            astro_mas: f64::NAN,
+            note: String::new(),
+        });
+    };
+    push(
+        "fast",
+        "cpu",
+        integrate_stamps(&sim, Method::Fast, None, None)?,
+    );
+    if let Some(g) = &gpu {
+        let name = g.adapter_name();
+        // warm-up (pipeline caches, kernel upload), then timed
+        let _ = integrate_stamps(&sim, Method::Fast, Some(g), None)?;
+        push(
+            "fast",
+            &name,
+            integrate_stamps(&sim, Method::Fast, Some(g), None)?,
+        );
+        push(
+            "direct",
+            &name,
+            integrate_stamps(&sim, Method::Direct, Some(g), None)?,
+        );
+    }
+    Ok(rows)
+}
+
+/// The integration cost against the number of stars (random positions over the photosensitive area).
+pub fn scaling(
+    cfg: &Config,
+    counts: &[usize],
+    gpu: Option<Arc<GpuIntegrator>>,
+) -> Result<Vec<BenchRow>, SimError> {
+    use rand::RngExt;
+    let dir = std::env::temp_dir().join(format!("jsim-bench-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).map_err(|e| SimError::Gpu(format!("{}: {e}", dir.display())))?;
+    let mut rows = Vec::new();
+    for &n in counts {
+        let mut r = crate::rng::stream(cfg.seed, crate::rng::Stream::Test, n as u64);
+        let lo = cfg.instrument.border_px() as f64 + 2.0;
+        let hi = (cfg.instrument.detector_px - cfg.instrument.border_px()) as f64 - 2.0;
+        let mut text = String::from("x,y,hw,j_h\n");
+        for _ in 0..n {
+            let (x, y) = (
+                lo + r.random::<f64>() * (hi - lo),
+                lo + r.random::<f64>() * (hi - lo),
+            );
+            text.push_str(&format!(
+                "{x},{y},{},{}\n",
+                cfg.scene.mag_hw, cfg.scene.j_minus_h
+            ));
+        }
+        let path = dir.join(format!("stars_{n}.csv"));
+        std::fs::write(&path, text)
+            .map_err(|e| SimError::Gpu(format!("{}: {e}", path.display())))?;
+        let mut c = bench_config(cfg);
+        c.scene.kind = crate::config::SceneKind::Catalogue;
+        c.scene.catalogue = Some(path);
+        let sim = Simulator::new(&c)?;
+        let (_, t) = integrate_stamps(&sim, Method::Fast, None, None)?;
+        rows.push(BenchRow {
+            group: "stars".into(),
+            setting: format!("{n} stars"),
+            backend: "cpu".into(),
+            stars: n,
+            time_s: t,
+            max_err: f64::NAN,
+            rms_err: f64::NAN,
+            flux_err: f64::NAN,
+            astro_mas: f64::NAN,
+            note: "fast method".into(),
+        });
+        if let Some(g) = &gpu {
+            let _ = integrate_stamps(&sim, Method::Fast, Some(g), None)?;
+            let (_, t) = integrate_stamps(&sim, Method::Fast, Some(g), None)?;
+            rows.push(BenchRow {
+                group: "stars".into(),
+                setting: format!("{n} stars"),
+                backend: g.adapter_name(),
+                stars: n,
+                time_s: t,
+                max_err: f64::NAN,
+                rms_err: f64::NAN,
+                flux_err: f64::NAN,
+                astro_mas: f64::NAN,
+                note: "fast method".into(),
+            });
+        }
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+    Ok(rows)
+}
+
+/// The knob sweeps of the reference configuration (`quick` uses a 5 × 5 grid for speed).
+pub fn knob_settings(base: &Config, quick: bool) -> Vec<(String, Vec<(String, Config)>, bool)> {
+    let mut b = bench_config(base);
+    if quick {
+        b.scene.grid_n = 5;
+        b.scene.grid_spacing_px = 300.0;
+    }
+    let with = |f: &dyn Fn(&mut Config)| {
+        let mut c = b.clone();
+        f(&mut c);
+        c
+    };
+    let mut g = b.clone();
+    g.ace.case = AceCase::Gaussian;
+    let gauss = |f: &dyn Fn(&mut Config)| {
+        let mut c = g.clone();
+        f(&mut c);
+        c
+    };
+    vec![
+        (
+            "time step (realistic ACE)".into(),
+            [64usize, 16, 4, 2, 1]
+                .iter()
+                .map(|&s| {
+                    (
+                        format!("{:.2} ms", 0.15 * s as f64),
+                        with(&|c| c.fidelity.time_stride = s),
+                    )
+                })
+                .collect(),
+            true,
+        ),
+        (
+            "subpixels per axis".into(),
+            [2usize, 4, 8, 16]
+                .iter()
+                .map(|&s| (format!("{s}"), gauss(&|c| c.fidelity.subpixels = s)))
+                .collect(),
+            true,
+        ),
+        (
+            "PSF cells per pixel".into(),
+            [4usize, 8, 16, 32]
+                .iter()
+                .map(|&o| (format!("{o}"), gauss(&|c| c.optics.psf_oversampling = o)))
+                .collect(),
+            true,
+        ),
+        (
+            "pupil samples".into(),
+            [64usize, 128, 256, 512]
+                .iter()
+                .map(|&n| (format!("{n}"), gauss(&|c| c.optics.pupil_samples = n)))
+                .collect(),
+            true,
+        ),
+        (
+            "wavelength step".into(),
+            [0.1f64, 0.05, 0.02, 0.01]
+                .iter()
+                .map(|&s| (format!("{s} µm"), gauss(&|c| c.band.wavelength_step_um = s)))
+                .collect(),
+            true,
+        ),
+        (
+            "stamp radius (flux kept)".into(),
+            [6usize, 8, 12, 20]
+                .iter()
+                .map(|&r| {
+                    (
+                        format!("{r} px"),
+                        gauss(&|c| c.fidelity.stamp_radius_px = r),
+                    )
+                })
+                .collect(),
+            false,
+        ),
+    ]
+}
+
+/// Accuracy against ePSF iterations on a noisy Gaussian-ACE image (mean over `images`).
+pub fn epsf_iterations(base: &Config, images: usize) -> Result<Vec<BenchRow>, SimError> {
+    let mut c = bench_config(base);
+    c.ace.case = AceCase::Gaussian;
+    c.fidelity.images = images.max(1);
+    let sim = Simulator::new(&c)?;
+    let exps: Vec<_> = (0..c.fidelity.images)
+        .map(|i| sim.exposure(i))
+        .collect::<Result<_, _>>()?;
+    let mut rows = Vec::new();
+    for (label, it, sm) in [
+        ("1 (quadratic)", 1usize, crate::config::Smoothing::Quadratic),
+        (
+            "3 (quadratic, default)",
+            3,
+            crate::config::Smoothing::Quadratic,
+        ),
+        (
+            "converged (quadratic)",
+            0,
+            crate::config::Smoothing::Quadratic,
+        ),
+        (
+            "3 (A&K local quadratic)",
+            3,
+            crate::config::Smoothing::LocalQuadratic,
+        ),
+        ("3 (no smoothing)", 3, crate::config::Smoothing::None),
+    ] {
+        let mut o = Options::new(&c.analysis);
+        o.cfg.epsf_iterations = it;
+        o.cfg.smoothing = sm;
+        let t0 = Instant::now();
+        let mut acc = Vec::new();
+        let mut ratio = Vec::new();
+        for e in &exps {
+            let img = AnalysisImage::from_detector(&c, &e.image);
+            if let Ok(a) = astrometry::analyze(&img, Some(&e.truth), &o) {
+                acc.push(a.report.accuracy_mas);
+                ratio.push(a.report.accuracy_over_crlb);
+            }
+        }
+        rows.push(BenchRow {
+            group: "ePSF iterations".into(),
+            setting: label.into(),
+            backend: "cpu".into(),
+            stars: sim.stars.len(),
+            time_s: t0.elapsed().as_secs_f64() / exps.len().max(1) as f64,
+            max_err: f64::NAN,
+            rms_err: f64::NAN,
+            flux_err: f64::NAN,
+            astro_mas: stats::mean(&acc),
+            note: format!(
+                "accuracy/CRLB {:.3} (mean of {} images)",
+                stats::mean(&ratio),
+                acc.len()
+            ),
+        });
+    }
+    Ok(rows)
+}

@@ -7,7 +7,9 @@ use clap::{Args, Parser, Subcommand};
 use engine::config::{AceCase, Backend, Config, Method, ReadoutOrder};
 use std::path::{Path, PathBuf};
 
+mod bench_cmd;
 mod cmd;
+mod sweep_cmd;
 
 #[derive(Parser)]
 #[command(
@@ -175,6 +177,14 @@ enum Command {
         #[arg(long, default_value = "out/experiment")]
         out: PathBuf,
     },
+    /// Monte Carlo sweep over a parameter grid (resumable, shardable; --emit-slurm for a cluster).
+    Sweep(sweep_cmd::SweepArgs),
+    /// Merge the shards of a sweep.
+    Merge(sweep_cmd::MergeArgs),
+    /// Report a merged sweep: fraction of exposures meeting a threshold, distributions, plots.
+    Report(sweep_cmd::ReportArgs),
+    /// Speed against error of every approximation knob, and the methods × backends.
+    Bench(bench_cmd::BenchArgs),
     /// Predict the accuracy of a configuration per countermeasure, without simulating images.
     Predict {
         #[command(flatten)]
@@ -339,6 +349,10 @@ fn run(cli: Cli) -> Result<()> {
                 },
             )
         }
+        Command::Sweep(a) => sweep_cmd::sweep(&a),
+        Command::Merge(a) => sweep_cmd::merge(&a),
+        Command::Report(a) => sweep_cmd::report(&a),
+        Command::Bench(a) => bench_cmd::bench(&a),
         Command::Predict {
             cfg,
             countermeasures,
