@@ -512,6 +512,8 @@ pub fn analyze(
             (built.fits, built.epsf, built.iterations)
         }
     };
+    let mut fits = fits;
+    crate::epsf::fit::flags::mark_poor_fits(&mut fits);
     let mut stars = star_results(&fits, &matches, truth);
     let mut report = Report {
         n_detected: det.len(),

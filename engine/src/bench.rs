@@ -204,12 +204,12 @@ pub fn knob_sweep(
                 setting: label,
                 backend: "cpu".into(),
                 stars: n,
-                time_s: t_int,
+                time_s: setup + t_int,
                 max_err,
                 rms_err,
                 flux_err,
                 astro_mas,
-                note: format!("set-up (PSF + kernel) {setup:.2} s"),
+                note: format!("PSF + kernel {setup:.2} s, integration {t_int:.3} s"),
             }
         })
         .collect())

@@ -236,12 +236,14 @@ pub fn build(
     let mut done = 0;
     for _ in 0..max_iter {
         done += 1;
-        let per_star: Vec<Vec<(usize, f64)>> = starts
+        let fitted: Vec<Option<(StarFit, f64, f64)>> = starts
             .par_iter()
             .enumerate()
-            .filter(|(k, _)| use_for_build[*k])
             .map(|(k, s)| {
-                let (f, x, y) = match fixed_positions {
+                if !use_for_build[k] {
+                    return None;
+                }
+                Some(match fixed_positions {
                     Some(p) => {
                         let (x, y) = p[k];
                         (
@@ -254,12 +256,32 @@ pub fn build(
                         let f = fit_star(img, &psi, s.x, s.y, s.flux, s.sky, &opts.fit);
                         (f, f.x, f.y)
                     }
-                };
-                if (fixed_positions.is_some() || f.usable()) && f.flux > 0.0 {
-                    samples(img, &psi, &f, x, y)
-                } else {
-                    Vec::new()
+                })
+            })
+            .collect();
+        // stars that the current ePSF fits far worse than the others (blends, defects) give no samples
+        let chi: Vec<f64> = fitted
+            .iter()
+            .flatten()
+            .filter(|(f, _, _)| f.usable())
+            .map(|(f, _, _)| f.chi2_red)
+            .collect();
+        let chi_limit = if fixed_positions.is_some() || chi.len() < 5 {
+            f64::INFINITY
+        } else {
+            crate::epsf::fit::flags::POOR_FIT_FACTOR * stats::median(&chi).max(1.0)
+        };
+        let per_star: Vec<Vec<(usize, f64)>> = fitted
+            .par_iter()
+            .map(|o| match o {
+                Some((f, x, y))
+                    if (fixed_positions.is_some() || f.usable())
+                        && f.flux > 0.0
+                        && f.chi2_red <= chi_limit =>
+                {
+                    samples(img, &psi, f, *x, *y)
                 }
+                _ => Vec::new(),
             })
             .collect();
         let mut buckets: Vec<Vec<f64>> = vec![Vec::new(); n * n];

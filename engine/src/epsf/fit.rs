@@ -31,8 +31,28 @@ pub mod flags {
     pub const SINGULAR: u32 = 16;
     pub const NONPOSITIVE_FLUX: u32 = 32;
     pub const FEW_PIXELS: u32 = 64;
+    /// χ²/dof far above the image's typical value (a blend, a cosmic, a bad pixel): see [`POOR_FIT_FACTOR`].
+    pub const POOR_FIT: u32 = 128;
     /// Anything that makes a fit unusable for the accuracy statistics.
-    pub const REJECT: u32 = NOT_CONVERGED | MOVED | SINGULAR | NONPOSITIVE_FLUX | FEW_PIXELS;
+    pub const REJECT: u32 =
+        NOT_CONVERGED | MOVED | SINGULAR | NONPOSITIVE_FLUX | FEW_PIXELS | POOR_FIT;
+    /// A fit is poor when its χ²/dof exceeds this many times the median of the image's fits (and 2).
+    pub const POOR_FIT_FACTOR: f64 = 5.0;
+
+    /// Flag the fits whose χ²/dof stands out from the median of the usable ones.
+    pub fn mark_poor_fits(fits: &mut [super::StarFit]) {
+        let c: Vec<f64> = fits
+            .iter()
+            .filter(|f| f.usable() && f.chi2_red.is_finite())
+            .map(|f| f.chi2_red)
+            .collect();
+        let limit = (POOR_FIT_FACTOR * crate::numerics::stats::median(&c)).max(2.0);
+        for f in fits.iter_mut() {
+            if !(f.chi2_red <= limit) {
+                f.flags |= POOR_FIT;
+            }
+        }
+    }
 }
 
 /// Options of a star fit.

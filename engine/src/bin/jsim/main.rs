@@ -266,6 +266,7 @@ pub struct CountermeasureArgs {
 }
 
 fn main() {
+    quiet_mesa();
     let cli = Cli::parse();
     if let Err(e) = run(cli) {
         eprintln!("jsim: error: {e:#}");
@@ -361,6 +362,19 @@ fn run(cli: Cli) -> Result<()> {
             let c = cfg.load()?;
             let plan = tel.plan(&countermeasures)?;
             cmd::predict(&c, &countermeasures, &plan)
+        }
+    }
+}
+
+/// Mesa's Vulkan loader prints "XDG_RUNTIME_DIR is invalid or not set" when probing for a GPU without a
+/// session directory: harmless, but alarming. Give it a private one before any thread exists.
+#[allow(unsafe_code)]
+fn quiet_mesa() {
+    if std::env::var_os("XDG_RUNTIME_DIR").is_none() {
+        let dir = std::env::temp_dir().join(format!("jsim-xdg-{}", std::process::id()));
+        if std::fs::create_dir_all(&dir).is_ok() {
+            // SAFETY: called first thing in main, before any other thread is started.
+            unsafe { std::env::set_var("XDG_RUNTIME_DIR", &dir) };
         }
     }
 }

@@ -1,0 +1,122 @@
+//! Shared helpers of the workspace tests: a reduced but physical configuration that runs in seconds in
+//! the dev profile.
+#![allow(dead_code)]
+
+use engine::config::Config;
+
+/// A 512² detector (4 channels of 128 columns), an 8 × 8 grid of stars 56 px apart, a coarser PSF grid and
+/// wavelength sampling, and a 2-minute ACE series. Everything else (optics, noise, photometry) as the paper.
+pub fn small_config() -> Config {
+    let mut c = Config::default();
+    c.instrument.detector_px = 512;
+    c.instrument.photosensitive_px = 496;
+    c.readout.channels = 4;
+    c.readout.channel_width_px = 128;
+    c.scene.grid_n = 8;
+    c.scene.grid_spacing_px = 56.0;
+    c.optics.pupil_samples = 128;
+    c.optics.psf_oversampling = 8;
+    c.optics.psf_radius_px = 10;
+    c.band.wavelength_step_um = 0.05;
+    c.fidelity.subpixels = 4;
+    c.fidelity.stamp_radius_px = 9;
+    c.fidelity.images = 3;
+    c.fidelity.backend = engine::config::Backend::Cpu;
+    c.ace.span_s = 120.0;
+    c.validate().expect("the small test config is valid");
+    c
+}
+
+/// A fresh temporary directory for one test.
+pub fn temp_dir(name: &str) -> std::path::PathBuf {
+    let d = std::env::temp_dir().join(format!("jsim-test-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).expect("temp dir");
+    d
+}
+
+/// An image (electrons) of stars drawn from a pixel-integrated circular Gaussian of σ px, on a flat sky,
+/// with Poisson and read noise when `seed` is given. Returns the analysis image and the truth.
+pub fn gaussian_image(
+    n: usize,
+    stars: &[(f64, f64, f64)],
+    sky: f64,
+    sigma_px: f64,
+    seed: Option<u64>,
+) -> (
+    engine::astrometry::AnalysisImage,
+    Vec<engine::simulate::TruthRow>,
+) {
+    use rand_distr::{Distribution, Normal, Poisson};
+    let s2 = 2.0 * sigma_px * sigma_px;
+    let pix = |d: f64| -> f64 {
+        (0..32)
+            .map(|k| (-(d + (k as f64 + 0.5) / 32.0 - 0.5).powi(2) / s2).exp())
+            .sum::<f64>()
+            / 32.0
+    };
+    let norm = 1.0 / (std::f64::consts::PI * s2);
+    let mut e = vec![sky; n * n];
+    for &(x, y, f) in stars {
+        let (cx, cy) = (x.round() as i64, y.round() as i64);
+        for py in (cy - 10).max(0)..(cy + 11).min(n as i64) {
+            let wy = pix(py as f64 - y);
+            for px in (cx - 10).max(0)..(cx + 11).min(n as i64) {
+                e[py as usize * n + px as usize] += f * norm * wy * pix(px as f64 - x);
+            }
+        }
+    }
+    if let Some(seed) = seed {
+        let mut r = engine::rng::stream(seed, engine::rng::Stream::Test, 7);
+        let rn = Normal::new(0.0, 15.0).expect("normal");
+        for v in e.iter_mut() {
+            let p: f64 = Poisson::new(v.max(1e-9))
+                .map(|d| d.sample(&mut r))
+                .unwrap_or(*v);
+            *v = p + rn.sample(&mut r);
+        }
+    }
+    let truth = stars
+        .iter()
+        .enumerate()
+        .map(|(k, &(x, y, f))| engine::simulate::TruthRow {
+            id: k,
+            x_px: x,
+            y_px: y,
+            mag_hw: 0.0,
+            j_minus_h: 0.0,
+            flux_e: f,
+            modelled_fraction: 1.0,
+            t_start_s: 0.0,
+            exptime_s: 1.0,
+            jitter_dx_px: 0.0,
+            jitter_dy_px: 0.0,
+        })
+        .collect();
+    let img = engine::astrometry::AnalysisImage {
+        nx: n,
+        ny: n,
+        e,
+        bad: vec![false; n * n],
+        var_floor_e2: 225.0,
+        plate_scale_mas: 472.0,
+    };
+    (img, truth)
+}
+
+/// A jittered grid of stars: (x, y, flux).
+pub fn grid_stars(n_side: usize, spacing: f64, flux: f64, seed: u64) -> Vec<(f64, f64, f64)> {
+    use rand::RngExt;
+    let mut r = engine::rng::stream(seed, engine::rng::Stream::Test, 11);
+    let mut v = Vec::new();
+    for j in 0..n_side {
+        for i in 0..n_side {
+            v.push((
+                20.0 + i as f64 * spacing + r.random::<f64>(),
+                20.0 + j as f64 * spacing + r.random::<f64>(),
+                flux,
+            ));
+        }
+    }
+    v
+}

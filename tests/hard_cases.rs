@@ -1,0 +1,201 @@
+//! The simulator on hard cases: zero and huge jitter, stars on detector and channel edges, saturation,
+//! zero flux, stars at the noise floor, extreme wavefront errors, and bad input — never NaN, never a panic.
+
+mod common;
+
+use common::{small_config, temp_dir};
+use engine::astrometry::{self, AnalysisImage, Options};
+use engine::config::{AceCase, Config, SceneKind};
+use engine::detector::dq;
+use engine::simulate::Simulator;
+
+fn catalogue(name: &str, rows: &[(f64, f64, f64)]) -> std::path::PathBuf {
+    let dir = temp_dir(name);
+    let p = dir.join("stars.csv");
+    let mut s = String::from("x,y,hw,j_h\n");
+    for (x, y, m) in rows {
+        s.push_str(&format!("{x},{y},{m},2.0\n"));
+    }
+    std::fs::write(&p, s).expect("write catalogue");
+    p
+}
+
+fn finite(e: &engine::simulate::Exposure) -> bool {
+    e.star_e.iter().all(|v| v.is_finite()) && e.image.adu.iter().all(|v| v.is_finite())
+}
+
+#[test]
+fn zero_jitter_equals_a_still_telescope() {
+    let mut c = small_config();
+    c.ace.sigma_mas = 0.0;
+    let a = Simulator::new(&c).expect("sim").exposure(0).expect("exp");
+    c.ace.case = AceCase::None;
+    let b = Simulator::new(&c).expect("sim").exposure(0).expect("exp");
+    assert!(finite(&a));
+    let peak = b.star_e.iter().cloned().fold(0.0, f64::max);
+    let worst = a
+        .star_e
+        .iter()
+        .zip(&b.star_e)
+        .map(|(x, y)| (x - y).abs())
+        .fold(0.0, f64::max);
+    assert!(worst < 1e-9 * peak, "{worst}");
+}
+
+#[test]
+fn huge_jitter_stays_finite_and_conserves_flux() {
+    let mut c = small_config();
+    c.scene.grid_n = 2;
+    c.scene.grid_spacing_px = 200.0;
+    c.ace.sigma_mas = 3000.0; // ≈ 6 px per exposure
+    c.detector.shot_noise = false;
+    c.detector.read_noise = false;
+    let sim = Simulator::new(&c).expect("sim");
+    let e = sim.exposure(0).expect("exp");
+    assert!(finite(&e));
+    // every star's light lands on the detector: total = Σ rate × window × modelled fraction
+    let expect: f64 = e.truth.iter().map(|t| t.flux_e * t.modelled_fraction).sum();
+    let got: f64 = e.star_e.iter().sum();
+    assert!((got / expect - 1.0).abs() < 1e-3, "{got} vs {expect}");
+    let img = AnalysisImage::from_detector(&c, &e.image);
+    let r = astrometry::analyze(&img, Some(&e.truth), &Options::new(&c.analysis));
+    if let Ok(a) = r {
+        assert!(a.stars.iter().all(|s| s.x.is_finite() && s.y.is_finite()));
+    }
+}
+
+#[test]
+fn stars_on_detector_and_channel_edges() {
+    let mut c = small_config();
+    c.scene.kind = SceneKind::Catalogue;
+    // partly off the detector, in the border, across the channel boundaries at x = 128, 256
+    c.scene.catalogue = Some(catalogue(
+        "edges",
+        &[
+            (-3.0, 100.0, 12.0),
+            (2.4, 200.0, 12.0),
+            (127.5, 300.0, 12.0),
+            (255.9, 60.0, 12.0),
+            (509.7, 509.9, 12.0),
+            (300.0, 300.0, 12.0),
+        ],
+    ));
+    c.detector.shot_noise = false;
+    c.detector.read_noise = false;
+    let sim = Simulator::new(&c).expect("sim");
+    let e = sim.exposure(0).expect("exp");
+    assert!(finite(&e));
+    // the border sees no light; pixels off the detector simply do not exist
+    assert_eq!(e.image.dq[100 * 512] & dq::BORDER, dq::BORDER);
+    // a star across a channel boundary keeps its flux (its pixels have different windows, not different light)
+    let box_sum = |cx: usize, cy: usize| -> f64 {
+        (cy - 9..=cy + 9)
+            .flat_map(|y| (cx - 9..=cx + 9).map(move |x| (x, y)))
+            .map(|(x, y)| e.star_e[y * 512 + x])
+            .sum()
+    };
+    let ratio = box_sum(128, 300) / box_sum(300, 300);
+    assert!(
+        (ratio - 1.0).abs() < 0.02,
+        "channel-boundary star flux ratio {ratio}"
+    );
+}
+
+#[test]
+fn saturated_zero_flux_and_noise_floor_stars() {
+    let mut c = small_config();
+    c.scene.kind = SceneKind::Catalogue;
+    c.scene.catalogue = Some(catalogue(
+        "bright",
+        &[
+            (100.3, 100.6, 6.0),
+            (200.2, 100.1, 40.0),
+            (300.7, 100.4, 17.5),
+            (100.0, 300.0, 12.5),
+            (200.0, 300.0, 12.5),
+            (300.0, 300.0, 12.5),
+            (400.0, 300.0, 12.5),
+            (400.0, 100.0, 12.5),
+        ],
+    ));
+    let sim = Simulator::new(&c).expect("sim");
+    let e = sim.exposure(0).expect("exp");
+    assert!(finite(&e));
+    let sat = (95..106)
+        .flat_map(|y| (95..106).map(move |x| (x, y)))
+        .filter(|(x, y)| e.image.dq[y * 512 + x] & dq::SATURATED != 0)
+        .count();
+    assert!(sat > 0, "the Hw 6 star saturates and is flagged");
+    let img = AnalysisImage::from_detector(&c, &e.image);
+    let a =
+        astrometry::analyze(&img, Some(&e.truth), &Options::new(&c.analysis)).expect("analysis");
+    assert!(
+        a.stars
+            .iter()
+            .all(|s| s.x.is_finite() && s.flux_e.is_finite())
+    );
+    // the zero-flux star is not detected; the saturated one is flagged
+    assert!(a.stars.iter().all(|s| s.truth != Some(1)));
+    if let Some(s) = a.stars.iter().find(|s| s.truth == Some(0)) {
+        assert!(s.flags & engine::epsf::fit::flags::SATURATED != 0, "{s:?}");
+    }
+}
+
+#[test]
+fn extreme_zernike_terms_give_a_finite_normalised_psf() {
+    let mut c = small_config();
+    c.optics.fringe = vec![0.0; 37];
+    c.optics.fringe[3] = 2.0; // 2 waves of defocus
+    c.optics.fringe[36] = 1.0; // the highest spherical term
+    c.optics.fringe[10] = -1.5; // trefoil
+    c.optics.psf_radius_px = 14;
+    let sim = Simulator::new(&c).expect("sim");
+    let psf = sim.psf_for(&sim.stars[0]);
+    assert!(psf.data.iter().all(|v| v.is_finite() && *v >= 0.0));
+    let s = psf.sum();
+    assert!(s > 0.1 && s <= 1.0 + 1e-9, "table flux {s}");
+    let e = sim.exposure(0).expect("exp");
+    assert!(finite(&e));
+}
+
+#[test]
+fn bad_input_is_a_named_error() {
+    let mut c = small_config();
+    c.detector.exposure_s = -1.0;
+    assert!(
+        Simulator::new(&c)
+            .err()
+            .expect("negative exposure")
+            .to_string()
+            .contains("detector.exposure_s")
+    );
+    let mut c = small_config();
+    c.ace.sigma_mas = f64::NAN;
+    assert!(
+        Simulator::new(&c)
+            .err()
+            .expect("NaN")
+            .to_string()
+            .contains("ace.sigma_mas")
+    );
+    let mut c = small_config();
+    c.scene.kind = SceneKind::Catalogue;
+    c.scene.catalogue = Some("/nonexistent/stars.csv".into());
+    assert!(
+        Simulator::new(&c)
+            .err()
+            .expect("missing file")
+            .to_string()
+            .contains("/nonexistent/stars.csv")
+    );
+    let mut c = small_config();
+    c.fidelity.images = 30; // 30 exposures need 414 s of ACE series
+    assert!(
+        Simulator::new(&c)
+            .err()
+            .expect("span")
+            .to_string()
+            .contains("ace.span_s")
+    );
+    assert!(Config::from_toml_str("[optics]\nfringe = [0.1, nan]").is_err());
+}
