@@ -139,16 +139,16 @@ impl Telemetry {
                 v[i] * (1.0 - f) + v[i + 1] * f
             }
         };
-        let track = Track {
-            dt_s: step,
-            t0_s: 0.0,
-            dx_px: (0..m)
+        let track = Track::new(
+            step,
+            0.0,
+            (0..m)
                 .map(|j| lin(exposure_start_s + j as f64 * step, &xs) / plate_scale_mas)
                 .collect(),
-            dy_px: (0..m)
+            (0..m)
                 .map(|j| lin(exposure_start_s + j as f64 * step, &ys) / plate_scale_mas)
                 .collect(),
-        };
+        );
         let nominal = track.window(timing.t_overhead_s, timing.t_overhead_s + timing.exposure_s);
         let response = FitResponse::build(kernel, &track, &nominal, noise);
         Ok(Self {

@@ -245,12 +245,7 @@ mod tests {
             data,
         };
         let k = PixelKernel::build(&psf, &IntraPixelMap::uniform(4)).expect("kernel");
-        let track = Track {
-            dt_s: 1.0,
-            t0_s: 0.0,
-            dx_px: vec![-2.5, 0.0, 2.5],
-            dy_px: vec![0.0, 0.0, 0.0],
-        };
+        let track = Track::new(1.0, 0.0, vec![-2.5, 0.0, 2.5], vec![0.0, 0.0, 0.0]);
         // nominal: the still middle sample only
         let nominal = WindowWeights {
             first: 1,

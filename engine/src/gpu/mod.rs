@@ -14,6 +14,7 @@ pub use crate::integrate::Stamp;
 use crate::integrate::track::{Track, WindowWeights};
 use crate::integrate::{FrameSpec, Motion, StarJob, bounds_of};
 use bytemuck::{Pod, Zeroable};
+use rayon::prelude::*;
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex, OnceLock};
 use wgpu::util::DeviceExt;
@@ -281,12 +282,7 @@ impl GpuIntegrator {
         if frame.method == Method::Reference {
             return Err(GpuError::Unsupported);
         }
-        let still = Track {
-            dt_s: frame.timing.exposure_s,
-            t0_s: 0.0,
-            dx_px: vec![0.0],
-            dy_px: vec![0.0],
-        };
+        let still = Track::new(frame.timing.exposure_s, 0.0, vec![0.0], vec![0.0]);
         let (track, is_static) = match motion {
             Motion::Static => (&still, true),
             Motion::Track(t) => (t, false),
@@ -383,41 +379,60 @@ impl GpuIntegrator {
         let fixed_scale = ((u32::MAX as f64) / (n_common_max as f64 + 4.0))
             .floor()
             .min((1u64 << 24) as f64) as f32;
-        for (k, (job, (x0, y0, nx, ny))) in batch.iter().enumerate() {
-            let x_rel = job.star.x_px - *x0 as f64;
-            let y_rel = job.star.y_px - *y0 as f64;
-            let pixel_offset = windows.len() as u32;
-            let mut a_max = f64::NEG_INFINITY;
-            let mut b_min = f64::INFINITY;
-            for iy in 0..*ny {
-                for ix in 0..*nx {
-                    if is_static {
-                        windows.push(GpuWindow {
-                            first: 0,
+        // per-pixel windows and each stamp's shared window, in parallel over stars
+        let per_star: Vec<(Vec<GpuWindow>, GpuWindow)> = batch
+            .par_iter()
+            .map(|(_, (x0, y0, nx, ny))| {
+                if is_static {
+                    return (
+                        vec![
+                            GpuWindow {
+                                first: 0,
+                                last: 0,
+                                wf: 1.0,
+                                wl: 1.0
+                            };
+                            nx * ny
+                        ],
+                        GpuWindow {
+                            first: 1,
                             last: 0,
-                            wf: 1.0,
-                            wl: 1.0,
-                        });
-                    } else {
+                            wf: 0.0,
+                            wl: 0.0,
+                        },
+                    );
+                }
+                let mut w = Vec::with_capacity(nx * ny);
+                let (mut a_max, mut b_min) = (f64::NEG_INFINITY, f64::INFINITY);
+                for iy in 0..*ny {
+                    for ix in 0..*nx {
                         let (a, b) = frame
                             .timing
                             .window_s((*x0 + ix as i64) as usize, (*y0 + iy as i64) as usize);
                         a_max = a_max.max(a);
                         b_min = b_min.min(b);
-                        windows.push(track.window(a, b).into());
+                        w.push(track.window(a, b).into());
                     }
                 }
-            }
-            let common: GpuWindow = if b_min > a_max {
-                track.window(a_max, b_min).into()
-            } else {
-                GpuWindow {
-                    first: 1,
-                    last: 0,
-                    wf: 0.0,
-                    wl: 0.0,
-                }
-            };
+                let common = if b_min > a_max {
+                    track.window(a_max, b_min).into()
+                } else {
+                    GpuWindow {
+                        first: 1,
+                        last: 0,
+                        wf: 0.0,
+                        wl: 0.0,
+                    }
+                };
+                (w, common)
+            })
+            .collect();
+        windows.reserve(per_star.iter().map(|p| p.0.len()).sum());
+        for (k, ((job, (x0, y0, nx, ny)), (w, common))) in batch.iter().zip(per_star).enumerate() {
+            let x_rel = job.star.x_px - *x0 as f64;
+            let y_rel = job.star.y_px - *y0 as f64;
+            let pixel_offset = windows.len() as u32;
+            windows.extend(w);
             // a stamp whose pixels share no part of their windows (exposure shorter than its read spread)
             // has no histogram to build: the batch runs the direct method
             no_common |= fast && common.first > common.last;

@@ -48,15 +48,11 @@ pub fn stamp_bounds(
     detector_px: usize,
 ) -> Option<(i64, i64, usize, usize)> {
     let (mx, my, ex) = match track {
-        Some(t) if !t.is_empty() => {
-            let n = t.len() as f64;
-            let mx = t.dx_px.iter().sum::<f64>() / n;
-            let my = t.dy_px.iter().sum::<f64>() / n;
-            let (a, b, c, d) = t.extent();
-            let ex = (mx - a).max(b - mx).max(my - c).max(d - my);
-            (mx, my, ex)
+        Some(t) => {
+            let s = t.summary();
+            (s.mean_x, s.mean_y, s.excursion)
         }
-        _ => (0.0, 0.0, 0.0),
+        None => (0.0, 0.0, 0.0),
     };
     let r = radius_px as i64 + ex.ceil() as i64;
     let (cx, cy) = ((x + mx).round() as i64, (y + my).round() as i64);
@@ -397,12 +393,7 @@ pub(crate) mod tests {
                 amp_px * ((j as f64 * dt * 1.7).cos() * 0.8 + 0.2 * (j as f64 * dt * 95.0).cos())
             })
             .collect();
-        Track {
-            dt_s: dt,
-            t0_s: 0.0,
-            dx_px: dx,
-            dy_px: dy,
-        }
+        Track::new(dt, 0.0, dx, dy)
     }
 
     fn timing(order: ReadoutOrder, exposure_s: f64) -> ReadoutTiming {

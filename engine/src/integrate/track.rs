@@ -14,6 +14,16 @@ pub struct Track {
     pub t0_s: f64,
     pub dx_px: Vec<f64>,
     pub dy_px: Vec<f64>,
+    /// Mean and excursion, computed once on first use (every star's stamp needs them).
+    summary: std::sync::OnceLock<TrackSummary>,
+}
+
+/// Mean displacement and the largest excursion from it (px).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct TrackSummary {
+    pub mean_x: f64,
+    pub mean_y: f64,
+    pub excursion: f64,
 }
 
 /// The samples overlapping a window: `first..=last`, with fractional weights at both ends.
@@ -51,6 +61,35 @@ impl WindowWeights {
 }
 
 impl Track {
+    /// A track from its samples.
+    pub fn new(dt_s: f64, t0_s: f64, dx_px: Vec<f64>, dy_px: Vec<f64>) -> Self {
+        Self {
+            dt_s,
+            t0_s,
+            dx_px,
+            dy_px,
+            summary: std::sync::OnceLock::new(),
+        }
+    }
+
+    /// Mean and largest excursion (cached).
+    pub fn summary(&self) -> TrackSummary {
+        *self.summary.get_or_init(|| {
+            if self.is_empty() {
+                return TrackSummary::default();
+            }
+            let n = self.len() as f64;
+            let mx = self.dx_px.iter().sum::<f64>() / n;
+            let my = self.dy_px.iter().sum::<f64>() / n;
+            let (a, b, c, d) = self.extent();
+            TrackSummary {
+                mean_x: mx,
+                mean_y: my,
+                excursion: (mx - a).max(b - mx).max(my - c).max(d - my),
+            }
+        })
+    }
+
     /// Cut the exposure starting at absolute series time `t_start_s` and lasting `span_s` from the series,
     /// converting mas to pixels, keeping every `stride`-th sample.
     pub fn from_series(
@@ -77,23 +116,13 @@ impl Track {
                 dy.push(series.y_mas[i] / plate_scale_mas);
             }
         }
-        Self {
-            dt_s: dt,
-            t0_s: j0 as f64 * dt - t_start_s,
-            dx_px: dx,
-            dy_px: dy,
-        }
+        Self::new(dt, j0 as f64 * dt - t_start_s, dx, dy)
     }
 
     /// A still telescope over `[0, span_s)`, sampled every `dt_s`.
     pub fn still(span_s: f64, dt_s: f64) -> Self {
         let n = (span_s / dt_s).ceil() as usize + 2;
-        Self {
-            dt_s,
-            t0_s: 0.0,
-            dx_px: vec![0.0; n],
-            dy_px: vec![0.0; n],
-        }
+        Self::new(dt_s, 0.0, vec![0.0; n], vec![0.0; n])
     }
 
     pub fn len(&self) -> usize {
@@ -178,12 +207,7 @@ mod tests {
 
     #[test]
     fn window_weights_sum_to_window_length() {
-        let t = Track {
-            dt_s: 0.15e-3,
-            t0_s: -0.0001,
-            dx_px: vec![0.0; 100_000],
-            dy_px: vec![0.0; 100_000],
-        };
+        let t = Track::new(0.15e-3, -0.0001, vec![0.0; 100_000], vec![0.0; 100_000]);
         for (a, b) in [
             (0.1, 12.6),
             (0.100_003, 12.600_003),
