@@ -33,10 +33,16 @@ fn stderr_of(out: &std::process::Output) -> String {
 
 #[test]
 fn print_default_parses_to_the_builtin_default() {
-    let out = jsim().args(["config", "--print-default"]).output().expect("run");
+    let out = jsim()
+        .args(["config", "--print-default"])
+        .output()
+        .expect("run");
     assert!(out.status.success());
     let text = String::from_utf8(out.stdout).expect("utf8");
-    assert_eq!(engine::config::Config::from_toml_str(&text).expect("parses"), engine::config::Config::default());
+    assert_eq!(
+        engine::config::Config::from_toml_str(&text).expect("parses"),
+        engine::config::Config::default()
+    );
 }
 
 #[test]
@@ -44,20 +50,36 @@ fn bad_values_are_named_errors_and_write_nothing() {
     let dir = temp("bad");
     let out_dir = dir.join("out");
     for (args, needle) in [
-        (vec!["--set", "detector.exposure_s=-1"], "detector.exposure_s"),
+        (
+            vec!["--set", "detector.exposure_s=-1"],
+            "detector.exposure_s",
+        ),
         (vec!["--set", "ace.sigma_mas=nan"], "ace.sigma_mas"),
         (vec!["--set", "ace.sigma_mass=3"], "sigma_mass"),
         (vec!["--readout", "diagonal"], "readout.order"),
-        (vec!["--config", "/nonexistent/cfg.toml"], "/nonexistent/cfg.toml"),
+        (
+            vec!["--config", "/nonexistent/cfg.toml"],
+            "/nonexistent/cfg.toml",
+        ),
     ] {
-        let out = jsim().arg("simulate").args(&args).arg("--out").arg(&out_dir).output().expect("run");
+        let out = jsim()
+            .arg("simulate")
+            .args(&args)
+            .arg("--out")
+            .arg(&out_dir)
+            .output()
+            .expect("run");
         assert_eq!(out.status.code(), Some(1), "{args:?}");
         let err = stderr_of(&out);
         assert!(err.contains(needle), "{args:?}: {err}");
         assert!(!err.contains("panicked"), "{err}");
         assert!(!out_dir.exists(), "{args:?} created its output directory");
     }
-    let out = jsim().args(["analyze", "--image", "/nonexistent/img.fits", "--out"]).arg(dir.join("an")).output().expect("run");
+    let out = jsim()
+        .args(["analyze", "--image", "/nonexistent/img.fits", "--out"])
+        .arg(dir.join("an"))
+        .output()
+        .expect("run");
     assert_eq!(out.status.code(), Some(1));
     assert!(stderr_of(&out).contains("/nonexistent/img.fits"));
 }
@@ -66,22 +88,54 @@ fn bad_values_are_named_errors_and_write_nothing() {
 fn simulate_then_analyze_on_a_small_scene() {
     let dir = temp("run");
     let cfg = small_toml(&dir);
-    let out = jsim().args(["simulate", "--config"]).arg(&cfg).args(["--ace", "gaussian", "--out"]).arg(dir.join("sim")).output().expect("run");
+    let out = jsim()
+        .args(["simulate", "--config"])
+        .arg(&cfg)
+        .args(["--ace", "gaussian", "--out"])
+        .arg(dir.join("sim"))
+        .output()
+        .expect("run");
     assert!(out.status.success(), "{}", stderr_of(&out));
-    for f in ["img_000.fits", "img_001.fits", "truth_000.csv", "truth_001.csv", "run.json", "config.toml"] {
+    for f in [
+        "img_000.fits",
+        "img_001.fits",
+        "truth_000.csv",
+        "truth_001.csv",
+        "run.json",
+        "config.toml",
+    ] {
         assert!(dir.join("sim").join(f).exists(), "{f}");
     }
-    let out = jsim().args(["analyze", "--image"]).arg(dir.join("sim/img_000.fits")).arg("--out").arg(dir.join("an")).output().expect("run");
+    let out = jsim()
+        .args(["analyze", "--image"])
+        .arg(dir.join("sim/img_000.fits"))
+        .arg("--out")
+        .arg(dir.join("an"))
+        .output()
+        .expect("run");
     assert!(out.status.success(), "{}", stderr_of(&out));
-    let summary: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(dir.join("an/summary.json")).expect("summary")).expect("json");
+    let summary: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.join("an/summary.json")).expect("summary"),
+    )
+    .expect("json");
     assert_eq!(summary["report"]["n_used"].as_u64(), Some(9));
-    assert!(summary["report"]["accuracy_mas"].as_f64().expect("accuracy") < 10.0);
+    assert!(
+        summary["report"]["accuracy_mas"]
+            .as_f64()
+            .expect("accuracy")
+            < 10.0
+    );
     for f in ["catalogue.csv", "epsf.fits", "vectors.csv", "vectors.png"] {
         assert!(dir.join("an").join(f).exists(), "{f}");
     }
     // same seed, same image (a second run into another directory)
-    let out = jsim().args(["simulate", "--config"]).arg(&cfg).args(["--ace", "gaussian", "--out"]).arg(dir.join("sim2")).output().expect("run");
+    let out = jsim()
+        .args(["simulate", "--config"])
+        .arg(&cfg)
+        .args(["--ace", "gaussian", "--out"])
+        .arg(dir.join("sim2"))
+        .output()
+        .expect("run");
     assert!(out.status.success());
     let a = engine::io::fits::read_image(&dir.join("sim/img_001.fits")).expect("a");
     let b = engine::io::fits::read_image(&dir.join("sim2/img_001.fits")).expect("b");
