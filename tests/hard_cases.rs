@@ -199,3 +199,35 @@ fn bad_input_is_a_named_error() {
     );
     assert!(Config::from_toml_str("[optics]\nfringe = [0.1, nan]").is_err());
 }
+
+#[test]
+fn psf_halo_adds_the_light_beyond_the_table() {
+    let mut c = small_config();
+    c.ace.case = AceCase::Gaussian;
+    c.scene.grid_n = 2;
+    c.scene.grid_spacing_px = 150.0;
+    c.detector.shot_noise = false;
+    c.detector.read_noise = false;
+    let plain = Simulator::new(&c).expect("sim").exposure(0).expect("exp");
+    c.fidelity.halo_radius_px = 60;
+    let sim = Simulator::new(&c).expect("sim");
+    let halo = sim.exposure(0).expect("exp");
+    let (f0, f1) = (
+        plain.truth[0].modelled_fraction,
+        halo.truth[0].modelled_fraction,
+    );
+    assert!(f1 > f0 + 0.02 && f1 < 1.0, "modelled fraction {f0} → {f1}");
+    // the image holds what the truth says it models (the halo and the table meet without gap or overlap
+    // to within the bilinear ramp at the seam)
+    let expect: f64 = halo
+        .truth
+        .iter()
+        .map(|t| t.flux_e * t.modelled_fraction)
+        .sum();
+    let got: f64 = halo.star_e.iter().sum();
+    assert!((got / expect - 1.0).abs() < 5e-3, "{got} vs {expect}");
+    // and the core is untouched
+    let t = &halo.truth[0];
+    let i = t.y_px.round() as usize * 512 + t.x_px.round() as usize;
+    assert!((halo.star_e[i] / plain.star_e[i] - 1.0).abs() < 1e-3);
+}

@@ -340,7 +340,71 @@ impl Simulator {
         };
         let mut img = vec![0.0; n * n];
         integrate::add_stamps(&mut img, n, &stamps);
+        if self.cfg.fidelity.halo_radius_px > 0 {
+            integrate::add_stamps(&mut img, n, &self.halo_stamps()?);
+        }
         Ok((img, track))
+    }
+
+    /// The static PSF halo of every star (`fidelity.halo_radius_px` > 0): the PSF beyond the main table,
+    /// integrated over 2 × 2 subpixels, jitter neglected (it moves the faint halo by ≪ its scale).
+    pub fn halo_stamps(&self) -> Result<Vec<integrate::Stamp>, SimError> {
+        let r = self.cfg.optics.psf_radius_px + self.cfg.fidelity.halo_radius_px;
+        let map = IntraPixelMap::uniform(2);
+        let mut out = Vec::with_capacity(self.stars.len());
+        let mut kernels: HashMap<usize, Arc<PixelKernel>> = HashMap::new();
+        for s in &self.stars {
+            let halo = self.bank.halo(
+                s.j_minus_h,
+                self.bank.zone_of(s.x_px, s.y_px),
+                self.cfg.fidelity.halo_radius_px,
+            );
+            let key = Arc::as_ptr(&halo) as usize;
+            let k = match kernels.get(&key) {
+                Some(k) => k.clone(),
+                None => {
+                    let k = Arc::new(PixelKernel::build(&halo, &map)?);
+                    kernels.insert(key, k.clone());
+                    k
+                }
+            };
+            let star = StarSpec {
+                x_px: s.x_px,
+                y_px: s.y_px,
+                rate_e_per_s: photometry::electrons_per_s(
+                    s.mag_hw,
+                    self.cfg.photometry.zero_point_e_per_s,
+                ),
+            };
+            if let Some(b) = integrate::cpu::stamp_bounds(
+                s.x_px,
+                s.y_px,
+                None,
+                r + 1,
+                self.cfg.instrument.detector_px,
+            ) {
+                out.push(integrate::cpu::static_stamp(
+                    &star,
+                    &k,
+                    self.cfg.detector.exposure_s,
+                    b,
+                ));
+            }
+        }
+        Ok(out)
+    }
+
+    /// Fraction of a star's light the simulation models: the main table, plus the halo when enabled.
+    pub fn modelled_fraction(&self, star: &Star, psf: &PsfTable) -> f64 {
+        let h = self.cfg.fidelity.halo_radius_px;
+        if h == 0 {
+            return psf.sum();
+        }
+        psf.sum()
+            + self
+                .bank
+                .halo(star.j_minus_h, self.bank.zone_of(star.x_px, star.y_px), h)
+                .sum()
     }
 
     /// Simulate exposure `index` of the dataset.
@@ -403,7 +467,7 @@ impl Simulator {
                     mag_hw: s.mag_hw,
                     j_minus_h: s.j_minus_h,
                     flux_e: j.star.rate_e_per_s * (b - a),
-                    modelled_fraction: j.psf.sum(),
+                    modelled_fraction: self.modelled_fraction(s, &j.psf),
                     t_start_s: a,
                     exptime_s: b - a,
                     jitter_dx_px: jx,

@@ -53,6 +53,8 @@ pub fn fringe_um_at(optics: &Optics, x_px: f64, y_px: f64) -> Vec<f64> {
 struct BankKey {
     j_minus_h_milli: i64,
     zone: usize,
+    /// 0 for the main PSF; the outer radius (px) for a halo table.
+    halo_px: usize,
 }
 
 /// Computes each distinct PSF once and shares it between stars and images.
@@ -111,9 +113,21 @@ impl PsfBank {
 
     /// The PSF for a colour and zone (computed on first use).
     pub fn get(&self, j_minus_h: f64, zone: usize) -> Arc<PsfTable> {
+        self.table(j_minus_h, zone, 0)
+    }
+
+    /// The PSF halo for a colour and zone: the same PSF at 2 cells per pixel out to
+    /// `psf_radius_px + halo_radius_px`, with the square the main table covers set to zero, so the two add
+    /// up to the PSF over the larger field (light beyond the main table is no longer dropped).
+    pub fn halo(&self, j_minus_h: f64, zone: usize, halo_radius_px: usize) -> Arc<PsfTable> {
+        self.table(j_minus_h, zone, halo_radius_px.max(1))
+    }
+
+    fn table(&self, j_minus_h: f64, zone: usize, halo_px: usize) -> Arc<PsfTable> {
         let key = BankKey {
             j_minus_h_milli: (j_minus_h * 1000.0).round() as i64,
             zone,
+            halo_px,
         };
         if let Some(p) = self
             .cache
@@ -124,15 +138,34 @@ impl PsfBank {
             return p.clone();
         }
         let (zx, zy) = self.zone_centre(zone);
+        let mut optics = self.optics.clone();
+        if halo_px > 0 {
+            optics.psf_oversampling = 2;
+            optics.psf_radius_px = self.optics.psf_radius_px + halo_px;
+        }
         let req = PsfRequest {
             geometry: PupilGeometry::from_instrument(&self.instrument),
-            optics: &self.optics,
+            optics: &optics,
             band: &self.band,
             pixel_rad: self.instrument.pixel_rad(),
             j_minus_h: key.j_minus_h_milli as f64 / 1000.0,
             fringe_um: fringe_um_at(&self.optics, zx, zy),
         };
-        let table = Arc::new(psf::polychromatic(&req));
+        let mut table = psf::polychromatic(&req);
+        if halo_px > 0 {
+            // cells inside the main table's square (its bilinear ramp ends one main cell beyond its edge)
+            let inner = (self.optics.psf_radius_px * 2) as i64;
+            let n = table.n();
+            let h = table.half_cells as i64;
+            for iy in 0..n {
+                for ix in 0..n {
+                    if (ix as i64 - h).abs() <= inner && (iy as i64 - h).abs() <= inner {
+                        table.data[iy * n + ix] = 0.0;
+                    }
+                }
+            }
+        }
+        let table = Arc::new(table);
         self.cache
             .lock()
             .unwrap_or_else(|e| e.into_inner())
