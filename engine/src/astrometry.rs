@@ -262,7 +262,7 @@ impl Options {
             fit: FitOptions {
                 radius_px: self.cfg.fit_radius_px,
                 max_iter: self.cfg.fit_max_iter,
-                fit_sky: false,
+                fit_sky: self.cfg.fit_sky,
             },
             recentre: true,
         }

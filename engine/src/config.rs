@@ -590,6 +590,10 @@ pub struct Analysis {
     pub epsf_radius_px: usize,
     /// Pixels within this radius of a star enter its fit.
     pub fit_radius_px: f64,
+    /// Fit each star's local sky as a fourth parameter (x, y, flux, sky); otherwise the sky is the clipped
+    /// median of an annulus just outside the ePSF (hundreds of pixels: known to ≪ 1 e⁻) and the fit and its
+    /// bound have three parameters.
+    pub fit_sky: bool,
     pub smoothing: Smoothing,
     /// Y zones of the position-dependent ePSF (1 = one ePSF for the image).
     pub epsf_zones: usize,
@@ -608,6 +612,7 @@ impl Default for Analysis {
             epsf_iterations: 3,
             epsf_radius_px: 6,
             fit_radius_px: 2.5,
+            fit_sky: false,
             smoothing: Smoothing::Quadratic,
             epsf_zones: 1,
             detect_sigma: 10.0,
