@@ -439,8 +439,9 @@ mod tests {
                 max_err = max_err.max((psf[iy * m + ix] - a).abs() / peak);
             }
         }
-        // measured: 2.3e-4 of the peak for 256 pupil samples (pupil discretisation); bound it at 1e-3
-        assert!(max_err < 1e-3, "max |MFT − Airy| / peak = {max_err:e}");
+        eprintln!("max |MFT − obscured Airy| / peak = {max_err:.2e} (256 pupil samples)");
+        // measured: 4.5e-5 of the peak for 256 pupil samples (pupil discretisation); bound it at 2e-4
+        assert!(max_err < 2e-4, "max |MFT − Airy| / peak = {max_err:e}");
     }
 
     #[test]
