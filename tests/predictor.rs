@@ -9,9 +9,16 @@ use engine::experiment::{Plan, run_dataset};
 
 #[test]
 fn predictor_agrees_with_simulations() {
-    let plan = Plan { countermeasures: vec!["none".into(), "plate-poly:3".into()], ..Default::default() };
+    let plan = Plan {
+        countermeasures: vec!["none".into(), "plate-poly:3".into()],
+        ..Default::default()
+    };
     let mut worst: f64 = 0.0;
-    for (ace, readout) in [(AceCase::Gaussian, ReadoutOrder::Rolling), (AceCase::Realistic, ReadoutOrder::Rolling), (AceCase::Realistic, ReadoutOrder::SampleHold)] {
+    for (ace, readout) in [
+        (AceCase::Gaussian, ReadoutOrder::Rolling),
+        (AceCase::Realistic, ReadoutOrder::Rolling),
+        (AceCase::Realistic, ReadoutOrder::SampleHold),
+    ] {
         for mag in [12.0, 13.5, 14.5] {
             let mut c = small_config();
             c.ace.case = ace;
@@ -27,7 +34,14 @@ fn predictor_agrees_with_simulations() {
                     ace, readout, r.countermeasure, r.accuracy_mas, r.sem_mas, r.predicted_mas
                 );
                 worst = worst.max(miss / tol);
-                assert!(miss <= tol, "{ace:?} {readout:?} {} Hw {mag}: measured {} ± {}, predicted {}", r.countermeasure, r.accuracy_mas, r.sem_mas, r.predicted_mas);
+                assert!(
+                    miss <= tol,
+                    "{ace:?} {readout:?} {} Hw {mag}: measured {} ± {}, predicted {}",
+                    r.countermeasure,
+                    r.accuracy_mas,
+                    r.sem_mas,
+                    r.predicted_mas
+                );
             }
         }
     }
