@@ -246,29 +246,29 @@ impl Predictor {
             let r: Vec<(f64, f64)> = rx.into_iter().zip(ry).collect();
             return (rms2(&r), 2 * p);
         }
-        if name == "telemetry" {
-            if let (Some(series), Some(im)) = (&self.series, self.images.get(i)) {
-                let t = &plan.telemetry;
-                if let Ok(tel) = Telemetry::from_series(
-                    series,
-                    self.timing,
-                    im.start_s,
-                    self.cfg.instrument.plate_scale_mas(),
-                    t.noise_mas,
-                    t.rate_hz,
-                    t.latency_s,
-                    self.cfg.seed,
-                    &self.kernel,
-                    &self.noise,
-                ) {
-                    let pred = tel.predicted_px(&self.stars);
-                    let r: Vec<(f64, f64)> = d
-                        .iter()
-                        .zip(pred)
-                        .map(|(a, b)| (a.0 - b.0, a.1 - b.1))
-                        .collect();
-                    return (rms2(&r), 0);
-                }
+        if name == "telemetry"
+            && let (Some(series), Some(im)) = (&self.series, self.images.get(i))
+        {
+            let t = &plan.telemetry;
+            if let Ok(tel) = Telemetry::from_series(
+                series,
+                self.timing,
+                im.start_s,
+                self.cfg.instrument.plate_scale_mas(),
+                t.noise_mas,
+                t.rate_hz,
+                t.latency_s,
+                self.cfg.seed,
+                &self.kernel,
+                &self.noise,
+            ) {
+                let pred = tel.predicted_px(&self.stars);
+                let r: Vec<(f64, f64)> = d
+                    .iter()
+                    .zip(pred)
+                    .map(|(a, b)| (a.0 - b.0, a.1 - b.1))
+                    .collect();
+                return (rms2(&r), 0);
             }
         }
         (rms2(&d), 0)

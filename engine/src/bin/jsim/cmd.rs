@@ -262,7 +262,22 @@ pub fn write_vectors(
     title: &str,
 ) -> Result<()> {
     use engine::epsf::fit::flags;
-    let used: Vec<&engine::astrometry::StarResult> = stars
+    // show the fit-response prediction where it was computed (experiment), else the mean-jitter one (truth)
+    let fit_pred = stars
+        .iter()
+        .any(|s| s.predicted_fit_dx_px != 0.0 || s.predicted_fit_dy_px != 0.0);
+    let owned: Vec<engine::astrometry::StarResult> = stars
+        .iter()
+        .map(|s| {
+            let mut s = *s;
+            if fit_pred {
+                s.predicted_dx_px = s.predicted_fit_dx_px;
+                s.predicted_dy_px = s.predicted_fit_dy_px;
+            }
+            s
+        })
+        .collect();
+    let used: Vec<&engine::astrometry::StarResult> = owned
         .iter()
         .filter(|s| s.truth.is_some() && s.flags & flags::REJECT == 0 && s.dx_px.is_finite())
         .collect();
@@ -348,7 +363,7 @@ pub fn write_vectors(
         &sets,
         extent,
         reference,
-        40.0,
+        60.0,
     )?;
     Ok(())
 }
@@ -573,31 +588,31 @@ pub fn experiment(base: &Config, a: &ExperimentArgs) -> Result<()> {
                 ]);
             }
         }
-        if let Some(stars) = images.first().and_then(|im| im.stars.as_ref()) {
-            if cfg.scene.mag_hw == a.mags[0] {
-                let stem = format!(
-                    "vectors_{}_{}_{}",
-                    cfg.ace.case.name(),
-                    cfg.readout.order.name(),
-                    cfg.scene.mag_hw
-                );
-                let title = format!(
-                    "Hw {} {} ACE, {} readout, image 0",
-                    cfg.scene.mag_hw,
-                    cfg.ace.case.name(),
-                    cfg.readout.order.name()
-                );
-                pb.suspend(|| {
-                    write_vectors(
-                        &a.out,
-                        &stem,
-                        stars,
-                        cfg.instrument.plate_scale_mas(),
-                        cfg.instrument.detector_px as f64,
-                        &title,
-                    )
-                })?;
-            }
+        if let Some(stars) = images.first().and_then(|im| im.stars.as_ref())
+            && cfg.scene.mag_hw == a.mags[0]
+        {
+            let stem = format!(
+                "vectors_{}_{}_{}",
+                cfg.ace.case.name(),
+                cfg.readout.order.name(),
+                cfg.scene.mag_hw
+            );
+            let title = format!(
+                "Hw {} {} ACE, {} readout, image 0",
+                cfg.scene.mag_hw,
+                cfg.ace.case.name(),
+                cfg.readout.order.name()
+            );
+            pb.suspend(|| {
+                write_vectors(
+                    &a.out,
+                    &stem,
+                    stars,
+                    cfg.instrument.plate_scale_mas(),
+                    cfg.instrument.detector_px as f64,
+                    &title,
+                )
+            })?;
         }
         rows.extend(r);
         // keep the CSV current so an interrupted experiment still leaves its finished datasets
