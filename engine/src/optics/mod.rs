@@ -214,7 +214,9 @@ mod tests {
         let mut clean = cfg.clone();
         clean.optics.fringe.clear();
         let no_wfe = monochromatic(&clean, 1.3).fwhm_px() * scale;
-        eprintln!("FWHM at 1.3 µm: {with_wfe:.1} mas with the default WFE, {no_wfe:.1} mas without");
+        eprintln!(
+            "FWHM at 1.3 µm: {with_wfe:.1} mas with the default WFE, {no_wfe:.1} mas without"
+        );
         // SPEC §1: ≈ 740 mas with the design WFE, ≈ 700 mas without
         assert!(
             (with_wfe - 740.0).abs() < 25.0,
