@@ -32,6 +32,31 @@ pub struct BenchRow {
     pub note: String,
 }
 
+impl BenchRow {
+    /// A row with a time only (no error columns).
+    fn timing(
+        group: &str,
+        setting: String,
+        backend: String,
+        stars: usize,
+        time_s: f64,
+        note: &str,
+    ) -> Self {
+        Self {
+            group: group.into(),
+            setting,
+            backend,
+            stars,
+            time_s,
+            max_err: f64::NAN,
+            rms_err: f64::NAN,
+            flux_err: f64::NAN,
+            astro_mas: f64::NAN,
+            note: note.into(),
+        }
+    }
+}
+
 /// The CSV header of `bench.csv`.
 pub const CSV_HEADER: [&str; 10] = [
     "group",
@@ -122,17 +147,37 @@ pub fn integrate_stamps(
 pub fn noise_free_positions(sim: &Simulator) -> Result<Vec<Option<(f64, f64)>>, SimError> {
     let jobs = sim.jobs()?;
     let (e, _) = sim.integrate(0, &jobs)?;
+    positions_of_image(sim, e)
+}
+
+/// Fitted positions (px) of the stars in a noise-free image assembled from stamps.
+pub fn positions_of_stamps(
+    sim: &Simulator,
+    stamps: &[Stamp],
+) -> Result<Vec<Option<(f64, f64)>>, SimError> {
     let n = sim.cfg.instrument.detector_px;
-    let sky = sim.cfg.detector.dark_e_per_s * sim.cfg.detector.exposure_s;
+    let mut e = vec![0.0; n * n];
+    integrate::add_stamps(&mut e, n, stamps);
+    positions_of_image(sim, e)
+}
+
+/// Fit the stars of a noise-free electron image (plus the sky) with an ePSF built from it.
+fn positions_of_image(
+    sim: &Simulator,
+    star_e: Vec<f64>,
+) -> Result<Vec<Option<(f64, f64)>>, SimError> {
+    let n = sim.cfg.instrument.detector_px;
+    let d = &sim.cfg.detector;
+    let sky = d.dark_e_per_s * d.exposure_s;
     let img = AnalysisImage {
         nx: n,
         ny: n,
-        e: e.iter().map(|v| v + sky).collect(),
+        e: star_e.into_iter().map(|v| v + sky).collect(),
         bad: vec![false; n * n],
-        var_floor_e2: sim.cfg.detector.read_noise_e.powi(2)
-            + sim.cfg.detector.gain_e_per_adu.powi(2) / 12.0,
+        var_floor_e2: d.read_noise_e.powi(2) + d.gain_e_per_adu.powi(2) / 12.0,
         plate_scale_mas: sim.cfg.instrument.plate_scale_mas(),
     };
+    let jobs = sim.jobs()?;
     let truth = sim.truth(&jobs, sim.track(0).as_ref());
     let a = astrometry::analyze(&img, Some(&truth), &Options::new(&sim.cfg.analysis))
         .map_err(|e| SimError::Gpu(e.to_string()))?;
@@ -238,27 +283,31 @@ pub fn methods(
         astro_mas: 0.0,
         note: format!("measured on {sub} stars ({t_ref:.2} s), scaled to {n_all}"),
     }];
-    let mut push = |setting: &str, backend: &str, full: (Vec<Stamp>, f64)| {
-        let part: Vec<Stamp> = full.0.iter().take(sub).cloned().collect();
-        let (max_err, rms_err, flux_err) = compare(&part, &reference);
-        rows.push(BenchRow {
-            group: "method".into(),
-            setting: setting.into(),
-            backend: backend.into(),
-            stars: n_all,
-            time_s: full.1,
-            max_err,
-            rms_err,
-            flux_err,
-            astro_mas: f64::NAN,
-            note: String::new(),
-        });
-    };
-    push(
-        "fast",
-        "cpu",
-        integrate_stamps(&sim, Method::Fast, None, None)?,
-    );
+    // the fast CPU method equals the direct one to rounding (checked on the subset below), so its full
+    // frame is the astrometric reference of the other methods
+    let fast_cpu = integrate_stamps(&sim, Method::Fast, None, None)?;
+    let scale = sim.cfg.instrument.plate_scale_mas();
+    let ref_pos = positions_of_stamps(&sim, &fast_cpu.0)?;
+    let mut push =
+        |setting: &str, backend: &str, full: (Vec<Stamp>, f64)| -> Result<(), SimError> {
+            let part: Vec<Stamp> = full.0.iter().take(sub).cloned().collect();
+            let (max_err, rms_err, flux_err) = compare(&part, &reference);
+            let astro_mas = position_rms_mas(&positions_of_stamps(&sim, &full.0)?, &ref_pos, scale);
+            rows.push(BenchRow {
+                group: "method".into(),
+                setting: setting.into(),
+                backend: backend.into(),
+                stars: n_all,
+                time_s: full.1,
+                max_err,
+                rms_err,
+                flux_err,
+                astro_mas,
+                note: "Δpos against the fast CPU frame".into(),
+            });
+            Ok(())
+        };
+    push("fast", "cpu", fast_cpu.clone())?;
     if let Some(g) = &gpu {
         let name = g.adapter_name();
         // warm-up (pipeline caches, kernel upload), then timed
@@ -267,12 +316,12 @@ pub fn methods(
             "fast",
             &name,
             integrate_stamps(&sim, Method::Fast, Some(g), None)?,
-        );
+        )?;
         push(
             "direct",
             &name,
             integrate_stamps(&sim, Method::Direct, Some(g), None)?,
-        );
+        )?;
     }
     Ok(rows)
 }
@@ -310,33 +359,25 @@ pub fn scaling(
         c.scene.catalogue = Some(path);
         let sim = Simulator::new(&c)?;
         let (_, t) = integrate_stamps(&sim, Method::Fast, None, None)?;
-        rows.push(BenchRow {
-            group: "stars".into(),
-            setting: format!("{n} stars"),
-            backend: "cpu".into(),
-            stars: n,
-            time_s: t,
-            max_err: f64::NAN,
-            rms_err: f64::NAN,
-            flux_err: f64::NAN,
-            astro_mas: f64::NAN,
-            note: "fast method".into(),
-        });
+        rows.push(BenchRow::timing(
+            "stars",
+            format!("{n} stars"),
+            "cpu".into(),
+            n,
+            t,
+            "fast method",
+        ));
         if let Some(g) = &gpu {
             let _ = integrate_stamps(&sim, Method::Fast, Some(g), None)?;
             let (_, t) = integrate_stamps(&sim, Method::Fast, Some(g), None)?;
-            rows.push(BenchRow {
-                group: "stars".into(),
-                setting: format!("{n} stars"),
-                backend: g.adapter_name(),
-                stars: n,
-                time_s: t,
-                max_err: f64::NAN,
-                rms_err: f64::NAN,
-                flux_err: f64::NAN,
-                astro_mas: f64::NAN,
-                note: "fast method".into(),
-            });
+            rows.push(BenchRow::timing(
+                "stars",
+                format!("{n} stars"),
+                g.adapter_name(),
+                n,
+                t,
+                "fast method",
+            ));
         }
     }
     let _ = std::fs::remove_dir_all(&dir);

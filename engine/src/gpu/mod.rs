@@ -530,70 +530,38 @@ impl GpuIntegrator {
             });
             enc.clear_buffer(&hist_buf, 0, None);
             let params_buf = uniform(&passes[0]);
-            let bg_dep = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                label: Some("deposit"),
-                layout: &self.deposit.get_bind_group_layout(0),
-                entries: &[
-                    entry(0, &params_buf),
-                    entry(1, &stars_buf),
-                    entry(2, track_buf),
-                    entry(3, &hist_buf),
-                ],
-            });
-            {
-                let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                    label: Some("deposit"),
-                    timestamp_writes: None,
-                });
-                pass.set_pipeline(&self.deposit);
-                pass.set_bind_group(0, &bg_dep, &[]);
-                pass.dispatch_workgroups(n_stars, 1, 1);
-            }
+            self.dispatch(
+                &mut enc,
+                &self.deposit,
+                "deposit",
+                &[&params_buf, &stars_buf, track_buf, &hist_buf],
+                (n_stars, 1),
+            );
             for p in &passes {
                 let params_buf = uniform(p);
-                let bg = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                    label: Some("fast"),
-                    layout: &self.fast.get_bind_group_layout(0),
-                    entries: &[
-                        entry(0, &params_buf),
-                        entry(1, &stars_buf),
-                        entry(2, &windows_buf),
-                        entry(3, track_buf),
-                        entry(4, kbuf),
-                        entry(5, &hist_buf),
-                        entry(6, &out_buf),
-                    ],
-                });
-                let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                    label: Some("fast"),
-                    timestamp_writes: None,
-                });
-                pass.set_pipeline(&self.fast);
-                pass.set_bind_group(0, &bg, &[]);
-                pass.dispatch_workgroups(groups_x, n_stars, 1);
+                let bufs = [
+                    &params_buf,
+                    &stars_buf,
+                    &windows_buf,
+                    track_buf,
+                    kbuf,
+                    &hist_buf,
+                    &out_buf,
+                ];
+                self.dispatch(&mut enc, &self.fast, "fast", &bufs, (groups_x, n_stars));
             }
         } else {
             for p in &passes {
                 let params_buf = uniform(p);
-                let bg = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
-                    label: Some("direct"),
-                    layout: &self.direct.get_bind_group_layout(0),
-                    entries: &[
-                        entry(0, &params_buf),
-                        entry(1, &stars_buf),
-                        entry(2, &windows_buf),
-                        entry(3, track_buf),
-                        entry(4, kbuf),
-                        entry(5, &out_buf),
-                    ],
-                });
-                let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
-                    label: Some("direct"),
-                    timestamp_writes: None,
-                });
-                pass.set_pipeline(&self.direct);
-                pass.set_bind_group(0, &bg, &[]);
-                pass.dispatch_workgroups(groups_x, n_stars, 1);
+                let bufs = [
+                    &params_buf,
+                    &stars_buf,
+                    &windows_buf,
+                    track_buf,
+                    kbuf,
+                    &out_buf,
+                ];
+                self.dispatch(&mut enc, &self.direct, "direct", &bufs, (groups_x, n_stars));
             }
         }
         enc.copy_buffer_to_buffer(&out_buf, 0, &staging, 0, out_size);
@@ -616,6 +584,34 @@ impl GpuIntegrator {
                 }
             })
             .collect())
+    }
+
+    /// Bind `buffers` to bindings 0, 1, … of `pipeline` and dispatch `groups` workgroups in a compute pass.
+    fn dispatch(
+        &self,
+        enc: &mut wgpu::CommandEncoder,
+        pipeline: &wgpu::ComputePipeline,
+        label: &str,
+        buffers: &[&wgpu::Buffer],
+        groups: (u32, u32),
+    ) {
+        let entries: Vec<wgpu::BindGroupEntry<'_>> = buffers
+            .iter()
+            .enumerate()
+            .map(|(i, b)| entry(i as u32, b))
+            .collect();
+        let bg = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some(label),
+            layout: &pipeline.get_bind_group_layout(0),
+            entries: &entries,
+        });
+        let mut pass = enc.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some(label),
+            timestamp_writes: None,
+        });
+        pass.set_pipeline(pipeline);
+        pass.set_bind_group(0, &bg, &[]);
+        pass.dispatch_workgroups(groups.0, groups.1, 1);
     }
 
     fn read_back(&self, staging: &wgpu::Buffer, n: usize) -> Result<Vec<f32>, GpuError> {

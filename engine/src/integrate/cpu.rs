@@ -99,14 +99,14 @@ pub fn static_stamp(
     }
 }
 
-/// Reference method: explicit subpixels × samples.
-pub fn reference_stamp(
+/// `r · Δt · Σ_j w_j(X, Y) · f(X − x − dx_j, Y − y − dy_j)` for every pixel of the stamp: the sum over each
+/// pixel's own window that the reference and direct methods share (they differ only in `f`).
+fn window_sum_stamp(
     star: &StarSpec,
-    psf: &PsfTable,
-    map: &IntraPixelMap,
     track: &Track,
     timing: &ReadoutTiming,
     bounds: (i64, i64, usize, usize),
+    f: impl Fn(f64, f64) -> f64,
 ) -> Stamp {
     let (x0, y0, nx, ny) = bounds;
     let mut data = vec![0.0; nx * ny];
@@ -116,11 +116,10 @@ pub fn reference_stamp(
             let x = x0 + ix as i64;
             let (a, b) = timing.window_s(x as usize, y as usize);
             let w = track.window(a, b);
+            let (bx, by) = (x as f64 - star.x_px, y as f64 - star.y_px);
             let mut acc = 0.0;
             for j in w.first..=w.last {
-                let dx = x as f64 - star.x_px - track.dx_px[j];
-                let dy = y as f64 - star.y_px - track.dy_px[j];
-                acc += w.weight(j) * subpixel_sum(psf, map, dx, dy);
+                acc += w.weight(j) * f(bx - track.dx_px[j], by - track.dy_px[j]);
             }
             data[iy * nx + ix] = acc * star.rate_e_per_s * track.dt_s;
         }
@@ -134,6 +133,20 @@ pub fn reference_stamp(
     }
 }
 
+/// Reference method: explicit subpixels × samples.
+pub fn reference_stamp(
+    star: &StarSpec,
+    psf: &PsfTable,
+    map: &IntraPixelMap,
+    track: &Track,
+    timing: &ReadoutTiming,
+    bounds: (i64, i64, usize, usize),
+) -> Stamp {
+    window_sum_stamp(star, track, timing, bounds, |dx, dy| {
+        subpixel_sum(psf, map, dx, dy)
+    })
+}
+
 /// Direct method: one pixel-kernel look-up per (pixel, sample).
 pub fn direct_stamp(
     star: &StarSpec,
@@ -142,29 +155,7 @@ pub fn direct_stamp(
     timing: &ReadoutTiming,
     bounds: (i64, i64, usize, usize),
 ) -> Stamp {
-    let (x0, y0, nx, ny) = bounds;
-    let mut data = vec![0.0; nx * ny];
-    for iy in 0..ny {
-        let y = y0 + iy as i64;
-        for ix in 0..nx {
-            let x = x0 + ix as i64;
-            let (a, b) = timing.window_s(x as usize, y as usize);
-            let w = track.window(a, b);
-            let (bx, by) = (x as f64 - star.x_px, y as f64 - star.y_px);
-            let mut acc = 0.0;
-            for j in w.first..=w.last {
-                acc += w.weight(j) * kernel.eval(bx - track.dx_px[j], by - track.dy_px[j]);
-            }
-            data[iy * nx + ix] = acc * star.rate_e_per_s * track.dt_s;
-        }
-    }
-    Stamp {
-        x0,
-        y0,
-        nx,
-        ny,
-        data,
-    }
+    window_sum_stamp(star, track, timing, bounds, |dx, dy| kernel.eval(dx, dy))
 }
 
 /// The cloud-in-cell histogram of a track over a window, on K's node grid, relative to a stamp origin.
