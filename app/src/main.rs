@@ -1,25 +1,20 @@
-//! `jsim-app`: the desktop explorer. `main` only builds the window options and starts the app.
+//! `jsim-app [CONFIG.toml]`: the desktop explorer. `main` only builds the window options and starts the app.
 
 fn main() -> eframe::Result<()> {
     let options = eframe::NativeOptions {
-        viewport: eframe::egui::ViewportBuilder::default()
-            .with_inner_size([1400.0, 900.0])
+        viewport: egui::ViewportBuilder::default()
+            .with_inner_size([1600.0, 1000.0])
+            .with_min_inner_size([1000.0, 700.0])
             .with_title("JASMINE astrometry explorer"),
         ..Default::default()
     };
     eframe::run_native(
         "JASMINE astrometry explorer",
         options,
-        Box::new(|_cc| Ok(Box::new(Explorer))),
+        Box::new(|_cc| {
+            Ok(Box::new(app::ExplorerApp::from_args(
+                std::env::args_os().skip(1),
+            )))
+        }),
     )
-}
-
-struct Explorer;
-
-impl eframe::App for Explorer {
-    fn ui(&mut self, ui: &mut egui::Ui, _frame: &mut eframe::Frame) {
-        egui::CentralPanel::default().show(ui, |ui| {
-            ui.heading("JASMINE astrometry explorer");
-        });
-    }
 }

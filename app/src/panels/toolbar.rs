@@ -1,0 +1,93 @@
+//! The toolbar: configuration file (open, save, copy as CLI), progress with Cancel, messages.
+
+use crate::app::{Action, ExplorerApp};
+
+pub fn toolbar_ui(ui: &mut egui::Ui, app: &mut ExplorerApp, actions: &mut Vec<Action>) {
+    ui.horizontal(|ui| {
+        ui.heading("JASMINE astrometry explorer");
+        ui.separator();
+        let l = ui.label("config file");
+        ui.add(egui::TextEdit::singleline(&mut app.config_path).desired_width(220.0))
+            .labelled_by(l.id)
+            .on_hover_text(
+                "path for Open, Save and Copy as CLI (relative to the working directory)",
+            );
+        if ui
+            .button("Open config")
+            .on_hover_text("load this TOML file")
+            .clicked()
+        {
+            actions.push(Action::Open);
+        }
+        if ui
+            .button("Save config")
+            .on_hover_text("write the TOML that reproduces what is on screen")
+            .clicked()
+        {
+            actions.push(Action::Save);
+        }
+        if ui
+            .button("Copy as CLI: experiment")
+            .on_hover_text(
+                "save the config, then copy the `jsim experiment` command of the magnitude curve",
+            )
+            .clicked()
+        {
+            actions.push(Action::CopyExperimentCli);
+        }
+        if ui
+            .button("Copy as CLI: simulate")
+            .on_hover_text("save the config, then copy the `jsim simulate` command of these images")
+            .clicked()
+        {
+            actions.push(Action::CopySimulateCli);
+        }
+        ui.separator();
+        if app.rt.busy || !app.is_idle() {
+            ui.add(egui::Spinner::new());
+            let (frac, text) = match &app.rt.progress {
+                Some(p) if p.total > 0 => (
+                    p.done as f32 / p.total as f32,
+                    format!("{}: {}", p.stage.name(), p.note),
+                ),
+                Some(p) => (0.0, format!("{}: {}", p.stage.name(), p.note)),
+                None => (0.0, "starting".into()),
+            };
+            ui.add(egui::ProgressBar::new(frac).desired_width(320.0).text(text));
+            if ui
+                .button("Cancel")
+                .on_hover_text("stop the running work")
+                .clicked()
+            {
+                actions.push(Action::Cancel);
+            }
+        } else {
+            let idle = ui.label("idle");
+            if let Some(t) = app.rt.last_job_s {
+                idle.on_hover_text(format!("the last run took {t:.1} s"));
+            }
+            if ui
+                .button("Run again")
+                .on_hover_text("recompute everything for the parameters on screen")
+                .clicked()
+            {
+                actions.push(Action::RunAll);
+            }
+        }
+    });
+    if let Some(inv) = &app.rt.invalid {
+        ui.colored_label(
+            ui.visuals().error_fg_color,
+            format!("Parameters not run: {inv}"),
+        );
+    }
+    if let Some(n) = &app.rt.note {
+        let color = if n.is_error {
+            ui.visuals().error_fg_color
+        } else {
+            ui.visuals().weak_text_color()
+        };
+        let prefix = if n.is_error { "Error: " } else { "" };
+        ui.colored_label(color, format!("{prefix}{}", n.text));
+    }
+}

@@ -1,0 +1,311 @@
+//! UI tests of the explorer, driven through egui_kittest by accessibility label, on a reduced configuration
+//! that simulates in seconds in the dev profile. The snapshot renders with wgpu (lavapipe in CI).
+
+use app::ExplorerApp;
+use egui::accesskit::Role;
+use egui_kittest::Harness;
+use egui_kittest::kittest::Queryable;
+use engine::config::{Backend, Config, ReadoutOrder};
+use std::time::{Duration, Instant};
+
+/// A 512² detector (4 channels of 128 columns), 6 × 6 stars, a coarse PSF and a 1-minute ACE series.
+fn small_config() -> Config {
+    let mut c = Config::default();
+    c.instrument.detector_px = 512;
+    c.instrument.photosensitive_px = 496;
+    c.readout.channels = 4;
+    c.readout.channel_width_px = 128;
+    c.scene.grid_n = 6;
+    c.scene.grid_spacing_px = 72.0;
+    c.optics.pupil_samples = 64;
+    c.optics.psf_oversampling = 8;
+    c.optics.psf_radius_px = 8;
+    c.band.wavelength_step_um = 0.1;
+    c.fidelity.subpixels = 4;
+    c.fidelity.stamp_radius_px = 9;
+    c.fidelity.images = 2;
+    c.fidelity.backend = Backend::Cpu;
+    c.ace.span_s = 60.0;
+    c.ace.sample_interval_ms = 0.5;
+    c.validate().expect("the small test config is valid");
+    c
+}
+
+fn small_app() -> ExplorerApp {
+    let mut app = ExplorerApp::new(small_config());
+    app.set_mags(vec![12.5, 13.5]);
+    app
+}
+
+fn harness(app: ExplorerApp, render: bool) -> Harness<'static, ExplorerApp> {
+    let b = Harness::builder().with_size(egui::vec2(1280.0, 820.0));
+    let b = if render { b.wgpu() } else { b };
+    b.build_ui_state(|ui, app: &mut ExplorerApp| app.show(ui), app)
+}
+
+/// Step frames until the worker has nothing queued or running, then let the UI settle.
+fn wait_idle(h: &mut Harness<'_, ExplorerApp>, what: &str) {
+    let t0 = Instant::now();
+    loop {
+        h.step();
+        if h.state().is_idle() {
+            break;
+        }
+        assert!(
+            t0.elapsed() < Duration::from_secs(180),
+            "timed out waiting for {what}"
+        );
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    h.run();
+}
+
+/// The frame on screen was computed with the configuration on screen.
+fn assert_current(h: &Harness<'_, ExplorerApp>) {
+    let app = h.state();
+    let hash = app.cfg.hash_hex();
+    let f = app.rt.frame.as_ref().expect("a frame was simulated");
+    assert_eq!(
+        f.cfg_hash, hash,
+        "the frame belongs to the parameters on screen"
+    );
+    assert_eq!(f.readout, app.cfg.readout.order);
+    assert_eq!(f.mag, app.cfg.scene.mag_hw);
+    let p = app.rt.prediction.as_ref().expect("a prediction");
+    assert_eq!(p.cfg_hash, hash);
+    assert!(p.dataset_mas.is_finite() && p.dataset_mas > 0.0, "{p:?}");
+    assert!(f.report.n_used >= 20, "stars measured: {:?}", f.report);
+    assert!(f.report.accuracy_mas.is_finite() && f.report.accuracy_mas > 0.0);
+    let t = app.rt.twin.as_ref().expect("the Gaussian twin");
+    assert_eq!(t.cfg_hash, hash);
+    assert!(
+        app.rt.note.as_ref().is_none_or(|n| !n.is_error),
+        "{:?}",
+        app.rt.note
+    );
+}
+
+#[test]
+fn controls_rerun_the_engine_with_the_new_parameters() {
+    let mut h = harness(small_app(), false);
+    wait_idle(&mut h, "the first results");
+    assert_current(&h);
+    {
+        let app = h.state();
+        assert_eq!(
+            app.rt.frame.as_ref().map(|f| f.readout),
+            Some(ReadoutOrder::Rolling)
+        );
+        // the magnitude curve: both magnitudes simulated, with the CRLB and the prediction
+        assert_eq!(app.rt.curve.len(), 2, "{:?}", app.rt.curve);
+        for c in &app.rt.curve {
+            let rows = c.rows.as_ref().expect("Monte Carlo rows");
+            assert!(
+                rows.iter()
+                    .any(|r| r.countermeasure == "none" && r.n_images == 2)
+            );
+            assert!(rows.iter().all(|r| r.crlb_mas > 0.0));
+            assert!(c.predicted_mas.is_some());
+        }
+    }
+    // the panels show the numbers
+    h.get_by_label_contains("Measured accuracy:");
+    h.get_by_label_contains("Predicted accuracy (instant):");
+    h.get_by_label_contains("Gaussian twin:");
+    let jobs = h.state().rt.jobs_sent;
+
+    // a slider: the magnitude
+    h.get_by_role_and_label(Role::Slider, "magnitude Hw")
+        .set_value_accesskit(13.0);
+    wait_idle(&mut h, "the new magnitude");
+    assert_eq!(h.state().cfg.scene.mag_hw, 13.0);
+    assert_current(&h);
+    assert!(h.state().rt.jobs_sent > jobs);
+
+    // a readout-order change
+    h.get_by_label("global reset").click();
+    wait_idle(&mut h, "the new readout order");
+    assert_eq!(h.state().cfg.readout.order, ReadoutOrder::GlobalReset);
+    assert_current(&h);
+    assert_eq!(
+        h.state().rt.frame.as_ref().map(|f| f.readout),
+        Some(ReadoutOrder::GlobalReset)
+    );
+    {
+        let app = h.state();
+        assert!(
+            app.rt.curve.iter().all(|c| c.rows.is_some()),
+            "the curve follows the readout change"
+        );
+        assert!(
+            app.rt
+                .curve
+                .iter()
+                .flat_map(|c| c.rows.iter().flatten())
+                .all(|r| r.readout == "global-reset")
+        );
+    }
+
+    // the PSD: add a natural mode, then remove it again
+    h.state_mut().view.auto_curve = false;
+    h.get_by_label("natural modes (8)").click();
+    h.run();
+    h.get_by_label("add mode").click();
+    wait_idle(&mut h, "the added mode");
+    assert_eq!(h.state().cfg.ace.modes.len(), 9);
+    assert_current(&h);
+    let dels = h.get_all_by_label("del").count();
+    assert_eq!(dels, 9);
+    h.get_all_by_label("del")
+        .last()
+        .expect("a del button")
+        .click();
+    wait_idle(&mut h, "the removed mode");
+    assert_eq!(h.state().cfg.ace.modes, Config::default().ace.modes);
+    assert_current(&h);
+}
+
+#[test]
+fn cancel_stops_the_work_and_drops_its_results() {
+    // a curve long enough to be caught running: 4 magnitudes × 12 images
+    let mut app = small_app();
+    app.cfg.fidelity.images = 12;
+    app.cfg.ace.span_s = 200.0;
+    app.set_mags(vec![12.0, 12.5, 13.0, 13.5]);
+    let mut h = harness(app, false);
+    let t0 = Instant::now();
+    loop {
+        h.step();
+        let p = h.state().rt.progress.as_ref().map(|p| p.stage);
+        if p == Some(app::worker::Stage::Curve) {
+            break;
+        }
+        assert!(h.state().rt.busy, "the curve should still be running");
+        assert!(
+            t0.elapsed() < Duration::from_secs(120),
+            "timed out waiting for the curve"
+        );
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    assert_current(&h);
+    let generation = h.state().rt.generation;
+    h.get_by_label("Cancel").click_accesskit();
+    h.step();
+    assert!(h.state().is_idle(), "Cancel leaves the app idle");
+    assert!(h.state().rt.generation > generation);
+    let simulated = |h: &Harness<'_, ExplorerApp>| {
+        h.state()
+            .rt
+            .curve
+            .iter()
+            .filter(|c| c.rows.is_some())
+            .count()
+    };
+    let done = simulated(&h);
+    assert!(done < 4, "the curve was cancelled before its end");
+    // whatever the abandoned job still sends is dropped
+    std::thread::sleep(Duration::from_millis(1500));
+    h.run();
+    assert_eq!(
+        simulated(&h),
+        done,
+        "no result of the cancelled generation is shown"
+    );
+    h.get_by_label_contains("cancelled");
+
+    // a change after the cancel runs again, for the new parameters
+    h.state_mut().view.auto_curve = false;
+    h.get_by_role_and_label(Role::Slider, "ACE σ [mas]")
+        .set_value_accesskit(150.0);
+    wait_idle(&mut h, "the new σ");
+    assert_eq!(h.state().cfg.ace.sigma_mas, 150.0);
+    assert_current(&h);
+}
+
+#[test]
+fn config_files_errors_and_copy_as_cli() {
+    let dir = std::env::temp_dir().join(format!("jsim-app-ui-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("temp dir");
+    let mut app = small_app();
+    app.view.auto_curve = false;
+    let mut h = harness(app, false);
+    h.step();
+
+    // a file that does not exist: the error is shown, nothing crashes
+    let missing = dir.join("missing.toml");
+    h.state_mut().config_path = missing.display().to_string();
+    h.get_by_label("Open config").click();
+    h.step();
+    h.step();
+    h.get_by_label_contains("cannot read config file");
+
+    // a bad value names its field
+    let bad = dir.join("bad.toml");
+    std::fs::write(&bad, "[ace]\nsigma_mas = -5.0\n").expect("write");
+    h.state_mut().config_path = bad.display().to_string();
+    h.get_by_label("Open config").click();
+    h.step();
+    h.step();
+    h.get_by_label_contains("ace.sigma_mas");
+    assert_eq!(
+        h.state().cfg,
+        small_config(),
+        "a bad file leaves the parameters alone"
+    );
+
+    // copy as CLI saves the configuration and puts the command on the clipboard
+    let path = dir.join("explorer.toml");
+    h.state_mut().config_path = path.display().to_string();
+    h.state_mut().countermeasure = "plate-poly:3".into();
+    h.step();
+    h.get_by_label("Copy as CLI: experiment").click();
+    h.step();
+    let copied: Vec<String> = h
+        .output()
+        .platform_output
+        .commands
+        .iter()
+        .filter_map(|c| match c {
+            egui::OutputCommand::CopyText(t) => Some(t.clone()),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(copied.len(), 1, "{copied:?}");
+    let cmd = &copied[0];
+    assert!(cmd.starts_with("jsim experiment --config "), "{cmd}");
+    assert!(
+        cmd.contains("--readouts rolling") && cmd.contains("--aces realistic"),
+        "{cmd}"
+    );
+    assert!(
+        cmd.contains("--mags 12.5,13.5") && cmd.contains("--countermeasures none,plate-poly:3"),
+        "{cmd}"
+    );
+    let saved = Config::load(&path).expect("the saved config loads");
+    assert_eq!(
+        saved,
+        h.state().cfg,
+        "the file reproduces the parameters on screen"
+    );
+    assert!(cmd.contains(&path.display().to_string()));
+
+    // and opening it in a fresh app restores the app's choices too
+    let mut other = ExplorerApp::new(Config::default());
+    other.config_path = path.display().to_string();
+    other.open_config();
+    assert_eq!(other.cfg, saved);
+    assert_eq!(other.countermeasure, "plate-poly:3");
+    drop(h);
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+#[test]
+fn main_window_snapshot() {
+    let mut h = harness(small_app(), true);
+    wait_idle(&mut h, "the first results");
+    assert_current(&h);
+    // wall-clock timings differ from run to run
+    let timing = h.get_by_label_contains("timing:").rect();
+    h.mask(timing);
+    h.snapshot("main_window");
+}
