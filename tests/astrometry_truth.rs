@@ -42,7 +42,11 @@ fn scatter_matches_the_cramer_rao_bound_within_15_percent() {
         for seed in 0..4 {
             let (img, truth) = gaussian_image(380, &stars, 300.0, 0.8, Some(100 + seed));
             let a = astrometry::analyze(&img, Some(&truth), &Options::new(&cfg)).expect("analysis");
-            let used: Vec<_> = a.stars.iter().filter(|s| s.flags & flags::REJECT == 0).collect();
+            let used: Vec<_> = a
+                .stars
+                .iter()
+                .filter(|s| s.flags & flags::REJECT == 0)
+                .collect();
             let mx = stats::mean(&used.iter().map(|s| s.dx_px).collect::<Vec<_>>());
             let my = stats::mean(&used.iter().map(|s| s.dy_px).collect::<Vec<_>>());
             for s in used {
@@ -52,9 +56,17 @@ fn scatter_matches_the_cramer_rao_bound_within_15_percent() {
                 crlb.push(s.crlb_y_px);
             }
         }
-        let ratio = (resid.iter().map(|r| r * r).sum::<f64>() / resid.len() as f64).sqrt() / stats::median(&crlb);
-        eprintln!("fit_sky {fit_sky}: scatter / CRLB = {ratio:.3} over {} measurements (CRLB {:.4} px)", resid.len(), stats::median(&crlb));
-        assert!((ratio - 1.0).abs() < 0.15, "fit_sky {fit_sky}: scatter / CRLB = {ratio}");
+        let ratio = (resid.iter().map(|r| r * r).sum::<f64>() / resid.len() as f64).sqrt()
+            / stats::median(&crlb);
+        eprintln!(
+            "fit_sky {fit_sky}: scatter / CRLB = {ratio:.3} over {} measurements (CRLB {:.4} px)",
+            resid.len(),
+            stats::median(&crlb)
+        );
+        assert!(
+            (ratio - 1.0).abs() < 0.15,
+            "fit_sky {fit_sky}: scatter / CRLB = {ratio}"
+        );
     }
 }
 

@@ -858,8 +858,7 @@ impl EngineState {
                         format!("Hw = {}: image {}/{}", c.scene.mag_hw, i + 1, images),
                     );
                     results.push(
-                        experiment::analyse_image(sim, i, &plan, 0.0)
-                            .map_err(failed(Stage::Curve))?,
+                        experiment::analyse_image(sim, i, &plan).map_err(failed(Stage::Curve))?,
                     );
                 }
                 let predicted = |name: &str| pred.predict(name, &plan).unwrap_or(f64::NAN);

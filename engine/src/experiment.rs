@@ -133,7 +133,6 @@ pub fn analyse_image(
     sim: &Simulator,
     index: usize,
     plan: &Plan,
-    predicted: f64,
 ) -> Result<ImageResult, ExperimentError> {
     let t0 = Instant::now();
     let exp = sim.exposure(index)?;
@@ -212,7 +211,6 @@ pub fn analyse_image(
             report,
         });
     }
-    let _ = predicted;
     Ok(ImageResult {
         index,
         ace_sigma_mas: ((exp.ace.sigma_x_mas.powi(2) + exp.ace.sigma_y_mas.powi(2)) / 2.0).sqrt(),
@@ -294,7 +292,7 @@ pub fn run_dataset(
     let pred = crate::predict::Predictor::new(&sim)?;
     let mut images = Vec::with_capacity(cfg.fidelity.images);
     for i in 0..cfg.fidelity.images {
-        let r = analyse_image(&sim, i, plan, 0.0)?;
+        let r = analyse_image(&sim, i, plan)?;
         on_image(&r);
         images.push(r);
     }

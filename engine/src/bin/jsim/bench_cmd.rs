@@ -166,7 +166,7 @@ pub fn bench(a: &BenchArgs) -> Result<()> {
         &a.out.join("bench.png"),
         "Speed against error (each knob against its finest setting)",
         "max |error| / peak pixel",
-        "integration time [s]",
+        "time [s]: PSF + kernel + integration",
         &sets,
         Scale::Log,
         Scale::Log,
