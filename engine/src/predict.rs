@@ -5,7 +5,8 @@
 //!   by a Gaussian with this exposure's ACE σ per axis (the Gaussian ACE σ, or the series' σ over the
 //!   exposure), integrated over the pixel with the subpixel/intra-pixel model, averaged over pixel phases
 //!   (as σ²), with the pixel variance `μ + RN² + g²/12 + (σ_flat·signal)²` — the inter-pixel flat is unknown
-//!   to the fit and acts as noise. Plate models absorb p of the n stars' degrees of freedom: × (1 − p/n).
+//!   to the fit and acts as noise. Plate models absorb p of the n stars' degrees of freedom: × (1 − p/n),
+//!   and add their reference catalogue's error E projected through the model: E²·(p/2 − 1)/n per axis.
 //! * **σ_disp** — the rms over stars (mean removed) of the fit displacement the ACE series predicts for each
 //!   star through the fit's response to the jitter of its window ([`crate::response`]). After `plate-*`, the
 //!   residual of the same least-squares model fitted to those displacements; after `telemetry`, the
@@ -285,7 +286,15 @@ impl Predictor {
         }
         let (disp_px, p) = self.residual_displacement(i, name, plan);
         let n = self.stars.len().max(1) as f64;
-        let noise2 = noise * noise * (1.0 - (p as f64 / n).min(0.9));
+        // a plate model absorbs p of the n stars' noise, and projects its reference catalogue's error E onto
+        // the stars through its p/2 − 1 non-constant parameters per axis (the constant one leaves the std)
+        let absorbed = (p as f64 / n).min(0.9);
+        let reference2 = if p > 0 {
+            plan.reference_error_mas.powi(2) * ((p as f64 / 2.0 - 1.0).max(0.0) / n)
+        } else {
+            0.0
+        };
+        let noise2 = noise * noise * (1.0 - absorbed) + reference2;
         (noise2 + (disp_px * self.cfg.instrument.plate_scale_mas()).powi(2)).sqrt()
     }
 
