@@ -14,12 +14,11 @@
 
 use engine::astrometry::{self, Analysis, AnalysisImage, Options, Report, StarResult};
 use engine::config::{AceCase, Config, ReadoutOrder};
-use engine::countermeasures::{Countermeasure, Telemetry};
+use engine::countermeasures::Countermeasure;
 use engine::epsf::Epsf;
 use engine::experiment::{self, ImageResult as DatasetImage, Plan, Row};
 use engine::optics::PsfBank;
 use engine::predict::Predictor;
-use engine::response::FitResponse;
 use engine::simulate::{AceStats, Exposure, Simulator};
 use std::collections::HashMap;
 use std::sync::Arc;
@@ -670,54 +669,34 @@ impl EngineState {
         let mut global: Analysis =
             astrometry::analyze(&img, Some(&exp.truth), &base).map_err(failed(Stage::Image))?;
         // the fit displacement the true ACE predicts for every star (the mechanism, beside the errors)
-        if let Some(track) = sim.track(r.image_index) {
-            let kernel = sim.optical_kernel().map_err(failed(Stage::Image))?;
-            let resp = FitResponse::build(
-                &kernel,
-                &track,
-                &sim.nominal_window(&track),
-                &sim.fit_noise(),
-            );
-            let pos: Vec<(f64, f64)> = exp.truth.iter().map(|t| (t.x_px, t.y_px)).collect();
-            let pred = resp.displacements(&track, &sim.timing, &pos);
-            astrometry::attach_fit_prediction(&mut global.stars, &pred);
-            astrometry::summarise(
-                &global.stars,
-                Some(&exp.truth),
-                img.plate_scale_mas,
-                &mut global.report,
-            );
-        }
+        experiment::attach_ace_prediction(
+            sim,
+            r.image_index,
+            &exp.truth,
+            &mut global,
+            img.plate_scale_mas,
+        )
+        .map_err(failed(Stage::Image))?;
         out.check()?;
         let with_cm = match r.countermeasure.as_str() {
             "none" => None,
-            "telemetry" => match sim.series() {
-                // a static ACE has nothing to correct: the plain result stands
-                None => None,
-                Some(series) => {
-                    let t = engine::experiment::TelemetrySpec::default();
-                    let kernel = sim.optical_kernel().map_err(failed(Stage::Image))?;
-                    let tel = Telemetry::from_series(
-                        series,
-                        sim.timing,
-                        exp.t_start_s,
-                        cfg.instrument.plate_scale_mas(),
-                        t.noise_mas,
-                        t.rate_hz,
-                        t.latency_s,
-                        cfg.seed,
-                        &kernel,
-                        &sim.fit_noise(),
-                    )
-                    .map_err(failed(Stage::Image))?;
-                    let mut o = base.clone();
-                    o.countermeasure = Countermeasure::Telemetry(Arc::new(tel));
-                    Some(
-                        astrometry::analyze(&img, Some(&exp.truth), &o)
-                            .map_err(failed(Stage::Image))?,
-                    )
+            "telemetry" => {
+                let spec = engine::experiment::TelemetrySpec::default();
+                match experiment::telemetry_countermeasure(sim, exp.t_start_s, &spec)
+                    .map_err(failed(Stage::Image))?
+                {
+                    // a static ACE has nothing to correct: the plain result stands
+                    None => None,
+                    Some(cm) => {
+                        let mut o = base.clone();
+                        o.countermeasure = cm;
+                        Some(
+                            astrometry::analyze(&img, Some(&exp.truth), &o)
+                                .map_err(failed(Stage::Image))?,
+                        )
+                    }
                 }
-            },
+            }
             other => {
                 let mut o = base.clone();
                 o.countermeasure = Countermeasure::parse(other, cfg.analysis.epsf_zones.max(2))

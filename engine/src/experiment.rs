@@ -128,6 +128,60 @@ pub fn exact_epsf(kernel: &PixelKernel, half_px: usize) -> Epsf {
     e
 }
 
+/// Attach to an analysis of exposure `index` the fit displacement the true ACE predicts for every star
+/// (realistic ACE only; the mechanism, shown beside the measured errors) and refresh its report.
+pub fn attach_ace_prediction(
+    sim: &Simulator,
+    index: usize,
+    truth: &[crate::simulate::TruthRow],
+    analysis: &mut astrometry::Analysis,
+    plate_scale_mas: f64,
+) -> Result<(), SimError> {
+    if let Some(track) = sim.track(index) {
+        let resp = FitResponse::build(
+            &*sim.optical_kernel()?,
+            &track,
+            &sim.nominal_window(&track),
+            &sim.fit_noise(),
+        );
+        let pos: Vec<(f64, f64)> = truth.iter().map(|t| (t.x_px, t.y_px)).collect();
+        let pred = resp.displacements(&track, &sim.timing, &pos);
+        astrometry::attach_fit_prediction(&mut analysis.stars, &pred);
+        astrometry::summarise(
+            &analysis.stars,
+            Some(truth),
+            plate_scale_mas,
+            &mut analysis.report,
+        );
+    }
+    Ok(())
+}
+
+/// The telemetry countermeasure of an exposure starting at `t_start_s`, or `None` for a static ACE (nothing
+/// to correct).
+pub fn telemetry_countermeasure(
+    sim: &Simulator,
+    t_start_s: f64,
+    spec: &TelemetrySpec,
+) -> Result<Option<Countermeasure>, ExperimentError> {
+    let Some(series) = sim.series() else {
+        return Ok(None);
+    };
+    let tel = Telemetry::from_series(
+        series,
+        sim.timing,
+        t_start_s,
+        sim.cfg.instrument.plate_scale_mas(),
+        spec.noise_mas,
+        spec.rate_hz,
+        spec.latency_s,
+        sim.cfg.seed,
+        &*sim.optical_kernel()?,
+        &sim.fit_noise(),
+    )?;
+    Ok(Some(Countermeasure::Telemetry(Arc::new(tel))))
+}
+
 /// Run the analyses of `plan` on one simulated image.
 pub fn analyse_image(
     sim: &Simulator,
@@ -143,23 +197,7 @@ pub fn analyse_image(
     // one global build shared by the countermeasures that start from it
     let mut global = astrometry::analyze(&img, Some(&exp.truth), &base)?;
     // the fit displacement the true ACE predicts for every star (the mechanism, shown beside the errors)
-    if let Some(track) = sim.track(index) {
-        let resp = FitResponse::build(
-            &*sim.optical_kernel()?,
-            &track,
-            &sim.nominal_window(&track),
-            &sim.fit_noise(),
-        );
-        let pos: Vec<(f64, f64)> = exp.truth.iter().map(|t| (t.x_px, t.y_px)).collect();
-        let pred = resp.displacements(&track, &sim.timing, &pos);
-        astrometry::attach_fit_prediction(&mut global.stars, &pred);
-        astrometry::summarise(
-            &global.stars,
-            Some(&exp.truth),
-            img.plate_scale_mas,
-            &mut global.report,
-        );
-    }
+    attach_ace_prediction(sim, index, &exp.truth, &mut global, img.plate_scale_mas)?;
     for name in &plan.countermeasures {
         let report = match name.as_str() {
             "none" => global.report.clone(),
@@ -173,31 +211,15 @@ pub fn analyse_image(
                 o.fixed_epsf = Some(exact_epsf(&j.kernel, sim.cfg.analysis.epsf_radius_px));
                 astrometry::analyze(&img, Some(&exp.truth), &o)?.report
             }
-            "telemetry" => {
-                let Some(series) = sim.series() else {
-                    // a static ACE has nothing to correct: the telemetry countermeasure is the plain result
-                    measured.push(Measured {
-                        countermeasure: name.clone(),
-                        report: global.report.clone(),
-                    });
-                    continue;
-                };
-                let tel = Telemetry::from_series(
-                    series,
-                    sim.timing,
-                    exp.t_start_s,
-                    sim.cfg.instrument.plate_scale_mas(),
-                    plan.telemetry.noise_mas,
-                    plan.telemetry.rate_hz,
-                    plan.telemetry.latency_s,
-                    sim.cfg.seed,
-                    &*sim.optical_kernel()?,
-                    &sim.fit_noise(),
-                )?;
-                let mut o = base.clone();
-                o.countermeasure = Countermeasure::Telemetry(Arc::new(tel));
-                astrometry::analyze(&img, Some(&exp.truth), &o)?.report
-            }
+            "telemetry" => match telemetry_countermeasure(sim, exp.t_start_s, &plan.telemetry)? {
+                // a static ACE has nothing to correct: the telemetry countermeasure is the plain result
+                None => global.report.clone(),
+                Some(cm) => {
+                    let mut o = base.clone();
+                    o.countermeasure = cm;
+                    astrometry::analyze(&img, Some(&exp.truth), &o)?.report
+                }
+            },
             other => {
                 let mut o = base.clone();
                 o.countermeasure =
