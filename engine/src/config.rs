@@ -595,7 +595,8 @@ pub struct Analysis {
     /// bound have three parameters.
     pub fit_sky: bool,
     pub smoothing: Smoothing,
-    /// Y zones of the position-dependent ePSF (1 = one ePSF for the image).
+    /// Y zones of the position-dependent ePSF of the `yzones` countermeasures (at least 2 are used; the plain
+    /// analysis builds one ePSF for the image).
     pub epsf_zones: usize,
     /// Detection threshold (peak above sky) in units of the sky noise.
     pub detect_sigma: f64,
@@ -614,7 +615,7 @@ impl Default for Analysis {
             fit_radius_px: 2.5,
             fit_sky: false,
             smoothing: Smoothing::Quadratic,
-            epsf_zones: 1,
+            epsf_zones: 4,
             detect_sigma: 10.0,
             fit_max_iter: 30,
             clip_sigma: 3.0,

@@ -5,9 +5,10 @@
 //!   built and re-centred on its own (centroid convention per zone). `yzones-shared`: each zone's ePSF is built
 //!   with the stars held at their global-ePSF positions and not re-centred, so it stays in the global ePSF's
 //!   centring frame. Neither can absorb a displacement common to the stars of a zone — an image translated
-//!   by δ is fitted at its translated position by any ePSF with a fixed centring convention; the per-zone
-//!   re-centring only removes what the zone's *shape* change did to the centroid (and, if the conventions
-//!   differed, would add a zone-to-zone offset). Displacements need a reference (plate model) or telemetry.
+//!   by δ is fitted at its translated position by any ePSF with a fixed centring convention. The shared frame
+//!   changes little; per-zone re-centring moves each zone's positions to its own (jitter-skewed) photocentre
+//!   convention, so the zones disagree by what their stars' jitter did and the scatter grows. Displacements
+//!   need a reference (plate model) or telemetry.
 //! * `plate-affine`, `plate-poly:N` — per exposure, fit a smooth transformation of the fitted positions onto
 //!   the reference positions (the truth, optionally with its own error) by least squares over all stars,
 //!   as an astrometric pipeline does against a reference catalogue: affine (6 parameters) or
