@@ -666,8 +666,14 @@ impl EngineState {
         let t1 = Instant::now();
         let img = AnalysisImage::from_detector(cfg, &exp.image);
         let base = Options::new(&cfg.analysis);
-        let mut global: Analysis =
-            astrometry::analyze(&img, Some(&exp.truth), &base).map_err(failed(Stage::Image))?;
+        // one detection and ePSF build; the countermeasure starts from its fits
+        let (plain, prepared) = astrometry::analyze_prepared(&img, Some(&exp.truth), &base)
+            .map_err(failed(Stage::Image))?;
+        let apply = |cm: &Countermeasure| {
+            astrometry::with_countermeasure(&img, Some(&exp.truth), &plain, &prepared, cm)
+                .map_err(failed(Stage::Image))
+        };
+        let mut global: Analysis = plain.clone();
         // the fit displacement the true ACE predicts for every star (the mechanism, beside the errors)
         experiment::attach_ace_prediction(
             sim,
@@ -687,24 +693,13 @@ impl EngineState {
                 {
                     // a static ACE has nothing to correct: the plain result stands
                     None => None,
-                    Some(cm) => {
-                        let mut o = base.clone();
-                        o.countermeasure = cm;
-                        Some(
-                            astrometry::analyze(&img, Some(&exp.truth), &o)
-                                .map_err(failed(Stage::Image))?,
-                        )
-                    }
+                    Some(cm) => Some(apply(&cm)?),
                 }
             }
             other => {
-                let mut o = base.clone();
-                o.countermeasure = Countermeasure::parse(other, cfg.analysis.epsf_zones.max(2))
+                let cm = Countermeasure::parse(other, cfg.analysis.epsf_zones.max(2))
                     .map_err(failed(Stage::Image))?;
-                Some(
-                    astrometry::analyze(&img, Some(&exp.truth), &o)
-                        .map_err(failed(Stage::Image))?,
-                )
+                Some(apply(&cm)?)
             }
         };
         let analyse_s = t1.elapsed().as_secs_f64();

@@ -481,12 +481,31 @@ pub fn star_results(
         .collect()
 }
 
+/// What the global analysis of an image prepared: enough to apply further countermeasures to its fits
+/// without detecting the stars and building the ePSF again.
+#[derive(Debug, Clone)]
+pub struct Prepared {
+    pub starts: Vec<StarStart>,
+    pub usable: Vec<bool>,
+    pub build: BuildOptions,
+}
+
 /// Analyse one image: detect, build (or take) the ePSF, fit, apply the countermeasure, report.
 pub fn analyze(
     img: &AnalysisImage,
     truth: Option<&[TruthRow]>,
     opts: &Options,
 ) -> Result<Analysis, AstrometryError> {
+    let (plain, prepared) = analyze_prepared(img, truth, opts)?;
+    with_countermeasure(img, truth, &plain, &prepared, &opts.countermeasure)
+}
+
+/// The analysis without a countermeasure, and what it prepared for [`with_countermeasure`].
+pub fn analyze_prepared(
+    img: &AnalysisImage,
+    truth: Option<&[TruthRow]>,
+    opts: &Options,
+) -> Result<(Analysis, Prepared), AstrometryError> {
     let det = detect(img, opts.cfg.detect_sigma);
     if det.is_empty() {
         return Err(AstrometryError::NoStars(opts.cfg.detect_sigma));
@@ -499,7 +518,7 @@ pub fn analyze(
     };
     let bopt = opts.build_options();
     let pd = img.pixels();
-    let (fits, epsf, iterations) = match &opts.fixed_epsf {
+    let (mut fits, epsf, iterations) = match &opts.fixed_epsf {
         Some(e) => {
             let fits: Vec<StarFit> = starts
                 .par_iter()
@@ -512,23 +531,52 @@ pub fn analyze(
             (built.fits, built.epsf, built.iterations)
         }
     };
-    let mut fits = fits;
     crate::epsf::fit::flags::mark_poor_fits(&mut fits);
-    let mut stars = star_results(&fits, &matches, truth);
+    let stars = star_results(&fits, &matches, truth);
     let mut report = Report {
         n_detected: det.len(),
         epsf_iterations: iterations,
+        countermeasure: Countermeasure::None.name(),
         ..Default::default()
     };
-    report.countermeasure = opts.countermeasure.name();
+    summarise(&stars, truth, img.plate_scale_mas, &mut report);
+    Ok((
+        Analysis {
+            report,
+            stars,
+            epsf,
+        },
+        Prepared {
+            starts,
+            usable,
+            build: bopt,
+        },
+    ))
+}
+
+/// Apply a countermeasure to the plain analysis of an image (from [`analyze_prepared`]) and report.
+pub fn with_countermeasure(
+    img: &AnalysisImage,
+    truth: Option<&[TruthRow]>,
+    plain: &Analysis,
+    prepared: &Prepared,
+    cm: &Countermeasure,
+) -> Result<Analysis, AstrometryError> {
+    let mut stars = plain.stars.clone();
+    let mut report = Report {
+        n_detected: plain.report.n_detected,
+        epsf_iterations: plain.report.epsf_iterations,
+        countermeasure: cm.name(),
+        ..Default::default()
+    };
     report.dof_absorbed = countermeasures::apply(
-        &opts.countermeasure,
+        cm,
         img,
-        &pd,
-        &starts,
-        &usable,
-        &bopt,
-        &epsf,
+        &img.pixels(),
+        &prepared.starts,
+        &prepared.usable,
+        &prepared.build,
+        &plain.epsf,
         truth,
         &mut stars,
     )?;
@@ -536,7 +584,7 @@ pub fn analyze(
     Ok(Analysis {
         report,
         stars,
-        epsf,
+        epsf: plain.epsf.clone(),
     })
 }
 

@@ -194,8 +194,12 @@ pub fn analyse_image(
     let img = AnalysisImage::from_detector(&sim.cfg, &exp.image);
     let base = Options::new(&sim.cfg.analysis);
     let mut measured = Vec::new();
-    // one global build shared by the countermeasures that start from it
-    let mut global = astrometry::analyze(&img, Some(&exp.truth), &base)?;
+    // one detection and global ePSF build, shared by every countermeasure that starts from it
+    let (plain, prepared) = astrometry::analyze_prepared(&img, Some(&exp.truth), &base)?;
+    let apply = |cm: &Countermeasure| {
+        astrometry::with_countermeasure(&img, Some(&exp.truth), &plain, &prepared, cm)
+    };
+    let mut global = plain.clone();
     // the fit displacement the true ACE predicts for every star (the mechanism, shown beside the errors)
     attach_ace_prediction(sim, index, &exp.truth, &mut global, img.plate_scale_mas)?;
     for name in &plan.countermeasures {
@@ -214,18 +218,12 @@ pub fn analyse_image(
             "telemetry" => match telemetry_countermeasure(sim, exp.t_start_s, &plan.telemetry)? {
                 // a static ACE has nothing to correct: the telemetry countermeasure is the plain result
                 None => global.report.clone(),
-                Some(cm) => {
-                    let mut o = base.clone();
-                    o.countermeasure = cm;
-                    astrometry::analyze(&img, Some(&exp.truth), &o)?.report
-                }
+                Some(cm) => apply(&cm)?.report,
             },
             other => {
-                let mut o = base.clone();
-                o.countermeasure =
-                    Countermeasure::parse(other, sim.cfg.analysis.epsf_zones.max(2))?
-                        .with_reference_error(plan.reference_error_mas, sim.cfg.seed);
-                astrometry::analyze(&img, Some(&exp.truth), &o)?.report
+                let cm = Countermeasure::parse(other, sim.cfg.analysis.epsf_zones.max(2))?
+                    .with_reference_error(plan.reference_error_mas, sim.cfg.seed);
+                apply(&cm)?.report
             }
         };
         measured.push(Measured {
