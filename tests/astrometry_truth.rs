@@ -4,9 +4,9 @@
 mod common;
 
 use common::{gaussian_image, grid_stars};
-use engine::astrometry::{self, Options};
+use engine::analysis::astrometry::{self, Options};
+use engine::analysis::epsf::fit::flags;
 use engine::config::Analysis;
-use engine::epsf::fit::flags;
 use engine::numerics::stats;
 
 #[test]

@@ -4,11 +4,11 @@
 mod common;
 
 use common::small_config;
-use engine::astrometry::{self, AnalysisImage, Options};
+use engine::analysis::astrometry::{self, AnalysisImage, Options};
+use engine::analysis::countermeasures::{Countermeasure, Telemetry};
+use engine::analysis::response::FitResponse;
 use engine::config::ReadoutOrder;
-use engine::countermeasures::{Countermeasure, Telemetry};
 use engine::numerics::stats;
-use engine::response::FitResponse;
 use engine::simulate::Simulator;
 use std::sync::Arc;
 

@@ -3,7 +3,7 @@
 mod common;
 
 use common::{small_config, temp_dir};
-use engine::astrometry::{self, AnalysisImage, Options};
+use engine::analysis::astrometry::{self, AnalysisImage, Options};
 use engine::config::AceCase;
 use engine::io::{exposure, fits};
 use engine::simulate::Simulator;

@@ -6,7 +6,7 @@
 //! (measured on lavapipe: ≤ 4.3e-7 per pixel, ≤ 3e-7 in flux).
 
 use engine::config::{Config, Method, ReadoutOrder};
-use engine::gpu::{GpuIntegrator, software_adapter};
+use engine::integrate::gpu::{GpuIntegrator, software_adapter};
 use engine::integrate::kernel::{IntraPixelMap, PixelKernel};
 use engine::integrate::track::Track;
 use engine::integrate::{self, FrameSpec, Motion, StarJob, StarSpec};

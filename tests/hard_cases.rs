@@ -4,7 +4,7 @@
 mod common;
 
 use common::{small_config, temp_dir};
-use engine::astrometry::{self, AnalysisImage, Options};
+use engine::analysis::astrometry::{self, AnalysisImage, Options};
 use engine::config::{AceCase, Config, SceneKind};
 use engine::detector::dq;
 use engine::simulate::Simulator;
@@ -137,7 +137,10 @@ fn saturated_zero_flux_and_noise_floor_stars() {
     // the zero-flux star is not detected; the saturated one is flagged
     assert!(a.stars.iter().all(|s| s.truth != Some(1)));
     if let Some(s) = a.stars.iter().find(|s| s.truth == Some(0)) {
-        assert!(s.flags & engine::epsf::fit::flags::SATURATED != 0, "{s:?}");
+        assert!(
+            s.flags & engine::analysis::epsf::fit::flags::SATURATED != 0,
+            "{s:?}"
+        );
     }
 }
 

@@ -5,7 +5,7 @@ mod common;
 
 use common::small_config;
 use engine::config::{AceCase, ReadoutOrder};
-use engine::experiment::{Plan, run_dataset};
+use engine::studies::experiment::{Plan, run_dataset};
 
 #[test]
 fn predictor_agrees_with_simulations() {

@@ -3,7 +3,7 @@
 
 #[test]
 fn every_kernel_parses_and_validates() {
-    let sources = engine::gpu::shader_sources();
+    let sources = engine::integrate::gpu::shader_sources();
     assert_eq!(sources.len(), 3);
     for (name, entry, src) in sources {
         let module = naga::front::wgsl::parse_str(&src)
@@ -23,7 +23,7 @@ fn every_kernel_parses_and_validates() {
 
 #[test]
 fn host_mirrors_match_wgsl_layouts() {
-    for (name, _, src) in engine::gpu::shader_sources() {
+    for (name, _, src) in engine::integrate::gpu::shader_sources() {
         let module = naga::front::wgsl::parse_str(&src).expect("parses");
         let mut layouter = naga::proc::Layouter::default();
         layouter.update(module.to_ctx()).expect("layout");
@@ -32,17 +32,17 @@ fn host_mirrors_match_wgsl_layouts() {
             match ty.name.as_deref() {
                 Some("Star") => assert_eq!(
                     size,
-                    std::mem::size_of::<engine::gpu::GpuStar>(),
+                    std::mem::size_of::<engine::integrate::gpu::GpuStar>(),
                     "{name}: Star"
                 ),
                 Some("Window") => assert_eq!(
                     size,
-                    std::mem::size_of::<engine::gpu::GpuWindow>(),
+                    std::mem::size_of::<engine::integrate::gpu::GpuWindow>(),
                     "{name}: Window"
                 ),
                 Some("Params") => assert_eq!(
                     size,
-                    std::mem::size_of::<engine::gpu::GpuParams>(),
+                    std::mem::size_of::<engine::integrate::gpu::GpuParams>(),
                     "{name}: Params"
                 ),
                 _ => {}

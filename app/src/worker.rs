@@ -12,14 +12,14 @@
 //! UI drops any message of an old generation. Results go back over a channel, followed by
 //! `ctx.request_repaint()`. No physics here: everything is an engine call.
 
-use engine::astrometry::{self, Analysis, AnalysisImage, Options, Report, StarResult};
+use engine::analysis::astrometry::{self, Analysis, AnalysisImage, Options, Report, StarResult};
+use engine::analysis::countermeasures::Countermeasure;
+use engine::analysis::epsf::Epsf;
+use engine::analysis::predict::Predictor;
 use engine::config::{AceCase, Config, ReadoutOrder};
-use engine::countermeasures::Countermeasure;
-use engine::epsf::Epsf;
-use engine::experiment::{self, ImageResult as DatasetImage, Plan, Row};
 use engine::optics::PsfBank;
-use engine::predict::Predictor;
 use engine::simulate::{AceStats, Exposure, Simulator};
+use engine::studies::experiment::{self, ImageResult as DatasetImage, Plan, Row};
 use std::collections::HashMap;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering};
@@ -687,7 +687,7 @@ impl EngineState {
         let with_cm = match r.countermeasure.as_str() {
             "none" => None,
             "telemetry" => {
-                let spec = engine::experiment::TelemetrySpec::default();
+                let spec = engine::studies::experiment::TelemetrySpec::default();
                 match experiment::telemetry_countermeasure(sim, exp.t_start_s, &spec)
                     .map_err(failed(Stage::Image))?
                 {

@@ -21,27 +21,20 @@
 //! * **Randomness**: every draw comes from a ChaCha stream derived from the run seed and a named stream id
 //!   ([`rng`]); the seed is written to every FITS header, and the same seed gives the same image.
 
-pub mod astrometry;
-pub mod bench;
+pub mod analysis;
 pub mod config;
-pub mod countermeasures;
 pub mod detector;
-pub mod epsf;
-pub mod experiment;
-pub mod gpu;
 pub mod integrate;
 pub mod io;
 pub mod jitter;
 pub mod numerics;
 pub mod optics;
 pub mod photometry;
-pub mod predict;
 pub mod readout;
-pub mod response;
 pub mod rng;
 pub mod scene;
 pub mod simulate;
-pub mod sweep;
+pub mod studies;
 
 pub use config::Config;
 

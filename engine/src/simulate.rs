@@ -5,7 +5,7 @@
 
 use crate::config::{AceCase, Backend, Config, Method};
 use crate::detector::{self, DetectorImage};
-use crate::gpu::GpuIntegrator;
+use crate::integrate::gpu::GpuIntegrator;
 use crate::integrate::kernel::{IntraPixelMap, KernelError, PixelKernel};
 use crate::integrate::track::Track;
 use crate::integrate::{self, FrameSpec, Motion, StarJob, StarSpec};
@@ -239,14 +239,14 @@ impl Simulator {
     }
 
     /// Noise parameters of a typical star's fit (median flux, sky, read/quantisation floor).
-    pub fn fit_noise(&self) -> crate::response::FitNoise {
+    pub fn fit_noise(&self) -> crate::analysis::response::FitNoise {
         let d = &self.cfg.detector;
         let rates: Vec<f64> = self
             .stars
             .iter()
             .map(|s| photometry::electrons_per_s(s.mag_hw, self.cfg.photometry.zero_point_e_per_s))
             .collect();
-        crate::response::FitNoise {
+        crate::analysis::response::FitNoise {
             flux_e: crate::numerics::stats::median(&rates) * d.exposure_s,
             sky_e: d.dark_e_per_s * d.exposure_s,
             floor_e2: d.read_noise_e.powi(2) + d.gain_e_per_adu.powi(2) / 12.0,

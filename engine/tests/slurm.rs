@@ -10,7 +10,7 @@
 //! skipped (with a note) when they are not installed; when the `CI` environment variable is set it fails
 //! instead, and it fails everywhere if the daemons do not come up, printing their logs.
 
-use engine::sweep::{self, Shard};
+use engine::studies::sweep::{self, Shard};
 use std::collections::BTreeMap;
 use std::fs::File;
 use std::path::{Path, PathBuf};

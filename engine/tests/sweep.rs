@@ -1,11 +1,11 @@
-//! Monte Carlo sweeps (`engine::sweep`, `jsim sweep|merge|report`): results independent of sharding and
+//! Monte Carlo sweeps (`engine::studies::sweep`, `jsim sweep|merge|report`): results independent of sharding and
 //! threads, resuming after lost, truncated or corrupted shard files, extending a sweep, merge diagnostics,
 //! the report's fractions, the Slurm scripts, and bad input giving named errors with no files written.
 //!
 //! The sweep is `engine/sweeps/quick_sweep.toml` (2 points × 4 exposures of a reduced scene); its
 //! single-process result is computed once and copied by the tests that start from it.
 
-use engine::sweep::{
+use engine::studies::sweep::{
     self, MergeOptions, ReportOptions, RunOptions, RunSummary, Shard, Sweep, SweepError,
 };
 use std::collections::BTreeMap;

@@ -44,7 +44,7 @@ pub fn gaussian_image(
     sigma_px: f64,
     seed: Option<u64>,
 ) -> (
-    engine::astrometry::AnalysisImage,
+    engine::analysis::astrometry::AnalysisImage,
     Vec<engine::simulate::TruthRow>,
 ) {
     use rand_distr::{Distribution, Normal, Poisson};
@@ -93,7 +93,7 @@ pub fn gaussian_image(
             jitter_dy_px: 0.0,
         })
         .collect();
-    let img = engine::astrometry::AnalysisImage {
+    let img = engine::analysis::astrometry::AnalysisImage {
         nx: n,
         ny: n,
         e,

@@ -8,7 +8,7 @@ use egui_plot::{
     Arrows, AxisHints, Corner, GridInput, GridMark, HLine, HoverPosition, Legend, Line, LineStyle,
     MarkerShape, Plot, PlotPoint, PlotPoints, Points, Span, Text, VLine,
 };
-use engine::epsf::fit::flags;
+use engine::analysis::epsf::fit::flags;
 use engine::jitter::Psd;
 use engine::readout::ReadoutTiming;
 

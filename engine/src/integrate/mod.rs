@@ -3,12 +3,13 @@
 //! * [`kernel`]: the pixel-response table K (subpixels + intra-pixel map folded in, exactly);
 //! * [`track`]: the jitter track on the time grid and window weights;
 //! * [`cpu`]: reference, direct and fast methods on the CPU (rayon over stars);
-//! * the same direct and fast methods on the GPU live in [`crate::gpu`] (WGSL in `shaders/`).
+//! * the same direct and fast methods on the GPU live in [`crate::integrate::gpu`] (WGSL in `shaders/`).
 //!
 //! Cost grows with what the scene holds: stamps only around stars, one kernel per distinct PSF, and the
 //! fast method integrates once the part of the exposure all pixels of a stamp share.
 
 pub mod cpu;
+pub mod gpu;
 pub mod kernel;
 pub mod track;
 

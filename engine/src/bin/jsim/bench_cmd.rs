@@ -4,9 +4,9 @@
 use crate::ConfigArgs;
 use anyhow::Result;
 use clap::Args;
-use engine::bench::{self, BenchRow, CSV_HEADER};
 use engine::io::csv::{self, Cell};
 use engine::io::plot::{Scale, Series, scatter};
+use engine::studies::bench::{self, BenchRow, CSV_HEADER};
 use std::path::PathBuf;
 
 #[derive(Args, Clone, Debug)]
@@ -87,7 +87,8 @@ pub fn bench(a: &BenchArgs) -> Result<()> {
     crate::ensure_dir(&a.out)?;
     let gpu = match cfg.fidelity.backend {
         engine::config::Backend::Cpu => None,
-        b => match engine::gpu::GpuIntegrator::shared(b == engine::config::Backend::Gpu) {
+        b => match engine::integrate::gpu::GpuIntegrator::shared(b == engine::config::Backend::Gpu)
+        {
             Ok(g) => Some(g),
             Err(e) => {
                 eprintln!("jsim: {e}");

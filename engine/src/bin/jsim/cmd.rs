@@ -239,7 +239,7 @@ pub struct AnalyzeArgs {
     pub truth: Option<std::path::PathBuf>,
     pub zones: Option<usize>,
     pub countermeasure: String,
-    pub telemetry: engine::experiment::TelemetrySpec,
+    pub telemetry: engine::studies::experiment::TelemetrySpec,
     pub reference_error_mas: f64,
     pub out: std::path::PathBuf,
 }
@@ -256,17 +256,17 @@ fn image_config(path: &Path, fallback: &Config) -> Config {
 pub fn write_vectors(
     dir: &Path,
     stem: &str,
-    stars: &[engine::astrometry::StarResult],
+    stars: &[engine::analysis::astrometry::StarResult],
     scale: f64,
     extent: f64,
     title: &str,
 ) -> Result<()> {
-    use engine::epsf::fit::flags;
+    use engine::analysis::epsf::fit::flags;
     // show the fit-response prediction where it was computed (experiment), else the mean-jitter one (truth)
     let fit_pred = stars
         .iter()
         .any(|s| s.predicted_fit_dx_px != 0.0 || s.predicted_fit_dy_px != 0.0);
-    let owned: Vec<engine::astrometry::StarResult> = stars
+    let owned: Vec<engine::analysis::astrometry::StarResult> = stars
         .iter()
         .map(|s| {
             let mut s = *s;
@@ -277,7 +277,7 @@ pub fn write_vectors(
             s
         })
         .collect();
-    let used: Vec<&engine::astrometry::StarResult> = owned
+    let used: Vec<&engine::analysis::astrometry::StarResult> = owned
         .iter()
         .filter(|s| s.truth.is_some() && s.flags & flags::REJECT == 0 && s.dx_px.is_finite())
         .collect();
@@ -370,8 +370,8 @@ pub fn write_vectors(
 
 /// `jsim analyze`
 pub fn analyze(cfg_fallback: &Config, a: &AnalyzeArgs) -> Result<()> {
-    use engine::astrometry::{self, AnalysisImage, Options};
-    use engine::countermeasures::{Countermeasure, Telemetry};
+    use engine::analysis::astrometry::{self, AnalysisImage, Options};
+    use engine::analysis::countermeasures::{Countermeasure, Telemetry};
     crate::ensure_dir(&a.out)?;
     let t0 = Instant::now();
     let read = fits::read_image(&a.image)?;
@@ -525,13 +525,13 @@ pub struct ExperimentArgs {
     pub aces: Vec<engine::config::AceCase>,
     pub readouts: Vec<engine::config::ReadoutOrder>,
     pub mags: Vec<f64>,
-    pub plan: engine::experiment::Plan,
+    pub plan: engine::studies::experiment::Plan,
     pub out: std::path::PathBuf,
 }
 
 /// `jsim experiment`
 pub fn experiment(base: &Config, a: &ExperimentArgs) -> Result<()> {
-    use engine::experiment::{self, CSV_HEADER};
+    use engine::studies::experiment::{self, CSV_HEADER};
     crate::ensure_dir(&a.out)?;
     let t0 = Instant::now();
     let datasets = experiment::grid(base, &a.aces, &a.readouts, &a.mags);
@@ -540,7 +540,8 @@ pub fn experiment(base: &Config, a: &ExperimentArgs) -> Result<()> {
     let bank = std::sync::Arc::new(PsfBank::new(base));
     let gpu = match base.fidelity.backend {
         engine::config::Backend::Cpu => None,
-        b => match engine::gpu::GpuIntegrator::shared(b == engine::config::Backend::Gpu) {
+        b => match engine::integrate::gpu::GpuIntegrator::shared(b == engine::config::Backend::Gpu)
+        {
             Ok(g) => Some(g),
             Err(e) => {
                 pb.suspend(|| eprintln!("jsim: {e}"));
@@ -665,7 +666,7 @@ pub fn experiment(base: &Config, a: &ExperimentArgs) -> Result<()> {
     Ok(())
 }
 
-fn write_experiment_csv(dir: &Path, rows: &[engine::experiment::Row]) -> Result<()> {
+fn write_experiment_csv(dir: &Path, rows: &[engine::studies::experiment::Row]) -> Result<()> {
     let cells: Vec<Vec<csv::Cell>> = rows
         .iter()
         .map(|r| {
@@ -685,13 +686,13 @@ fn write_experiment_csv(dir: &Path, rows: &[engine::experiment::Row]) -> Result<
         .collect();
     csv::write(
         &dir.join("experiment.csv"),
-        &engine::experiment::CSV_HEADER,
+        &engine::studies::experiment::CSV_HEADER,
         &cells,
     )?;
     Ok(())
 }
 
-fn render_table(rows: &[engine::experiment::Row]) -> String {
+fn render_table(rows: &[engine::studies::experiment::Row]) -> String {
     let mut s = format!(
         "{:<10} {:<13} {:<14} {:>5} {:>10} {:>7} {:>8} {:>10}\n",
         "ace", "readout", "countermeasure", "mag", "acc [mas]", "±sem", "CRLB", "predicted"
@@ -712,7 +713,7 @@ fn render_table(rows: &[engine::experiment::Row]) -> String {
     s
 }
 
-fn plot_experiment(dir: &Path, rows: &[engine::experiment::Row]) -> Result<()> {
+fn plot_experiment(dir: &Path, rows: &[engine::studies::experiment::Row]) -> Result<()> {
     use engine::io::plot::{Scale, Series, line_plot};
     // one curve per (readout, countermeasure) of the realistic ACE; the static ACE cases only with the plain
     // analysis (their countermeasures change nothing and would hide the curves that matter); the exact-ePSF
@@ -729,7 +730,7 @@ fn plot_experiment(dir: &Path, rows: &[engine::experiment::Row]) -> Result<()> {
     let mut series: Vec<Series> = keys
         .iter()
         .map(|(a, ro, c)| {
-            let pts: Vec<&engine::experiment::Row> = rows
+            let pts: Vec<&engine::studies::experiment::Row> = rows
                 .iter()
                 .filter(|r| &r.ace == a && &r.readout == ro && &r.countermeasure == c)
                 .collect();
@@ -748,7 +749,7 @@ fn plot_experiment(dir: &Path, rows: &[engine::experiment::Row]) -> Result<()> {
         .collect();
     // the bound of the plain analysis, once per ACE case
     for a in ["gaussian", "realistic"] {
-        let pts: Vec<&engine::experiment::Row> = rows
+        let pts: Vec<&engine::studies::experiment::Row> = rows
             .iter()
             .filter(|r| r.ace == a && r.countermeasure == "none")
             .collect();
@@ -785,12 +786,16 @@ fn plot_experiment(dir: &Path, rows: &[engine::experiment::Row]) -> Result<()> {
 }
 
 /// `jsim predict`
-pub fn predict(cfg: &Config, names: &[String], plan: &engine::experiment::Plan) -> Result<()> {
+pub fn predict(
+    cfg: &Config,
+    names: &[String],
+    plan: &engine::studies::experiment::Plan,
+) -> Result<()> {
     let t0 = Instant::now();
     let sim = Simulator::new(cfg)?;
     let setup = t0.elapsed().as_secs_f64();
     let t1 = Instant::now();
-    let p = engine::predict::Predictor::new(&sim)?;
+    let p = engine::analysis::predict::Predictor::new(&sim)?;
     println!(
         "Hw {} {} ACE, {} readout, {} images:",
         cfg.scene.mag_hw,

@@ -218,16 +218,16 @@ pub struct TelemetryArgs {
 }
 
 impl TelemetryArgs {
-    fn spec(&self) -> engine::experiment::TelemetrySpec {
-        engine::experiment::TelemetrySpec {
+    fn spec(&self) -> engine::studies::experiment::TelemetrySpec {
+        engine::studies::experiment::TelemetrySpec {
             noise_mas: self.noise_mas,
             rate_hz: self.rate_hz,
             latency_s: self.latency_s,
         }
     }
-    fn plan(&self, names: &[String]) -> Result<engine::experiment::Plan> {
+    fn plan(&self, names: &[String]) -> Result<engine::studies::experiment::Plan> {
         for n in names {
-            if !engine::predict::known(n) {
+            if !engine::analysis::predict::known(n) {
                 bail!(
                     "unknown countermeasure `{n}` (none, yzones, yzones-shared, plate-affine, plate-poly:N, telemetry, exact-epsf)"
                 );
@@ -247,7 +247,7 @@ impl TelemetryArgs {
         if !self.latency_s.is_finite() {
             bail!("--telemetry-latency-s {}: must be finite", self.latency_s);
         }
-        Ok(engine::experiment::Plan {
+        Ok(engine::studies::experiment::Plan {
             countermeasures: names.to_vec(),
             telemetry: self.spec(),
             reference_error_mas: self.reference_error_mas,

@@ -1,10 +1,10 @@
 //! `jsim sweep`, `jsim merge`, `jsim report`: Monte Carlo sweeps, sharded, resumable, and their reports.
-//! The work is in [`engine::sweep`] (whose docs describe the sweep file, the output directory and the
+//! The work is in [`engine::studies::sweep`] (whose docs describe the sweep file, the output directory and the
 //! Slurm scripts); here we parse options, show progress and print summaries.
 
 use anyhow::{Context, Result, bail};
 use clap::Args;
-use engine::sweep::{self, Event, Shard, Sweep};
+use engine::studies::sweep::{self, Event, Shard, Sweep};
 use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::time::Instant;

@@ -7,9 +7,9 @@
 //! (mean removed, per axis) of the difference between the positions fitted on noise-free images made with
 //! the knob and with the reference setting, each with its own ePSF built from the image.
 
-use crate::astrometry::{self, AnalysisImage, Options};
+use crate::analysis::astrometry::{self, AnalysisImage, Options};
 use crate::config::{AceCase, Backend, Config, Method};
-use crate::gpu::GpuIntegrator;
+use crate::integrate::gpu::GpuIntegrator;
 use crate::integrate::{self, FrameSpec, Motion, Stamp};
 use crate::numerics::stats;
 use crate::simulate::{SimError, Simulator};

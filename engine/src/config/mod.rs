@@ -1042,7 +1042,7 @@ impl Config {
 }
 
 /// The default configuration, with comments: what `jsim config --print-default` writes.
-pub const DEFAULT_TOML: &str = include_str!("default_config.toml");
+pub const DEFAULT_TOML: &str = include_str!("default.toml");
 
 #[cfg(test)]
 mod tests {

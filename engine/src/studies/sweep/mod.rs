@@ -82,7 +82,7 @@
 //! (a per-row checksum). Everything before `simulate_s` is deterministic; [`without_timing`] strips the rest.
 //! `accuracy_x_mas`/`accuracy_y_mas` are the standard deviations over the stars of measured − true position per
 //! axis, `accuracy_mas = √((σx² + σy²)/2)` (per axis), `bias_*` their means, `crlb_mas` the median Cramér–Rao
-//! bound, `predicted_mas` the instant predictor's expectation for this exposure ([`crate::predict`]),
+//! bound, `predicted_mas` the instant predictor's expectation for this exposure ([`crate::analysis::predict`]),
 //! `ace_sigma_mas`/`ace_drift_mas` the exposure's jitter σ and drift, `seed` the unit's master seed.
 //! `status` is `ok`, `not applicable` (e.g. `exact-epsf` with a realistic ACE) or `error: …` (the analysis
 //! failed for that exposure; its accuracy is NaN and counts as *not* meeting the threshold).
@@ -131,12 +131,12 @@
 //! file system the compute nodes share.
 
 use crate::config::{Config, ConfigError};
-use crate::experiment::{self, Plan, TelemetrySpec};
 use crate::io::{self, IoError, plot};
 use crate::numerics::stats;
 use crate::optics::PsfBank;
 use crate::rng::{self, Stream};
 use crate::simulate::Simulator;
+use crate::studies::experiment::{self, Plan, TelemetrySpec};
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 use std::collections::{BTreeMap, BTreeSet};
@@ -380,7 +380,7 @@ impl Sweep {
             ));
         }
         for (k, c) in countermeasures.iter().enumerate() {
-            if !crate::predict::known(c) {
+            if !crate::analysis::predict::known(c) {
                 return Err(ferr(format!(
                     "countermeasure `{c}` is unknown (none, yzones, yzones-shared, plate-affine, plate-poly:N, telemetry, exact-epsf)"
                 )));
@@ -1385,7 +1385,7 @@ pub fn compute_unit(sweep: &Sweep, unit: usize, banks: &Banks) -> Result<UnitRow
     banks.warm(&sim);
     let analysed = experiment::analyse_image(&sim, 0, &sweep.plan);
     let tp = Instant::now();
-    let predictor = crate::predict::Predictor::new(&sim).ok();
+    let predictor = crate::analysis::predict::Predictor::new(&sim).ok();
     let predicted: Vec<f64> = sweep
         .countermeasures
         .iter()

@@ -3,17 +3,17 @@
 //!
 //! A dataset reports, per countermeasure, the mean over its images of the per-image accuracy and the
 //! standard error of that mean (the paper's figure), the median Cramér–Rao bound, and the accuracy the
-//! instant predictor expects ([`crate::predict`]).
+//! instant predictor expects ([`crate::analysis::predict`]).
 
-use crate::astrometry::{self, AnalysisImage, Options, Report};
+use crate::analysis::astrometry::{self, AnalysisImage, Options, Report};
+use crate::analysis::countermeasures::{Countermeasure, CountermeasureError, Telemetry};
+use crate::analysis::epsf::Epsf;
+use crate::analysis::response::FitResponse;
 use crate::config::{AceCase, Config, ReadoutOrder};
-use crate::countermeasures::{Countermeasure, CountermeasureError, Telemetry};
-use crate::epsf::Epsf;
-use crate::gpu::GpuIntegrator;
+use crate::integrate::gpu::GpuIntegrator;
 use crate::integrate::kernel::PixelKernel;
 use crate::numerics::stats;
 use crate::optics::PsfBank;
-use crate::response::FitResponse;
 use crate::simulate::{SimError, Simulator};
 use serde::Serialize;
 use std::sync::Arc;
@@ -309,7 +309,7 @@ pub fn run_dataset(
         bank.unwrap_or_else(|| Arc::new(PsfBank::new(cfg))),
         gpu,
     )?;
-    let pred = crate::predict::Predictor::new(&sim)?;
+    let pred = crate::analysis::predict::Predictor::new(&sim)?;
     let mut images = Vec::with_capacity(cfg.fidelity.images);
     for i in 0..cfg.fidelity.images {
         let r = analyse_image(&sim, i, plan)?;

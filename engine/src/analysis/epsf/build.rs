@@ -269,7 +269,7 @@ pub fn build(
         let chi_limit = if fixed_positions.is_some() || chi.len() < 5 {
             f64::INFINITY
         } else {
-            crate::epsf::fit::flags::POOR_FIT_FACTOR * stats::median(&chi).max(1.0)
+            crate::analysis::epsf::fit::flags::POOR_FIT_FACTOR * stats::median(&chi).max(1.0)
         };
         let per_star: Vec<Vec<(usize, f64)>> = fitted
             .par_iter()

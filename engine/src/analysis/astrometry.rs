@@ -4,17 +4,17 @@
 //! * Position accuracy of an image = the standard deviation over stars of (fitted − true), per axis, in mas
 //!   (a common offset of all stars does not count); "combined" is the quadratic mean of the two axes
 //!   (`√((σx² + σy²)/2)`, a per-axis figure comparable to the per-axis bound).
-//! * The Cramér–Rao bound of each star comes from its fit ([`crate::epsf::fit`]); the report gives the
+//! * The Cramér–Rao bound of each star comes from its fit ([`crate::analysis::epsf::fit`]); the report gives the
 //!   median and accuracy / bound.
 //! * Pixel-phase bias: mean (fitted − true) in five bins of the star's sub-pixel phase; its largest excursion
 //!   is the signature of a bad ePSF.
 
+use crate::analysis::countermeasures::{self, Countermeasure};
+use crate::analysis::epsf::Epsf;
+use crate::analysis::epsf::build::{self, BuildOptions, StarStart};
+use crate::analysis::epsf::fit::{FitOptions, PixelData, StarFit, fit_star, flags};
 use crate::config::{Analysis as AnalysisCfg, Config};
-use crate::countermeasures::{self, Countermeasure};
 use crate::detector::{DetectorImage, dq};
-use crate::epsf::Epsf;
-use crate::epsf::build::{self, BuildOptions, StarStart};
-use crate::epsf::fit::{FitOptions, PixelData, StarFit, fit_star, flags};
 use crate::io::fits::ImageRead;
 use crate::numerics::stats;
 use crate::simulate::TruthRow;
@@ -187,7 +187,7 @@ pub struct StarResult {
     /// The displacement the ACE series predicts for this star (px): the mean jitter over its window (truth).
     pub predicted_dx_px: f64,
     pub predicted_dy_px: f64,
-    /// The fit displacement the ACE series predicts through the fit's response ([`crate::response`]), px.
+    /// The fit displacement the ACE series predicts through the fit's response ([`crate::analysis::response`]), px.
     pub predicted_fit_dx_px: f64,
     pub predicted_fit_dy_px: f64,
 }
@@ -531,7 +531,7 @@ pub fn analyze_prepared(
             (built.fits, built.epsf, built.iterations)
         }
     };
-    crate::epsf::fit::flags::mark_poor_fits(&mut fits);
+    crate::analysis::epsf::fit::flags::mark_poor_fits(&mut fits);
     let stars = star_results(&fits, &matches, truth);
     let mut report = Report {
         n_detected: det.len(),

@@ -17,18 +17,18 @@
 //! * `telemetry` — subtract, from each star, the displacement the attitude telemetry predicts for its fit:
 //!   the ACE series sampled at `rate_hz`, delayed by `latency_s`, with Gaussian noise `noise_mas` per sample,
 //!   linearly interpolated, and turned into each star's fitted shift through the fit's response to the jitter
-//!   of its pixels' window ([`crate::response`]; the optical PSF is taken as known from calibration).
+//!   of its pixels' window ([`crate::analysis::response`]; the optical PSF is taken as known from calibration).
 
-use crate::astrometry::{AnalysisImage, StarResult};
-use crate::epsf::Epsf;
-use crate::epsf::build::{self, BuildOptions, StarStart};
-use crate::epsf::fit::{PixelData, fit_star, flags};
+use crate::analysis::astrometry::{AnalysisImage, StarResult};
+use crate::analysis::epsf::Epsf;
+use crate::analysis::epsf::build::{self, BuildOptions, StarStart};
+use crate::analysis::epsf::fit::{PixelData, fit_star, flags};
+use crate::analysis::response::{FitNoise, FitResponse};
 use crate::integrate::kernel::PixelKernel;
 use crate::integrate::track::Track;
 use crate::jitter::AceSeries;
 use crate::numerics::linalg;
 use crate::readout::ReadoutTiming;
-use crate::response::{FitNoise, FitResponse};
 use crate::rng::{self, Stream};
 use crate::simulate::TruthRow;
 use rand_distr::{Distribution, Normal};
@@ -61,7 +61,7 @@ pub struct Telemetry {
     /// Telemetry resampled (linearly) onto a regular grid, px, times relative to the exposure start.
     pub track: Track,
     pub timing: ReadoutTiming,
-    /// The ePSF fit's response to jitter under this telemetry ([`crate::response`]).
+    /// The ePSF fit's response to jitter under this telemetry ([`crate::analysis::response`]).
     pub response: FitResponse,
 }
 

@@ -8,7 +8,7 @@
 //!   to the fit and acts as noise. Plate models absorb p of the n stars' degrees of freedom: × (1 − p/n),
 //!   and add their reference catalogue's error E projected through the model: E²·(p/2 − 1)/n per axis.
 //! * **σ_disp** — the rms over stars (mean removed) of the fit displacement the ACE series predicts for each
-//!   star through the fit's response to the jitter of its window ([`crate::response`]). After `plate-*`, the
+//!   star through the fit's response to the jitter of its window ([`crate::analysis::response`]). After `plate-*`, the
 //!   residual of the same least-squares model fitted to those displacements; after `telemetry`, the
 //!   displacement minus the telemetry's own prediction (its noise, rate and latency included). The Y-zoned
 //!   ePSFs cannot remove a displacement, so they predict what `none` does.
@@ -17,17 +17,17 @@
 //! Cost: the bound is cached per 5-mas blur step (≈ 30 ms each); each realistic image costs one fit-response
 //! table (≈ 30 ms).
 
+use crate::analysis::countermeasures::Telemetry;
+use crate::analysis::response::{FitNoise, FitResponse};
 use crate::config::AceCase;
-use crate::countermeasures::Telemetry;
-use crate::experiment::Plan;
 use crate::integrate::kernel::{IntraPixelMap, PixelKernel, subpixel_sum};
 use crate::integrate::track::Track;
 use crate::jitter::AceSeries;
 use crate::numerics::{linalg, stats};
 use crate::optics::psf::PsfTable;
 use crate::readout::ReadoutTiming;
-use crate::response::{FitNoise, FitResponse};
 use crate::simulate::{SimError, Simulator};
+use crate::studies::experiment::Plan;
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 
@@ -312,5 +312,5 @@ impl Predictor {
 pub fn known(name: &str) -> bool {
     name == "exact-epsf"
         || name == "telemetry"
-        || crate::countermeasures::Countermeasure::parse(name, 4).is_ok()
+        || crate::analysis::countermeasures::Countermeasure::parse(name, 4).is_ok()
 }

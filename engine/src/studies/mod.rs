@@ -1,0 +1,6 @@
+//! Studies built on the pipeline: the paper's experiment, the speed-against-error benchmarks and the Monte
+//! Carlo sweeps.
+
+pub mod bench;
+pub mod experiment;
+pub mod sweep;
