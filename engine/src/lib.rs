@@ -33,6 +33,7 @@ pub mod photometry;
 pub mod readout;
 pub mod rng;
 pub mod scene;
+pub mod session;
 pub mod simulate;
 pub mod studies;
 

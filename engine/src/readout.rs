@@ -21,7 +21,11 @@ pub struct ReadoutTiming {
     pub pixel_time_s: f64,
     pub t_overhead_s: f64,
     pub exposure_s: f64,
-    cadence_override_s: f64,
+    /// One channel's read sweep, the latest window end and the start-to-start time ([`Config`]'s
+    /// derived timing, computed there once).
+    frame_sweep_s: f64,
+    span_s: f64,
+    cadence_s: f64,
 }
 
 impl ReadoutTiming {
@@ -34,7 +38,9 @@ impl ReadoutTiming {
             pixel_time_s: cfg.readout.pixel_time_us * 1e-6,
             t_overhead_s: cfg.readout.t_overhead_s,
             exposure_s: cfg.detector.exposure_s,
-            cadence_override_s: cfg.readout.exposure_cadence_s,
+            frame_sweep_s: cfg.frame_sweep_s(),
+            span_s: cfg.exposure_span_s(),
+            cadence_s: cfg.exposure_cadence_s(),
         }
     }
 
@@ -64,21 +70,17 @@ impl ReadoutTiming {
 
     /// Duration of one read sweep of a channel (W × rows × t_pix).
     pub fn frame_sweep_s(&self) -> f64 {
-        (self.channel_width_px * self.rows) as f64 * self.pixel_time_s
+        self.frame_sweep_s
     }
 
     /// Latest end of any window, seconds from the exposure start.
     pub fn span_s(&self) -> f64 {
-        self.t_overhead_s + self.frame_sweep_s() + self.exposure_s
+        self.span_s
     }
 
     /// Start-to-start time of consecutive exposures.
     pub fn cadence_s(&self) -> f64 {
-        if self.cadence_override_s > 0.0 {
-            self.cadence_override_s
-        } else {
-            self.span_s()
-        }
+        self.cadence_s
     }
 }
 

@@ -3,12 +3,11 @@
 //! exposures of a dataset (PSFs, kernels, the ACE series, the flat), so a dataset costs one PSF per
 //! distinct colour/zone and one integration per exposure.
 
-use crate::config::{AceCase, Backend, Config, Method};
+use crate::config::{AceCase, Config};
 use crate::detector::{self, DetectorImage};
-use crate::integrate::gpu::GpuIntegrator;
-use crate::integrate::kernel::{IntraPixelMap, KernelError, PixelKernel};
+use crate::integrate::kernel::{IntraPixelMap, KernelCache, KernelError, PixelKernel};
 use crate::integrate::track::Track;
-use crate::integrate::{self, FrameSpec, Motion, StarJob, StarSpec};
+use crate::integrate::{self, FrameSpec, Integrator, Motion, StarJob, StarSpec};
 use crate::jitter::AceSeries;
 use crate::optics::PsfBank;
 use crate::optics::psf::PsfTable;
@@ -16,7 +15,7 @@ use crate::photometry;
 use crate::readout::ReadoutTiming;
 use crate::scene::{self, SceneError, Star};
 use std::collections::HashMap;
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
 use std::time::Instant;
 
 #[derive(Debug, thiserror::Error)]
@@ -28,7 +27,7 @@ pub enum SimError {
     #[error(transparent)]
     Kernel(#[from] KernelError),
     #[error("GPU integration failed: {0}")]
-    Gpu(String),
+    Gpu(#[from] crate::integrate::gpu::GpuError),
 }
 
 /// The true parameters of one star in one exposure.
@@ -93,25 +92,32 @@ pub struct Simulator {
     pub timing: ReadoutTiming,
     bank: Arc<PsfBank>,
     map: IntraPixelMap,
-    kernels: Mutex<HashMap<(usize, u64), Arc<PixelKernel>>>,
+    kernels: Arc<KernelCache>,
     series: Option<Arc<AceSeries>>,
     flat: Vec<f32>,
-    gpu: Option<Arc<GpuIntegrator>>,
-    /// Why the GPU is not used (said once), if it is not.
-    pub gpu_note: Option<String>,
+    integrator: Integrator,
 }
 
 impl Simulator {
-    /// Build with a fresh PSF bank and the configured backend.
+    /// Build with a fresh PSF bank and kernel cache, on the configured backend (a session shares these
+    /// between simulators: [`crate::session::Session::simulator`]).
     pub fn new(cfg: &Config) -> Result<Self, SimError> {
-        Self::with_bank(cfg, Arc::new(PsfBank::new(cfg)), None)
+        let (integrator, _) = Integrator::choose(cfg.fidelity.backend);
+        Self::build(
+            cfg,
+            Arc::new(PsfBank::new(cfg)),
+            Arc::new(KernelCache::default()),
+            integrator,
+        )
     }
 
-    /// Build reusing a PSF bank (if it serves this configuration) and, optionally, a GPU context.
-    pub fn with_bank(
+    /// Build from shared parts: a PSF bank (replaced by a fresh one if it does not serve `cfg`), a kernel
+    /// cache and the integrator.
+    pub fn build(
         cfg: &Config,
         bank: Arc<PsfBank>,
-        gpu: Option<Arc<GpuIntegrator>>,
+        kernels: Arc<KernelCache>,
+        integrator: Integrator,
     ) -> Result<Self, SimError> {
         cfg.validate()?;
         let bank = if bank.serves(cfg) {
@@ -144,27 +150,16 @@ impl Simulator {
             _ => None,
         };
         let flat = detector::inter_pixel_flat(cfg);
-        let (gpu, gpu_note) = match cfg.fidelity.backend {
-            Backend::Cpu => (None, None),
-            Backend::Gpu | Backend::Auto => match gpu {
-                Some(g) => (Some(g), None),
-                None => match GpuIntegrator::shared(cfg.fidelity.backend == Backend::Gpu) {
-                    Ok(g) => (Some(g), None),
-                    Err(e) => (None, Some(e.to_string())),
-                },
-            },
-        };
         Ok(Self {
             cfg: cfg.clone(),
             stars,
             timing,
             bank,
             map,
-            kernels: Mutex::new(HashMap::new()),
+            kernels,
             series,
             flat,
-            gpu,
-            gpu_note,
+            integrator,
         })
     }
 
@@ -185,10 +180,12 @@ impl Simulator {
 
     /// The backend integration runs on: "cpu" or the adapter name.
     pub fn backend_name(&self) -> String {
-        self.gpu
-            .as_ref()
-            .map(|g| g.adapter_name())
-            .unwrap_or_else(|| "cpu".to_string())
+        self.integrator.name_for(self.cfg.fidelity.method)
+    }
+
+    /// The integrator (CPU or GPU) this simulator uses.
+    pub fn integrator(&self) -> &Integrator {
+        &self.integrator
     }
 
     /// Jitter blur folded into the kernels (Gaussian ACE), px.
@@ -216,42 +213,7 @@ impl Simulator {
         psf: &Arc<PsfTable>,
         blur: f64,
     ) -> Result<Arc<PixelKernel>, SimError> {
-        let key = (Arc::as_ptr(psf) as usize, blur.to_bits());
-        if let Some(k) = self
-            .kernels
-            .lock()
-            .unwrap_or_else(|e| e.into_inner())
-            .get(&key)
-        {
-            return Ok(k.clone());
-        }
-        let table = if blur > 0.0 {
-            Arc::new(psf.gaussian_blurred(blur))
-        } else {
-            psf.clone()
-        };
-        let k = Arc::new(PixelKernel::build(&table, &self.map)?);
-        self.kernels
-            .lock()
-            .unwrap_or_else(|e| e.into_inner())
-            .insert(key, k.clone());
-        Ok(k)
-    }
-
-    /// Noise parameters of a typical star's fit (median flux, sky, read/quantisation floor).
-    pub fn fit_noise(&self) -> crate::analysis::response::FitNoise {
-        let d = &self.cfg.detector;
-        let rates: Vec<f64> = self
-            .stars
-            .iter()
-            .map(|s| photometry::electrons_per_s(s.mag_hw, self.cfg.photometry.zero_point_e_per_s))
-            .collect();
-        crate::analysis::response::FitNoise {
-            flux_e: crate::numerics::stats::median(&rates) * d.exposure_s,
-            sky_e: d.dark_e_per_s * d.exposure_s,
-            floor_e2: d.read_noise_e.powi(2) + d.gain_e_per_adu.powi(2) / 12.0,
-            radius_px: self.cfg.analysis.fit_radius_px,
-        }
+        Ok(self.kernels.get(psf, blur, &self.map)?)
     }
 
     /// The unblurred pixel kernel of a typical star (its PSF with this simulation's pixel model): the PSF
@@ -332,12 +294,7 @@ impl Simulator {
             method: self.cfg.fidelity.method,
             map: &self.map,
         };
-        let stamps = match (&self.gpu, self.cfg.fidelity.method) {
-            (Some(g), Method::Direct | Method::Fast) => g
-                .integrate(jobs, motion, &frame)
-                .map_err(|e| SimError::Gpu(e.to_string()))?,
-            _ => integrate::integrate_cpu(jobs, motion, &frame),
-        };
+        let stamps = self.integrator.integrate(jobs, motion, &frame)?;
         let mut img = vec![0.0; n * n];
         integrate::add_stamps(&mut img, n, &stamps);
         if self.cfg.fidelity.halo_radius_px > 0 {
@@ -428,11 +385,7 @@ impl Simulator {
                 integrate_s: (t1 - t0).as_secs_f64(),
                 detector_s: (t2 - t1).as_secs_f64(),
             },
-            backend: if matches!(self.cfg.fidelity.method, Method::Reference) {
-                "cpu".into()
-            } else {
-                self.backend_name()
-            },
+            backend: self.backend_name(),
         })
     }
 

@@ -1,8 +1,29 @@
 //! Analysis of images: detection, the effective PSF (Anderson & King 2000), fits, countermeasures, the fit's
-//! response to jitter, the instant predictor and the accuracy report.
+//! response to jitter, the instant predictor, the accuracy report and the deviation vector map — and the
+//! one per-image [`pipeline`] that runs them in order.
 
-pub mod astrometry;
 pub mod countermeasures;
+pub mod detection;
 pub mod epsf;
+pub mod image;
+pub mod pipeline;
 pub mod predict;
+pub mod report;
 pub mod response;
+pub mod vectors;
+
+pub use image::AnalysisImage;
+pub use pipeline::{Analysis, ImageAnalysis, Options, Source, analyse_image};
+pub use report::{Report, StarResult};
+
+/// An analysis failure.
+#[derive(Debug, thiserror::Error)]
+pub enum AnalysisError {
+    #[error("no star detected above {0} σ")]
+    NoStars(f64),
+    #[error("countermeasure: {0}")]
+    Countermeasure(#[from] countermeasures::CountermeasureError),
+    /// What the analysis asked of the simulation the image came from (its kernel, its stars).
+    #[error(transparent)]
+    Simulation(#[from] crate::simulate::SimError),
+}

@@ -17,7 +17,7 @@
 //! Cost: the bound is cached per 5-mas blur step (≈ 30 ms each); each realistic image costs one fit-response
 //! table (≈ 30 ms).
 
-use crate::analysis::countermeasures::Telemetry;
+use crate::analysis::countermeasures::{Countermeasure, CountermeasureError, Telemetry};
 use crate::analysis::response::{FitNoise, FitResponse};
 use crate::config::AceCase;
 use crate::integrate::kernel::{IntraPixelMap, PixelKernel, subpixel_sum};
@@ -27,7 +27,6 @@ use crate::numerics::{linalg, stats};
 use crate::optics::psf::PsfTable;
 use crate::readout::ReadoutTiming;
 use crate::simulate::{SimError, Simulator};
-use crate::studies::experiment::Plan;
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 
@@ -60,23 +59,17 @@ fn rms2(v: &[(f64, f64)]) -> f64 {
     ((stats::std_dev(&x).powi(2) + stats::std_dev(&y).powi(2)) / 2.0).sqrt()
 }
 
-/// Design row of a plate model by name (`None` for other countermeasures).
-pub fn plate_basis(name: &str) -> Option<Box<dyn Fn(f64, f64) -> Vec<f64> + Send + Sync>> {
-    match name {
-        "plate-affine" => Some(Box::new(|x, y| {
-            vec![1.0, x / 1000.0 - 1.0, y / 1000.0 - 1.0]
-        })),
-        s if s.starts_with("plate-poly:") => {
-            let n: usize = s["plate-poly:".len()..].parse().ok()?;
-            Some(Box::new(move |x, y| {
-                let yn = y / 1000.0 - 1.0;
-                let mut v = vec![1.0, x / 1000.0 - 1.0];
-                v.extend((1..=n).map(|k| yn.powi(k as i32)));
-                v
-            }))
-        }
-        _ => None,
-    }
+/// Why a prediction could not be made.
+#[derive(Debug, thiserror::Error)]
+pub enum PredictError {
+    #[error(transparent)]
+    Simulation(#[from] SimError),
+    #[error(transparent)]
+    Countermeasure(#[from] CountermeasureError),
+    #[error("{0}: the star positions do not constrain the plate model")]
+    Degenerate(String),
+    #[error("no exposure to predict")]
+    NoImages,
 }
 
 impl Predictor {
@@ -106,7 +99,7 @@ impl Predictor {
         Ok(Self {
             map: IntraPixelMap::from_config(&cfg.detector, cfg.fidelity.subpixels)?,
             kernel: sim.optical_kernel()?,
-            noise: sim.fit_noise(),
+            noise: FitNoise::of_simulation(sim, sim.cfg.analysis.fit_radius_px),
             timing: sim.timing,
             series: sim.series_arc(),
             stars: sim.stars.iter().map(|s| (s.x_px, s.y_px)).collect(),
@@ -220,97 +213,92 @@ impl Predictor {
 
     /// Per-axis rms (px) of what a countermeasure leaves of image `i`'s displacements, and the parameters it
     /// absorbs.
-    fn residual_displacement(&self, i: usize, name: &str, plan: &Plan) -> (f64, usize) {
+    fn residual_displacement(
+        &self,
+        i: usize,
+        cm: &Countermeasure,
+    ) -> Result<(f64, usize), PredictError> {
         let d = self.displacements(i);
-        if let Some(b) = plate_basis(name) {
-            let p = b(0.0, 0.0).len();
-            let design: Vec<f64> = self.stars.iter().flat_map(|&(x, y)| b(x, y)).collect();
-            let w = vec![1.0; d.len()];
-            let fit = |v: Vec<f64>| -> Vec<f64> {
-                match linalg::weighted_lstsq(&design, &v, &w, p) {
-                    Some((c, _)) => v
-                        .iter()
-                        .enumerate()
-                        .map(|(k, y)| {
-                            y - design[k * p..(k + 1) * p]
-                                .iter()
-                                .zip(&c)
-                                .map(|(a, b)| a * b)
-                                .sum::<f64>()
-                        })
-                        .collect(),
-                    None => v,
-                }
-            };
-            let rx = fit(d.iter().map(|p| p.0).collect());
-            let ry = fit(d.iter().map(|p| p.1).collect());
-            let r: Vec<(f64, f64)> = rx.into_iter().zip(ry).collect();
-            return (rms2(&r), 2 * p);
-        }
-        if name == "telemetry"
-            && let (Some(series), Some(im)) = (&self.series, self.images.get(i))
-        {
-            let t = &plan.telemetry;
-            if let Ok(tel) = Telemetry::from_series(
-                series,
-                self.timing,
-                im.start_s,
-                self.cfg.instrument.plate_scale_mas(),
-                t.noise_mas,
-                t.rate_hz,
-                t.latency_s,
-                self.cfg.seed,
-                &self.kernel,
-                &self.noise,
-            ) {
+        match cm {
+            Countermeasure::Plate { model, .. } => {
+                let fit = |v: Vec<f64>| {
+                    model
+                        .residuals(&self.stars, &v)
+                        .ok_or_else(|| PredictError::Degenerate(cm.to_string()))
+                };
+                let rx = fit(d.iter().map(|p| p.0).collect())?;
+                let ry = fit(d.iter().map(|p| p.1).collect())?;
+                let r: Vec<(f64, f64)> = rx.into_iter().zip(ry).collect();
+                Ok((rms2(&r), 2 * model.n_params()))
+            }
+            Countermeasure::Telemetry(q) => {
+                let (Some(series), Some(im)) = (&self.series, self.images.get(i)) else {
+                    return Ok((rms2(&d), 0));
+                };
+                let tel = Telemetry::from_series(
+                    series,
+                    self.timing,
+                    im.start_s,
+                    self.cfg.instrument.plate_scale_mas(),
+                    q,
+                    self.cfg.seed,
+                    &self.kernel,
+                    &self.noise,
+                )?;
                 let pred = tel.predicted_px(&self.stars);
                 let r: Vec<(f64, f64)> = d
                     .iter()
                     .zip(pred)
                     .map(|(a, b)| (a.0 - b.0, a.1 - b.1))
                     .collect();
-                return (rms2(&r), 0);
+                Ok((rms2(&r), 0))
             }
+            _ => Ok((rms2(&d), 0)),
         }
-        (rms2(&d), 0)
     }
 
     /// Predicted per-image accuracy (mas) of image `i` under a countermeasure.
-    pub fn predict_image(&self, i: usize, name: &str, plan: &Plan) -> f64 {
+    pub fn predict_image(&self, i: usize, cm: &Countermeasure) -> Result<f64, PredictError> {
         let Some(im) = self.images.get(i) else {
-            return f64::NAN;
+            return Err(PredictError::NoImages);
         };
         let noise = self.noise_floor_mas(im.sigma_x_mas, im.sigma_y_mas);
-        if name == "exact-epsf" {
-            return noise;
+        if *cm == Countermeasure::ExactEpsf {
+            return Ok(noise);
         }
-        let (disp_px, p) = self.residual_displacement(i, name, plan);
+        let (disp_px, p) = self.residual_displacement(i, cm)?;
         let n = self.stars.len().max(1) as f64;
         // a plate model absorbs p of the n stars' noise, and projects its reference catalogue's error E onto
         // the stars through its p/2 − 1 non-constant parameters per axis (the constant one leaves the std)
         let absorbed = (p as f64 / n).min(0.9);
+        let reference_error_mas = match cm {
+            Countermeasure::Plate {
+                reference_error_mas,
+                ..
+            } => *reference_error_mas,
+            _ => 0.0,
+        };
         let reference2 = if p > 0 {
-            plan.reference_error_mas.powi(2) * ((p as f64 / 2.0 - 1.0).max(0.0) / n)
+            reference_error_mas.powi(2) * ((p as f64 / 2.0 - 1.0).max(0.0) / n)
         } else {
             0.0
         };
         let noise2 = noise * noise * (1.0 - absorbed) + reference2;
-        (noise2 + (disp_px * self.cfg.instrument.plate_scale_mas()).powi(2)).sqrt()
+        Ok((noise2 + (disp_px * self.cfg.instrument.plate_scale_mas()).powi(2)).sqrt())
     }
 
     /// Predicted dataset accuracy (mean over its images) under a countermeasure.
-    pub fn predict(&self, name: &str, plan: &Plan) -> Option<f64> {
-        let v: Vec<f64> = (0..self.images.len())
-            .map(|i| self.predict_image(i, name, plan))
-            .filter(|v| v.is_finite())
-            .collect();
-        (!v.is_empty()).then(|| stats::mean(&v))
+    pub fn predict(&self, cm: &Countermeasure) -> Result<f64, PredictError> {
+        let mut v = Vec::with_capacity(self.images.len());
+        for i in 0..self.images.len() {
+            let p = self.predict_image(i, cm)?;
+            if p.is_finite() {
+                v.push(p);
+            }
+        }
+        if v.is_empty() {
+            return Err(PredictError::NoImages);
+        }
+        Ok(stats::mean(&v))
     }
-}
-
-/// Names of the countermeasures the predictor understands (the same as the analysis).
-pub fn known(name: &str) -> bool {
-    name == "exact-epsf"
-        || name == "telemetry"
-        || crate::analysis::countermeasures::Countermeasure::parse(name, 4).is_ok()
 }

@@ -15,7 +15,10 @@
 use crate::integrate::cpu::{Histogram, StarSpec};
 use crate::integrate::kernel::PixelKernel;
 use crate::integrate::track::{Track, WindowWeights};
+use crate::numerics::stats;
+use crate::photometry;
 use crate::readout::ReadoutTiming;
+use crate::simulate::Simulator;
 
 /// R_x and R_y tabulated on a grid of jitter offsets u (px).
 #[derive(Debug, Clone, PartialEq)]
@@ -36,6 +39,26 @@ pub struct FitNoise {
     pub sky_e: f64,
     pub floor_e2: f64,
     pub radius_px: f64,
+}
+
+impl FitNoise {
+    /// Noise parameters of a typical star's fit in a simulation (median flux, sky, read/quantisation floor)
+    /// with the analysis' fit radius (px).
+    pub fn of_simulation(sim: &Simulator, radius_px: f64) -> Self {
+        let cfg = &sim.cfg;
+        let d = &cfg.detector;
+        let rates: Vec<f64> = sim
+            .stars
+            .iter()
+            .map(|s| photometry::electrons_per_s(s.mag_hw, cfg.photometry.zero_point_e_per_s))
+            .collect();
+        FitNoise {
+            flux_e: stats::median(&rates) * d.exposure_s,
+            sky_e: d.dark_e_per_s * d.exposure_s,
+            floor_e2: d.read_noise_e.powi(2) + d.gain_e_per_adu.powi(2) / 12.0,
+            radius_px,
+        }
+    }
 }
 
 impl FitResponse {

@@ -129,6 +129,55 @@ pub struct Band {
     pub response: Vec<[f64; 2]>,
 }
 
+impl Band {
+    /// The configured wavelength grid (µm), restricted to points where throughput × QE > 0.
+    pub fn wavelength_grid(&self) -> Vec<f64> {
+        let band = self;
+        if !(band.wavelength_step_um > 0.0) || !(band.wavelength_max_um >= band.wavelength_min_um) {
+            return Vec::new();
+        }
+        let n = ((band.wavelength_max_um - band.wavelength_min_um) / band.wavelength_step_um + 1e-9)
+            .floor() as usize;
+        (0..=n)
+            .map(|i| band.wavelength_min_um + i as f64 * band.wavelength_step_um)
+            .filter(|&l| band.response(l) > 0.0)
+            .collect()
+    }
+
+    /// Throughput × QE at λ (µm): piecewise linear through `band.response`, zero outside it.
+    pub fn response(&self, lambda_um: f64) -> f64 {
+        let r = &self.response;
+        match r.len() {
+            0 => 0.0,
+            1 => {
+                if (lambda_um - r[0][0]).abs() < 1e-9 {
+                    r[0][1]
+                } else {
+                    0.0
+                }
+            }
+            _ => {
+                let tol = 1e-9;
+                if lambda_um < r[0][0] - tol || lambda_um > r[r.len() - 1][0] + tol {
+                    return 0.0;
+                }
+                for w in r.windows(2) {
+                    let (a, b) = (w[0], w[1]);
+                    if lambda_um <= b[0] + tol {
+                        let span = b[0] - a[0];
+                        if span <= 0.0 {
+                            return b[1];
+                        }
+                        let f = ((lambda_um - a[0]) / span).clamp(0.0, 1.0);
+                        return a[1] + f * (b[1] - a[1]);
+                    }
+                }
+                r[r.len() - 1][1]
+            }
+        }
+    }
+}
+
 impl Default for Band {
     fn default() -> Self {
         Self {
@@ -690,7 +739,8 @@ impl Config {
     /// A copy with one field set from text, by dotted path (`ace.sigma_mas`, `readout.order`,
     /// `ace.modes.0.freq_hz` for array elements). The value is read as TOML (`300`, `"rolling"`, `true`,
     /// `[1.0, 2.0]`), or as a plain string when it is not valid TOML. Unknown fields and bad values are
-    /// errors naming the field.
+    /// errors naming the field. The ranges are not checked here: apply every override, then
+    /// [`Config::validate`] once, so that the order of the overrides never matters.
     pub fn with_override(&self, path: &str, value: &str) -> Result<Config, ConfigError> {
         let parsed: toml::Value = toml::from_str::<toml::Table>(&format!("v = {value}"))
             .ok()
@@ -734,11 +784,8 @@ impl Config {
             };
         }
         *node = parsed;
-        let cfg: Config = root
-            .try_into()
-            .map_err(|e: toml::de::Error| invalid(path, value, &e.to_string()))?;
-        cfg.validate()?;
-        Ok(cfg)
+        root.try_into()
+            .map_err(|e: toml::de::Error| invalid(path, value, &e.to_string()))
     }
 
     /// SHA-256 of the canonical TOML, first 16 hex digits: identifies a configuration in outputs.
@@ -750,6 +797,28 @@ impl Config {
     /// Pixels of the ACE time series per time step, derived.
     pub fn integration_dt_s(&self) -> f64 {
         self.ace.sample_interval_ms * 1e-3 * self.fidelity.time_stride as f64
+    }
+
+    /// Duration of one read sweep of a channel, `W × rows × t_pix` (s): a derived readout quantity
+    /// (the readout timing carries it).
+    pub fn frame_sweep_s(&self) -> f64 {
+        (self.readout.channel_width_px * self.instrument.detector_px) as f64
+            * (self.readout.pixel_time_us * 1e-6)
+    }
+
+    /// Latest end of any pixel's window, `t_overhead + sweep + T`, s from the exposure start.
+    pub fn exposure_span_s(&self) -> f64 {
+        self.readout.t_overhead_s + self.frame_sweep_s() + self.detector.exposure_s
+    }
+
+    /// Start-to-start time of consecutive exposures: `readout.exposure_cadence_s` when set (> 0), else the
+    /// span of one exposure.
+    pub fn exposure_cadence_s(&self) -> f64 {
+        if self.readout.exposure_cadence_s > 0.0 {
+            self.readout.exposure_cadence_s
+        } else {
+            self.exposure_span_s()
+        }
     }
 
     /// Check every field; the error names the field and the allowed range.
@@ -829,7 +898,7 @@ impl Config {
                 ));
             }
         }
-        if crate::optics::spectrum::wavelength_grid(b).is_empty() {
+        if b.wavelength_grid().is_empty() {
             return Err(invalid(
                 "band",
                 format!("{}–{} µm", b.wavelength_min_um, b.wavelength_max_um),
@@ -973,8 +1042,7 @@ impl Config {
         }
         check_nonneg("ace.first_exposure_start_s", a.first_exposure_start_s)?;
         if a.case == AceCase::Realistic {
-            let need =
-                a.first_exposure_start_s + crate::readout::ReadoutTiming::new(self).cadence_s();
+            let need = a.first_exposure_start_s + self.exposure_cadence_s();
             if need > a.span_s {
                 return Err(invalid(
                     "ace.span_s",
@@ -1130,10 +1198,23 @@ mod tests {
         );
         assert!(
             c.with_override("ace.sigma_mas", "-5")
+                .expect("applied; ranges are checked once, after every override")
+                .validate()
                 .expect_err("range")
                 .to_string()
                 .contains("ace.sigma_mas")
         );
+        // the order of overrides does not matter: a catalogue scene and its file, either way round
+        let a = c
+            .with_override("scene.kind", "catalogue")
+            .and_then(|c| c.with_override("scene.catalogue", "stars.csv"))
+            .expect("kind first");
+        let b = c
+            .with_override("scene.catalogue", "stars.csv")
+            .and_then(|c| c.with_override("scene.kind", "catalogue"))
+            .expect("file first");
+        assert_eq!(a, b);
+        assert!(a.validate().is_ok());
         assert!(c.with_override("readout.order", "diagonal").is_err());
     }
 

@@ -18,7 +18,9 @@
 use crate::config::{Detector, IntraPixel};
 use crate::optics::psf::PsfTable;
 use rayon::prelude::*;
+use std::collections::HashMap;
 use std::path::Path;
+use std::sync::{Arc, Mutex};
 
 /// Errors building the intra-pixel map.
 #[derive(Debug, thiserror::Error)]
@@ -271,6 +273,49 @@ pub fn subpixel_sum(psf: &PsfTable, map: &IntraPixelMap, dx_px: f64, dy_px: f64)
         }
     }
     acc / (s * s) as f64
+}
+
+/// Pixel kernels by (PSF, Gaussian blur, intra-pixel map), shared by every simulator of a session. Each entry
+/// holds the PSF it was built from, so the PSF's address (the key) cannot be reused while it is cached. At
+/// most [`KernelCache::MAX_ENTRIES`] kernels are kept (the cache is emptied when a new one would pass that).
+#[derive(Default)]
+pub struct KernelCache {
+    entries: Mutex<HashMap<(usize, u64), Vec<(Arc<PsfTable>, IntraPixelMap, Arc<PixelKernel>)>>>,
+}
+
+impl KernelCache {
+    pub const MAX_ENTRIES: usize = 128;
+
+    /// The kernel of `psf` blurred by a Gaussian of `blur_px` (0: none) with `map`, built on first use.
+    pub fn get(
+        &self,
+        psf: &Arc<PsfTable>,
+        blur_px: f64,
+        map: &IntraPixelMap,
+    ) -> Result<Arc<PixelKernel>, KernelError> {
+        let key = (Arc::as_ptr(psf) as usize, blur_px.to_bits());
+        let lock = || self.entries.lock().unwrap_or_else(|e| e.into_inner());
+        if let Some(v) = lock().get(&key)
+            && let Some((_, _, k)) = v.iter().find(|(_, m, _)| m == map)
+        {
+            return Ok(k.clone());
+        }
+        let table = if blur_px > 0.0 {
+            Arc::new(psf.gaussian_blurred(blur_px))
+        } else {
+            psf.clone()
+        };
+        let k = Arc::new(PixelKernel::build(&table, map)?);
+        let mut entries = lock();
+        if entries.values().map(Vec::len).sum::<usize>() >= Self::MAX_ENTRIES {
+            entries.clear();
+        }
+        entries
+            .entry(key)
+            .or_default()
+            .push((psf.clone(), map.clone(), k.clone()));
+        Ok(k)
+    }
 }
 
 #[cfg(test)]

@@ -13,7 +13,7 @@ pub mod gpu;
 pub mod kernel;
 pub mod track;
 
-use crate::config::Method;
+use crate::config::{Backend, Method};
 use crate::optics::psf::PsfTable;
 use crate::readout::ReadoutTiming;
 pub use cpu::{Stamp, StarSpec};
@@ -93,6 +93,60 @@ pub fn integrate_cpu(jobs: &[StarJob], motion: Motion<'_>, frame: &FrameSpec<'_>
     jobs.par_iter()
         .filter_map(|j| integrate_star_cpu(j, motion, frame))
         .collect()
+}
+
+/// Where integration runs: the CPU (rayon over stars) or a GPU through wgpu.
+#[derive(Clone)]
+pub enum Integrator {
+    Cpu,
+    Gpu(Arc<gpu::GpuIntegrator>),
+}
+
+impl Integrator {
+    /// The integrator a backend asks for — the one place the CPU-or-GPU choice is made. `cpu`: the CPU.
+    /// `auto`: a hardware GPU when there is one, else the CPU. `gpu`: any adapter, a software one
+    /// (lavapipe) included, else the CPU. When the CPU stands in for a GPU, the note says why (to be shown
+    /// once). The GPU context is created once per process.
+    pub fn choose(backend: Backend) -> (Integrator, Option<String>) {
+        match backend {
+            Backend::Cpu => (Integrator::Cpu, None),
+            Backend::Gpu | Backend::Auto => {
+                match gpu::GpuIntegrator::shared(backend == Backend::Gpu) {
+                    Ok(g) => (Integrator::Gpu(g), None),
+                    Err(e) => (Integrator::Cpu, Some(e.to_string())),
+                }
+            }
+        }
+    }
+
+    /// "cpu" or the GPU adapter's name.
+    pub fn name(&self) -> String {
+        match self {
+            Integrator::Cpu => "cpu".to_string(),
+            Integrator::Gpu(g) => g.adapter_name(),
+        }
+    }
+
+    /// The name of where `method` runs: the reference method is CPU-only.
+    pub fn name_for(&self, method: Method) -> String {
+        match method {
+            Method::Reference => "cpu".to_string(),
+            _ => self.name(),
+        }
+    }
+
+    /// Integrate all stars (the reference method always on the CPU).
+    pub fn integrate(
+        &self,
+        jobs: &[StarJob],
+        motion: Motion<'_>,
+        frame: &FrameSpec<'_>,
+    ) -> Result<Vec<Stamp>, gpu::GpuError> {
+        match (self, frame.method) {
+            (Integrator::Gpu(g), Method::Direct | Method::Fast) => g.integrate(jobs, motion, frame),
+            _ => Ok(integrate_cpu(jobs, motion, frame)),
+        }
+    }
 }
 
 /// Add stamps into a row-major `n × n` image.

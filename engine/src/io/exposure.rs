@@ -3,7 +3,9 @@
 use super::IoError;
 use super::csv::{self, Cell};
 use super::fits::{self, Card, Column, Hdu, Pixels};
+use crate::analysis::AnalysisImage;
 use crate::config::AceCase;
+use crate::detector::dq;
 use crate::simulate::{Exposure, Simulator, TruthRow};
 use std::path::{Path, PathBuf};
 
@@ -305,4 +307,49 @@ pub fn write_exposure(
     )?;
     write_truth_csv(&truth_csv, &exp.truth)?;
     Ok(ExposureFiles { image, truth_csv })
+}
+
+/// Read an image for analysis: electrons with the bias removed (GAIN, RDNOISE, BIASADU, SATURATE headers),
+/// the mask from its DQ extension when present (else from SATURATE and non-finite values).
+pub fn read_analysis_image(path: &Path, plate_scale_mas: f64) -> Result<AnalysisImage, IoError> {
+    let r = fits::read_image(path)?;
+    if r.data.len() != r.nx * r.ny {
+        return Err(IoError::Format {
+            path: path.to_path_buf(),
+            message: format!(
+                "image is {}×{} but holds {} values",
+                r.nx,
+                r.ny,
+                r.data.len()
+            ),
+        });
+    }
+    let g = r.gain_e_per_adu;
+    let sat = r.saturation_adu.unwrap_or(f64::INFINITY);
+    let bad_bits = dq::BORDER | dq::SATURATED | dq::ADC_HIGH;
+    let bad = match &r.dq {
+        Some(d) => d.iter().map(|q| q & bad_bits != 0).collect(),
+        None => r
+            .data
+            .iter()
+            .map(|v| *v as f64 >= sat || !v.is_finite())
+            .collect(),
+    };
+    Ok(AnalysisImage {
+        nx: r.nx,
+        ny: r.ny,
+        e: r.data
+            .iter()
+            .map(|v| {
+                if v.is_finite() {
+                    (*v as f64 - r.bias_adu) * g
+                } else {
+                    0.0
+                }
+            })
+            .collect(),
+        bad,
+        var_floor_e2: r.read_noise_e.powi(2) + g * g / 12.0,
+        plate_scale_mas,
+    })
 }

@@ -5,6 +5,7 @@ pub mod csv;
 pub mod exposure;
 pub mod fits;
 pub mod plot;
+pub mod products;
 
 use std::path::{Path, PathBuf};
 
@@ -20,6 +21,8 @@ pub enum IoError {
     Fits { path: PathBuf, message: String },
     #[error("{path}: {message}")]
     Format { path: PathBuf, message: String },
+    #[error(transparent)]
+    Plot(#[from] plot::PlotError),
 }
 
 impl IoError {

@@ -13,52 +13,6 @@ const LAMBDA_H_UM: f64 = 1.662;
 const F0_J_JY: f64 = 1594.0;
 const F0_H_JY: f64 = 1024.0;
 
-/// The configured wavelength grid (µm), restricted to points where throughput × QE > 0.
-pub fn wavelength_grid(band: &Band) -> Vec<f64> {
-    if !(band.wavelength_step_um > 0.0) || !(band.wavelength_max_um >= band.wavelength_min_um) {
-        return Vec::new();
-    }
-    let n = ((band.wavelength_max_um - band.wavelength_min_um) / band.wavelength_step_um + 1e-9)
-        .floor() as usize;
-    (0..=n)
-        .map(|i| band.wavelength_min_um + i as f64 * band.wavelength_step_um)
-        .filter(|&l| response(band, l) > 0.0)
-        .collect()
-}
-
-/// Throughput × QE at λ (µm): piecewise linear through `band.response`, zero outside it.
-pub fn response(band: &Band, lambda_um: f64) -> f64 {
-    let r = &band.response;
-    match r.len() {
-        0 => 0.0,
-        1 => {
-            if (lambda_um - r[0][0]).abs() < 1e-9 {
-                r[0][1]
-            } else {
-                0.0
-            }
-        }
-        _ => {
-            let tol = 1e-9;
-            if lambda_um < r[0][0] - tol || lambda_um > r[r.len() - 1][0] + tol {
-                return 0.0;
-            }
-            for w in r.windows(2) {
-                let (a, b) = (w[0], w[1]);
-                if lambda_um <= b[0] + tol {
-                    let span = b[0] - a[0];
-                    if span <= 0.0 {
-                        return b[1];
-                    }
-                    let f = ((lambda_um - a[0]) / span).clamp(0.0, 1.0);
-                    return a[1] + f * (b[1] - a[1]);
-                }
-            }
-            r[r.len() - 1][1]
-        }
-    }
-}
-
 /// Power-law slope β of `F_ν ∝ ν^β` that reproduces the J−H colour.
 pub fn beta_from_j_minus_h(j_minus_h: f64) -> f64 {
     // J−H = −2.5 log10[(ν_J/ν_H)^β · F0_H/F0_J]
@@ -72,13 +26,13 @@ pub fn photon_rate(lambda_um: f64, j_minus_h: f64) -> f64 {
 
 /// `(λ_um, weight)` of the polychromatic PSF, weights summing to 1.
 pub fn weights(band: &Band, j_minus_h: f64) -> Vec<(f64, f64)> {
-    let grid = wavelength_grid(band);
+    let grid = band.wavelength_grid();
     let raw: Vec<(f64, f64)> = grid
         .iter()
         .map(|&l| {
             (
                 l,
-                photon_rate(l, j_minus_h) * response(band, l) * band.wavelength_step_um,
+                photon_rate(l, j_minus_h) * band.response(l) * band.wavelength_step_um,
             )
         })
         .collect();
@@ -97,7 +51,7 @@ mod tests {
 
     #[test]
     fn default_grid_is_1p00_to_1p60() {
-        let g = wavelength_grid(&Band::default());
+        let g = Band::default().wavelength_grid();
         assert_eq!(g.len(), 61);
         assert!((g[0] - 1.0).abs() < 1e-9 && (g[60] - 1.6).abs() < 1e-9);
     }

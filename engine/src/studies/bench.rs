@@ -7,15 +7,30 @@
 //! (mean removed, per axis) of the difference between the positions fitted on noise-free images made with
 //! the knob and with the reference setting, each with its own ePSF built from the image.
 
-use crate::analysis::astrometry::{self, AnalysisImage, Options};
+use crate::analysis::pipeline::{Options, analyze};
+use crate::analysis::{AnalysisError, AnalysisImage};
 use crate::config::{AceCase, Backend, Config, Method};
-use crate::integrate::gpu::GpuIntegrator;
-use crate::integrate::{self, FrameSpec, Motion, Stamp};
+use crate::integrate::{self, FrameSpec, Integrator, Motion, Stamp};
 use crate::numerics::stats;
+use crate::session::Session;
 use crate::simulate::{SimError, Simulator};
 use serde::Serialize;
-use std::sync::Arc;
+use std::path::PathBuf;
 use std::time::Instant;
+
+/// A benchmark failure.
+#[derive(Debug, thiserror::Error)]
+pub enum BenchError {
+    #[error(transparent)]
+    Sim(#[from] SimError),
+    #[error(transparent)]
+    Analysis(#[from] AnalysisError),
+    #[error("{path}: {source}")]
+    Io {
+        path: PathBuf,
+        source: std::io::Error,
+    },
+}
 
 /// One line of the benchmark.
 #[derive(Debug, Clone, Serialize)]
@@ -110,7 +125,7 @@ pub fn compare(a: &[Stamp], r: &[Stamp]) -> (f64, f64, f64) {
 pub fn integrate_stamps(
     sim: &Simulator,
     method: Method,
-    gpu: Option<&GpuIntegrator>,
+    integrator: &Integrator,
     limit: Option<usize>,
 ) -> Result<(Vec<Stamp>, f64), SimError> {
     let mut jobs = sim.jobs()?;
@@ -134,17 +149,12 @@ pub fn integrate_stamps(
         map: &map,
     };
     let t0 = Instant::now();
-    let stamps = match (gpu, method) {
-        (Some(g), Method::Direct | Method::Fast) => g
-            .integrate(&jobs, motion, &frame)
-            .map_err(|e| SimError::Gpu(e.to_string()))?,
-        _ => integrate::integrate_cpu(&jobs, motion, &frame),
-    };
+    let stamps = integrator.integrate(&jobs, motion, &frame)?;
     Ok((stamps, t0.elapsed().as_secs_f64()))
 }
 
 /// Fitted positions (px) of the stars in the noise-free image of `sim`'s exposure 0.
-pub fn noise_free_positions(sim: &Simulator) -> Result<Vec<Option<(f64, f64)>>, SimError> {
+pub fn noise_free_positions(sim: &Simulator) -> Result<Vec<Option<(f64, f64)>>, BenchError> {
     let jobs = sim.jobs()?;
     let (e, _) = sim.integrate(0, &jobs)?;
     positions_of_image(sim, e)
@@ -154,7 +164,7 @@ pub fn noise_free_positions(sim: &Simulator) -> Result<Vec<Option<(f64, f64)>>, 
 pub fn positions_of_stamps(
     sim: &Simulator,
     stamps: &[Stamp],
-) -> Result<Vec<Option<(f64, f64)>>, SimError> {
+) -> Result<Vec<Option<(f64, f64)>>, BenchError> {
     let n = sim.cfg.instrument.detector_px;
     let mut e = vec![0.0; n * n];
     integrate::add_stamps(&mut e, n, stamps);
@@ -165,7 +175,7 @@ pub fn positions_of_stamps(
 fn positions_of_image(
     sim: &Simulator,
     star_e: Vec<f64>,
-) -> Result<Vec<Option<(f64, f64)>>, SimError> {
+) -> Result<Vec<Option<(f64, f64)>>, BenchError> {
     let n = sim.cfg.instrument.detector_px;
     let d = &sim.cfg.detector;
     let sky = d.dark_e_per_s * d.exposure_s;
@@ -179,8 +189,7 @@ fn positions_of_image(
     };
     let jobs = sim.jobs()?;
     let truth = sim.truth(&jobs, sim.track(0).as_ref());
-    let a = astrometry::analyze(&img, Some(&truth), &Options::new(&sim.cfg.analysis))
-        .map_err(|e| SimError::Gpu(e.to_string()))?;
+    let a = analyze(&img, Some(&truth), &Options::new(&sim.cfg.analysis))?;
     let mut out = vec![None; truth.len()];
     for s in &a.stars {
         if let Some(k) = s.truth {
@@ -212,15 +221,16 @@ pub fn bench_config(base: &Config) -> Config {
 
 /// A sweep of one knob: `settings` are (label, configuration); the last one is the reference.
 pub fn knob_sweep(
+    session: &Session,
     group: &str,
     settings: &[(String, Config)],
     astro: bool,
-) -> Result<Vec<BenchRow>, SimError> {
+) -> Result<Vec<BenchRow>, BenchError> {
     let mut runs = Vec::new();
     for (label, cfg) in settings {
         let t0 = Instant::now();
-        let sim = Simulator::new(cfg)?;
-        let (stamps, t_int) = integrate_stamps(&sim, cfg.fidelity.method, None, None)?;
+        let sim = session.new_simulator(cfg)?;
+        let (stamps, t_int) = integrate_stamps(&sim, cfg.fidelity.method, &Integrator::Cpu, None)?;
         let setup = t0.elapsed().as_secs_f64() - t_int;
         let pos = if astro {
             Some(noise_free_positions(&sim)?)
@@ -263,14 +273,16 @@ pub fn knob_sweep(
 /// Methods × backends on one configuration: errors against the CPU direct method on `ref_stars` stars;
 /// times of the full frame (the direct CPU time is measured on the subset and scaled, as noted).
 pub fn methods(
+    session: &Session,
     cfg: &Config,
     ref_stars: usize,
-    gpu: Option<Arc<GpuIntegrator>>,
-) -> Result<Vec<BenchRow>, SimError> {
-    let sim = Simulator::new(&bench_config(cfg))?;
+    gpu: Option<&Integrator>,
+) -> Result<Vec<BenchRow>, BenchError> {
+    let sim = session.new_simulator(&bench_config(cfg))?;
+    let cpu = Integrator::Cpu;
     let n_all = sim.stars.len();
     let sub = ref_stars.min(n_all).max(1);
-    let (reference, t_ref) = integrate_stamps(&sim, Method::Direct, None, Some(sub))?;
+    let (reference, t_ref) = integrate_stamps(&sim, Method::Direct, &cpu, Some(sub))?;
     let mut rows = vec![BenchRow {
         group: "method".into(),
         setting: "direct (reference)".into(),
@@ -285,11 +297,11 @@ pub fn methods(
     }];
     // the fast CPU method equals the direct one to rounding (checked on the subset below), so its full
     // frame is the astrometric reference of the other methods
-    let fast_cpu = integrate_stamps(&sim, Method::Fast, None, None)?;
+    let fast_cpu = integrate_stamps(&sim, Method::Fast, &cpu, None)?;
     let scale = sim.cfg.instrument.plate_scale_mas();
     let ref_pos = positions_of_stamps(&sim, &fast_cpu.0)?;
     let mut push =
-        |setting: &str, backend: &str, full: (Vec<Stamp>, f64)| -> Result<(), SimError> {
+        |setting: &str, backend: &str, full: (Vec<Stamp>, f64)| -> Result<(), BenchError> {
             let part: Vec<Stamp> = full.0.iter().take(sub).cloned().collect();
             let (max_err, rms_err, flux_err) = compare(&part, &reference);
             let astro_mas = position_rms_mas(&positions_of_stamps(&sim, &full.0)?, &ref_pos, scale);
@@ -308,19 +320,19 @@ pub fn methods(
             Ok(())
         };
     push("fast", "cpu", fast_cpu.clone())?;
-    if let Some(g) = &gpu {
-        let name = g.adapter_name();
+    if let Some(g) = gpu {
+        let name = g.name();
         // warm-up (pipeline caches, kernel upload), then timed
-        let _ = integrate_stamps(&sim, Method::Fast, Some(g), None)?;
+        let _ = integrate_stamps(&sim, Method::Fast, g, None)?;
         push(
             "fast",
             &name,
-            integrate_stamps(&sim, Method::Fast, Some(g), None)?,
+            integrate_stamps(&sim, Method::Fast, g, None)?,
         )?;
         push(
             "direct",
             &name,
-            integrate_stamps(&sim, Method::Direct, Some(g), None)?,
+            integrate_stamps(&sim, Method::Direct, g, None)?,
         )?;
     }
     Ok(rows)
@@ -328,13 +340,18 @@ pub fn methods(
 
 /// The integration cost against the number of stars (random positions over the photosensitive area).
 pub fn scaling(
+    session: &Session,
     cfg: &Config,
     counts: &[usize],
-    gpu: Option<Arc<GpuIntegrator>>,
-) -> Result<Vec<BenchRow>, SimError> {
+    gpu: Option<&Integrator>,
+) -> Result<Vec<BenchRow>, BenchError> {
     use rand::RngExt;
     let dir = std::env::temp_dir().join(format!("jsim-bench-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).map_err(|e| SimError::Gpu(format!("{}: {e}", dir.display())))?;
+    let io = |path: &std::path::Path| {
+        let path = path.to_path_buf();
+        move |source| BenchError::Io { path, source }
+    };
+    std::fs::create_dir_all(&dir).map_err(io(&dir))?;
     let mut rows = Vec::new();
     for &n in counts {
         let mut r = crate::rng::stream(cfg.seed, crate::rng::Stream::Test, n as u64);
@@ -352,13 +369,12 @@ pub fn scaling(
             ));
         }
         let path = dir.join(format!("stars_{n}.csv"));
-        std::fs::write(&path, text)
-            .map_err(|e| SimError::Gpu(format!("{}: {e}", path.display())))?;
+        std::fs::write(&path, text).map_err(io(&path))?;
         let mut c = bench_config(cfg);
         c.scene.kind = crate::config::SceneKind::Catalogue;
         c.scene.catalogue = Some(path);
-        let sim = Simulator::new(&c)?;
-        let (_, t) = integrate_stamps(&sim, Method::Fast, None, None)?;
+        let sim = session.new_simulator(&c)?;
+        let (_, t) = integrate_stamps(&sim, Method::Fast, &Integrator::Cpu, None)?;
         rows.push(BenchRow::timing(
             "stars",
             format!("{n} stars"),
@@ -367,13 +383,13 @@ pub fn scaling(
             t,
             "fast method",
         ));
-        if let Some(g) = &gpu {
-            let _ = integrate_stamps(&sim, Method::Fast, Some(g), None)?;
-            let (_, t) = integrate_stamps(&sim, Method::Fast, Some(g), None)?;
+        if let Some(g) = gpu {
+            let _ = integrate_stamps(&sim, Method::Fast, g, None)?;
+            let (_, t) = integrate_stamps(&sim, Method::Fast, g, None)?;
             rows.push(BenchRow::timing(
                 "stars",
                 format!("{n} stars"),
-                g.adapter_name(),
+                g.name(),
                 n,
                 t,
                 "fast method",
@@ -466,11 +482,15 @@ pub fn knob_settings(base: &Config, quick: bool) -> Vec<(String, Vec<(String, Co
 }
 
 /// Accuracy against ePSF iterations on a noisy Gaussian-ACE image (mean over `images`).
-pub fn epsf_iterations(base: &Config, images: usize) -> Result<Vec<BenchRow>, SimError> {
+pub fn epsf_iterations(
+    session: &Session,
+    base: &Config,
+    images: usize,
+) -> Result<Vec<BenchRow>, BenchError> {
     let mut c = bench_config(base);
     c.ace.case = AceCase::Gaussian;
     c.fidelity.images = images.max(1);
-    let sim = Simulator::new(&c)?;
+    let sim = session.new_simulator(&c)?;
     let exps: Vec<_> = (0..c.fidelity.images)
         .map(|i| sim.exposure(i))
         .collect::<Result<_, _>>()?;
@@ -502,7 +522,7 @@ pub fn epsf_iterations(base: &Config, images: usize) -> Result<Vec<BenchRow>, Si
         let mut ratio = Vec::new();
         for e in &exps {
             let img = AnalysisImage::from_detector(&c, &e.image);
-            if let Ok(a) = astrometry::analyze(&img, Some(&e.truth), &o) {
+            if let Ok(a) = analyze(&img, Some(&e.truth), &o) {
                 acc.push(a.report.accuracy_mas);
                 ratio.push(a.report.accuracy_over_crlb);
             }

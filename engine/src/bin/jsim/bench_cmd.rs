@@ -85,17 +85,13 @@ fn table(rows: &[BenchRow]) -> String {
 pub fn bench(a: &BenchArgs) -> Result<()> {
     let cfg = a.cfg.load()?;
     crate::ensure_dir(&a.out)?;
-    let gpu = match cfg.fidelity.backend {
-        engine::config::Backend::Cpu => None,
-        b => match engine::integrate::gpu::GpuIntegrator::shared(b == engine::config::Backend::Gpu)
-        {
-            Ok(g) => Some(g),
-            Err(e) => {
-                eprintln!("jsim: {e}");
-                None
-            }
-        },
-    };
+    let session = engine::session::Session::new();
+    // the GPU rows are measured when the configured backend finds one (the CPU rows always)
+    let gpu = Some(session.integrator(cfg.fidelity.backend))
+        .filter(|i| matches!(i, engine::integrate::Integrator::Gpu(_)));
+    for note in session.take_notes() {
+        eprintln!("jsim: {note}");
+    }
     let mut rows: Vec<BenchRow> = Vec::new();
     let save = |rows: &[BenchRow]| -> Result<()> {
         let cells: Vec<Vec<Cell>> = rows
@@ -121,24 +117,24 @@ pub fn bench(a: &BenchArgs) -> Result<()> {
     let has = |p: &str| a.parts.iter().any(|x| x == p);
     if has("methods") {
         eprintln!("bench: methods × backends …");
-        rows.extend(bench::methods(&cfg, a.ref_stars, gpu.clone())?);
+        rows.extend(bench::methods(&session, &cfg, a.ref_stars, gpu.as_ref())?);
         save(&rows)?;
     }
     if has("knobs") {
         for (group, settings, astro) in bench::knob_settings(&cfg, a.quick) {
             eprintln!("bench: {group} …");
-            rows.extend(bench::knob_sweep(&group, &settings, astro)?);
+            rows.extend(bench::knob_sweep(&session, &group, &settings, astro)?);
             save(&rows)?;
         }
     }
     if has("epsf") {
         eprintln!("bench: ePSF iterations …");
-        rows.extend(bench::epsf_iterations(&cfg, a.epsf_images)?);
+        rows.extend(bench::epsf_iterations(&session, &cfg, a.epsf_images)?);
         save(&rows)?;
     }
     if has("stars") {
         eprintln!("bench: cost against the number of stars …");
-        rows.extend(bench::scaling(&cfg, &a.stars, gpu.clone())?);
+        rows.extend(bench::scaling(&session, &cfg, &a.stars, gpu.as_ref())?);
         save(&rows)?;
     }
     // time against error, one point set per knob group

@@ -1,15 +1,17 @@
-//! The command implementations (thin: the engine does the work; here we print, write and show progress).
+//! The command implementations (thin: the engine session does the work, `engine::io::products` knows the
+//! files; here we print, write and show progress).
 
-use anyhow::{Context, Result};
-use engine::config::Config;
-use engine::io::fits::{self, Card, Hdu, Pixels};
-use engine::io::{csv, exposure};
+use anyhow::{Context, Result, bail};
+use engine::analysis::countermeasures::{Countermeasure, Plan};
+use engine::analysis::vectors::VectorMap;
+use engine::analysis::{Source, analyse_image};
+use engine::config::{AceCase, Config, ReadoutOrder};
+use engine::io::{csv, exposure, fits, products};
 use engine::jitter::AceSeries;
-use engine::optics::PsfBank;
-use engine::optics::spectrum;
-use engine::simulate::Simulator;
+use engine::session::Session;
+use engine::studies::experiment;
 use indicatif::{ProgressBar, ProgressStyle};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 /// A progress bar on stderr (hidden when stderr is not a terminal).
@@ -26,6 +28,13 @@ pub fn progress(len: u64, what: &str) -> ProgressBar {
     pb
 }
 
+/// Print the session's notes about the backend (once each).
+fn say_notes(session: &Session) {
+    for note in session.take_notes() {
+        eprintln!("jsim: {note}");
+    }
+}
+
 fn parent_dir(path: &Path) -> Result<()> {
     if let Some(p) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
         crate::ensure_dir(p)?;
@@ -34,110 +43,24 @@ fn parent_dir(path: &Path) -> Result<()> {
 }
 
 /// `jsim psf`
-pub fn psf(cfg: &Config, out: &Path) -> Result<()> {
-    parent_dir(out)?;
+pub fn psf(session: &Session, cfg: &Config, out: &Path) -> Result<()> {
     let t0 = Instant::now();
-    let bank = PsfBank::new(cfg);
+    let bank = session.bank(cfg);
     let zone = bank.zone_of(
         cfg.instrument.detector_px as f64 / 2.0,
         cfg.instrument.detector_px as f64 / 2.0,
     );
     let psf = bank.get(cfg.scene.j_minus_h, zone);
     let elapsed = t0.elapsed().as_secs_f64();
-    let scale = cfg.instrument.plate_scale_mas();
-    let os = psf.oversampling as f64;
+    parent_dir(out)?;
+    products::write_psf(out, cfg, &psf)?;
     let n = psf.n();
-    let grid = spectrum::wavelength_grid(&cfg.band);
-    let fwhm = psf.fwhm_px() * scale;
-    let cards = vec![
-        Card::s("BUNIT", "fraction", "fraction of the total flux per cell"),
-        Card::i(
-            "OVERSAMP",
-            psf.oversampling as i64,
-            "cells per detector pixel",
-        ),
-        Card::f("CDELT1", 1.0 / os, "[pix] cell size"),
-        Card::f("CDELT2", 1.0 / os, "[pix] cell size"),
-        Card::f(
-            "CRPIX1",
-            psf.half_cells as f64 + 1.0,
-            "optical axis (1-based FITS pixel)",
-        ),
-        Card::f(
-            "CRPIX2",
-            psf.half_cells as f64 + 1.0,
-            "optical axis (1-based FITS pixel)",
-        ),
-        Card::f("CELLMAS", scale / os, "[mas] cell size on the sky"),
-        Card::f("PLTSCALE", scale, "[mas/pix] detector plate scale"),
-        Card::f(
-            "LAMMIN",
-            grid.first().copied().unwrap_or(0.0),
-            "[um] shortest wavelength",
-        ),
-        Card::f(
-            "LAMMAX",
-            grid.last().copied().unwrap_or(0.0),
-            "[um] longest wavelength",
-        ),
-        Card::i("NLAMBDA", grid.len() as i64, "wavelengths summed"),
-        Card::f(
-            "LAMEFF",
-            spectrum::effective_wavelength_um(&cfg.band, cfg.scene.j_minus_h),
-            "[um] photon-weighted",
-        ),
-        Card::f("JMINUSH", cfg.scene.j_minus_h, "stellar colour"),
-        Card::s(
-            "METHOD",
-            format!("{:?}", cfg.optics.psf_method),
-            "PSF method",
-        ),
-        Card::i(
-            "NPUPIL",
-            cfg.optics.pupil_samples as i64,
-            "pupil samples across",
-        ),
-        Card::f("FWHM", fwhm, "[mas] FWHM"),
-        Card::f(
-            "EE1PX",
-            psf.encircled_energy(1.0),
-            "encircled energy within 1 pix",
-        ),
-        Card::f(
-            "EE3PX",
-            psf.encircled_energy(3.0),
-            "encircled energy within 3 pix",
-        ),
-        Card::f("TABFRAC", psf.sum(), "flux fraction inside this table"),
-        Card::s("CONFHASH", cfg.hash_hex(), "config hash"),
-        Card::s(
-            "ENGINE",
-            format!("jsim {}", engine::VERSION),
-            "simulator version",
-        ),
-    ];
-    let text = cfg.to_toml();
-    fits::write(
-        out,
-        &[
-            Hdu::Image {
-                name: "",
-                nx: n,
-                ny: n,
-                pixels: Pixels::F64(&psf.data),
-                cards,
-            },
-            Hdu::Text {
-                name: "CONFIG",
-                text: &text,
-            },
-        ],
-    )?;
     println!(
-        "wrote {} ({n}×{n} cells, {} per pixel, {} wavelengths, FWHM {fwhm:.1} mas, {:.2} % of the flux inside the table) in {elapsed:.2} s",
+        "wrote {} ({n}×{n} cells, {} per pixel, {} wavelengths, FWHM {:.1} mas, {:.2} % of the flux inside the table) in {elapsed:.2} s",
         out.display(),
         psf.oversampling,
-        grid.len(),
+        cfg.band.wavelength_grid().len(),
+        psf.fwhm_px() * cfg.instrument.plate_scale_mas(),
         100.0 * psf.sum()
     );
     Ok(())
@@ -145,7 +68,6 @@ pub fn psf(cfg: &Config, out: &Path) -> Result<()> {
 
 /// `jsim ace`
 pub fn ace(cfg: &Config, out: &Path, every: usize) -> Result<()> {
-    parent_dir(out)?;
     let t0 = Instant::now();
     let s = AceSeries::generate(cfg, cfg.seed, 0);
     let every = every.max(1);
@@ -159,6 +81,7 @@ pub fn ace(cfg: &Config, out: &Path, every: usize) -> Result<()> {
             ]
         })
         .collect();
+    parent_dir(out)?;
     csv::write(out, &["t_s", "x_mas", "y_mas"], &rows)?;
     println!(
         "wrote {} ({} samples of {} at {:.3} ms, {} scaling: σ = {:.1}/{:.1} mas) in {:.2} s",
@@ -178,15 +101,13 @@ pub fn ace(cfg: &Config, out: &Path, every: usize) -> Result<()> {
 }
 
 /// `jsim simulate`
-pub fn simulate(cfg: &Config, out: &Path) -> Result<()> {
-    crate::ensure_dir(out)?;
+pub fn simulate(session: &Session, cfg: &Config, out: &Path) -> Result<()> {
     let t0 = Instant::now();
-    let sim = Simulator::new(cfg)?;
-    if let Some(note) = &sim.gpu_note {
-        eprintln!("jsim: {note}");
-    }
+    let sim = session.new_simulator(cfg)?;
+    say_notes(session);
     sim.jobs()?; // PSFs and kernels now, so the timing below separates set-up from integration
     let setup_s = t0.elapsed().as_secs_f64();
+    crate::ensure_dir(out)?;
     engine::io::write_atomic(&out.join("config.toml"), cfg.to_toml().as_bytes())?;
     let pb = progress(cfg.fidelity.images as u64, "simulate");
     let mut summary = Vec::new();
@@ -233,275 +154,95 @@ pub fn simulate(cfg: &Config, out: &Path) -> Result<()> {
     Ok(())
 }
 
-/// Options of the analysis commands.
+/// Options of `jsim analyze`.
 pub struct AnalyzeArgs {
-    pub image: std::path::PathBuf,
-    pub truth: Option<std::path::PathBuf>,
+    pub image: PathBuf,
+    pub truth: Option<PathBuf>,
     pub zones: Option<usize>,
-    pub countermeasure: String,
-    pub telemetry: engine::studies::experiment::TelemetrySpec,
-    pub reference_error_mas: f64,
-    pub out: std::path::PathBuf,
+    pub countermeasure: Countermeasure,
+    pub out: PathBuf,
 }
 
-/// The configuration a FITS image was made with (its CONFIG extension), else `fallback`.
-fn image_config(path: &Path, fallback: &Config) -> Config {
-    fits::read_text(path, "CONFIG")
+/// The configuration and exposure index a FITS image was made with (its CONFIG extension and IMAGEIDX),
+/// when it says.
+pub fn image_provenance(path: &Path) -> Option<(Config, usize)> {
+    let cfg = fits::read_text(path, "CONFIG")
         .ok()
-        .and_then(|t| Config::from_toml_str(&t).ok())
-        .unwrap_or_else(|| fallback.clone())
+        .and_then(|t| Config::from_toml_str(&t).ok())?;
+    let index = fits::read_f64_key(path, "IMAGEIDX").ok()?;
+    (index >= 0.0 && index.fract() == 0.0).then_some((cfg, index as usize))
 }
 
-/// Write the deviation vector map (CSV + PNG) of star results.
-pub fn write_vectors(
-    dir: &Path,
-    stem: &str,
-    stars: &[engine::analysis::astrometry::StarResult],
-    scale: f64,
-    extent: f64,
-    title: &str,
-) -> Result<()> {
-    use engine::analysis::epsf::fit::flags;
-    // show the fit-response prediction where it was computed (experiment), else the mean-jitter one (truth)
-    let fit_pred = stars
-        .iter()
-        .any(|s| s.predicted_fit_dx_px != 0.0 || s.predicted_fit_dy_px != 0.0);
-    let owned: Vec<engine::analysis::astrometry::StarResult> = stars
-        .iter()
-        .map(|s| {
-            let mut s = *s;
-            if fit_pred {
-                s.predicted_dx_px = s.predicted_fit_dx_px;
-                s.predicted_dy_px = s.predicted_fit_dy_px;
-            }
-            s
-        })
-        .collect();
-    let used: Vec<&engine::analysis::astrometry::StarResult> = owned
-        .iter()
-        .filter(|s| s.truth.is_some() && s.flags & flags::REJECT == 0 && s.dx_px.is_finite())
-        .collect();
-    let (mx, my) = if used.is_empty() {
-        (0.0, 0.0)
-    } else {
-        (
-            used.iter().map(|s| s.dx_px).sum::<f64>() / used.len() as f64,
-            used.iter().map(|s| s.dy_px).sum::<f64>() / used.len() as f64,
-        )
-    };
-    let (pmx, pmy) = if used.is_empty() {
-        (0.0, 0.0)
-    } else {
-        (
-            used.iter().map(|s| s.predicted_dx_px).sum::<f64>() / used.len() as f64,
-            used.iter().map(|s| s.predicted_dy_px).sum::<f64>() / used.len() as f64,
-        )
-    };
-    let rows: Vec<Vec<csv::Cell>> = used
-        .iter()
-        .map(|s| {
-            vec![
-                csv::Cell::F(s.x),
-                csv::Cell::F(s.y),
-                csv::Cell::F((s.dx_px - mx) * scale),
-                csv::Cell::F((s.dy_px - my) * scale),
-                csv::Cell::F((s.predicted_dx_px - pmx) * scale),
-                csv::Cell::F((s.predicted_dy_px - pmy) * scale),
-            ]
-        })
-        .collect();
-    csv::write(
-        &dir.join(format!("{stem}.csv")),
-        &[
-            "x",
-            "y",
-            "dx_mas",
-            "dy_mas",
-            "predicted_dx_mas",
-            "predicted_dy_mas",
-        ],
-        &rows,
-    )?;
-    let measured: Vec<(f64, f64, f64, f64)> = used
-        .iter()
-        .map(|s| (s.x, s.y, (s.dx_px - mx) * scale, (s.dy_px - my) * scale))
-        .collect();
-    let predicted: Vec<(f64, f64, f64, f64)> = used
-        .iter()
-        .map(|s| {
-            (
-                s.x,
-                s.y,
-                (s.predicted_dx_px - pmx) * scale,
-                (s.predicted_dy_px - pmy) * scale,
-            )
-        })
-        .collect();
-    let mut sets = vec![("fitted − true (mean removed)".to_string(), measured)];
-    if predicted.iter().any(|p| p.2 != 0.0 || p.3 != 0.0) {
-        sets.push(("ACE-predicted displacement".to_string(), predicted));
-    }
-    let rms = (rows
-        .iter()
-        .map(|r| {
-            if let (csv::Cell::F(a), csv::Cell::F(b)) = (&r[2], &r[3]) {
-                a * a + b * b
-            } else {
-                0.0
-            }
-        })
-        .sum::<f64>()
-        / rows.len().max(1) as f64)
-        .sqrt();
-    let reference = [1.0, 2.0, 5.0, 10.0, 20.0, 50.0]
-        .into_iter()
-        .find(|r| *r >= rms)
-        .unwrap_or(100.0);
-    engine::io::plot::vector_map(
-        &dir.join(format!("{stem}.png")),
-        title,
-        &sets,
-        extent,
-        reference,
-        60.0,
-    )?;
-    Ok(())
-}
-
-/// `jsim analyze`
-pub fn analyze(cfg_fallback: &Config, a: &AnalyzeArgs) -> Result<()> {
-    use engine::analysis::astrometry::{self, AnalysisImage, Options};
-    use engine::analysis::countermeasures::{Countermeasure, Telemetry};
-    crate::ensure_dir(&a.out)?;
+/// `jsim analyze`: the analysis pipeline on one image. `cfg` gives the analysis knobs; the image's own
+/// configuration (its CONFIG extension) gives what only its simulation knows (the ACE series for the
+/// telemetry and the ACE prediction, the exact ePSF of the control).
+pub fn analyze(session: &Session, cfg: &Config, a: &AnalyzeArgs) -> Result<()> {
     let t0 = Instant::now();
-    let read = fits::read_image(&a.image)?;
-    let cfg = image_config(&a.image, cfg_fallback);
-    let scale =
-        fits::read_f64_key(&a.image, "PLTSCALE").unwrap_or(cfg.instrument.plate_scale_mas());
+    let provenance = image_provenance(&a.image);
+    let img_cfg = provenance.as_ref().map(|(c, _)| c).unwrap_or(cfg);
+    let scale = fits::read_f64_key(&a.image, "PLTSCALE")
+        .unwrap_or_else(|_| img_cfg.instrument.plate_scale_mas());
+    let img = exposure::read_analysis_image(&a.image, scale)?;
     let truth = match &a.truth {
         Some(p) => Some(exposure::read_truth(p)?),
         None => exposure::read_truth(&a.image).ok(),
     };
-    let img = AnalysisImage::from_fits(&read, scale)?;
-    let mut opts = Options::new(&cfg_fallback.analysis);
+    let mut analysis_cfg = cfg.analysis.clone();
     if let Some(z) = a.zones {
-        opts.cfg.epsf_zones = z;
+        analysis_cfg.epsf_zones = z;
     }
-    opts.countermeasure = if a.countermeasure == "telemetry" {
-        if cfg.ace.case != engine::config::AceCase::Realistic {
-            Countermeasure::None
-        } else {
-            // the image's own configuration gives back its ACE series, PSF and noise
-            let mut c = cfg.clone();
+    let sim = match &provenance {
+        Some((c, index)) => {
+            let mut c = c.clone();
             c.fidelity.backend = engine::config::Backend::Cpu;
-            c.fidelity.images = 1;
-            let sim = Simulator::new(&c)?;
-            let series = sim
-                .series()
-                .context("the image's configuration has no ACE series")?;
-            let t_start = fits::read_f64_key(&a.image, "TSTART").unwrap_or(0.0);
-            let tel = Telemetry::from_series(
-                series,
-                sim.timing,
-                t_start,
-                scale,
-                a.telemetry.noise_mas,
-                a.telemetry.rate_hz,
-                a.telemetry.latency_s,
-                cfg.seed,
-                &*sim.optical_kernel()?,
-                &sim.fit_noise(),
-            )?;
-            Countermeasure::Telemetry(std::sync::Arc::new(tel))
+            c.fidelity.images = index + 1;
+            Some((session.simulator(&c)?, *index))
         }
-    } else {
-        Countermeasure::parse(&a.countermeasure, opts.cfg.epsf_zones.max(2))?
-            .with_reference_error(a.reference_error_mas, cfg.seed)
+        None => None,
     };
-    let res = astrometry::analyze(&img, truth.as_deref(), &opts)?;
-    // catalogue
-    let rows: Vec<Vec<csv::Cell>> = res
-        .stars
-        .iter()
-        .map(|s| {
-            vec![
-                csv::Cell::F(s.x),
-                csv::Cell::F(s.y),
-                csv::Cell::F(s.flux_e),
-                csv::Cell::F(s.sky_e),
-                csv::Cell::F(s.crlb_x_px * scale),
-                csv::Cell::F(s.crlb_y_px * scale),
-                csv::Cell::I(s.flags as i64),
-                csv::Cell::I(s.truth.map(|t| t as i64).unwrap_or(-1)),
-                csv::Cell::F(s.dx_px * scale),
-                csv::Cell::F(s.dy_px * scale),
-            ]
-        })
-        .collect();
-    csv::write(
-        &a.out.join("catalogue.csv"),
-        &[
-            "x",
-            "y",
-            "flux_e",
-            "sky_e",
-            "crlb_x_mas",
-            "crlb_y_mas",
-            "flags",
-            "truth_id",
-            "dx_mas",
-            "dy_mas",
-        ],
-        &rows,
-    )?;
-    let e = &res.epsf;
-    let n = e.n();
-    fits::write(
-        &a.out.join("epsf.fits"),
-        &[Hdu::Image {
-            name: "",
-            nx: n,
-            ny: n,
-            pixels: Pixels::F64(&e.data),
-            cards: vec![
-                Card::i("OVERSAMP", e.oversampling as i64, "ePSF nodes per pixel"),
-                Card::f("CRPIX1", e.half_nodes as f64 + 1.0, "origin (1-based)"),
-                Card::f("CRPIX2", e.half_nodes as f64 + 1.0, "origin (1-based)"),
-                Card::s("NORM", "sum = oversampling^2", "a star's pixels sum to 1"),
-                Card::i(
-                    "ITER",
-                    res.report.epsf_iterations as i64,
-                    "builder iterations",
-                ),
-            ],
-        }],
-    )?;
-    let summary = serde_json::json!({
-        "image": a.image.display().to_string(),
-        "plate_scale_mas": scale,
-        "countermeasure": res.report.countermeasure,
-        "report": res.report,
-        "seconds": t0.elapsed().as_secs_f64(),
+    let source = sim.as_ref().map(|(s, index)| Source {
+        sim: s,
+        index: *index,
     });
-    engine::io::write_atomic(
-        &a.out.join("summary.json"),
-        serde_json::to_string_pretty(&summary)?.as_bytes(),
+    let plan = Plan::new(vec![a.countermeasure])?;
+    let res = analyse_image(
+        &img,
+        truth.as_deref(),
+        source,
+        &analysis_cfg,
+        &plan,
+        img_cfg.seed,
     )?;
-    if truth.is_some() {
-        write_vectors(
-            &a.out,
-            "vectors",
-            &res.stars,
-            scale,
-            read.nx as f64,
-            &format!(
-                "{} — deviations ({})",
-                a.image.display(),
-                res.report.countermeasure
-            ),
-        )?;
-    }
-    let r = &res.report;
+    let Some(an) = res.of(&a.countermeasure) else {
+        bail!(
+            "{} does not apply to this image (exact-epsf needs a static-ACE image simulated by jsim)",
+            a.countermeasure
+        );
+    };
+    crate::ensure_dir(&a.out)?;
+    let title = format!(
+        "{} — deviations ({})",
+        a.image.display(),
+        an.report.countermeasure
+    );
+    let map = VectorMap::new(&an.stars, scale);
+    let summary = products::Summary {
+        image: a.image.display().to_string(),
+        plate_scale_mas: scale,
+        countermeasure: &an.report.countermeasure,
+        report: &an.report,
+        assumptions: Vec::new(),
+        seconds: t0.elapsed().as_secs_f64(),
+    };
+    products::write_analysis(
+        &a.out,
+        an,
+        &summary,
+        truth
+            .is_some()
+            .then_some((&map, img.nx as f64, title.as_str())),
+    )?;
+    let r = &an.report;
     println!(
         "{}: {} stars detected, {} used; accuracy {:.2} mas (x {:.2}, y {:.2}), median CRLB {:.2} mas (ratio {:.2}), phase bias {:.2}/{:.2} mas [{}] in {:.2} s",
         a.image.display(),
@@ -522,33 +263,20 @@ pub fn analyze(cfg_fallback: &Config, a: &AnalyzeArgs) -> Result<()> {
 
 /// Options of `jsim experiment`.
 pub struct ExperimentArgs {
-    pub aces: Vec<engine::config::AceCase>,
-    pub readouts: Vec<engine::config::ReadoutOrder>,
+    pub aces: Vec<AceCase>,
+    pub readouts: Vec<ReadoutOrder>,
     pub mags: Vec<f64>,
-    pub plan: engine::studies::experiment::Plan,
-    pub out: std::path::PathBuf,
+    pub plan: Plan,
+    pub out: PathBuf,
 }
 
 /// `jsim experiment`
-pub fn experiment(base: &Config, a: &ExperimentArgs) -> Result<()> {
-    use engine::studies::experiment::{self, CSV_HEADER};
-    crate::ensure_dir(&a.out)?;
+pub fn experiment(session: &Session, base: &Config, a: &ExperimentArgs) -> Result<()> {
     let t0 = Instant::now();
     let datasets = experiment::grid(base, &a.aces, &a.readouts, &a.mags);
+    crate::ensure_dir(&a.out)?;
     let total = (datasets.len() * base.fidelity.images) as u64;
     let pb = progress(total, "experiment");
-    let bank = std::sync::Arc::new(PsfBank::new(base));
-    let gpu = match base.fidelity.backend {
-        engine::config::Backend::Cpu => None,
-        b => match engine::integrate::gpu::GpuIntegrator::shared(b == engine::config::Backend::Gpu)
-        {
-            Ok(g) => Some(g),
-            Err(e) => {
-                pb.suspend(|| eprintln!("jsim: {e}"));
-                None
-            }
-        },
-    };
     let mut rows = Vec::new();
     let mut image_rows: Vec<Vec<csv::Cell>> = Vec::new();
     for cfg in &datasets {
@@ -558,41 +286,10 @@ pub fn experiment(base: &Config, a: &ExperimentArgs) -> Result<()> {
             cfg.readout.order.name(),
             cfg.scene.mag_hw
         ));
-        let (r, images) =
-            experiment::run_dataset(cfg, &a.plan, Some(bank.clone()), gpu.clone(), &mut |_| {
-                pb.inc(1)
-            })?;
-        for im in &images {
-            for m in &im.measured {
-                image_rows.push(vec![
-                    csv::Cell::S(cfg.ace.case.name().into()),
-                    csv::Cell::S(cfg.readout.order.name().into()),
-                    csv::Cell::S(m.countermeasure.clone()),
-                    csv::Cell::F(cfg.scene.mag_hw),
-                    csv::Cell::I(im.index as i64),
-                    csv::Cell::F(m.report.accuracy_mas),
-                    csv::Cell::F(m.report.accuracy_x_mas),
-                    csv::Cell::F(m.report.accuracy_y_mas),
-                    csv::Cell::F(m.report.crlb_median_mas),
-                    csv::Cell::F(m.report.phase_bias_x_mas.max(m.report.phase_bias_y_mas)),
-                    csv::Cell::F(m.report.predicted_rms_mas),
-                    csv::Cell::F(m.report.predicted_corr_x),
-                    csv::Cell::F(m.report.predicted_corr_y),
-                    csv::Cell::F(m.report.predicted_slope_x),
-                    csv::Cell::F(m.report.predicted_slope_y),
-                    csv::Cell::F(m.report.response_corr_x),
-                    csv::Cell::F(m.report.response_corr_y),
-                    csv::Cell::F(m.report.response_slope_x),
-                    csv::Cell::F(m.report.response_slope_y),
-                    csv::Cell::I(m.report.n_used as i64),
-                    csv::Cell::I(m.report.dof_absorbed as i64),
-                    csv::Cell::F(im.ace_sigma_mas),
-                    csv::Cell::F(im.ace_drift_mas),
-                    csv::Cell::F(im.simulate_s),
-                    csv::Cell::F(im.analyse_s),
-                ]);
-            }
-        }
+        let sim = session.new_simulator(cfg)?;
+        pb.suspend(|| say_notes(session));
+        let (r, images) = experiment::run_dataset(&sim, &a.plan, &mut |_| pb.inc(1))?;
+        image_rows.extend(products::image_rows(cfg, &images));
         if let Some(stars) = images.first().and_then(|im| im.stars.as_ref())
             && cfg.scene.mag_hw == a.mags[0]
         {
@@ -608,12 +305,12 @@ pub fn experiment(base: &Config, a: &ExperimentArgs) -> Result<()> {
                 cfg.ace.case.name(),
                 cfg.readout.order.name()
             );
+            let map = VectorMap::new(stars, cfg.instrument.plate_scale_mas());
             pb.suspend(|| {
-                write_vectors(
+                products::write_vectors(
                     &a.out,
                     &stem,
-                    stars,
-                    cfg.instrument.plate_scale_mas(),
+                    &map,
                     cfg.instrument.detector_px as f64,
                     &title,
                 )
@@ -621,178 +318,24 @@ pub fn experiment(base: &Config, a: &ExperimentArgs) -> Result<()> {
         }
         rows.extend(r);
         // keep the CSV current so an interrupted experiment still leaves its finished datasets
-        write_experiment_csv(&a.out, &rows)?;
+        products::write_experiment(&a.out.join("experiment.csv"), &rows)?;
     }
     pb.finish_and_clear();
-    csv::write(
-        &a.out.join("images.csv"),
-        &[
-            "ace",
-            "readout",
-            "countermeasure",
-            "mag",
-            "image",
-            "accuracy_mas",
-            "accuracy_x_mas",
-            "accuracy_y_mas",
-            "crlb_mas",
-            "phase_bias_mas",
-            "predicted_rms_mas",
-            "pred_corr_x",
-            "pred_corr_y",
-            "pred_slope_x",
-            "pred_slope_y",
-            "response_corr_x",
-            "response_corr_y",
-            "response_slope_x",
-            "response_slope_y",
-            "n_used",
-            "dof_absorbed",
-            "ace_sigma_mas",
-            "ace_drift_mas",
-            "simulate_s",
-            "analyse_s",
-        ],
-        &image_rows,
-    )?;
-    plot_experiment(&a.out, &rows)?;
-    println!("{}", render_table(&rows));
+    products::write_images(&a.out.join("images.csv"), &image_rows)?;
+    products::plot_accuracy(&a.out.join("accuracy.png"), &rows)?;
+    println!("{}", experiment::render_table(&rows));
     println!(
         "wrote {}/experiment.csv, images.csv, accuracy.png in {:.1} s",
         a.out.display(),
         t0.elapsed().as_secs_f64()
     );
-    let _ = CSV_HEADER;
-    Ok(())
-}
-
-fn write_experiment_csv(dir: &Path, rows: &[engine::studies::experiment::Row]) -> Result<()> {
-    let cells: Vec<Vec<csv::Cell>> = rows
-        .iter()
-        .map(|r| {
-            vec![
-                csv::Cell::S(r.ace.clone()),
-                csv::Cell::S(r.readout.clone()),
-                csv::Cell::S(r.countermeasure.clone()),
-                csv::Cell::F(r.mag),
-                csv::Cell::F(r.accuracy_mas),
-                csv::Cell::F(r.sem_mas),
-                csv::Cell::F(r.crlb_mas),
-                csv::Cell::F(r.predicted_mas),
-                csv::Cell::I(r.n_images as i64),
-                csv::Cell::F(r.time_s),
-            ]
-        })
-        .collect();
-    csv::write(
-        &dir.join("experiment.csv"),
-        &engine::studies::experiment::CSV_HEADER,
-        &cells,
-    )?;
-    Ok(())
-}
-
-fn render_table(rows: &[engine::studies::experiment::Row]) -> String {
-    let mut s = format!(
-        "{:<10} {:<13} {:<14} {:>5} {:>10} {:>7} {:>8} {:>10}\n",
-        "ace", "readout", "countermeasure", "mag", "acc [mas]", "±sem", "CRLB", "predicted"
-    );
-    for r in rows {
-        s.push_str(&format!(
-            "{:<10} {:<13} {:<14} {:>5.1} {:>10.2} {:>7.2} {:>8.2} {:>10.2}\n",
-            r.ace,
-            r.readout,
-            r.countermeasure,
-            r.mag,
-            r.accuracy_mas,
-            r.sem_mas,
-            r.crlb_mas,
-            r.predicted_mas
-        ));
-    }
-    s
-}
-
-fn plot_experiment(dir: &Path, rows: &[engine::studies::experiment::Row]) -> Result<()> {
-    use engine::io::plot::{Scale, Series, line_plot};
-    // one curve per (readout, countermeasure) of the realistic ACE; the static ACE cases only with the plain
-    // analysis (their countermeasures change nothing and would hide the curves that matter); the exact-ePSF
-    // control is in the CSV
-    let mut keys: Vec<(String, String, String)> = Vec::new();
-    for r in rows {
-        let shown = r.countermeasure != "exact-epsf"
-            && (r.ace == "realistic" || r.countermeasure == "none");
-        let k = (r.ace.clone(), r.readout.clone(), r.countermeasure.clone());
-        if shown && !keys.contains(&k) {
-            keys.push(k);
-        }
-    }
-    let mut series: Vec<Series> = keys
-        .iter()
-        .map(|(a, ro, c)| {
-            let pts: Vec<&engine::studies::experiment::Row> = rows
-                .iter()
-                .filter(|r| &r.ace == a && &r.readout == ro && &r.countermeasure == c)
-                .collect();
-            let label = if a == "realistic" {
-                format!("{a} ACE, {ro}, {c}")
-            } else {
-                format!("{a} ACE, {c}")
-            };
-            Series {
-                label,
-                x: pts.iter().map(|r| r.mag).collect(),
-                y: pts.iter().map(|r| r.accuracy_mas).collect(),
-                yerr: Some(pts.iter().map(|r| r.sem_mas).collect()),
-            }
-        })
-        .collect();
-    // the bound of the plain analysis, once per ACE case
-    for a in ["gaussian", "realistic"] {
-        let pts: Vec<&engine::studies::experiment::Row> = rows
-            .iter()
-            .filter(|r| r.ace == a && r.countermeasure == "none")
-            .collect();
-        if !pts.is_empty() && (a == "gaussian" || !rows.iter().any(|r| r.ace == "gaussian")) {
-            let mut seen = Vec::new();
-            let mut x = Vec::new();
-            let mut y = Vec::new();
-            for p in pts {
-                if !seen.contains(&p.mag.to_bits()) {
-                    seen.push(p.mag.to_bits());
-                    x.push(p.mag);
-                    y.push(p.crlb_mas);
-                }
-            }
-            series.push(Series {
-                label: format!("Cramér–Rao bound ({a})"),
-                x,
-                y,
-                yerr: None,
-            });
-        }
-    }
-    line_plot(
-        &dir.join("accuracy.png"),
-        "Single-exposure position accuracy (mean over images ± s.e.m.)",
-        "Hw magnitude",
-        "accuracy per axis [mas]",
-        &series,
-        &[(4.0, "4 mas requirement".to_string())],
-        Scale::Linear,
-        Scale::Log,
-    )?;
     Ok(())
 }
 
 /// `jsim predict`
-pub fn predict(
-    cfg: &Config,
-    names: &[String],
-    plan: &engine::studies::experiment::Plan,
-) -> Result<()> {
+pub fn predict(session: &Session, cfg: &Config, plan: &Plan) -> Result<()> {
     let t0 = Instant::now();
-    let sim = Simulator::new(cfg)?;
+    let sim = session.new_simulator(cfg)?;
     let setup = t0.elapsed().as_secs_f64();
     let t1 = Instant::now();
     let p = engine::analysis::predict::Predictor::new(&sim)?;
@@ -803,9 +346,9 @@ pub fn predict(
         cfg.readout.order.name(),
         cfg.fidelity.images
     );
-    for n in names {
-        let v = p.predict(n, plan).unwrap_or(f64::NAN);
-        println!("  {n:<14} predicted accuracy {v:7.2} mas");
+    for c in &plan.countermeasures {
+        let v = p.predict(c).with_context(|| format!("predicting {c}"))?;
+        println!("  {:<14} predicted accuracy {v:7.2} mas", c.to_string());
     }
     println!(
         "prediction {:.0} ms (after {:.2} s building the PSF and the ACE series, shared with a simulation)",

@@ -4,7 +4,9 @@
 
 use anyhow::{Context, Result, bail};
 use clap::{Args, Parser, Subcommand};
+use engine::analysis::countermeasures::{DEFAULT_TELEMETRY_RATE_HZ, Plan, TelemetryQuality};
 use engine::config::{AceCase, Backend, Config, Method, ReadoutOrder};
+use engine::session::Session;
 use std::path::{Path, PathBuf};
 
 mod bench_cmd;
@@ -168,8 +170,8 @@ enum Command {
         /// Magnitudes (comma separated).
         #[arg(long, default_value = "12,12.5,13,13.5,14,14.5", value_delimiter = ',')]
         mags: Vec<f64>,
-        /// Countermeasures (comma separated): none, yzones, yzones-shared, plate-affine, plate-poly:N, telemetry,
-        /// exact-epsf (control fit with the exact ePSF, static ACE only).
+        /// Countermeasures (comma separated): none, yzones[:K], yzones-shared[:K], plate-affine, plate-poly:N,
+        /// telemetry, exact-epsf (control fit with the exact ePSF, static ACE only).
         #[arg(long, default_value = "none,yzones", value_delimiter = ',')]
         countermeasures: Vec<String>,
         #[command(flatten)]
@@ -207,7 +209,7 @@ pub struct TelemetryArgs {
     #[arg(long = "telemetry-noise-mas", default_value_t = 0.0)]
     pub noise_mas: f64,
     /// Telemetry sampling rate, Hz.
-    #[arg(long = "telemetry-rate-hz", default_value_t = 1000.0)]
+    #[arg(long = "telemetry-rate-hz", default_value_t = DEFAULT_TELEMETRY_RATE_HZ)]
     pub rate_hz: f64,
     /// Telemetry latency, s.
     #[arg(long = "telemetry-latency-s", default_value_t = 0.0)]
@@ -218,47 +220,22 @@ pub struct TelemetryArgs {
 }
 
 impl TelemetryArgs {
-    fn spec(&self) -> engine::studies::experiment::TelemetrySpec {
-        engine::studies::experiment::TelemetrySpec {
+    /// The plan of these countermeasure names with this telemetry quality and reference error, validated
+    /// by the engine (the one place a plan is checked).
+    fn plan<S: AsRef<str>>(&self, names: &[S]) -> Result<Plan> {
+        let q = TelemetryQuality {
             noise_mas: self.noise_mas,
             rate_hz: self.rate_hz,
             latency_s: self.latency_s,
-        }
-    }
-    fn plan(&self, names: &[String]) -> Result<engine::studies::experiment::Plan> {
-        for n in names {
-            if !engine::analysis::predict::known(n) {
-                bail!(
-                    "unknown countermeasure `{n}` (none, yzones, yzones-shared, plate-affine, plate-poly:N, telemetry, exact-epsf)"
-                );
-            }
-        }
-        for (v, what) in [
-            (self.noise_mas, "--telemetry-noise-mas"),
-            (self.reference_error_mas, "--reference-error-mas"),
-        ] {
-            if !(v >= 0.0) || !v.is_finite() {
-                bail!("{what} {v}: must be a finite number ≥ 0");
-            }
-        }
-        if !(self.rate_hz > 0.0) || !self.rate_hz.is_finite() {
-            bail!("--telemetry-rate-hz {}: must be > 0", self.rate_hz);
-        }
-        if !self.latency_s.is_finite() {
-            bail!("--telemetry-latency-s {}: must be finite", self.latency_s);
-        }
-        Ok(engine::studies::experiment::Plan {
-            countermeasures: names.to_vec(),
-            telemetry: self.spec(),
-            reference_error_mas: self.reference_error_mas,
-        })
+        };
+        Ok(Plan::parse(names, q, self.reference_error_mas)?)
     }
 }
 
 /// The countermeasure of `jsim analyze`.
 #[derive(Args, Clone, Debug)]
 pub struct CountermeasureArgs {
-    /// none, yzones, yzones-shared, plate-affine, plate-poly:N or telemetry.
+    /// none, yzones[:K], yzones-shared[:K], plate-affine, plate-poly:N, telemetry or exact-epsf.
     #[arg(long, default_value = "none")]
     pub countermeasure: String,
     #[command(flatten)]
@@ -291,9 +268,9 @@ fn run(cli: Cli) -> Result<()> {
             }
             Ok(())
         }
-        Command::Psf { cfg, out } => cmd::psf(&cfg.load()?, &out),
+        Command::Psf { cfg, out } => cmd::psf(&Session::new(), &cfg.load()?, &out),
         Command::Ace { cfg, out, every } => cmd::ace(&cfg.load()?, &out, every),
-        Command::Simulate { cfg, out } => cmd::simulate(&cfg.load()?, &out),
+        Command::Simulate { cfg, out } => cmd::simulate(&Session::new(), &cfg.load()?, &out),
         Command::Analyze {
             cfg,
             image,
@@ -303,16 +280,20 @@ fn run(cli: Cli) -> Result<()> {
             out,
         } => {
             let c = cfg.load()?;
-            cm.tel.plan(std::slice::from_ref(&cm.countermeasure))?;
+            let plan = cm.tel.plan(std::slice::from_ref(&cm.countermeasure))?;
+            if let Some(z) = epsf_zones
+                && !(2..=64).contains(&z)
+            {
+                bail!("--epsf-zones {z}: allowed 2..=64");
+            }
             cmd::analyze(
+                &Session::new(),
                 &c,
                 &cmd::AnalyzeArgs {
                     image,
                     truth,
                     zones: epsf_zones,
-                    countermeasure: cm.countermeasure,
-                    telemetry: cm.tel.spec(),
-                    reference_error_mas: cm.tel.reference_error_mas,
+                    countermeasure: plan.countermeasures[0],
                     out,
                 },
             )
@@ -340,6 +321,7 @@ fn run(cli: Cli) -> Result<()> {
             }
             let plan = tel.plan(&countermeasures)?;
             cmd::experiment(
+                &Session::new(),
                 &c,
                 &cmd::ExperimentArgs {
                     aces,
@@ -361,7 +343,7 @@ fn run(cli: Cli) -> Result<()> {
         } => {
             let c = cfg.load()?;
             let plan = tel.plan(&countermeasures)?;
-            cmd::predict(&c, &countermeasures, &plan)
+            cmd::predict(&Session::new(), &c, &plan)
         }
     }
 }

@@ -146,7 +146,8 @@ pub fn sweep(a: &SweepArgs) -> Result<()> {
         jobs: a.jobs,
         max_units: a.max_units,
     };
-    let summary = sweep::run_shard(&sw, &a.out, &opts, &mut |ev| match ev {
+    let session = engine::session::Session::new();
+    let summary = sweep::run_shard(&session, &sw, &a.out, &opts, &mut |ev| match ev {
         Event::Salvaged(note) => eprintln!("jsim: resuming from a damaged shard file: {note}"),
         Event::Plan {
             shard_units,

@@ -52,7 +52,7 @@
 //! predictor. Its random streams therefore depend only on (sweep seed, unit index): results do not depend on
 //! how units are split across processes, threads or machines (on the CPU backend; a GPU integrates in single
 //! precision, so pin `fidelity.backend = "cpu"` in the base for bit-reproducible sweeps). PSFs are computed
-//! on one thread ([`Banks`]) so that neither `RAYON_NUM_THREADS` nor `--jobs` changes a bit of the output.
+//! on one thread ([`Session::warm`]) so that neither `RAYON_NUM_THREADS` nor `--jobs` changes a bit of the output.
 //! `--jobs J` computes J units at once in one process; `--max-units K` stops after K new units (a chunk
 //! that fits a time limit; rerun to continue).
 //!
@@ -130,20 +130,19 @@
 //! again: finished units are skipped, so only the missing work is done. The output directory must be on a
 //! file system the compute nodes share.
 
+use crate::analysis::countermeasures::{DEFAULT_TELEMETRY_RATE_HZ, Plan, TelemetryQuality};
 use crate::config::{Config, ConfigError};
 use crate::io::{self, IoError, plot};
 use crate::numerics::stats;
-use crate::optics::PsfBank;
 use crate::rng::{self, Stream};
-use crate::simulate::Simulator;
-use crate::studies::experiment::{self, Plan, TelemetrySpec};
+use crate::session::Session;
+use crate::studies::experiment;
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 use std::collections::{BTreeMap, BTreeSet};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
-use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
 /// Format tag of `sweep.json`.
@@ -291,6 +290,9 @@ pub struct Sweep {
     pub threshold_mas: f64,
     pub common_random_numbers: bool,
     pub plan: Plan,
+    /// The telemetry quality and plate reference error of the plan (recorded in `sweep.json`).
+    pub telemetry: TelemetryQuality,
+    pub reference_error_mas: f64,
     /// The base configuration after `[set]`.
     pub base: Config,
     /// Swept fields, sorted by name.
@@ -372,50 +374,18 @@ impl Sweep {
             )));
         }
 
-        // countermeasures
-        let countermeasures = f.countermeasures.unwrap_or_else(|| vec!["none".into()]);
-        if countermeasures.is_empty() {
-            return Err(ferr(
-                "`countermeasures` is empty: list at least one, e.g. [\"none\"]".into(),
-            ));
-        }
-        for (k, c) in countermeasures.iter().enumerate() {
-            if !crate::analysis::predict::known(c) {
-                return Err(ferr(format!(
-                    "countermeasure `{c}` is unknown (none, yzones, yzones-shared, plate-affine, plate-poly:N, telemetry, exact-epsf)"
-                )));
-            }
-            if countermeasures[..k].contains(c) {
-                return Err(ferr(format!("countermeasure `{c}` is listed twice")));
-            }
-        }
+        // countermeasures: one plan, validated where every plan is
+        let names = f.countermeasures.unwrap_or_else(|| vec!["none".into()]);
         let t = f.telemetry.unwrap_or_default();
-        let telemetry = TelemetrySpec {
+        let telemetry = TelemetryQuality {
             noise_mas: t.noise_mas.unwrap_or(0.0),
-            rate_hz: t.rate_hz.unwrap_or(1000.0),
+            rate_hz: t.rate_hz.unwrap_or(DEFAULT_TELEMETRY_RATE_HZ),
             latency_s: t.latency_s.unwrap_or(0.0),
         };
         let reference_error_mas = t.reference_error_mas.unwrap_or(0.0);
-        for (v, what) in [
-            (telemetry.noise_mas, "telemetry.noise_mas"),
-            (reference_error_mas, "telemetry.reference_error_mas"),
-        ] {
-            if !(v >= 0.0) || !v.is_finite() {
-                return Err(ferr(format!("`{what}` = {v}: must be a finite number ≥ 0")));
-            }
-        }
-        if !(telemetry.rate_hz > 0.0) || !telemetry.rate_hz.is_finite() {
-            return Err(ferr(format!(
-                "`telemetry.rate_hz` = {}: must be > 0",
-                telemetry.rate_hz
-            )));
-        }
-        if !telemetry.latency_s.is_finite() {
-            return Err(ferr(format!(
-                "`telemetry.latency_s` = {}: must be finite",
-                telemetry.latency_s
-            )));
-        }
+        let plan = Plan::parse(&names, telemetry, reference_error_mas)
+            .map_err(|e| ferr(format!("`countermeasures`/`[telemetry]`: {e}")))?;
+        let countermeasures = plan.names();
 
         // base configuration
         let mut base = match &f.base {
@@ -558,11 +528,9 @@ impl Sweep {
             source: source.to_path_buf(),
             seed: f.seed,
             exposures,
-            plan: Plan {
-                countermeasures: countermeasures.clone(),
-                telemetry,
-                reference_error_mas,
-            },
+            plan,
+            telemetry,
+            reference_error_mas,
             countermeasures,
             threshold_mas,
             common_random_numbers,
@@ -628,10 +596,10 @@ impl Sweep {
                 .collect(),
             point_values: self.points.iter().map(|p| p.values.clone()).collect(),
             telemetry: RecordTelemetry {
-                noise_mas: self.plan.telemetry.noise_mas,
-                rate_hz: self.plan.telemetry.rate_hz,
-                latency_s: self.plan.telemetry.latency_s,
-                reference_error_mas: self.plan.reference_error_mas,
+                noise_mas: self.telemetry.noise_mas,
+                rate_hz: self.telemetry.rate_hz,
+                latency_s: self.telemetry.latency_s,
+                reference_error_mas: self.reference_error_mas,
             },
             base_config: self.base.to_toml(),
             engine_version: crate::VERSION.into(),
@@ -1333,35 +1301,6 @@ pub struct RunSummary {
     pub file: PathBuf,
 }
 
-/// PSF banks shared between units whose instrument, optics and band agree. (Every stage of the engine is
-/// bit-identical whatever the number of threads, so units do not depend on `RAYON_NUM_THREADS` or `--jobs`.)
-#[derive(Default)]
-pub struct Banks {
-    banks: Mutex<Vec<Arc<PsfBank>>>,
-}
-
-impl Banks {
-    pub fn for_config(&self, cfg: &Config) -> Arc<PsfBank> {
-        let mut v = self.banks.lock().unwrap_or_else(|e| e.into_inner());
-        if let Some(b) = v.iter().find(|b| b.serves(cfg)) {
-            return b.clone();
-        }
-        let b = Arc::new(PsfBank::new(cfg));
-        v.push(b.clone());
-        b
-    }
-
-    /// Compute every PSF the simulator will ask its bank for.
-    pub fn warm(&self, sim: &Simulator) {
-        for s in &sim.stars {
-            sim.psf_for(s);
-        }
-        if sim.stars.is_empty() {
-            sim.bank().get(sim.cfg.scene.j_minus_h, 0);
-        }
-    }
-}
-
 /// A float as written in the CSVs: the shortest text that reads back to the same value (`1e-17`, `3.25`,
 /// `NaN`, `inf`).
 fn f(v: f64) -> String {
@@ -1370,7 +1309,7 @@ fn f(v: f64) -> String {
 
 /// Compute one unit: simulate, analyse with every countermeasure, predict. Configuration and simulator
 /// errors are returned; an analysis failure of this exposure is recorded in the rows (`status`).
-pub fn compute_unit(sweep: &Sweep, unit: usize, banks: &Banks) -> Result<UnitRows, SweepError> {
+pub fn compute_unit(sweep: &Sweep, unit: usize, session: &Session) -> Result<UnitRows, SweepError> {
     let t0 = Instant::now();
     let (point, exposure) = sweep.unit(unit);
     let cfg = sweep.unit_config(unit);
@@ -1380,19 +1319,23 @@ pub fn compute_unit(sweep: &Sweep, unit: usize, banks: &Banks) -> Result<UnitRow
         exposure,
         message,
     };
-    let sim = Simulator::with_bank(&cfg, banks.for_config(&cfg), None)
+    let sim = session
+        .new_simulator(&cfg)
         .map_err(|e| uerr(e.to_string()))?;
-    banks.warm(&sim);
-    let analysed = experiment::analyse_image(&sim, 0, &sweep.plan);
+    session.warm(&sim);
+    let analysed = experiment::analyse_exposure(&sim, 0, &sweep.plan);
     let tp = Instant::now();
     let predictor = crate::analysis::predict::Predictor::new(&sim).ok();
+    // a prediction that cannot be made is recorded as NaN beside the measured row (the file has no other
+    // place for the reason; `jsim predict` reports it)
     let predicted: Vec<f64> = sweep
+        .plan
         .countermeasures
         .iter()
         .map(|c| {
             predictor
                 .as_ref()
-                .map(|p| p.predict_image(0, c, &sweep.plan))
+                .and_then(|p| p.predict_image(0, c).ok())
                 .unwrap_or(f64::NAN)
         })
         .collect();
@@ -1482,6 +1425,7 @@ fn remove_stale_temps(dir: &Path, shard: Shard) {
 
 /// Run (or resume) one shard of a sweep into `dir`.
 pub fn run_shard(
+    session: &Session,
     sweep: &Sweep,
     dir: &Path,
     opts: &RunOptions,
@@ -1564,7 +1508,6 @@ pub fn run_shard(
     }
     let limit = opts.max_units.unwrap_or(usize::MAX).min(todo.len());
     let jobs = opts.jobs.clamp(1, 256).min(limit.max(1));
-    let banks = Banks::default();
     let next = AtomicUsize::new(0);
     let stop = AtomicBool::new(false);
     let mut computed = 0;
@@ -1573,7 +1516,7 @@ pub fn run_shard(
         let (tx, rx) = std::sync::mpsc::channel::<(usize, f64, Result<UnitRows, SweepError>)>();
         for _ in 0..jobs {
             let tx = tx.clone();
-            let (next, stop, banks, todo) = (&next, &stop, &banks, &todo);
+            let (next, stop, todo) = (&next, &stop, &todo);
             s.spawn(move || {
                 loop {
                     if stop.load(Ordering::SeqCst) {
@@ -1585,7 +1528,7 @@ pub fn run_shard(
                     }
                     let u = todo[k];
                     let tu = Instant::now();
-                    let r = compute_unit(sweep, u, banks);
+                    let r = compute_unit(sweep, u, session);
                     if tx.send((u, tu.elapsed().as_secs_f64(), r)).is_err() {
                         break;
                     }

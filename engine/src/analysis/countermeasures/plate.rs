@@ -1,0 +1,265 @@
+//! The plate models: per exposure, a smooth transformation of the fitted positions onto reference positions,
+//! fitted by least squares over all stars as an astrometric pipeline does against a reference catalogue.
+
+use super::CountermeasureError;
+use crate::analysis::report::StarResult;
+use crate::numerics::linalg;
+use crate::rng::{self, Stream};
+use crate::simulate::TruthRow;
+use rand_distr::{Distribution, Normal};
+
+/// The model of a plate fit: its design row is the one basis shared by the countermeasure and the
+/// predictor. Coordinates are normalised as `u = x/1000 − 1` (≈ [−1, 1] over the 1968-px array) for
+/// conditioning.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PlateModel {
+    /// `Δ = a₀ + a₁u + a₂v` per axis (6 parameters).
+    Affine,
+    /// `Δ = a₀ + a₁u + Σₖ₌₁..N bₖ vᵏ` per axis (2(N + 2) parameters): a polynomial in Y, the direction of the
+    /// rolling readout's displacement pattern.
+    PolyY(usize),
+}
+
+/// Largest order of `plate-poly:N`.
+pub const MAX_PLATE_ORDER: usize = 8;
+
+impl PlateModel {
+    /// One design row at detector position (x, y) px.
+    pub fn basis(&self, x: f64, y: f64) -> Vec<f64> {
+        let (u, v) = (x / 1000.0 - 1.0, y / 1000.0 - 1.0);
+        match *self {
+            PlateModel::Affine => vec![1.0, u, v],
+            PlateModel::PolyY(n) => {
+                let mut row = vec![1.0, u];
+                row.extend((1..=n).map(|k| v.powi(k as i32)));
+                row
+            }
+        }
+    }
+
+    /// Parameters per axis.
+    pub fn n_params(&self) -> usize {
+        match *self {
+            PlateModel::Affine => 3,
+            PlateModel::PolyY(n) => n + 2,
+        }
+    }
+
+    /// Fit the model to per-star displacements (one axis) by unweighted least squares and return the
+    /// residuals; `None` when the positions do not constrain the model.
+    pub fn residuals(&self, positions: &[(f64, f64)], values: &[f64]) -> Option<Vec<f64>> {
+        let p = self.n_params();
+        let design: Vec<f64> = positions
+            .iter()
+            .flat_map(|&(x, y)| self.basis(x, y))
+            .collect();
+        let w = vec![1.0; values.len()];
+        let (c, _) = linalg::weighted_lstsq(&design, values, &w, p)?;
+        Some(
+            values
+                .iter()
+                .enumerate()
+                .map(|(k, y)| {
+                    y - design[k * p..(k + 1) * p]
+                        .iter()
+                        .zip(&c)
+                        .map(|(a, b)| a * b)
+                        .sum::<f64>()
+                })
+                .collect(),
+        )
+    }
+}
+
+/// Reference positions: the truth, plus its own error when asked (seeded).
+pub(super) fn reference(truth: &[TruthRow], k: usize, err_px: f64, seed: u64) -> (f64, f64) {
+    if err_px > 0.0 {
+        let mut r = rng::stream(seed, Stream::ReferenceCatalogue, truth[k].id as u64);
+        let n = Normal::new(0.0, err_px)
+            .map(|n| (n.sample(&mut r), n.sample(&mut r)))
+            .unwrap_or((0.0, 0.0));
+        (truth[k].x_px + n.0, truth[k].y_px + n.1)
+    } else {
+        (truth[k].x_px, truth[k].y_px)
+    }
+}
+
+/// Fit Δ = design · coefficients per axis over the matched, usable stars, subtract, and return the number of
+/// parameters absorbed.
+pub fn plate_fit(
+    stars: &mut [StarResult],
+    truth: &[TruthRow],
+    model: PlateModel,
+    what: &str,
+    err_px: f64,
+    seed: u64,
+) -> Result<usize, CountermeasureError> {
+    let idx: Vec<usize> = (0..stars.len()).filter(|&k| stars[k].is_used()).collect();
+    let p = model.n_params();
+    if idx.len() <= p {
+        return Err(CountermeasureError::TooFewStars {
+            what: what.into(),
+            need: p + 1,
+            have: idx.len(),
+        });
+    }
+    let mut design = Vec::with_capacity(idx.len() * p);
+    let (mut rx, mut ry) = (Vec::new(), Vec::new());
+    for &k in &idx {
+        let s = &stars[k];
+        let (xr, yr) = reference(truth, s.truth.unwrap_or(0), err_px, seed);
+        design.extend(model.basis(s.x, s.y));
+        // the correction maps fitted → reference: Δ = reference − fitted
+        rx.push(xr - s.x);
+        ry.push(yr - s.y);
+    }
+    let w = vec![1.0; idx.len()];
+    let (cx, _) = linalg::weighted_lstsq(&design, &rx, &w, p)
+        .ok_or_else(|| CountermeasureError::Degenerate { what: what.into() })?;
+    let (cy, _) = linalg::weighted_lstsq(&design, &ry, &w, p)
+        .ok_or_else(|| CountermeasureError::Degenerate { what: what.into() })?;
+    for s in stars.iter_mut() {
+        let b = model.basis(s.x, s.y);
+        let (ddx, ddy) = (
+            b.iter().zip(&cx).map(|(a, c)| a * c).sum::<f64>(),
+            b.iter().zip(&cy).map(|(a, c)| a * c).sum::<f64>(),
+        );
+        s.x += ddx;
+        s.y += ddy;
+        s.dx_px += ddx;
+        s.dy_px += ddy;
+    }
+    Ok(2 * p)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn star(x: f64, y: f64, dx: f64, dy: f64, k: usize) -> StarResult {
+        StarResult {
+            truth: Some(k),
+            x: x + dx,
+            y: y + dy,
+            flux_e: 1e4,
+            sky_e: 0.0,
+            crlb_x_px: 0.01,
+            crlb_y_px: 0.01,
+            flags: 0,
+            dx_px: dx,
+            dy_px: dy,
+            predicted_dx_px: 0.0,
+            predicted_dy_px: 0.0,
+            predicted_fit_dx_px: 0.0,
+            predicted_fit_dy_px: 0.0,
+        }
+    }
+
+    fn truth_at(pos: &[(f64, f64)]) -> Vec<TruthRow> {
+        pos.iter()
+            .enumerate()
+            .map(|(k, &(x, y))| TruthRow {
+                id: k,
+                x_px: x,
+                y_px: y,
+                mag_hw: 12.5,
+                j_minus_h: 2.0,
+                flux_e: 1e4,
+                modelled_fraction: 1.0,
+                t_start_s: 0.0,
+                exptime_s: 12.5,
+                jitter_dx_px: 0.0,
+                jitter_dy_px: 0.0,
+            })
+            .collect()
+    }
+
+    #[test]
+    fn plate_poly_removes_a_displacement_field_of_matching_order() {
+        let pos: Vec<(f64, f64)> = (0..100)
+            .map(|k| {
+                (
+                    50.0 + (k % 10) as f64 * 190.0,
+                    40.0 + (k / 10) as f64 * 195.0,
+                )
+            })
+            .collect();
+        let truth = truth_at(&pos);
+        // a cubic displacement along Y, plus a shift and a rotation-like term
+        let field = |x: f64, y: f64| {
+            let yn = y / 1000.0 - 1.0;
+            (
+                0.02 + 0.01 * (x / 1000.0 - 1.0) + 0.05 * yn - 0.03 * yn.powi(3),
+                -0.01 + 0.04 * yn * yn,
+            )
+        };
+        let mut stars: Vec<StarResult> = pos
+            .iter()
+            .enumerate()
+            .map(|(k, &(x, y))| {
+                let (dx, dy) = field(x, y);
+                star(x, y, dx, dy, k)
+            })
+            .collect();
+        let dof = plate_fit(
+            &mut stars,
+            &truth,
+            PlateModel::PolyY(3),
+            "plate-poly:3",
+            0.0,
+            0,
+        )
+        .expect("fit");
+        assert_eq!(dof, 10);
+        // the field is a polynomial of the true positions and the model one of the measured positions: the
+        // difference is second order in the field (here < 1e-6 px = 5e-4 mas)
+        for s in &stars {
+            assert!(
+                s.dx_px.abs() < 1e-6 && s.dy_px.abs() < 1e-6,
+                "{} {}",
+                s.dx_px,
+                s.dy_px
+            );
+        }
+    }
+
+    #[test]
+    fn plate_fit_degenerate_inputs_are_named_errors() {
+        let pos: Vec<(f64, f64)> = (0..3).map(|k| (k as f64 * 100.0, 500.0)).collect();
+        let truth = truth_at(&pos);
+        let mut stars: Vec<StarResult> = pos
+            .iter()
+            .enumerate()
+            .map(|(k, &(x, y))| star(x, y, 0.1, 0.0, k))
+            .collect();
+        let e = plate_fit(
+            &mut stars,
+            &truth,
+            PlateModel::Affine,
+            "plate-affine",
+            0.0,
+            0,
+        )
+        .expect_err("too few");
+        assert!(matches!(e, CountermeasureError::TooFewStars { .. }), "{e}");
+        // all stars in one row: y has no lever arm
+        let pos: Vec<(f64, f64)> = (0..20).map(|k| (k as f64 * 90.0, 500.0)).collect();
+        let truth = truth_at(&pos);
+        let mut stars: Vec<StarResult> = pos
+            .iter()
+            .enumerate()
+            .map(|(k, &(x, y))| star(x, y, 0.1, 0.0, k))
+            .collect();
+        let e = plate_fit(
+            &mut stars,
+            &truth,
+            PlateModel::Affine,
+            "plate-affine",
+            0.0,
+            0,
+        )
+        .expect_err("one row");
+        assert!(matches!(e, CountermeasureError::Degenerate { .. }), "{e}");
+        assert!(stars.iter().all(|s| s.dx_px.is_finite()));
+    }
+}

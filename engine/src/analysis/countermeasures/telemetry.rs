@@ -1,0 +1,150 @@
+//! The `telemetry` countermeasure: the attitude telemetry of an exposure, degraded as the instrument would
+//! record it, turned into each star's fitted shift through the fit's response to the jitter of its pixels'
+//! window ([`crate::analysis::response`]; the optical PSF is taken as known from calibration).
+
+use super::{CountermeasureError, TelemetryQuality};
+use crate::analysis::response::{FitNoise, FitResponse};
+use crate::integrate::kernel::PixelKernel;
+use crate::integrate::track::Track;
+use crate::jitter::AceSeries;
+use crate::readout::ReadoutTiming;
+use crate::rng::{self, Stream};
+use rand_distr::{Distribution, Normal};
+
+/// Degraded attitude telemetry of one exposure, and the fit displacements it predicts.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Telemetry {
+    /// Telemetry resampled (linearly) onto a regular grid, px, times relative to the exposure start.
+    pub track: Track,
+    pub timing: ReadoutTiming,
+    /// The ePSF fit's response to jitter under this telemetry ([`crate::analysis::response`]).
+    pub response: FitResponse,
+}
+
+impl Telemetry {
+    /// Sample `series` at the quality's `rate_hz` with `noise_mas` Gaussian noise per sample (seeded),
+    /// reporting at time t the attitude of time t − `latency_s`, over one exposure; interpolate linearly between samples; and
+    /// build the fit response from the PSF's pixel kernel.
+    pub fn from_series(
+        series: &AceSeries,
+        timing: ReadoutTiming,
+        exposure_start_s: f64,
+        plate_scale_mas: f64,
+        quality: &TelemetryQuality,
+        seed: u64,
+        kernel: &PixelKernel,
+        noise: &FitNoise,
+    ) -> Result<Self, CountermeasureError> {
+        quality.validate()?;
+        let TelemetryQuality {
+            noise_mas,
+            rate_hz,
+            latency_s,
+        } = *quality;
+        if series.is_empty() {
+            return Err(CountermeasureError::Telemetry(
+                "the ACE series is empty (zero-length telemetry)".into(),
+            ));
+        }
+        let dt = 1.0 / rate_hz;
+        let span = timing.span_s();
+        let (t0, t1) = (
+            exposure_start_s - 2.0 * dt,
+            exposure_start_s + span + 2.0 * dt,
+        );
+        let n = ((t1 - t0) / dt).ceil() as usize + 1;
+        if n > 50_000_000 {
+            return Err(CountermeasureError::Telemetry(format!(
+                "{n} samples: rate too high"
+            )));
+        }
+        let normal = Normal::new(0.0, noise_mas.max(0.0))
+            .map_err(|e| CountermeasureError::Telemetry(e.to_string()))?;
+        let mut r = rng::stream(seed, Stream::Telemetry, (exposure_start_s * 1e3) as u64);
+        let at = |t: f64, v: &[f64]| -> f64 {
+            let i = (t / series.dt_s).round().clamp(0.0, (v.len() - 1) as f64) as usize;
+            v[i]
+        };
+        let (mut xs, mut ys) = (Vec::with_capacity(n), Vec::with_capacity(n));
+        for k in 0..n {
+            let t = t0 + k as f64 * dt;
+            xs.push(at(t - latency_s, &series.x_mas) + normal.sample(&mut r));
+            ys.push(at(t - latency_s, &series.y_mas) + normal.sample(&mut r));
+        }
+        // resample on the integration grid (at most 1 ms, and no coarser than the series)
+        let step = series.dt_s.max(dt.min(1e-3) / 4.0).min(1e-3);
+        let m = (span / step).ceil() as usize + 2;
+        let lin = |t_abs: f64, v: &[f64]| -> f64 {
+            let u = ((t_abs - t0) / dt).clamp(0.0, (n - 1) as f64);
+            let i = (u.floor() as usize).min(n.saturating_sub(2));
+            let f = u - i as f64;
+            if n < 2 {
+                v[0]
+            } else {
+                v[i] * (1.0 - f) + v[i + 1] * f
+            }
+        };
+        let track = Track::new(
+            step,
+            0.0,
+            (0..m)
+                .map(|j| lin(exposure_start_s + j as f64 * step, &xs) / plate_scale_mas)
+                .collect(),
+            (0..m)
+                .map(|j| lin(exposure_start_s + j as f64 * step, &ys) / plate_scale_mas)
+                .collect(),
+        );
+        let nominal = track.window(timing.t_overhead_s, timing.t_overhead_s + timing.exposure_s);
+        let response = FitResponse::build(kernel, &track, &nominal, noise);
+        Ok(Self {
+            track,
+            timing,
+            response,
+        })
+    }
+
+    /// The fit displacement (px) telemetry predicts for stars at these positions.
+    pub fn predicted_px(&self, positions: &[(f64, f64)]) -> Vec<(f64, f64)> {
+        self.response
+            .displacements(&self.track, &self.timing, positions)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn telemetry_input_errors_are_named() {
+        let cfg = crate::config::Config::default();
+        let timing = ReadoutTiming::new(&cfg);
+        let psf = crate::integrate::cpu::tests::test_psf(4, 4);
+        let k = PixelKernel::build(&psf, &crate::integrate::kernel::IntraPixelMap::uniform(4))
+            .expect("kernel");
+        let nm = FitNoise {
+            flux_e: 7e4,
+            sky_e: 300.0,
+            floor_e2: 226.0,
+            radius_px: 2.5,
+        };
+        let q = |noise_mas, rate_hz| TelemetryQuality {
+            noise_mas,
+            rate_hz,
+            latency_s: 0.0,
+        };
+        let empty = AceSeries::still(1e-3, 0);
+        let e = Telemetry::from_series(&empty, timing, 0.0, 472.0, &q(1.0, 10.0), 1, &k, &nm)
+            .expect_err("empty");
+        assert!(e.to_string().contains("zero-length"));
+        let s = AceSeries::still(1e-3, 20_000);
+        for (bad, what) in [
+            (q(f64::NAN, 10.0), "noise"),
+            (q(1.0, 0.0), "rate"),
+            (q(1.0, 1e7), "rate"),
+        ] {
+            let e =
+                Telemetry::from_series(&s, timing, 0.0, 472.0, &bad, 1, &k, &nm).expect_err(what);
+            assert!(e.to_string().contains(what), "{e}");
+        }
+    }
+}

@@ -1,0 +1,337 @@
+//! The per-image analysis pipeline: detect → global ePSF → fits → each countermeasure of a [`Plan`] → the
+//! ACE prediction → report. `jsim analyze`, `jsim experiment`, the sweeps and the explorer all run
+//! [`analyse_image`]; the pieces ([`analyze_prepared`], [`with_countermeasure`], [`analyze`]) are public for
+//! the tests and for studies that need one step alone.
+
+use crate::analysis::AnalysisError;
+use crate::analysis::countermeasures::{self, Context, Countermeasure, Plan, Telemetry};
+use crate::analysis::detection::{detect, match_truth, starts};
+use crate::analysis::epsf::Epsf;
+use crate::analysis::epsf::build::{self, BuildOptions, StarStart};
+use crate::analysis::epsf::fit::{FitOptions, StarFit, fit_star, flags};
+use crate::analysis::image::AnalysisImage;
+use crate::analysis::report::{Report, StarResult, attach_fit_prediction, star_results, summarise};
+use crate::analysis::response::{FitNoise, FitResponse};
+use crate::config::{AceCase, Analysis as AnalysisCfg};
+use crate::integrate::kernel::PixelKernel;
+use crate::simulate::{Simulator, TruthRow};
+use rayon::prelude::*;
+use std::sync::Arc;
+
+/// Everything the analysis of one image produced.
+#[derive(Debug, Clone)]
+pub struct Analysis {
+    pub report: Report,
+    pub stars: Vec<StarResult>,
+    pub epsf: Epsf,
+}
+
+/// Options of one analysis: the configured knobs, a countermeasure with what it needs, and an optional
+/// fixed ePSF (the control).
+#[derive(Debug, Clone)]
+pub struct Options {
+    pub cfg: AnalysisCfg,
+    pub countermeasure: Countermeasure,
+    /// The exposure's telemetry, for [`Countermeasure::Telemetry`] (none: nothing to correct).
+    pub telemetry: Option<Arc<Telemetry>>,
+    /// Seed of the reference catalogue's error draws (the simulation's seed).
+    pub seed: u64,
+    /// Fit with this ePSF instead of building one (e.g. the exact ePSF from the simulator).
+    pub fixed_epsf: Option<Epsf>,
+}
+
+impl Options {
+    pub fn new(cfg: &AnalysisCfg) -> Self {
+        Self {
+            cfg: cfg.clone(),
+            countermeasure: Countermeasure::None,
+            telemetry: None,
+            seed: 0,
+            fixed_epsf: None,
+        }
+    }
+
+    pub fn build_options(&self) -> BuildOptions {
+        build_options(&self.cfg)
+    }
+}
+
+/// The ePSF builder's options from the analysis configuration.
+pub fn build_options(cfg: &AnalysisCfg) -> BuildOptions {
+    BuildOptions {
+        oversampling: cfg.epsf_oversampling,
+        half_px: cfg.epsf_radius_px,
+        iterations: cfg.epsf_iterations,
+        smoothing: cfg.smoothing,
+        clip_sigma: cfg.clip_sigma,
+        fit: FitOptions {
+            radius_px: cfg.fit_radius_px,
+            max_iter: cfg.fit_max_iter,
+            fit_sky: cfg.fit_sky,
+        },
+        recentre: true,
+    }
+}
+
+/// What the global analysis of an image prepared: enough to apply further countermeasures to its fits
+/// without detecting the stars and building the ePSF again.
+#[derive(Debug, Clone)]
+pub struct Prepared {
+    pub starts: Vec<StarStart>,
+    pub usable: Vec<bool>,
+    pub build: BuildOptions,
+    /// Zones of `yzones` without `:K`.
+    pub default_zones: usize,
+}
+
+/// Analyse one image: detect, build (or take) the ePSF, fit, apply the countermeasure, report.
+pub fn analyze(
+    img: &AnalysisImage,
+    truth: Option<&[TruthRow]>,
+    opts: &Options,
+) -> Result<Analysis, AnalysisError> {
+    let (plain, prepared) = analyze_prepared(img, truth, opts)?;
+    with_countermeasure(
+        img,
+        truth,
+        &plain,
+        &prepared,
+        &opts.countermeasure,
+        opts.telemetry.as_deref(),
+        opts.seed,
+    )
+}
+
+/// The analysis without a countermeasure, and what it prepared for [`with_countermeasure`].
+pub fn analyze_prepared(
+    img: &AnalysisImage,
+    truth: Option<&[TruthRow]>,
+    opts: &Options,
+) -> Result<(Analysis, Prepared), AnalysisError> {
+    let det = detect(img, opts.cfg.detect_sigma);
+    if det.is_empty() {
+        return Err(AnalysisError::NoStars(opts.cfg.detect_sigma));
+    }
+    let (starts, usable) = starts(img, &det, &opts.cfg);
+    let initial: Vec<(f64, f64)> = starts.iter().map(|s| (s.x, s.y)).collect();
+    let matches = match truth {
+        Some(t) => match_truth(&initial, t),
+        None => vec![None; initial.len()],
+    };
+    let bopt = opts.build_options();
+    let pd = img.pixels();
+    let (mut fits, epsf, iterations) = match &opts.fixed_epsf {
+        Some(e) => {
+            let fits: Vec<StarFit> = starts
+                .par_iter()
+                .map(|s| fit_star(&pd, e, s.x, s.y, s.flux, s.sky, &bopt.fit))
+                .collect();
+            (fits, e.clone(), 0)
+        }
+        None => {
+            let built = build::build(&pd, &starts, &usable, &bopt, None, None);
+            (built.fits, built.epsf, built.iterations)
+        }
+    };
+    flags::mark_poor_fits(&mut fits);
+    let stars = star_results(&fits, &matches, truth);
+    let mut report = Report {
+        n_detected: det.len(),
+        epsf_iterations: iterations,
+        countermeasure: Countermeasure::None.to_string(),
+        ..Default::default()
+    };
+    summarise(&stars, truth, img.plate_scale_mas, &mut report);
+    Ok((
+        Analysis {
+            report,
+            stars,
+            epsf,
+        },
+        Prepared {
+            starts,
+            usable,
+            build: bopt,
+            default_zones: opts.cfg.epsf_zones.max(2),
+        },
+    ))
+}
+
+/// Apply a countermeasure to the plain analysis of an image (from [`analyze_prepared`]) and report.
+pub fn with_countermeasure(
+    img: &AnalysisImage,
+    truth: Option<&[TruthRow]>,
+    plain: &Analysis,
+    prepared: &Prepared,
+    cm: &Countermeasure,
+    telemetry: Option<&Telemetry>,
+    seed: u64,
+) -> Result<Analysis, AnalysisError> {
+    let mut stars = plain.stars.clone();
+    let mut report = Report {
+        n_detected: plain.report.n_detected,
+        epsf_iterations: plain.report.epsf_iterations,
+        countermeasure: cm.to_string(),
+        ..Default::default()
+    };
+    let ctx = Context {
+        img,
+        starts: &prepared.starts,
+        usable: &prepared.usable,
+        build: &prepared.build,
+        global: &plain.epsf,
+        truth,
+        default_zones: prepared.default_zones,
+        telemetry,
+        seed,
+    };
+    report.dof_absorbed = countermeasures::apply(cm, &ctx, &mut stars)?;
+    summarise(&stars, truth, img.plate_scale_mas, &mut report);
+    Ok(Analysis {
+        report,
+        stars,
+        epsf: plain.epsf.clone(),
+    })
+}
+
+/// The exact ePSF of a static simulation: its pixel kernel (PSF ⊛ Gaussian ACE ⊛ pixel) sampled at 8 nodes
+/// per pixel. Only meaningful when every star shares one kernel and the ACE is static.
+pub fn exact_epsf(kernel: &PixelKernel, half_px: usize) -> Epsf {
+    let mut e = Epsf::from_fn(8, half_px, |x, y| kernel.eval(x, y));
+    e.normalise();
+    e
+}
+
+/// The simulated exposure an image came from: what only a simulation knows (the ACE series behind the
+/// telemetry and the ACE prediction, the exact ePSF of the control).
+#[derive(Clone, Copy)]
+pub struct Source<'a> {
+    pub sim: &'a Simulator,
+    /// The exposure's index in the simulator's dataset.
+    pub index: usize,
+}
+
+impl Source<'_> {
+    /// Noise parameters of a typical star's fit in this simulation, with the analysis' fit radius.
+    fn fit_noise(&self, cfg: &AnalysisCfg) -> FitNoise {
+        FitNoise::of_simulation(self.sim, cfg.fit_radius_px)
+    }
+
+    /// The exposure's telemetry of the given quality, `None` for a static ACE (nothing to correct).
+    pub fn telemetry(
+        &self,
+        quality: &countermeasures::TelemetryQuality,
+        cfg: &AnalysisCfg,
+    ) -> Result<Option<Telemetry>, AnalysisError> {
+        let Some(series) = self.sim.series() else {
+            return Ok(None);
+        };
+        let sim = self.sim;
+        Ok(Some(Telemetry::from_series(
+            series,
+            sim.timing,
+            sim.exposure_start_s(self.index),
+            sim.cfg.instrument.plate_scale_mas(),
+            quality,
+            sim.cfg.seed,
+            &*sim.optical_kernel()?,
+            &self.fit_noise(cfg),
+        )?))
+    }
+
+    /// Attach to an analysis the fit displacement the true ACE predicts for every star (realistic ACE only;
+    /// the mechanism, shown beside the measured errors) and refresh its report.
+    pub fn attach_ace_prediction(
+        &self,
+        truth: &[TruthRow],
+        analysis: &mut Analysis,
+        cfg: &AnalysisCfg,
+        plate_scale_mas: f64,
+    ) -> Result<(), AnalysisError> {
+        let sim = self.sim;
+        if let Some(track) = sim.track(self.index) {
+            let resp = FitResponse::build(
+                &*sim.optical_kernel()?,
+                &track,
+                &sim.nominal_window(&track),
+                &self.fit_noise(cfg),
+            );
+            let pos: Vec<(f64, f64)> = truth.iter().map(|t| (t.x_px, t.y_px)).collect();
+            let pred = resp.displacements(&track, &sim.timing, &pos);
+            attach_fit_prediction(&mut analysis.stars, &pred);
+            summarise(
+                &analysis.stars,
+                Some(truth),
+                plate_scale_mas,
+                &mut analysis.report,
+            );
+        }
+        Ok(())
+    }
+}
+
+/// One image analysed under a plan.
+#[derive(Debug, Clone)]
+pub struct ImageAnalysis {
+    /// The global-ePSF analysis, with the ACE prediction attached when the image is a simulated one with a
+    /// realistic ACE (the result of countermeasure `none`).
+    pub global: Analysis,
+    /// One analysis per countermeasure of the plan that applies to this image, in plan order (`exact-epsf`
+    /// applies only to a simulated image with a static ACE).
+    pub measured: Vec<(Countermeasure, Analysis)>,
+}
+
+impl ImageAnalysis {
+    /// The analysis of one countermeasure, if it applied.
+    pub fn of(&self, cm: &Countermeasure) -> Option<&Analysis> {
+        self.measured.iter().find(|(c, _)| c == cm).map(|(_, a)| a)
+    }
+}
+
+/// The pipeline: analyse one image under every countermeasure of `plan`, detecting the stars and building
+/// the global ePSF once. `source` is the simulation the image came from, when known (without it the
+/// telemetry has no ACE series to correct with and the exact-ePSF control does not apply); `seed` draws the
+/// reference catalogue's errors.
+pub fn analyse_image(
+    img: &AnalysisImage,
+    truth: Option<&[TruthRow]>,
+    source: Option<Source<'_>>,
+    cfg: &AnalysisCfg,
+    plan: &Plan,
+    seed: u64,
+) -> Result<ImageAnalysis, AnalysisError> {
+    let base = Options::new(cfg);
+    let (plain, prepared) = analyze_prepared(img, truth, &base)?;
+    let mut global = plain.clone();
+    if let (Some(src), Some(t)) = (source, truth) {
+        src.attach_ace_prediction(t, &mut global, cfg, img.plate_scale_mas)?;
+    }
+    let mut measured = Vec::with_capacity(plan.countermeasures.len());
+    for cm in &plan.countermeasures {
+        let analysis = match cm {
+            Countermeasure::None => global.clone(),
+            Countermeasure::ExactEpsf => {
+                let Some(src) = source.filter(|s| s.sim.cfg.ace.case != AceCase::Realistic) else {
+                    continue;
+                };
+                let jobs = src.sim.jobs()?;
+                let Some(j) = jobs.first() else { continue };
+                let mut o = base.clone();
+                o.fixed_epsf = Some(exact_epsf(&j.kernel, cfg.epsf_radius_px));
+                analyze(img, truth, &o)?
+            }
+            Countermeasure::Telemetry(q) => {
+                match source.map(|s| s.telemetry(q, cfg)).transpose()?.flatten() {
+                    // a static ACE (or an image without its simulation) has nothing to correct
+                    None => global.clone(),
+                    Some(tel) => {
+                        with_countermeasure(img, truth, &plain, &prepared, cm, Some(&tel), seed)?
+                    }
+                }
+            }
+            other => with_countermeasure(img, truth, &plain, &prepared, other, None, seed)?,
+        };
+        measured.push((*cm, analysis));
+    }
+    Ok(ImageAnalysis { global, measured })
+}

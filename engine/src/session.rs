@@ -1,0 +1,158 @@
+//! The engine session: the long-lived object every front end holds (the CLI, the explorer's worker, the
+//! experiment, the benchmarks, the sweeps, the Python module). It owns what is expensive and shareable —
+//! PSF banks, pixel kernels, the integrator (CPU or GPU, chosen once per backend with its message) and the
+//! last few datasets' simulators — and hands out [`Simulator`]s built from them.
+//!
+//! Every stage is bit-identical whatever is cached: a simulator from a session gives the same image as one
+//! built alone ([`Simulator::new`]).
+
+use crate::config::{Backend, Config};
+use crate::integrate::Integrator;
+use crate::integrate::kernel::KernelCache;
+use crate::optics::PsfBank;
+use crate::simulate::{SimError, Simulator};
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex, MutexGuard};
+
+/// At most this many PSF banks (distinct instrument/optics/band) are kept; the oldest goes first.
+pub const MAX_BANKS: usize = 8;
+/// At most this many simulators (distinct datasets) are kept; the oldest goes first.
+pub const MAX_SIMULATORS: usize = 4;
+
+/// The engine session.
+#[derive(Default)]
+pub struct Session {
+    integrators: Mutex<HashMap<Backend, Integrator>>,
+    notes: Mutex<Vec<String>>,
+    banks: Mutex<Vec<Arc<PsfBank>>>,
+    kernels: Arc<KernelCache>,
+    simulators: Mutex<Vec<(String, Arc<Simulator>)>>,
+}
+
+fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// The key of a dataset's simulation: its configuration without the analysis knobs (which no simulated
+/// image depends on).
+pub fn simulation_key(cfg: &Config) -> String {
+    let mut c = cfg.clone();
+    c.analysis = Default::default();
+    c.hash_hex()
+}
+
+impl Session {
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// The integrator of a backend, chosen on first use ([`Integrator::choose`]); when the CPU stands in
+    /// for a GPU the reason is queued once for [`Session::take_notes`].
+    pub fn integrator(&self, backend: Backend) -> Integrator {
+        let mut m = lock(&self.integrators);
+        if let Some(i) = m.get(&backend) {
+            return i.clone();
+        }
+        let (i, note) = Integrator::choose(backend);
+        if let Some(n) = note {
+            lock(&self.notes).push(n);
+        }
+        m.insert(backend, i.clone());
+        i
+    }
+
+    /// Messages about the backend not yet shown (each is returned once).
+    pub fn take_notes(&self) -> Vec<String> {
+        std::mem::take(&mut *lock(&self.notes))
+    }
+
+    /// The PSF bank that serves `cfg` (shared by every configuration with the same instrument, optics and
+    /// band).
+    pub fn bank(&self, cfg: &Config) -> Arc<PsfBank> {
+        let mut v = lock(&self.banks);
+        if let Some(b) = v.iter().find(|b| b.serves(cfg)) {
+            return b.clone();
+        }
+        let b = Arc::new(PsfBank::new(cfg));
+        if v.len() >= MAX_BANKS {
+            v.remove(0);
+        }
+        v.push(b.clone());
+        b
+    }
+
+    /// A new simulator of `cfg` (validated) on the session's bank, kernels and integrator.
+    pub fn new_simulator(&self, cfg: &Config) -> Result<Simulator, SimError> {
+        cfg.validate()?;
+        Simulator::build(
+            cfg,
+            self.bank(cfg),
+            self.kernels.clone(),
+            self.integrator(cfg.fidelity.backend),
+        )
+    }
+
+    /// The simulator of `cfg`, reused while only the analysis knobs change (the last
+    /// [`MAX_SIMULATORS`] datasets are kept). Its `cfg.analysis` is the one it was built with: pass the
+    /// analysis configuration to the pipeline explicitly.
+    pub fn simulator(&self, cfg: &Config) -> Result<Arc<Simulator>, SimError> {
+        let key = simulation_key(cfg);
+        if let Some((_, s)) = lock(&self.simulators).iter().find(|(k, _)| *k == key) {
+            return Ok(s.clone());
+        }
+        let s = Arc::new(self.new_simulator(cfg)?);
+        let mut v = lock(&self.simulators);
+        if v.len() >= MAX_SIMULATORS {
+            v.remove(0);
+        }
+        v.push((key, s.clone()));
+        Ok(s)
+    }
+
+    /// Whether the simulator of `cfg` is cached (no PSF, ACE series or scene to compute).
+    pub fn has_simulator(&self, cfg: &Config) -> bool {
+        let key = simulation_key(cfg);
+        lock(&self.simulators).iter().any(|(k, _)| *k == key)
+    }
+
+    /// Whether the PSFs of `cfg` are at hand.
+    pub fn has_bank(&self, cfg: &Config) -> bool {
+        lock(&self.banks).iter().any(|b| b.serves(cfg))
+    }
+
+    /// Compute every PSF the simulator will ask its bank for (so that the timing of its first exposure
+    /// shows integration alone).
+    pub fn warm(&self, sim: &Simulator) {
+        for s in &sim.stars {
+            sim.psf_for(s);
+        }
+        if sim.stars.is_empty() {
+            sim.bank().get(sim.cfg.scene.j_minus_h, 0);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn simulators_are_shared_while_only_the_analysis_changes() {
+        let s = Session::new();
+        let mut cfg = Config::default();
+        cfg.fidelity.backend = Backend::Cpu;
+        cfg.ace.case = crate::config::AceCase::Gaussian;
+        cfg.scene.grid_n = 2;
+        cfg.optics.pupil_samples = 64;
+        let a = s.simulator(&cfg).expect("sim");
+        cfg.analysis.epsf_iterations += 1;
+        let b = s.simulator(&cfg).expect("sim");
+        assert!(Arc::ptr_eq(&a, &b));
+        cfg.scene.mag_hw += 1.0;
+        let c = s.simulator(&cfg).expect("sim");
+        assert!(!Arc::ptr_eq(&a, &c));
+        // a different magnitude shares the optics: one bank
+        assert!(Arc::ptr_eq(&a.bank(), &c.bank()));
+        assert!(s.take_notes().is_empty());
+    }
+}
