@@ -4,8 +4,8 @@
 mod common;
 
 use common::{gaussian_image, grid_stars};
-use engine::analysis::astrometry::{self, Options};
 use engine::analysis::epsf::fit::flags;
+use engine::analysis::pipeline::{self as astrometry, Options};
 use engine::config::Analysis;
 use engine::numerics::stats;
 

@@ -4,13 +4,12 @@
 mod common;
 
 use common::small_config;
-use engine::analysis::astrometry::{self, AnalysisImage, Options};
-use engine::analysis::countermeasures::{Countermeasure, Telemetry};
-use engine::analysis::response::FitResponse;
+use engine::analysis::countermeasures::{Plan, Telemetry, TelemetryQuality};
+use engine::analysis::response::{FitNoise, FitResponse};
+use engine::analysis::{AnalysisImage, Source, analyse_image};
 use engine::config::ReadoutOrder;
 use engine::numerics::stats;
 use engine::simulate::Simulator;
-use std::sync::Arc;
 
 fn rms_mas(v: &[(f64, f64)], scale: f64) -> f64 {
     let x: Vec<f64> = v.iter().map(|p| p.0 * scale).collect();
@@ -25,7 +24,7 @@ fn perfect_telemetry_removes_the_predicted_displacement() {
     let sim = Simulator::new(&c).expect("sim");
     let track = sim.track(0).expect("track");
     let kernel = sim.optical_kernel().expect("kernel");
-    let noise = sim.fit_noise();
+    let noise = FitNoise::of_simulation(&sim, c.analysis.fit_radius_px);
     let pos: Vec<(f64, f64)> = sim.stars.iter().map(|s| (s.x_px, s.y_px)).collect();
     let truth = FitResponse::build(&kernel, &track, &sim.nominal_window(&track), &noise)
         .displacements(&track, &sim.timing, &pos);
@@ -37,9 +36,11 @@ fn perfect_telemetry_removes_the_predicted_displacement() {
             sim.timing,
             sim.exposure_start_s(0),
             scale,
-            noise_mas,
-            rate_hz,
-            0.0,
+            &TelemetryQuality {
+                noise_mas,
+                rate_hz,
+                latency_s: 0.0,
+            },
             c.seed,
             &kernel,
             &noise,
@@ -83,29 +84,21 @@ fn telemetry_and_plate_model_fix_a_noise_free_rolling_image_and_sample_hold_need
         let sim = Simulator::new(c).expect("sim");
         let exp = sim.exposure(0).expect("exposure");
         let img = AnalysisImage::from_detector(c, &exp.image);
-        let mut o = Options::new(&c.analysis);
-        o.countermeasure = match cm {
-            "telemetry" => Countermeasure::Telemetry(Arc::new(
-                Telemetry::from_series(
-                    sim.series().expect("series"),
-                    sim.timing,
-                    exp.t_start_s,
-                    c.instrument.plate_scale_mas(),
-                    0.0,
-                    1000.0,
-                    0.0,
-                    c.seed,
-                    &sim.optical_kernel().expect("kernel"),
-                    &sim.fit_noise(),
-                )
-                .expect("telemetry"),
-            )),
-            other => Countermeasure::parse(other, 4).expect("name"),
+        let plan = Plan::new(vec![cm.parse().expect("name")]).expect("plan");
+        let source = Source {
+            sim: &sim,
+            index: 0,
         };
-        astrometry::analyze(&img, Some(&exp.truth), &o)
-            .expect("analysis")
-            .report
-            .accuracy_mas
+        let r = analyse_image(
+            &img,
+            Some(&exp.truth),
+            Some(source),
+            &c.analysis,
+            &plan,
+            c.seed,
+        )
+        .expect("analysis");
+        r.measured[0].1.report.accuracy_mas
     };
     let none = accuracy(&c, "none");
     let tel = accuracy(&c, "telemetry");

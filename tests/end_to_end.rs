@@ -3,7 +3,8 @@
 mod common;
 
 use common::{small_config, temp_dir};
-use engine::analysis::astrometry::{self, AnalysisImage, Options};
+use engine::analysis::AnalysisImage;
+use engine::analysis::pipeline::{self as astrometry, Options};
 use engine::config::AceCase;
 use engine::io::{exposure, fits};
 use engine::simulate::Simulator;
@@ -43,8 +44,8 @@ fn simulate_write_read_analyse_round_trip() {
     assert_eq!(truth_csv.len(), 64);
     assert_eq!(truth_csv, truth_fits);
     // the analysis of the file equals the analysis in memory
-    let from_file =
-        AnalysisImage::from_fits(&back, cfg.instrument.plate_scale_mas()).expect("image");
+    let from_file = exposure::read_analysis_image(&files.image, cfg.instrument.plate_scale_mas())
+        .expect("image");
     let in_memory = AnalysisImage::from_detector(&cfg, &exp.image);
     let o = Options::new(&cfg.analysis);
     let a = astrometry::analyze(&from_file, Some(&truth_csv), &o).expect("analysis");

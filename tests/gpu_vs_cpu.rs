@@ -6,7 +6,6 @@
 //! (measured on lavapipe: ≤ 4.3e-7 per pixel, ≤ 3e-7 in flux).
 
 use engine::config::{Config, Method, ReadoutOrder};
-use engine::integrate::gpu::{GpuIntegrator, software_adapter};
 use engine::integrate::kernel::{IntraPixelMap, PixelKernel};
 use engine::integrate::track::Track;
 use engine::integrate::{self, FrameSpec, Motion, StarJob, StarSpec};
@@ -15,51 +14,8 @@ use engine::optics::psf::PsfTable;
 use engine::readout::ReadoutTiming;
 use std::sync::Arc;
 
-fn gpu() -> Option<GpuIntegrator> {
-    let adapter = software_adapter()?;
-    match GpuIntegrator::from_adapter(adapter) {
-        Ok(g) => Some(g),
-        Err(e) => panic!("an adapter exists but the integrator failed: {e}"),
-    }
-}
-
-/// The GPU tests must run in CI: `.ci/run` installs lavapipe, and JSIM_REQUIRE_GPU=1 makes a missing
-/// adapter a failure instead of a skip.
-fn require_gpu() -> Option<GpuIntegrator> {
-    let g = gpu();
-    if g.is_none() {
-        assert!(
-            std::env::var("JSIM_REQUIRE_GPU").is_err(),
-            "JSIM_REQUIRE_GPU is set but no Vulkan adapter was found"
-        );
-        eprintln!("no Vulkan adapter: GPU comparison skipped");
-    }
-    g
-}
-
 fn small_psf() -> Arc<PsfTable> {
-    let (os, half_px) = (8usize, 6usize);
-    let half = half_px * os;
-    let n = 2 * half + 1;
-    let mut data = vec![0.0; n * n];
-    for iy in 0..n {
-        for ix in 0..n {
-            let (x, y) = (
-                (ix as f64 - half as f64) / os as f64,
-                (iy as f64 - half as f64) / os as f64,
-            );
-            data[iy * n + ix] = (-(x * x + 0.7 * y * y) / (2.0 * 0.7 * 0.7)).exp()
-                * (1.0 + 0.25 * x).max(0.0)
-                + 0.01 * (-(x * x + y * y).sqrt() / 2.0).exp();
-        }
-    }
-    let s: f64 = data.iter().sum();
-    data.iter_mut().for_each(|v| *v /= s);
-    Arc::new(PsfTable {
-        oversampling: os,
-        half_cells: half,
-        data,
-    })
+    Arc::new(engine::testkit::synthetic_psf(8, 6))
 }
 
 fn compare(cpu: &[integrate::Stamp], gpu: &[integrate::Stamp], what: &str) {
@@ -87,7 +43,9 @@ fn compare(cpu: &[integrate::Stamp], gpu: &[integrate::Stamp], what: &str) {
 
 #[test]
 fn gpu_matches_cpu_for_every_method_and_readout_over_a_full_exposure() {
-    let Some(gpu) = require_gpu() else { return };
+    let Some(gpu) = engine::testkit::software_gpu() else {
+        return;
+    };
     let psf = small_psf();
     let map = IntraPixelMap::uniform(4);
     let kernel = Arc::new(PixelKernel::build(&psf, &map).expect("kernel"));

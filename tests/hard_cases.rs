@@ -4,7 +4,8 @@
 mod common;
 
 use common::{small_config, temp_dir};
-use engine::analysis::astrometry::{self, AnalysisImage, Options};
+use engine::analysis::AnalysisImage;
+use engine::analysis::pipeline::{self as astrometry, Options};
 use engine::config::{AceCase, Config, SceneKind};
 use engine::detector::dq;
 use engine::simulate::Simulator;

@@ -4,15 +4,19 @@
 mod common;
 
 use common::small_config;
+use engine::analysis::countermeasures::Plan;
 use engine::config::{AceCase, ReadoutOrder};
-use engine::studies::experiment::{Plan, run_dataset};
+use engine::session::Session;
+use engine::studies::experiment::run_dataset;
 
 #[test]
 fn predictor_agrees_with_simulations() {
-    let plan = Plan {
-        countermeasures: vec!["none".into(), "plate-poly:3".into()],
-        ..Default::default()
-    };
+    let plan = Plan::new(vec![
+        "none".parse().expect("none"),
+        "plate-poly:3".parse().expect("plate"),
+    ])
+    .expect("plan");
+    let session = Session::new();
     let mut worst: f64 = 0.0;
     for (ace, readout) in [
         (AceCase::Gaussian, ReadoutOrder::Rolling),
@@ -25,7 +29,8 @@ fn predictor_agrees_with_simulations() {
             c.readout.order = readout;
             c.scene.mag_hw = mag;
             c.fidelity.images = 4;
-            let (rows, _) = run_dataset(&c, &plan, None, None, &mut |_| {}).expect("dataset");
+            let sim = session.new_simulator(&c).expect("simulator");
+            let (rows, _) = run_dataset(&sim, &plan, &mut |_| {}).expect("dataset");
             for r in rows {
                 let tol = (2.0 * r.sem_mas).max(0.15 * r.accuracy_mas);
                 let miss = (r.predicted_mas - r.accuracy_mas).abs();

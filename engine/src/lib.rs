@@ -36,6 +36,8 @@ pub mod scene;
 pub mod session;
 pub mod simulate;
 pub mod studies;
+#[cfg(any(test, feature = "testkit"))]
+pub mod testkit;
 
 pub use config::Config;
 

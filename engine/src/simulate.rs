@@ -100,7 +100,7 @@ pub struct Simulator {
 
 impl Simulator {
     /// Build with a fresh PSF bank and kernel cache, on the configured backend (a session shares these
-    /// between simulators: [`crate::session::Session::simulator`]).
+    /// between simulators: the engine session's `simulator`).
     pub fn new(cfg: &Config) -> Result<Self, SimError> {
         let (integrator, _) = Integrator::choose(cfg.fidelity.backend);
         Self::build(

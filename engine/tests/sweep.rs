@@ -5,6 +5,7 @@
 //! The sweep is `engine/sweeps/quick_sweep.toml` (2 points × 4 exposures of a reduced scene); its
 //! single-process result is computed once and copied by the tests that start from it.
 
+use engine::session::Session;
 use engine::studies::sweep::{
     self, MergeOptions, ReportOptions, RunOptions, RunSummary, Shard, Sweep, SweepError,
 };
@@ -35,6 +36,7 @@ fn scratch(name: &str) -> PathBuf {
 
 fn run(sw: &Sweep, dir: &Path, shard: Shard, jobs: usize, max_units: Option<usize>) -> RunSummary {
     sweep::run_shard(
+        &Session::new(),
         sw,
         dir,
         &RunOptions {
@@ -168,11 +170,17 @@ fn resume_after_deleting_or_truncating_a_shard_file() {
     let text = std::fs::read_to_string(&csv).expect("csv");
     std::fs::write(&csv, &text[..text.len() - 40]).expect("truncate");
     let mut salvaged = Vec::new();
-    let s = sweep::run_shard(&sw, &dir, &RunOptions::default(), &mut |e| {
-        if let sweep::Event::Salvaged(n) = e {
-            salvaged.push(n)
-        }
-    })
+    let s = sweep::run_shard(
+        &Session::new(),
+        &sw,
+        &dir,
+        &RunOptions::default(),
+        &mut |e| {
+            if let sweep::Event::Salvaged(n) = e {
+                salvaged.push(n)
+            }
+        },
+    )
     .expect("resume");
     assert_eq!((s.done_before, s.computed), (7, 1));
     assert_eq!(salvaged.len(), 1, "the damage is reported");
@@ -757,8 +765,14 @@ fn a_shard_runs_in_one_process_at_a_time() {
         .open(dir.join("shards/shard-0000-of-0001.lock"))
         .expect("lock file");
     lock.try_lock().expect("lock");
-    let e = sweep::run_shard(&quick(), &dir, &RunOptions::default(), &mut |_| {})
-        .expect_err("the shard is locked");
+    let e = sweep::run_shard(
+        &Session::new(),
+        &quick(),
+        &dir,
+        &RunOptions::default(),
+        &mut |_| {},
+    )
+    .expect_err("the shard is locked");
     assert!(e.to_string().contains("another process"), "{e}");
     // other shards are free, and the lock goes with its holder
     let s = run(&quick(), &dir, Shard::new(1, 2).expect("shard"), 1, None);

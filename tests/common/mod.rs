@@ -1,39 +1,8 @@
 //! Shared helpers of the workspace tests: a reduced but physical configuration that runs in seconds in
 //! the dev profile.
-#![allow(dead_code)]
+#![allow(dead_code, unused_imports)] // each test crate uses a different subset
 
-use engine::config::Config;
-
-/// A 512² detector (4 channels of 128 columns), an 8 × 8 grid of stars 56 px apart, a coarser PSF grid and
-/// wavelength sampling, and a 2-minute ACE series. Everything else (optics, noise, photometry) as the paper.
-pub fn small_config() -> Config {
-    let mut c = Config::default();
-    c.instrument.detector_px = 512;
-    c.instrument.photosensitive_px = 496;
-    c.readout.channels = 4;
-    c.readout.channel_width_px = 128;
-    c.scene.grid_n = 8;
-    c.scene.grid_spacing_px = 56.0;
-    c.optics.pupil_samples = 128;
-    c.optics.psf_oversampling = 8;
-    c.optics.psf_radius_px = 10;
-    c.band.wavelength_step_um = 0.05;
-    c.fidelity.subpixels = 4;
-    c.fidelity.stamp_radius_px = 9;
-    c.fidelity.images = 3;
-    c.fidelity.backend = engine::config::Backend::Cpu;
-    c.ace.span_s = 120.0;
-    c.validate().expect("the small test config is valid");
-    c
-}
-
-/// A fresh temporary directory for one test.
-pub fn temp_dir(name: &str) -> std::path::PathBuf {
-    let d = std::env::temp_dir().join(format!("jsim-test-{name}-{}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&d);
-    std::fs::create_dir_all(&d).expect("temp dir");
-    d
-}
+pub use engine::testkit::{small_config, temp_dir};
 
 /// An image (electrons) of stars drawn from a pixel-integrated circular Gaussian of σ px, on a flat sky,
 /// with Poisson and read noise when `seed` is given. Returns the analysis image and the truth.
@@ -44,7 +13,7 @@ pub fn gaussian_image(
     sigma_px: f64,
     seed: Option<u64>,
 ) -> (
-    engine::analysis::astrometry::AnalysisImage,
+    engine::analysis::AnalysisImage,
     Vec<engine::simulate::TruthRow>,
 ) {
     use rand_distr::{Distribution, Normal, Poisson};
@@ -93,7 +62,7 @@ pub fn gaussian_image(
             jitter_dy_px: 0.0,
         })
         .collect();
-    let img = engine::analysis::astrometry::AnalysisImage {
+    let img = engine::analysis::AnalysisImage {
         nx: n,
         ny: n,
         e,

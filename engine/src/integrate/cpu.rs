@@ -348,32 +348,9 @@ pub fn fast_stamp(
 }
 
 #[cfg(test)]
-pub(crate) mod tests {
+mod tests {
     use super::*;
     use crate::config::{Config, ReadoutOrder};
-
-    pub(crate) fn test_psf(os: usize, half_px: usize) -> PsfTable {
-        let half = half_px * os;
-        let n = 2 * half + 1;
-        let mut data = vec![0.0; n * n];
-        for iy in 0..n {
-            for ix in 0..n {
-                let (x, y) = (
-                    (ix as f64 - half as f64) / os as f64,
-                    (iy as f64 - half as f64) / os as f64,
-                );
-                data[iy * n + ix] = (-(x * x + 0.8 * y * y) / (2.0 * 0.6 * 0.6)).exp()
-                    * (1.0 + 0.2 * x - 0.1 * y).max(0.0);
-            }
-        }
-        let s: f64 = data.iter().sum();
-        data.iter_mut().for_each(|v| *v /= s);
-        PsfTable {
-            oversampling: os,
-            half_cells: half,
-            data,
-        }
-    }
 
     fn wiggly_track(n: usize, dt: f64, amp_px: f64) -> Track {
         let dx = (0..n)
@@ -400,7 +377,7 @@ pub(crate) mod tests {
 
     #[test]
     fn direct_equals_reference_and_fast_equals_direct() {
-        let psf = test_psf(8, 4);
+        let psf = crate::testkit::synthetic_psf(8, 4);
         let map = IntraPixelMap::uniform(4);
         let k = PixelKernel::build(&psf, &map).expect("kernel");
         let track = wiggly_track(3000, 1e-3, 0.4);
@@ -437,7 +414,7 @@ pub(crate) mod tests {
 
     #[test]
     fn still_track_equals_static_and_conserves_flux() {
-        let psf = test_psf(8, 5);
+        let psf = crate::testkit::synthetic_psf(8, 5);
         let k = PixelKernel::build(&psf, &IntraPixelMap::uniform(8)).expect("kernel");
         let t = timing(ReadoutOrder::Rolling, 2.0);
         let track = Track::still(3.0 + t.span_s(), 1e-3);

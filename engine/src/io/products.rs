@@ -7,11 +7,11 @@ use super::csv::{self, Cell};
 use super::fits::{self, Card, Hdu, Pixels};
 use super::plot;
 use crate::analysis::epsf::Epsf;
+use crate::analysis::report::{ImageResult, Row};
 use crate::analysis::vectors::VectorMap;
 use crate::analysis::{Analysis, Report, StarResult};
 use crate::config::Config;
 use crate::optics::psf::PsfTable;
-use crate::studies::experiment::{ImageResult, Row};
 use serde::Serialize;
 use std::path::Path;
 

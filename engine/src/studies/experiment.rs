@@ -7,11 +7,11 @@
 
 use crate::analysis::countermeasures::Plan;
 use crate::analysis::predict::{PredictError, Predictor};
-use crate::analysis::{AnalysisError, AnalysisImage, Report, Source, StarResult, analyse_image};
+pub use crate::analysis::report::{ImageResult, Measured, Row};
+use crate::analysis::{AnalysisError, AnalysisImage, Source, analyse_image};
 use crate::config::{AceCase, Config, ReadoutOrder};
 use crate::numerics::stats;
 use crate::simulate::{SimError, Simulator};
-use serde::Serialize;
 use std::time::Instant;
 
 #[derive(Debug, thiserror::Error)]
@@ -22,42 +22,6 @@ pub enum ExperimentError {
     Analysis(#[from] AnalysisError),
     #[error(transparent)]
     Predict(#[from] PredictError),
-}
-
-/// Result of one countermeasure on one image.
-#[derive(Debug, Clone, Serialize)]
-pub struct Measured {
-    pub countermeasure: String,
-    pub report: Report,
-}
-
-/// One image's results.
-#[derive(Debug, Clone, Serialize)]
-pub struct ImageResult {
-    pub index: usize,
-    pub ace_sigma_mas: f64,
-    pub ace_drift_mas: f64,
-    pub simulate_s: f64,
-    pub analyse_s: f64,
-    pub measured: Vec<Measured>,
-    /// The star results of the plain global-ePSF analysis (kept for image 0, for the vector map).
-    #[serde(skip)]
-    pub stars: Option<Vec<StarResult>>,
-}
-
-/// A dataset summary row per countermeasure.
-#[derive(Debug, Clone, Serialize)]
-pub struct Row {
-    pub ace: String,
-    pub readout: String,
-    pub countermeasure: String,
-    pub mag: f64,
-    pub accuracy_mas: f64,
-    pub sem_mas: f64,
-    pub crlb_mas: f64,
-    pub predicted_mas: f64,
-    pub n_images: usize,
-    pub time_s: f64,
 }
 
 /// Simulate exposure `index` of `sim` and run the analysis pipeline on it under `plan`.

@@ -118,7 +118,7 @@ mod tests {
     fn telemetry_input_errors_are_named() {
         let cfg = crate::config::Config::default();
         let timing = ReadoutTiming::new(&cfg);
-        let psf = crate::integrate::cpu::tests::test_psf(4, 4);
+        let psf = crate::testkit::synthetic_psf(4, 4);
         let k = PixelKernel::build(&psf, &crate::integrate::kernel::IntraPixelMap::uniform(4))
             .expect("kernel");
         let nm = FitNoise {

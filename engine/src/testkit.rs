@@ -1,0 +1,98 @@
+//! Test support shared by the engine's unit tests, the workspace tests (`tests/`) and the explorer's tests
+//! (feature `testkit`, off in builds for users): a reduced but physical configuration, a synthetic PSF, the
+//! software GPU adapter with the CI rule, and scratch directories.
+
+use crate::config::{Backend, Config};
+use crate::integrate::gpu::{GpuIntegrator, software_adapter};
+use crate::optics::psf::PsfTable;
+
+/// A 512² detector (4 channels of 128 columns), an 8 × 8 grid of stars 56 px apart, a coarser PSF grid and
+/// wavelength sampling, and a 2-minute ACE series; everything else (optics, noise, photometry) as the
+/// paper. Runs in seconds in the dev profile.
+pub fn small_config() -> Config {
+    let mut c = Config::default();
+    c.instrument.detector_px = 512;
+    c.instrument.photosensitive_px = 496;
+    c.readout.channels = 4;
+    c.readout.channel_width_px = 128;
+    c.scene.grid_n = 8;
+    c.scene.grid_spacing_px = 56.0;
+    c.optics.pupil_samples = 128;
+    c.optics.psf_oversampling = 8;
+    c.optics.psf_radius_px = 10;
+    c.band.wavelength_step_um = 0.05;
+    c.fidelity.subpixels = 4;
+    c.fidelity.stamp_radius_px = 9;
+    c.fidelity.images = 3;
+    c.fidelity.backend = Backend::Cpu;
+    c.ace.span_s = 120.0;
+    if let Err(e) = c.validate() {
+        panic!("the small test config must be valid: {e}");
+    }
+    c
+}
+
+/// A synthetic, asymmetric PSF table (`os` cells per pixel, `half_px` pixels each side, unit sum): an
+/// elliptical Gaussian core (σ 0.7 px, y squeezed by 0.7) tilted by a linear ramp in x, plus a faint
+/// exponential halo — no symmetry a method could exploit by accident.
+pub fn synthetic_psf(os: usize, half_px: usize) -> PsfTable {
+    let half = half_px * os;
+    let n = 2 * half + 1;
+    let mut data = vec![0.0; n * n];
+    for iy in 0..n {
+        for ix in 0..n {
+            let (x, y) = (
+                (ix as f64 - half as f64) / os as f64,
+                (iy as f64 - half as f64) / os as f64,
+            );
+            data[iy * n + ix] = (-(x * x + 0.7 * y * y) / (2.0 * 0.7 * 0.7)).exp()
+                * (1.0 + 0.25 * x).max(0.0)
+                + 0.01 * (-(x * x + y * y).sqrt() / 2.0).exp();
+        }
+    }
+    let s: f64 = data.iter().sum();
+    data.iter_mut().for_each(|v| *v /= s);
+    PsfTable {
+        oversampling: os,
+        half_cells: half,
+        data,
+    }
+}
+
+/// Whether this run must have a GPU adapter: in CI (`CI` set and not `false`/`0`) or when
+/// `JSIM_REQUIRE_GPU` is set. `.ci/run` installs lavapipe and sets `CI=true`.
+pub fn gpu_required() -> bool {
+    let ci = std::env::var("CI").is_ok_and(|v| !v.is_empty() && v != "false" && v != "0");
+    ci || std::env::var_os("JSIM_REQUIRE_GPU").is_some()
+}
+
+/// The software Vulkan adapter (lavapipe; any adapter if there is no software one) as an integrator.
+/// Without one: panics when [`gpu_required`] (a GPU test that skips silently in CI is a defect), else says
+/// so on stderr and returns `None` so the caller skips.
+pub fn software_gpu() -> Option<GpuIntegrator> {
+    let Some(adapter) = software_adapter() else {
+        assert!(
+            !gpu_required(),
+            "no Vulkan adapter found, and this run requires one (CI or JSIM_REQUIRE_GPU): install \
+             mesa-vulkan-drivers (lavapipe)"
+        );
+        eprintln!(
+            "no Vulkan adapter: GPU test skipped (set JSIM_REQUIRE_GPU=1 to make this a failure)"
+        );
+        return None;
+    };
+    match GpuIntegrator::from_adapter(adapter) {
+        Ok(g) => Some(g),
+        Err(e) => panic!("a Vulkan adapter exists but the integrator failed: {e}"),
+    }
+}
+
+/// A fresh, empty scratch directory for one test (under the system temporary directory).
+pub fn temp_dir(name: &str) -> std::path::PathBuf {
+    let d = std::env::temp_dir().join(format!("jsim-test-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    if let Err(e) = std::fs::create_dir_all(&d) {
+        panic!("cannot create {}: {e}", d.display());
+    }
+    d
+}
