@@ -1,8 +1,10 @@
 //! Detector and electronics (SPEC §1, §4), in this order, per pixel:
 //!
 //! 1. star electrons × inter-pixel flat (1 + σ·z, z ~ N(0,1), fixed per detector: seeded once);
-//! 2. plus (dark + stray light)·T — only the photosensitive region sees light; the border of
-//!    `(detector_px − photosensitive_px)/2` pixels holds no signal and is read for noise only;
+//! 2. plus (dark + stray light) × the pixel's own integration window (T, or T + its delay under a global
+//!    reset: later rows integrate up to one frame sweep longer) — only the photosensitive region sees
+//!    light; the border of `(detector_px − photosensitive_px)/2` pixels holds no signal and is read for
+//!    noise only;
 //! 3. Poisson shot noise on the total; charge clipped at the full well (flagged);
 //! 4. plus Gaussian CDS read noise;
 //! 5. ÷ gain + bias, rounded, clipped to `[0, 2^bits − 1]` ADU (flagged).
@@ -11,6 +13,7 @@
 //! per image and per row, so the result does not depend on threading.
 
 use crate::config::Config;
+use crate::readout::ReadoutTiming;
 use crate::rng::{self, Stream};
 use rand_distr::{Distribution, Normal, Poisson, StandardNormal};
 use rayon::prelude::*;
@@ -61,10 +64,15 @@ pub fn photosensitive(cfg: &Config, x: usize, y: usize) -> bool {
 }
 
 /// Turn noise-free star electrons into a detector image. `image_index` selects the noise streams.
-pub fn expose(cfg: &Config, star_e: &[f64], flat: &[f32], image_index: u64) -> DetectorImage {
+pub fn expose(
+    cfg: &Config,
+    timing: &ReadoutTiming,
+    star_e: &[f64],
+    flat: &[f32],
+    image_index: u64,
+) -> DetectorImage {
     let n = cfg.instrument.detector_px;
     let d = &cfg.detector;
-    let dark_e = d.dark_e_per_s * d.exposure_s;
     let adc_max = (2f64.powi(d.adc_bits as i32) - 1.0).min(f32::MAX as f64);
     let read = Normal::new(0.0, d.read_noise_e.max(0.0)).ok();
     let mut adu = vec![0.0f32; n * n];
@@ -80,7 +88,8 @@ pub fn expose(cfg: &Config, star_e: &[f64], flat: &[f32], image_index: u64) -> D
                 let i = y * n + x;
                 let mut flags = 0u8;
                 let mean_e = if photosensitive(cfg, x, y) {
-                    star_e[i].max(0.0) * flat[i] as f64 + dark_e
+                    star_e[i].max(0.0) * flat[i] as f64
+                        + d.dark_e_per_s * timing.window_length_s(x, y)
                 } else {
                     flags |= dq::BORDER;
                     0.0
@@ -129,6 +138,10 @@ mod tests {
         c.instrument.photosensitive_px = n;
         c.detector.inter_pixel_flat_sigma = 0.0;
         c
+    }
+
+    fn expose(c: &Config, star_e: &[f64], flat: &[f32], index: u64) -> DetectorImage {
+        super::expose(c, &ReadoutTiming::new(c), star_e, flat, index)
     }
 
     fn moments(img: &DetectorImage) -> (f64, f64) {
@@ -223,5 +236,42 @@ mod tests {
         let img = expose(&c, &star, &vec![1.0; n * n], 0);
         let tot: f64 = img.adu.iter().map(|v| *v as f64 * 3.0).sum();
         assert!((tot - star.iter().sum::<f64>()).abs() < 1e-3);
+    }
+
+    #[test]
+    fn dark_accumulates_over_each_pixels_own_window_under_a_global_reset() {
+        // SPEC §4: under a global reset every pixel starts at t_overhead and stops at its first read + T, so
+        // the pixel read last integrates (rows − 1)·W + (W − 1) pixel times longer than the first one
+        let n = 64;
+        let mut c = cfg(n);
+        c.readout.channel_width_px = 16;
+        c.detector.shot_noise = false;
+        c.detector.read_noise = false;
+        c.detector.digitise = false;
+        c.detector.dark_e_per_s = 1000.0; // 15 pixel times = 0.075 e⁻, well above the f32 rounding
+        let zero = vec![0.0; n * n];
+        let flat = vec![1.0f32; n * n];
+        let g = c.detector.gain_e_per_adu;
+        let rate = c.detector.dark_e_per_s;
+        let t_pix = c.readout.pixel_time_us * 1e-6;
+        let bias = c.detector.bias_adu;
+        // electrons back from the f32 ADU value (its rounding: ≤ 2e-3 e⁻ here)
+        let dark_of =
+            |img: &DetectorImage, x: usize, y: usize| (img.adu[y * n + x] as f64 - bias) * g;
+        let rolling = expose(&c, &zero, &flat, 0);
+        c.readout.order = crate::config::ReadoutOrder::GlobalReset;
+        let global = expose(&c, &zero, &flat, 0);
+        let t = c.detector.exposure_s;
+        for (x, y) in [(0, 0), (15, 0), (16, 0), (3, 40), (15, 63)] {
+            let r = dark_of(&rolling, x, y);
+            assert!((r - rate * t).abs() < 4e-3, "rolling ({x}, {y}): {r}");
+            let delay = ((y * 16 + x % 16) as f64) * t_pix;
+            let got = dark_of(&global, x, y);
+            assert!(
+                (got - rate * (t + delay)).abs() < 4e-3,
+                "({x}, {y}): {got} e⁻, expected {}",
+                rate * (t + delay)
+            );
+        }
     }
 }

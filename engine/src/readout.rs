@@ -68,6 +68,18 @@ impl ReadoutTiming {
         }
     }
 
+    /// Length of pixel (x, y)'s integration window, s: exactly T under the rolling and sample-and-hold
+    /// orders, T plus the pixel's read delay under a global reset.
+    pub fn window_length_s(&self, x: usize, y: usize) -> f64 {
+        match self.order {
+            ReadoutOrder::GlobalReset => {
+                let (a, b) = self.window_s(x, y);
+                b - a
+            }
+            ReadoutOrder::Rolling | ReadoutOrder::SampleHold => self.exposure_s,
+        }
+    }
+
     /// Duration of one read sweep of a channel (W × rows × t_pix).
     pub fn frame_sweep_s(&self) -> f64 {
         self.frame_sweep_s

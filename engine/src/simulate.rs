@@ -370,7 +370,7 @@ impl Simulator {
         let t0 = Instant::now();
         let (star_e, track) = self.integrate(index, &jobs)?;
         let t1 = Instant::now();
-        let image = detector::expose(&self.cfg, &star_e, &self.flat, index as u64);
+        let image = detector::expose(&self.cfg, &self.timing, &star_e, &self.flat, index as u64);
         let t2 = Instant::now();
         let truth = self.truth(&jobs, track.as_ref());
         let ace = self.ace_stats(index);

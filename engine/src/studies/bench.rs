@@ -11,10 +11,13 @@ use crate::analysis::pipeline::{Options, analyze};
 use crate::analysis::{AnalysisError, AnalysisImage};
 use crate::config::{AceCase, Backend, Config, Method};
 use crate::integrate::{self, FrameSpec, Integrator, Motion, Stamp};
+use crate::io::IoError;
+use crate::io::csv::{self, Cell};
 use crate::numerics::stats;
 use crate::session::Session;
 use crate::simulate::{SimError, Simulator};
 use serde::Serialize;
+use std::path::Path;
 use std::path::PathBuf;
 use std::time::Instant;
 
@@ -545,4 +548,112 @@ pub fn epsf_iterations(
         });
     }
     Ok(rows)
+}
+
+/// A relative error for the table: `–` when not measured.
+fn fmt(v: f64) -> String {
+    if v.is_nan() {
+        "–".into()
+    } else if v == 0.0 {
+        "0".into()
+    } else {
+        format!("{v:.2e}")
+    }
+}
+
+/// The rows as a text table (what `jsim bench` prints).
+pub fn render_table(rows: &[BenchRow]) -> String {
+    let mut s = format!(
+        "{:<26} {:<24} {:<28} {:>6} {:>9} {:>9} {:>9} {:>9} {:>9}  {}\n",
+        "group",
+        "setting",
+        "backend",
+        "stars",
+        "time [s]",
+        "max err",
+        "rms err",
+        "flux err",
+        "Δpos mas",
+        "note"
+    );
+    for r in rows {
+        s.push_str(&format!(
+            "{:<26} {:<24} {:<28} {:>6} {:>9.3} {:>9} {:>9} {:>9} {:>9}  {}\n",
+            r.group,
+            r.setting,
+            r.backend.chars().take(28).collect::<String>(),
+            r.stars,
+            r.time_s,
+            fmt(r.max_err),
+            fmt(r.rms_err),
+            fmt(r.flux_err),
+            if r.astro_mas.is_nan() {
+                "–".into()
+            } else {
+                format!("{:.3}", r.astro_mas)
+            },
+            r.note
+        ));
+    }
+    s
+}
+
+/// Write `bench.csv` (columns: [`CSV_HEADER`]).
+pub fn write_bench(path: &Path, rows: &[BenchRow]) -> Result<(), IoError> {
+    let cells: Vec<Vec<Cell>> = rows
+        .iter()
+        .map(|r| {
+            vec![
+                Cell::S(r.group.clone()),
+                Cell::S(r.setting.clone()),
+                Cell::S(r.backend.clone()),
+                Cell::I(r.stars as i64),
+                Cell::F(r.time_s),
+                Cell::F(r.max_err),
+                Cell::F(r.rms_err),
+                Cell::F(r.flux_err),
+                Cell::F(r.astro_mas),
+                Cell::S(r.note.clone()),
+            ]
+        })
+        .collect();
+    csv::write(path, &CSV_HEADER, &cells)
+}
+
+/// The speed-against-error figure of `jsim bench` (`bench.png`): time against the largest error, one point
+/// set per knob group.
+pub fn plot_bench(path: &Path, rows: &[BenchRow]) -> Result<(), IoError> {
+    use crate::io::plot::{Scale, Series, scatter};
+    let mut groups: Vec<String> = Vec::new();
+    for r in rows {
+        if r.max_err.is_finite() && r.max_err > 0.0 && !groups.contains(&r.group) {
+            groups.push(r.group.clone());
+        }
+    }
+    let sets: Vec<Series> = groups
+        .iter()
+        .map(|g| {
+            let pts: Vec<&BenchRow> = rows
+                .iter()
+                .filter(|r| &r.group == g && r.max_err > 0.0 && r.max_err.is_finite())
+                .collect();
+            Series {
+                label: g.clone(),
+                x: pts.iter().map(|r| r.max_err).collect(),
+                y: pts.iter().map(|r| r.time_s).collect(),
+                yerr: None,
+            }
+        })
+        .collect();
+    scatter(
+        path,
+        "Speed against error (each knob against its finest setting)",
+        "max |error| / peak pixel",
+        "time [s]: PSF + kernel + integration",
+        &sets,
+        Scale::Log,
+        Scale::Log,
+        false,
+    )?;
+    Ok(())
 }
