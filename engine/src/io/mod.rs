@@ -1,5 +1,6 @@
 //! Input/output: FITS images and tables, CSV catalogues, PNG figures. Every file is written to a temporary
-//! name and renamed into place, so an interrupted run never leaves a half-written output.
+//! name and renamed into place, so an interrupted run never leaves a half-written output. [`shell_quote`] writes
+//! a path as one shell word for the scripts and command lines we write or show.
 
 pub mod csv;
 pub mod exposure;
@@ -40,7 +41,7 @@ impl IoError {
     }
 }
 
-/// The temporary sibling a file is written to before the rename.
+/// The temporary sibling a file is written to before the rename: `<name>.<pid>.tmp`.
 pub fn temp_path(path: &Path) -> PathBuf {
     let mut name = path
         .file_name()
@@ -50,17 +51,96 @@ pub fn temp_path(path: &Path) -> PathBuf {
     path.with_file_name(name)
 }
 
-/// Write `bytes` to `path` atomically (temporary file + rename).
+/// Write `bytes` to `path` atomically (temporary file [`temp_path`] + rename).
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), IoError> {
-    let tmp = temp_path(path);
-    std::fs::write(&tmp, bytes).map_err(|e| IoError::io(&tmp, e))?;
-    std::fs::rename(&tmp, path).map_err(|e| {
-        let _ = std::fs::remove_file(&tmp);
-        IoError::io(path, e)
+    write_via(path, &temp_path(path), |tmp| {
+        std::fs::write(tmp, bytes).map_err(|e| IoError::io(tmp, e))
     })
+}
+
+/// Write `path` atomically through a writer that creates the file itself (an image encoder, say): `write`
+/// writes the whole file at the temporary path it is given, which is then renamed into place. The
+/// temporary path is [`temp_path`] with `path`'s extension appended again (`a.png` → `a.png.<pid>.tmp.png`),
+/// for writers that choose the format from the extension. On any failure the temporary file is removed
+/// and `path` is left as it was.
+pub fn write_atomic_with<E: From<IoError>>(
+    path: &Path,
+    write: impl FnOnce(&Path) -> Result<(), E>,
+) -> Result<(), E> {
+    let mut tmp = temp_path(path).into_os_string();
+    if let Some(ext) = path.extension() {
+        tmp.push(".");
+        tmp.push(ext);
+    }
+    write_via(path, Path::new(&tmp), write)
+}
+
+/// Run `write` on `tmp`, then rename it to `path`; remove `tmp` if either fails.
+fn write_via<E: From<IoError>>(
+    path: &Path,
+    tmp: &Path,
+    write: impl FnOnce(&Path) -> Result<(), E>,
+) -> Result<(), E> {
+    let outcome = write(tmp)
+        .and_then(|()| std::fs::rename(tmp, path).map_err(|e| E::from(IoError::io(path, e))));
+    if outcome.is_err() {
+        let _ = std::fs::remove_file(tmp);
+    }
+    outcome
 }
 
 /// Create a directory (and parents), naming it in the error.
 pub fn ensure_dir(dir: &Path) -> Result<(), IoError> {
     std::fs::create_dir_all(dir).map_err(|e| IoError::io(dir, e))
+}
+
+/// `word` as one POSIX shell word, for the scripts and command lines we write or show: always in single
+/// quotes (so the result is one word whatever `word` holds, spaces, `$` and newlines included), each `'`
+/// written as `'\''`. `/data/my run` → `'/data/my run'`, `it's` → `'it'\''s'`.
+pub fn shell_quote(word: impl AsRef<std::ffi::OsStr>) -> String {
+    format!(
+        "'{}'",
+        word.as_ref().to_string_lossy().replace('\'', r"'\''")
+    )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn shell_words() {
+        assert_eq!(shell_quote("/data/run"), "'/data/run'");
+        assert_eq!(shell_quote(Path::new("/data/my run")), "'/data/my run'");
+        assert_eq!(shell_quote("it's $HOME"), r"'it'\''s $HOME'");
+    }
+
+    #[test]
+    fn atomic_writes_leave_no_temporary_file() {
+        let dir = std::env::temp_dir().join(format!("jsim-io-atomic-{}", std::process::id()));
+        ensure_dir(&dir).expect("dir");
+        let path = dir.join("a.png");
+        write_atomic_with(&path, |tmp| {
+            assert_eq!(tmp.extension().and_then(|e| e.to_str()), Some("png"));
+            std::fs::write(tmp, b"x").map_err(|e| IoError::io(tmp, e))
+        })
+        .expect("written");
+        assert_eq!(std::fs::read(&path).expect("read"), b"x");
+        let failed: Result<(), IoError> = write_atomic_with(&dir.join("b.png"), |tmp| {
+            std::fs::write(tmp, b"half").map_err(|e| IoError::io(tmp, e))?;
+            Err(IoError::Format {
+                path: tmp.to_path_buf(),
+                message: "encoder failed".into(),
+            })
+        });
+        assert!(failed.is_err());
+        write_atomic(&dir.join("c.txt"), b"y").expect("written");
+        let mut names: Vec<String> = std::fs::read_dir(&dir)
+            .expect("list")
+            .map(|e| e.expect("entry").file_name().to_string_lossy().to_string())
+            .collect();
+        names.sort();
+        assert_eq!(names, ["a.png", "c.txt"]);
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 }
