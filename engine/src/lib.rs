@@ -24,6 +24,7 @@
 pub mod analysis;
 pub mod config;
 pub mod detector;
+pub mod digest;
 pub mod integrate;
 pub mod io;
 pub mod jitter;
