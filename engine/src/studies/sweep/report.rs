@@ -1,0 +1,441 @@
+//! `jsim report`: the fraction of exposures meeting a threshold per grid point and countermeasure, with
+//! 95 % Wilson intervals (`report.csv`), their distributions and the fraction against a swept parameter
+//! (`report/*.png`), and the same as a text table.
+
+use super::error::SweepError;
+use super::record::{float_cell, parse_line, read_record, render_line};
+use crate::io::{self, plot};
+use crate::numerics::stats;
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+/// z of a two-sided 95 % interval.
+pub const Z95: f64 = 1.959_963_984_540_054;
+/// Accuracy columns `jsim report` can threshold.
+pub const METRICS: [&str; 3] = ["accuracy_mas", "accuracy_x_mas", "accuracy_y_mas"];
+
+/// Options of [`report`].
+#[derive(Debug, Clone)]
+pub struct ReportOptions {
+    /// Threshold in mas (default: the sweep's `threshold_mas`).
+    pub threshold_mas: Option<f64>,
+    /// Which accuracy column is thresholded (one of [`METRICS`]).
+    pub metric: String,
+    /// Grid field on the x axis of the fraction plot (default: the first numeric one with several values).
+    pub x: Option<String>,
+}
+
+impl Default for ReportOptions {
+    fn default() -> Self {
+        Self {
+            threshold_mas: None,
+            metric: "accuracy_mas".into(),
+            x: None,
+        }
+    }
+}
+
+/// One (grid point, countermeasure) line of the report.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ReportRow {
+    pub point: usize,
+    pub values: Vec<String>,
+    pub countermeasure: String,
+    /// Exposures.
+    pub n: usize,
+    /// Exposures meeting the threshold.
+    pub k: usize,
+    /// Exposures whose analysis failed (counted as not meeting it).
+    pub failed: usize,
+    pub fraction: f64,
+    pub ci_low: f64,
+    pub ci_high: f64,
+    pub mean_mas: f64,
+    pub median_mas: f64,
+    pub q90_mas: f64,
+    pub crlb_median_mas: f64,
+    pub predicted_mean_mas: f64,
+    /// Fraction of exposures the instant predictor expects to meet the threshold.
+    pub predicted_fraction: f64,
+}
+
+/// The outcome of [`report`].
+#[derive(Debug, Clone)]
+pub struct ReportSummary {
+    pub rows: Vec<ReportRow>,
+    pub threshold_mas: f64,
+    pub metric: String,
+    /// Grid fields, in column order.
+    pub fields: Vec<String>,
+    /// The x axis of the fraction plot (`None`: grid point index).
+    pub x_field: Option<String>,
+    pub files: Vec<PathBuf>,
+}
+
+fn slug(s: &str) -> String {
+    s.chars()
+        .map(|c| {
+            if c.is_ascii_alphanumeric() || c == '-' || c == '.' {
+                c
+            } else {
+                '_'
+            }
+        })
+        .collect()
+}
+
+/// Fractions meeting the threshold per grid point and countermeasure (95 % Wilson intervals), written to
+/// `dir/report.csv`, with a histogram + CDF per point and countermeasure and the fraction against the swept
+/// parameter in `dir/report/`.
+pub fn report(dir: &Path, opts: &ReportOptions) -> Result<ReportSummary, SweepError> {
+    let rec = read_record(dir)?;
+    if !METRICS.contains(&opts.metric.as_str()) {
+        return Err(SweepError::Invalid(format!(
+            "--metric {}: expected one of {}",
+            opts.metric,
+            METRICS.join(", ")
+        )));
+    }
+    let threshold = opts.threshold_mas.unwrap_or(rec.threshold_mas);
+    if !(threshold > 0.0) || !threshold.is_finite() {
+        return Err(SweepError::Invalid(format!(
+            "--threshold-mas {threshold}: must be a finite number > 0"
+        )));
+    }
+    let fields: Vec<String> = rec.grid.iter().map(|p| p.field.clone()).collect();
+    let numeric = |k: usize| {
+        rec.grid[k]
+            .values
+            .iter()
+            .all(|v| v.trim().parse::<f64>().is_ok_and(|x| x.is_finite()))
+    };
+    let x_index = match &opts.x {
+        Some(x) => {
+            let k = fields.iter().position(|f| f == x).ok_or_else(|| {
+                SweepError::Invalid(format!(
+                    "--x {x}: not a grid parameter of this sweep ({})",
+                    fields.join(", ")
+                ))
+            })?;
+            if !numeric(k) {
+                return Err(SweepError::Invalid(format!(
+                    "--x {x}: its values ({}) are not numbers",
+                    rec.grid[k].values.join(", ")
+                )));
+            }
+            Some(k)
+        }
+        None => (0..fields.len()).find(|&k| numeric(k) && rec.grid[k].values.len() > 1),
+    };
+    let merged = dir.join("merged.csv");
+    let text = std::fs::read_to_string(&merged).map_err(|e| {
+        SweepError::Invalid(format!(
+            "cannot read {}: {e}; run `jsim merge {}` first",
+            merged.display(),
+            dir.display()
+        ))
+    })?;
+    let header = rec.header(false);
+    let mut lines = text.lines();
+    if lines.next().and_then(parse_line).as_deref() != Some(&header[..]) {
+        return Err(SweepError::Invalid(format!(
+            "{} does not match this sweep's columns: rerun `jsim merge {}`",
+            merged.display(),
+            dir.display()
+        )));
+    }
+    let c_point = rec.col("point");
+    let c_cm = rec.col("countermeasure");
+    let c_metric = rec.col(&opts.metric);
+    let c_crlb = rec.col("crlb_mas");
+    let c_pred = rec.col("predicted_mas");
+    // (point, countermeasure index) → (metric values, crlb, predicted)
+    let mut groups: BTreeMap<(usize, usize), (Vec<f64>, Vec<f64>, Vec<f64>)> = BTreeMap::new();
+    for (k, l) in lines.enumerate() {
+        let cells = parse_line(l)
+            .filter(|c| c.len() == header.len())
+            .ok_or_else(|| {
+                SweepError::Invalid(format!(
+                    "{} line {}: malformed; rerun `jsim merge`",
+                    merged.display(),
+                    k + 2
+                ))
+            })?;
+        let point: usize = cells[c_point].parse().map_err(|_| {
+            SweepError::Invalid(format!("{} line {}: bad point", merged.display(), k + 2))
+        })?;
+        let Some(ci) = rec.countermeasures.iter().position(|c| c == &cells[c_cm]) else {
+            continue;
+        };
+        let num = |c: usize| cells[c].parse::<f64>().unwrap_or(f64::NAN);
+        let g = groups.entry((point, ci)).or_default();
+        g.0.push(num(c_metric));
+        g.1.push(num(c_crlb));
+        g.2.push(num(c_pred));
+    }
+    let mut rows = Vec::new();
+    for p in 0..rec.points {
+        for (ci, cm) in rec.countermeasures.iter().enumerate() {
+            let (vals, crlb, pred) = groups.get(&(p, ci)).cloned().unwrap_or_default();
+            let finite: Vec<f64> = vals.iter().copied().filter(|v| v.is_finite()).collect();
+            let n = vals.len();
+            let k = finite.iter().filter(|&&v| v <= threshold).count();
+            let (lo, hi) = stats::wilson_interval(k, n, Z95);
+            let crlb_f: Vec<f64> = crlb.into_iter().filter(|v| v.is_finite()).collect();
+            let pred_f: Vec<f64> = pred.into_iter().filter(|v| v.is_finite()).collect();
+            let nan_if_empty = |v: &[f64], x: f64| if v.is_empty() { f64::NAN } else { x };
+            rows.push(ReportRow {
+                point: p,
+                values: rec.point_values[p].clone(),
+                countermeasure: cm.clone(),
+                n,
+                k,
+                failed: n - finite.len(),
+                fraction: if n > 0 { k as f64 / n as f64 } else { f64::NAN },
+                ci_low: lo,
+                ci_high: hi,
+                mean_mas: nan_if_empty(&finite, stats::mean(&finite)),
+                median_mas: nan_if_empty(&finite, stats::median(&finite)),
+                q90_mas: nan_if_empty(&finite, stats::quantile(&finite, 0.9)),
+                crlb_median_mas: nan_if_empty(&crlb_f, stats::median(&crlb_f)),
+                predicted_mean_mas: nan_if_empty(&pred_f, stats::mean(&pred_f)),
+                predicted_fraction: if pred_f.is_empty() {
+                    f64::NAN
+                } else {
+                    pred_f.iter().filter(|&&v| v <= threshold).count() as f64 / pred_f.len() as f64
+                },
+            });
+        }
+    }
+
+    // report.csv
+    let mut h: Vec<String> = vec!["point".into()];
+    h.extend(fields.iter().cloned());
+    for c in [
+        "countermeasure",
+        "metric",
+        "threshold_mas",
+        "n",
+        "k",
+        "n_failed",
+        "fraction",
+        "ci95_low",
+        "ci95_high",
+        "mean_mas",
+        "median_mas",
+        "q90_mas",
+        "crlb_median_mas",
+        "predicted_mean_mas",
+        "predicted_fraction",
+    ] {
+        h.push(c.into());
+    }
+    let mut csv = render_line(&h);
+    csv.push('\n');
+    for r in &rows {
+        let mut c = vec![r.point.to_string()];
+        c.extend(r.values.iter().cloned());
+        c.push(r.countermeasure.clone());
+        c.push(opts.metric.clone());
+        c.push(float_cell(threshold));
+        c.push(r.n.to_string());
+        c.push(r.k.to_string());
+        c.push(r.failed.to_string());
+        for v in [
+            r.fraction,
+            r.ci_low,
+            r.ci_high,
+            r.mean_mas,
+            r.median_mas,
+            r.q90_mas,
+            r.crlb_median_mas,
+            r.predicted_mean_mas,
+            r.predicted_fraction,
+        ] {
+            c.push(float_cell(v));
+        }
+        csv.push_str(&render_line(&c));
+        csv.push('\n');
+    }
+    let mut files = Vec::new();
+    let plots = dir.join("report");
+    io::ensure_dir(&plots)?;
+    // distributions
+    for p in 0..rec.points {
+        for (ci, cm) in rec.countermeasures.iter().enumerate() {
+            let vals = groups
+                .get(&(p, ci))
+                .map(|g| g.0.clone())
+                .unwrap_or_default();
+            let path = plots.join(format!("dist_p{p:03}_{}.png", slug(cm)));
+            let desc = rec
+                .grid
+                .iter()
+                .zip(&rec.point_values[p])
+                .map(|(g, v)| format!("{}={v}", g.field))
+                .collect::<Vec<_>>()
+                .join(", ");
+            plot::histogram_cdf(
+                &path,
+                &format!("point {p}: {desc}; {cm} (n = {})", vals.len()),
+                &format!("{} [mas]", opts.metric),
+                &vals,
+                Some((threshold, format!("{threshold} mas"))),
+            )?;
+            files.push(path);
+        }
+    }
+    // fraction against the swept parameter
+    let mut series_keys: Vec<(Vec<String>, usize)> = Vec::new();
+    for r in &rows {
+        let others: Vec<String> = r
+            .values
+            .iter()
+            .enumerate()
+            .filter(|(k, _)| Some(*k) != x_index)
+            .map(|(k, v)| format!("{}={v}", fields[k]))
+            .collect();
+        let ci = rec
+            .countermeasures
+            .iter()
+            .position(|c| c == &r.countermeasure)
+            .unwrap_or(0);
+        if !series_keys.contains(&(others.clone(), ci)) {
+            series_keys.push((others, ci));
+        }
+    }
+    // series sharing an x are offset by ±1 % of the x range so that their bars stay visible
+    let xs: Vec<f64> = rows
+        .iter()
+        .map(|r| match x_index {
+            Some(k) => r.values[k].trim().parse().unwrap_or(f64::NAN),
+            None => r.point as f64,
+        })
+        .filter(|v| v.is_finite())
+        .collect();
+    let span = xs.iter().copied().fold(f64::NEG_INFINITY, f64::max)
+        - xs.iter().copied().fold(f64::INFINITY, f64::min);
+    let dodge = if span > 0.0 { 0.01 * span } else { 0.05 };
+    let n_series = series_keys.len() as f64;
+    let series: Vec<plot::Series> = series_keys
+        .iter()
+        .enumerate()
+        .map(|(si, (others, ci))| {
+            let shift = (si as f64 - (n_series - 1.0) / 2.0) * dodge;
+            let pts: Vec<&ReportRow> = rows
+                .iter()
+                .filter(|r| {
+                    r.countermeasure == rec.countermeasures[*ci]
+                        && &r
+                            .values
+                            .iter()
+                            .enumerate()
+                            .filter(|(k, _)| Some(*k) != x_index)
+                            .map(|(k, v)| format!("{}={v}", fields[k]))
+                            .collect::<Vec<_>>()
+                            == others
+                })
+                .collect();
+            let x: Vec<f64> = pts
+                .iter()
+                .map(|r| match x_index {
+                    Some(k) => r.values[k].trim().parse().unwrap_or(f64::NAN),
+                    None => r.point as f64,
+                } + shift)
+                .collect();
+            let mut label = rec.countermeasures[*ci].clone();
+            if !others.is_empty() {
+                label = format!("{label}, {}", others.join(", "));
+            }
+            plot::Series {
+                label,
+                x,
+                // plot::Series has symmetric bars only: draw the (asymmetric) Wilson interval exactly, marker
+                // at its centre (k + z²/2)/(n + z²); the observed fraction k/n is in report.csv and the table
+                y: pts.iter().map(|r| 0.5 * (r.ci_low + r.ci_high)).collect(),
+                yerr: Some(pts.iter().map(|r| 0.5 * (r.ci_high - r.ci_low)).collect()),
+            }
+        })
+        .collect();
+    let frac_path = plots.join("fraction.png");
+    plot::line_plot(
+        &frac_path,
+        &format!(
+            "Exposures with {} ≤ {threshold} mas: 95 % Wilson intervals",
+            opts.metric
+        ),
+        match x_index {
+            Some(k) => fields[k].as_str(),
+            None => "grid point",
+        },
+        "fraction of exposures (interval centre ± half-width)",
+        &series,
+        &[],
+        plot::Scale::Linear,
+        plot::Scale::Linear,
+    )?;
+    files.push(frac_path);
+    let report_csv = dir.join("report.csv");
+    io::write_atomic(&report_csv, csv.as_bytes())?;
+    files.insert(0, report_csv);
+    Ok(ReportSummary {
+        rows,
+        threshold_mas: threshold,
+        metric: opts.metric.clone(),
+        fields,
+        x_field: x_index.map(|k| rec.grid[k].field.clone()),
+        files,
+    })
+}
+
+/// The report as a text table (what `jsim report` prints).
+pub fn render_report(s: &ReportSummary) -> String {
+    let mut out = String::new();
+    let mut widths: Vec<usize> = s.fields.iter().map(|f| f.len().max(6)).collect();
+    for r in &s.rows {
+        for (k, v) in r.values.iter().enumerate() {
+            widths[k] = widths[k].max(v.len());
+        }
+    }
+    let cmw = s
+        .rows
+        .iter()
+        .map(|r| r.countermeasure.len())
+        .max()
+        .unwrap_or(0)
+        .max(14);
+    let _ = write!(out, "{:>5}", "point");
+    for (k, f) in s.fields.iter().enumerate() {
+        let _ = write!(out, "  {:<w$}", f, w = widths[k]);
+    }
+    let _ = writeln!(
+        out,
+        "  {:<cmw$} {:>7} {:>8}  {:<17} {:>8} {:>8} {:>9}",
+        "countermeasure", "n", "fraction", "95 % Wilson", "median", "p90", "predicted"
+    );
+    for r in &s.rows {
+        let _ = write!(out, "{:>5}", r.point);
+        for (k, v) in r.values.iter().enumerate() {
+            let _ = write!(out, "  {:<w$}", v, w = widths[k]);
+        }
+        let _ = writeln!(
+            out,
+            "  {:<cmw$} {:>7} {:>8.3}  [{:.3}, {:.3}]    {:>8.2} {:>8.2} {:>9.3}",
+            r.countermeasure,
+            format!("{}/{}", r.k, r.n),
+            r.fraction,
+            r.ci_low,
+            r.ci_high,
+            r.median_mas,
+            r.q90_mas,
+            r.predicted_fraction,
+        );
+    }
+    let _ = writeln!(
+        out,
+        "fraction: exposures with {} ≤ {} mas (analysis failures count as misses); median/p90 in mas; predicted: the fraction the instant predictor expects",
+        s.metric, s.threshold_mas
+    );
+    out
+}
