@@ -1,0 +1,364 @@
+//! [`Config::validate`]: every field checked, the error naming the field and the allowed range.
+
+use super::{AceCase, Config, ConfigError, IntraPixel, SceneKind, invalid};
+
+fn check_finite(field: &str, v: f64) -> Result<(), ConfigError> {
+    if v.is_finite() {
+        Ok(())
+    } else {
+        Err(invalid(field, v, "must be a finite number"))
+    }
+}
+fn check_pos(field: &str, v: f64) -> Result<(), ConfigError> {
+    check_finite(field, v)?;
+    if v > 0.0 {
+        Ok(())
+    } else {
+        Err(invalid(field, v, "must be > 0"))
+    }
+}
+fn check_nonneg(field: &str, v: f64) -> Result<(), ConfigError> {
+    check_finite(field, v)?;
+    if v >= 0.0 {
+        Ok(())
+    } else {
+        Err(invalid(field, v, "must be ≥ 0"))
+    }
+}
+fn check_range_usize(field: &str, v: usize, lo: usize, hi: usize) -> Result<(), ConfigError> {
+    if (lo..=hi).contains(&v) {
+        Ok(())
+    } else {
+        Err(invalid(field, v, &format!("must be in {lo}..={hi}")))
+    }
+}
+
+impl Config {
+    /// Check every field; the error names the field and the allowed range.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        let i = &self.instrument;
+        check_pos("instrument.aperture_diameter_m", i.aperture_diameter_m)?;
+        check_nonneg(
+            "instrument.obstruction_diameter_m",
+            i.obstruction_diameter_m,
+        )?;
+        if i.obstruction_diameter_m >= i.aperture_diameter_m {
+            return Err(invalid(
+                "instrument.obstruction_diameter_m",
+                i.obstruction_diameter_m,
+                &format!(
+                    "must be smaller than instrument.aperture_diameter_m = {}",
+                    i.aperture_diameter_m
+                ),
+            ));
+        }
+        check_nonneg("instrument.spider_width_m", i.spider_width_m)?;
+        if i.spider_width_m >= i.aperture_diameter_m {
+            return Err(invalid(
+                "instrument.spider_width_m",
+                i.spider_width_m,
+                &format!(
+                    "must be narrower than the aperture ({} m)",
+                    i.aperture_diameter_m
+                ),
+            ));
+        }
+        if i.spider_count > 64 {
+            return Err(invalid(
+                "instrument.spider_count",
+                i.spider_count,
+                "must be in 0..=64",
+            ));
+        }
+        check_finite("instrument.spider_angle_deg", i.spider_angle_deg)?;
+        check_pos("instrument.focal_length_m", i.focal_length_m)?;
+        check_pos("instrument.pixel_pitch_um", i.pixel_pitch_um)?;
+        check_range_usize("instrument.detector_px", i.detector_px, 8, 65_536)?;
+        if i.photosensitive_px > i.detector_px || i.photosensitive_px == 0 {
+            return Err(invalid(
+                "instrument.photosensitive_px",
+                i.photosensitive_px,
+                &format!("must be in 1..={} (instrument.detector_px)", i.detector_px),
+            ));
+        }
+
+        let b = &self.band;
+        check_pos("band.wavelength_min_um", b.wavelength_min_um)?;
+        check_pos("band.wavelength_max_um", b.wavelength_max_um)?;
+        check_pos("band.wavelength_step_um", b.wavelength_step_um)?;
+        if b.wavelength_max_um < b.wavelength_min_um {
+            return Err(invalid(
+                "band.wavelength_max_um",
+                b.wavelength_max_um,
+                "must be ≥ band.wavelength_min_um",
+            ));
+        }
+        if (b.wavelength_max_um - b.wavelength_min_um) / b.wavelength_step_um > 10_000.0 {
+            return Err(invalid(
+                "band.wavelength_step_um",
+                b.wavelength_step_um,
+                "gives more than 10000 wavelengths",
+            ));
+        }
+        for (k, p) in b.response.iter().enumerate() {
+            check_nonneg(&format!("band.response[{k}]"), p[1])?;
+            check_pos(&format!("band.response[{k}]"), p[0])?;
+            if k > 0 && p[0] < b.response[k - 1][0] {
+                return Err(invalid(
+                    &format!("band.response[{k}]"),
+                    p[0],
+                    "wavelengths must increase",
+                ));
+            }
+        }
+        if b.wavelength_grid().is_empty() {
+            return Err(invalid(
+                "band",
+                format!("{}–{} µm", b.wavelength_min_um, b.wavelength_max_um),
+                "the wavelength grid has no point where throughput × QE > 0",
+            ));
+        }
+
+        let o = &self.optics;
+        check_range_usize("optics.pupil_samples", o.pupil_samples, 16, 4096)?;
+        check_range_usize("optics.psf_oversampling", o.psf_oversampling, 1, 64)?;
+        check_range_usize("optics.psf_radius_px", o.psf_radius_px, 2, 256)?;
+        check_pos("optics.reference_wavelength_um", o.reference_wavelength_um)?;
+        if o.fringe.len() > 37 {
+            return Err(invalid(
+                "optics.fringe",
+                o.fringe.len(),
+                "at most 37 Fringe Zernike terms",
+            ));
+        }
+        for (k, c) in o.fringe.iter().enumerate() {
+            check_finite(&format!("optics.fringe[{k}]"), *c)?;
+        }
+        for (t, row) in o.field_table.iter().enumerate() {
+            check_finite(&format!("optics.field_table[{t}].x_px"), row.x_px)?;
+            check_finite(&format!("optics.field_table[{t}].y_px"), row.y_px)?;
+            if row.fringe.len() > 37 {
+                return Err(invalid(
+                    &format!("optics.field_table[{t}].fringe"),
+                    row.fringe.len(),
+                    "at most 37 terms",
+                ));
+            }
+            for (k, c) in row.fringe.iter().enumerate() {
+                check_finite(&format!("optics.field_table[{t}].fringe[{k}]"), *c)?;
+            }
+        }
+        check_range_usize("optics.field_zones", o.field_zones, 1, 64)?;
+
+        let d = &self.detector;
+        check_pos("detector.exposure_s", d.exposure_s)?;
+        if d.exposure_s > 3600.0 {
+            return Err(invalid(
+                "detector.exposure_s",
+                d.exposure_s,
+                "must be ≤ 3600 s",
+            ));
+        }
+        check_nonneg("detector.dark_e_per_s", d.dark_e_per_s)?;
+        check_nonneg("detector.read_noise_e", d.read_noise_e)?;
+        check_pos("detector.gain_e_per_adu", d.gain_e_per_adu)?;
+        check_pos("detector.full_well_e", d.full_well_e)?;
+        if !(1..=32).contains(&d.adc_bits) {
+            return Err(invalid(
+                "detector.adc_bits",
+                d.adc_bits,
+                "must be in 1..=32",
+            ));
+        }
+        check_finite("detector.bias_adu", d.bias_adu)?;
+        check_nonneg("detector.inter_pixel_flat_sigma", d.inter_pixel_flat_sigma)?;
+        if d.inter_pixel_flat_sigma > 0.5 {
+            return Err(invalid(
+                "detector.inter_pixel_flat_sigma",
+                d.inter_pixel_flat_sigma,
+                "must be ≤ 0.5",
+            ));
+        }
+        if let IntraPixel::Separable {
+            profile_x,
+            profile_y,
+        } = &d.intra_pixel
+        {
+            for (name, p) in [("profile_x", profile_x), ("profile_y", profile_y)] {
+                if p.is_empty() {
+                    return Err(invalid(
+                        &format!("detector.intra_pixel.{name}"),
+                        "[]",
+                        "needs at least one value",
+                    ));
+                }
+                for (k, v) in p.iter().enumerate() {
+                    check_nonneg(&format!("detector.intra_pixel.{name}[{k}]"), *v)?;
+                }
+                if p.iter().sum::<f64>() <= 0.0 {
+                    return Err(invalid(
+                        &format!("detector.intra_pixel.{name}"),
+                        "all zero",
+                        "needs a positive mean",
+                    ));
+                }
+            }
+        }
+
+        let r = &self.readout;
+        check_range_usize("readout.channels", r.channels, 1, 1024)?;
+        check_range_usize("readout.channel_width_px", r.channel_width_px, 1, 65_536)?;
+        if r.channels * r.channel_width_px < i.detector_px {
+            return Err(invalid(
+                "readout.channel_width_px",
+                r.channel_width_px,
+                &format!(
+                    "channels × width must cover instrument.detector_px = {}",
+                    i.detector_px
+                ),
+            ));
+        }
+        check_nonneg("readout.pixel_time_us", r.pixel_time_us)?;
+        check_nonneg("readout.t_overhead_s", r.t_overhead_s)?;
+        check_nonneg("readout.exposure_cadence_s", r.exposure_cadence_s)?;
+
+        let a = &self.ace;
+        check_nonneg("ace.sigma_mas", a.sigma_mas)?;
+        if a.sigma_mas > 1e6 {
+            return Err(invalid("ace.sigma_mas", a.sigma_mas, "must be ≤ 1e6 mas"));
+        }
+        check_pos("ace.boundary_freq_hz", a.boundary_freq_hz)?;
+        check_finite("ace.power_law_index", a.power_law_index)?;
+        if !(0.0..=8.0).contains(&a.power_law_index) {
+            return Err(invalid(
+                "ace.power_law_index",
+                a.power_law_index,
+                "must be in 0..=8",
+            ));
+        }
+        check_nonneg("ace.continuum_amplitude", a.continuum_amplitude)?;
+        for (k, m) in a.modes.iter().enumerate() {
+            check_pos(&format!("ace.modes[{k}].freq_hz"), m.freq_hz)?;
+            check_pos(&format!("ace.modes[{k}].width_hz"), m.width_hz)?;
+            check_nonneg(&format!("ace.modes[{k}].amplitude"), m.amplitude)?;
+        }
+        check_nonneg("ace.amplitude_noise", a.amplitude_noise)?;
+        check_pos("ace.sample_interval_ms", a.sample_interval_ms)?;
+        check_pos("ace.span_s", a.span_s)?;
+        let n_samples = a.span_s / (a.sample_interval_ms * 1e-3);
+        if n_samples > 5.0e7 {
+            return Err(invalid(
+                "ace.span_s",
+                a.span_s,
+                "with ace.sample_interval_ms gives more than 5e7 samples",
+            ));
+        }
+        check_nonneg("ace.first_exposure_start_s", a.first_exposure_start_s)?;
+        if a.case == AceCase::Realistic {
+            let need = a.first_exposure_start_s + self.exposure_cadence_s();
+            if need > a.span_s {
+                return Err(invalid(
+                    "ace.span_s",
+                    a.span_s,
+                    &format!(
+                        "must cover at least one exposure cycle ({need:.3} s from the series start)"
+                    ),
+                ));
+            }
+        }
+
+        check_pos(
+            "photometry.zero_point_e_per_s",
+            self.photometry.zero_point_e_per_s,
+        )?;
+
+        let s = &self.scene;
+        check_finite("scene.mag_hw", s.mag_hw)?;
+        if !(-5.0..=40.0).contains(&s.mag_hw) {
+            return Err(invalid("scene.mag_hw", s.mag_hw, "must be in -5..=40"));
+        }
+        check_finite("scene.j_minus_h", s.j_minus_h)?;
+        if !(-2.0..=8.0).contains(&s.j_minus_h) {
+            return Err(invalid("scene.j_minus_h", s.j_minus_h, "must be in -2..=8"));
+        }
+        check_range_usize("scene.grid_n", s.grid_n, 1, 1000)?;
+        check_pos("scene.grid_spacing_px", s.grid_spacing_px)?;
+        check_nonneg("scene.grid_random_px", s.grid_random_px)?;
+        if s.kind == SceneKind::Catalogue && s.catalogue.is_none() {
+            return Err(invalid(
+                "scene.catalogue",
+                "missing",
+                "a CSV path is needed when scene.kind = \"catalogue\"",
+            ));
+        }
+
+        let f = &self.fidelity;
+        check_range_usize("fidelity.images", f.images, 1, 100_000)?;
+        check_range_usize("fidelity.stamp_radius_px", f.stamp_radius_px, 1, 512)?;
+        check_range_usize("fidelity.subpixels", f.subpixels, 1, 64)?;
+        check_range_usize("fidelity.time_stride", f.time_stride, 1, 1_000_000)?;
+        check_range_usize("fidelity.halo_radius_px", f.halo_radius_px, 0, 1024)?;
+
+        let an = &self.analysis;
+        check_range_usize("analysis.epsf_oversampling", an.epsf_oversampling, 1, 16)?;
+        check_range_usize("analysis.epsf_iterations", an.epsf_iterations, 0, 100)?;
+        check_range_usize("analysis.epsf_radius_px", an.epsf_radius_px, 2, 64)?;
+        check_pos("analysis.fit_radius_px", an.fit_radius_px)?;
+        if an.fit_radius_px > an.epsf_radius_px as f64 - 1.0 {
+            return Err(invalid(
+                "analysis.fit_radius_px",
+                an.fit_radius_px,
+                &format!(
+                    "must be ≤ analysis.epsf_radius_px − 1 = {}",
+                    an.epsf_radius_px as f64 - 1.0
+                ),
+            ));
+        }
+        check_range_usize("analysis.epsf_zones", an.epsf_zones, 1, 64)?;
+        check_pos("analysis.detect_sigma", an.detect_sigma)?;
+        check_range_usize("analysis.fit_max_iter", an.fit_max_iter, 1, 10_000)?;
+        check_pos("analysis.clip_sigma", an.clip_sigma)?;
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn expect_field(text: &str, field: &str) {
+        match Config::from_toml_str(text) {
+            Err(e) => {
+                let msg = e.to_string();
+                assert!(msg.contains(field), "error `{msg}` should name `{field}`");
+            }
+            Ok(_) => panic!("config `{text}` should be rejected"),
+        }
+    }
+
+    #[test]
+    fn bad_values_name_their_field() {
+        expect_field("[detector]\nexposure_s = -1.0", "detector.exposure_s");
+        expect_field("[detector]\nexposure_s = nan", "detector.exposure_s");
+        expect_field(
+            "[instrument]\nspider_width_m = 0.5",
+            "instrument.spider_width_m",
+        );
+        expect_field(
+            "[instrument]\nobstruction_diameter_m = 0.36",
+            "instrument.obstruction_diameter_m",
+        );
+        expect_field(
+            "[band]\nwavelength_min_um = 2.0\nwavelength_max_um = 2.5",
+            "band",
+        );
+        expect_field("[readout]\norder = \"sideways\"", "order");
+        expect_field("[ace]\nsigma_mas = inf", "ace.sigma_mas");
+        expect_field("[scene]\nmag_hw = nan", "scene.mag_hw");
+        expect_field("[fidelity]\nsubpixels = 0", "fidelity.subpixels");
+        expect_field("[analysis]\nfit_radius_px = 9.0", "analysis.fit_radius_px");
+        expect_field("[ace]\nspan_s = 5.0", "ace.span_s");
+        expect_field("unknown_key = 3", "unknown_key");
+        expect_field("[scene]\nkind = \"catalogue\"", "scene.catalogue");
+    }
+}
