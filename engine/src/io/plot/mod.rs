@@ -3,13 +3,13 @@
 //!
 //! Everything is drawn with `plotters` on a bitmap using the embedded DejaVu Sans font (registered once as
 //! "sans-serif"). Every figure is drawn to a temporary `.png` sibling and renamed into place
-//! ([`super::write_atomic_with`]), so an interrupted run never leaves a half-written PNG. Odd input (NaN/inf, empty series, constant values) never panics: such
-//! points are skipped and degenerate axis ranges are widened.
+//! ([`super::write_atomic_with`]), so an interrupted run never leaves a half-written PNG. Odd input
+//! (NaN/inf, empty series, constant values) never panics: such points are skipped and degenerate axis
+//! ranges are widened.
 //!
-//! Shared here: the font, the atomic PNG output, colours, the [`Axis`] (linear or log, with its ticks),
-//! markers, legends and the mesh. One file per kind of figure: [`line`] (line plots and scatter plots),
-//! [`vectors`] (deviation vector maps), [`histogram`] (histogram + empirical CDF), [`image`] (greyscale
-//! image previews).
+//! Shared here: the font, the atomic PNG output, colours, the axis (linear or log, with its ticks),
+//! markers, legends and the mesh. One file per kind of figure: `line` ([`line_plot`], [`scatter`]),
+//! `vectors` ([`vector_map`]), `histogram` ([`histogram_cdf`]) and `image` ([`image_png`]).
 
 mod histogram;
 mod image;
