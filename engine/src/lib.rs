@@ -1,13 +1,24 @@
 //! # JASMINE image simulator and ePSF astrometry engine
 //!
-//! The pipeline, one way, each stage a module named for the physics it models:
+//! The data flow is one way; each module owns one stage or job and imports only from the modules above it
+//! in this list (no import cycles):
 //!
 //! ```text
-//! config ─► optics (pupil, Fringe Zernike WFE, polychromatic PSF) ─► integrate::kernel (pixel-response table K)
-//!        ─► jitter (ACE PSD → time series) ─► readout (per-pixel exposure windows)
-//!        ─► integrate (CPU reference / direct / fast, or wgpu) ─► detector (flats, dark, noise, gain, ADC)
-//!        ─► io (FITS + truth) ─► epsf (Anderson & King 2000) ─► astrometry (accuracy, CRLB, countermeasures)
+//! foundations  numerics, rng, digest, photometry        maths, seeded streams, content digests, magnitudes
+//! config       the configuration: types, defaults, validation (imports no physics)
+//! stages       scene ─► optics ─► readout ─► jitter ─► integrate (kernel, track, cpu, gpu) ─► detector
+//!              stars    PSF       windows    ACE       pixel integration, CPU or wgpu        flat, noise, ADC
+//! image        simulate: one dataset's exposures (image + truth)
+//! analysis     image, detection, epsf, countermeasures, response, predict, report, vectors, and the one
+//!              per-image pipeline
+//! io           fits, csv, plot (figures), exposure (image files), products (the schema of every output)
+//! session      the engine session: PSF banks, kernels, the integrator, simulators (what front ends hold)
+//! studies      experiment, bench, sweep (spec, record, shard, run, merge, report, slurm)
+//! error        engine::Error, joining every module's error
 //! ```
+//!
+//! Front ends (the `jsim` CLI in `src/bin/jsim`, the explorer in `app/`) parse, call a [`session::Session`]
+//! and print; every number, schema and reduction lives here.
 //!
 //! ## Conventions (used everywhere)
 //! * **Pixels**: 0-based; pixel `(X, Y)` covers `X − ½ ≤ x < X + ½`, so integer coordinates are pixel *centres*.
@@ -25,6 +36,7 @@ pub mod analysis;
 pub mod config;
 pub mod detector;
 pub mod digest;
+pub mod error;
 pub mod integrate;
 pub mod io;
 pub mod jitter;
@@ -41,6 +53,7 @@ pub mod studies;
 pub mod testkit;
 
 pub use config::Config;
+pub use error::{Error, Result};
 
 /// Engine version recorded in every output header.
 pub const VERSION: &str = env!("CARGO_PKG_VERSION");

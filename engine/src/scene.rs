@@ -35,7 +35,16 @@ pub enum SceneError {
     },
     #[error("star catalogue {path} holds no stars")]
     Empty { path: String },
+    #[error("star catalogue {path} holds more than {max} stars")]
+    TooMany { path: String, max: usize },
 }
+
+/// Most stars a catalogue may hold (memory and time grow with it: ≈ 1 kB and one stamp per star).
+pub const MAX_CATALOGUE_STARS: usize = 10_000_000;
+/// Allowed Hw magnitudes of a catalogue star (`inf` is also accepted: a star that delivers no light).
+pub const HW_RANGE: (f64, f64) = (-5.0, 35.0);
+/// Allowed J − H colours.
+pub const JH_RANGE: (f64, f64) = (-1.0, 10.0);
 
 /// The stars of `cfg.scene`.
 pub fn build(cfg: &Config) -> Result<Vec<Star>, SceneError> {
@@ -43,7 +52,12 @@ pub fn build(cfg: &Config) -> Result<Vec<Star>, SceneError> {
         SceneKind::Grid => Ok(grid(cfg)),
         SceneKind::Catalogue => {
             let path = cfg.scene.catalogue.as_deref().unwrap_or(Path::new(""));
-            read_catalogue(path, cfg.scene.mag_hw, cfg.scene.j_minus_h)
+            read_catalogue(
+                path,
+                cfg.scene.mag_hw,
+                cfg.scene.j_minus_h,
+                cfg.instrument.detector_px as f64,
+            )
         }
     }
 }
@@ -72,11 +86,14 @@ pub fn grid(cfg: &Config) -> Vec<Star> {
 }
 
 /// Read `x,y[,hw[,j_h]]` rows (pixels; a header line and `#` comments are skipped). Missing magnitudes
-/// and colours take the scene defaults.
+/// and colours take the scene defaults. Every value is range-checked, naming the line and column: x and y
+/// within one detector width (`detector_px`) of the array, Hw in [`HW_RANGE`] or `inf` (a star that
+/// delivers no light: flux exactly 0), J − H in [`JH_RANGE`]; at most [`MAX_CATALOGUE_STARS`] rows.
 pub fn read_catalogue(
     path: &Path,
     default_mag: f64,
     default_jh: f64,
+    detector_px: f64,
 ) -> Result<Vec<Star>, SceneError> {
     let p = path.display().to_string();
     let text = std::fs::read_to_string(path).map_err(|source| SceneError::Io {
@@ -93,7 +110,12 @@ pub fn read_catalogue(
         if k == 0 && cols.first().is_some_and(|c| c.parse::<f64>().is_err()) {
             continue; // header
         }
-        let num = |i: usize, name: &str, default: Option<f64>| -> Result<f64, SceneError> {
+        let num = |i: usize,
+                   name: &str,
+                   default: Option<f64>,
+                   (lo, hi): (f64, f64),
+                   inf_ok: bool|
+         -> Result<f64, SceneError> {
             match cols.get(i) {
                 Some(v) if !v.is_empty() => {
                     let x: f64 = v.parse().map_err(|_| SceneError::Parse {
@@ -101,13 +123,16 @@ pub fn read_catalogue(
                         line: k + 1,
                         message: format!("column {name} = `{v}` is not a number"),
                     })?;
-                    if x.is_finite() {
+                    if (lo..=hi).contains(&x) || (inf_ok && x == f64::INFINITY) {
                         Ok(x)
                     } else {
                         Err(SceneError::Parse {
                             path: p.clone(),
                             line: k + 1,
-                            message: format!("column {name} is {x}"),
+                            message: format!(
+                                "column {name} = {v}: allowed [{lo}, {hi}]{}",
+                                if inf_ok { " or inf (no light)" } else { "" }
+                            ),
                         })
                     }
                 }
@@ -118,12 +143,19 @@ pub fn read_catalogue(
                 }),
             }
         };
+        if stars.len() >= MAX_CATALOGUE_STARS {
+            return Err(SceneError::TooMany {
+                path: p,
+                max: MAX_CATALOGUE_STARS,
+            });
+        }
+        let xy = (-detector_px, 2.0 * detector_px);
         stars.push(Star {
             id: stars.len(),
-            x_px: num(0, "x", None)?,
-            y_px: num(1, "y", None)?,
-            mag_hw: num(2, "hw", Some(default_mag))?,
-            j_minus_h: num(3, "j_h", Some(default_jh))?,
+            x_px: num(0, "x", None, xy, false)?,
+            y_px: num(1, "y", None, xy, false)?,
+            mag_hw: num(2, "hw", Some(default_mag), HW_RANGE, true)?,
+            j_minus_h: num(3, "j_h", Some(default_jh), JH_RANGE, false)?,
         });
     }
     if stars.is_empty() {
@@ -163,14 +195,36 @@ mod tests {
             "x,y,hw,j_h\n10.5, 20.25, 12.0, 1.5\n# comment\n30,40\n",
         )
         .expect("write");
-        let s = read_catalogue(&good, 13.0, 2.0).expect("parse");
+        let s = read_catalogue(&good, 13.0, 2.0, 1968.0).expect("parse");
         assert_eq!(s.len(), 2);
         assert_eq!((s[1].mag_hw, s[1].j_minus_h), (13.0, 2.0));
         let bad = dir.join("bad.csv");
         std::fs::write(&bad, "1,2,3\n4,nan,5\n").expect("write");
-        let e = read_catalogue(&bad, 13.0, 2.0).expect_err("NaN");
+        let e = read_catalogue(&bad, 13.0, 2.0, 1968.0).expect_err("NaN");
         assert!(e.to_string().contains("line 2"), "{e}");
-        let e = read_catalogue(&dir.join("missing.csv"), 13.0, 2.0).expect_err("missing");
+        let e = read_catalogue(&dir.join("missing.csv"), 13.0, 2.0, 1968.0).expect_err("missing");
         assert!(e.to_string().contains("missing.csv"));
+        // every value is range-checked, naming the line, the column and the allowed range
+        for (row, needle) in [
+            ("1e300,5,12,2", "column x = 1e300"),
+            ("5,-4000,12,2", "column y = -4000"),
+            ("5,5,99,2", "column hw = 99"),
+            ("5,5,-inf,2", "column hw = -inf"),
+            ("5,5,12,40", "column j_h = 40"),
+        ] {
+            let f = dir.join("range.csv");
+            std::fs::write(&f, format!("x,y,hw,j_h\n10,10,12,2\n{row}\n")).expect("write");
+            let e = read_catalogue(&f, 13.0, 2.0, 1968.0).expect_err(needle);
+            let m = e.to_string();
+            assert!(
+                m.contains(needle) && m.contains("line 3") && m.contains("allowed"),
+                "{m}"
+            );
+        }
+        // Hw = inf is a star without light
+        let f = dir.join("dark.csv");
+        std::fs::write(&f, "10,10,inf,2\n").expect("write");
+        let s = read_catalogue(&f, 13.0, 2.0, 1968.0).expect("inf");
+        assert_eq!(crate::photometry::electrons_per_s(s[0].mag_hw, 5800.0), 0.0);
     }
 }

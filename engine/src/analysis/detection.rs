@@ -51,7 +51,20 @@ pub fn detect(img: &AnalysisImage, nsigma: f64) -> Vec<(f64, f64)> {
             v
         })
         .collect();
-    let mut peaks: Vec<(f64, f64, f64)> = rows.into_iter().flatten().collect();
+    let mut peaks: Vec<(f64, f64, f64)> = rows
+        .into_iter()
+        .flatten()
+        .map(|(p, x, y)| {
+            let i = y as usize * nx + x as usize;
+            if img.bad[i] {
+                // a saturated core is a plateau: the star is at its centre, not at its first pixel
+                let (cx, cy) = plateau_centre(img, x as usize, y as usize);
+                (p, cx, cy)
+            } else {
+                (p, x, y)
+            }
+        })
+        .collect();
     peaks.sort_by(|a, b| b.0.total_cmp(&a.0));
     let mut kept: Vec<(f64, f64)> = Vec::new();
     for (_, x, y) in peaks {
@@ -65,16 +78,74 @@ pub fn detect(img: &AnalysisImage, nsigma: f64) -> Vec<(f64, f64)> {
     kept
 }
 
+/// Centroid (unweighted) of the 4-connected region of masked pixels containing (x, y), within 40 px: the
+/// centre of a saturated core.
+fn plateau_centre(img: &AnalysisImage, x: usize, y: usize) -> (f64, f64) {
+    const REACH: usize = 40;
+    let (nx, ny) = (img.nx, img.ny);
+    let mut seen = std::collections::HashSet::new();
+    let mut stack = vec![(x, y)];
+    let (mut sx, mut sy, mut n) = (0.0f64, 0.0f64, 0.0f64);
+    while let Some((px, py)) = stack.pop() {
+        if px.abs_diff(x) > REACH || py.abs_diff(y) > REACH || !seen.insert((px, py)) {
+            continue;
+        }
+        if !img.bad[py * nx + px] {
+            continue;
+        }
+        sx += px as f64;
+        sy += py as f64;
+        n += 1.0;
+        if px > 0 {
+            stack.push((px - 1, py));
+        }
+        if py > 0 {
+            stack.push((px, py - 1));
+        }
+        if px + 1 < nx {
+            stack.push((px + 1, py));
+        }
+        if py + 1 < ny {
+            stack.push((px, py + 1));
+        }
+    }
+    (sx / n.max(1.0), sy / n.max(1.0))
+}
+
 /// Sky annulus used for every star (just outside the ePSF table).
 pub fn sky_annulus(cfg: &AnalysisCfg) -> (f64, f64) {
     let r = cfg.epsf_radius_px as f64;
     (r + 1.0, r + 4.0)
 }
 
-/// Match detections to the truth: for each detection the nearest truth star within 2 px.
+/// Match detections to the truth: for each detection the nearest truth star within 2 px of its position
+/// corrected for the common offset. The common offset (the exposure's mean pointing error, the ePSF's
+/// centring convention) is the median displacement of the detections to their nearest truth star within
+/// 20 px (when at least 3 such pairs exist; else none), as a cross-match with an offset search would find it.
 pub fn match_truth(pos: &[(f64, f64)], truth: &[TruthRow]) -> Vec<Option<usize>> {
-    // bucket the truth on a 4-px grid
-    let cell = 4.0;
+    let coarse = nearest_truth(pos, truth, 20.0, (0.0, 0.0));
+    let (dx, dy): (Vec<f64>, Vec<f64>) = pos
+        .iter()
+        .zip(&coarse)
+        .filter_map(|(&(x, y), m)| m.map(|k| (x - truth[k].x_px, y - truth[k].y_px)))
+        .unzip();
+    let offset = if dx.len() >= 3 {
+        (stats::median(&dx), stats::median(&dy))
+    } else {
+        (0.0, 0.0)
+    };
+    nearest_truth(pos, truth, 2.0, offset)
+}
+
+/// For each position, the nearest truth star within `radius_px` of the position minus `offset`.
+fn nearest_truth(
+    pos: &[(f64, f64)],
+    truth: &[TruthRow],
+    radius_px: f64,
+    offset: (f64, f64),
+) -> Vec<Option<usize>> {
+    // bucket the truth on a grid of cells one radius wide
+    let cell = radius_px.max(1.0);
     let mut grid: std::collections::HashMap<(i64, i64), Vec<usize>> =
         std::collections::HashMap::new();
     for (k, t) in truth.iter().enumerate() {
@@ -87,13 +158,14 @@ pub fn match_truth(pos: &[(f64, f64)], truth: &[TruthRow]) -> Vec<Option<usize>>
     }
     pos.iter()
         .map(|&(x, y)| {
+            let (x, y) = (x - offset.0, y - offset.1);
             let (cx, cy) = ((x / cell).floor() as i64, (y / cell).floor() as i64);
             let mut best: Option<(usize, f64)> = None;
             for gy in cy - 1..=cy + 1 {
                 for gx in cx - 1..=cx + 1 {
                     for &k in grid.get(&(gx, gy)).map(|v| v.as_slice()).unwrap_or(&[]) {
                         let d = (truth[k].x_px - x).powi(2) + (truth[k].y_px - y).powi(2);
-                        if d <= 4.0 && best.is_none_or(|(_, bd)| d < bd) {
+                        if d <= radius_px * radius_px && best.is_none_or(|(_, bd)| d < bd) {
                             best = Some((k, d));
                         }
                     }

@@ -134,6 +134,7 @@ pub fn analyze_prepared(
         }
     };
     flags::mark_poor_fits(&mut fits);
+    flags::mark_blends(&mut fits, flags::blend_radius_px(opts.cfg.fit_radius_px));
     let stars = star_results(&fits, &matches, truth);
     let mut report = Report {
         n_detected: det.len(),

@@ -33,7 +33,7 @@ pub use telemetry::Telemetry;
 
 use crate::analysis::epsf::Epsf;
 use crate::analysis::epsf::build::{BuildOptions, StarStart};
-use crate::analysis::epsf::fit::fit_star;
+use crate::analysis::epsf::fit::{fit_star, flags};
 use crate::analysis::image::AnalysisImage;
 use crate::analysis::report::StarResult;
 use crate::simulate::TruthRow;
@@ -406,7 +406,8 @@ pub fn apply(
                 s.flux_e = f.flux;
                 s.crlb_x_px = f.crlb_x;
                 s.crlb_y_px = f.crlb_y;
-                s.flags = f.flags;
+                // a neighbour found by the global analysis is still a neighbour
+                s.flags = f.flags | (s.flags & flags::BLENDED);
                 s.dx_px += ddx;
                 s.dy_px += ddy;
             }

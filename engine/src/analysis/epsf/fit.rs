@@ -33,11 +33,54 @@ pub mod flags {
     pub const FEW_PIXELS: u32 = 64;
     /// χ²/dof far above the image's typical value (a blend, a cosmic, a bad pixel): see [`POOR_FIT_FACTOR`].
     pub const POOR_FIT: u32 = 128;
+    /// Another detected star lies within [`blend_radius_px`] of this one: its light is in this star's fit
+    /// pixels (reported, not rejected: a crowded-field analysis reports such stars separately).
+    pub const BLENDED: u32 = 256;
     /// Anything that makes a fit unusable for the accuracy statistics.
     pub const REJECT: u32 =
         NOT_CONVERGED | MOVED | SINGULAR | NONPOSITIVE_FLUX | FEW_PIXELS | POOR_FIT;
     /// A fit is poor when its χ²/dof exceeds this many times the median of the image's fits (and 2).
     pub const POOR_FIT_FACTOR: f64 = 5.0;
+
+    /// The distance within which a neighbour blends into a star's fit: the fit radius plus 3 px (where the
+    /// neighbour's PSF core has fallen below ≈ 1 % of its peak).
+    pub fn blend_radius_px(fit_radius_px: f64) -> f64 {
+        fit_radius_px + 3.0
+    }
+
+    /// Flag the fits with another fit within `radius_px` (positions bucketed on a grid: O(n)).
+    pub fn mark_blends(fits: &mut [super::StarFit], radius_px: f64) {
+        use std::collections::HashMap;
+        let cell = radius_px.max(1.0);
+        let key = |x: f64, y: f64| ((x / cell).floor() as i64, (y / cell).floor() as i64);
+        let mut grid: HashMap<(i64, i64), Vec<usize>> = HashMap::new();
+        for (k, f) in fits.iter().enumerate() {
+            if f.x.is_finite() && f.y.is_finite() {
+                grid.entry(key(f.x, f.y)).or_default().push(k);
+            }
+        }
+        let blended: Vec<bool> = fits
+            .iter()
+            .enumerate()
+            .map(|(k, f)| {
+                let (cx, cy) = key(f.x, f.y);
+                (cy - 1..=cy + 1).any(|gy| {
+                    (cx - 1..=cx + 1).any(|gx| {
+                        grid.get(&(gx, gy)).is_some_and(|v| {
+                            v.iter().any(|&j| {
+                                j != k && (fits[j].x - f.x).hypot(fits[j].y - f.y) < radius_px
+                            })
+                        })
+                    })
+                })
+            })
+            .collect();
+        for (f, b) in fits.iter_mut().zip(blended) {
+            if b {
+                f.flags |= BLENDED;
+            }
+        }
+    }
 
     /// Flag the fits whose χ²/dof stands out from the median of the usable ones.
     pub fn mark_poor_fits(fits: &mut [super::StarFit]) {
@@ -120,7 +163,31 @@ pub fn annulus_sky(img: &PixelData<'_>, x: f64, y: f64, r_in: f64, r_out: f64) -
 
 /// Pixels (index, X, Y) within `radius` of (x, y); also whether the disc was clipped by the image edge and
 /// whether bad pixels were excluded.
+/// The fit pixels around (x, y): the disc of `radius`, grown 1 px at a time (by at most
+/// [`MAX_RADIUS_GROWTH_PX`]) while masked pixels (a saturated core) leave fewer good pixels than the
+/// unmasked disc would hold, so a saturated star is fitted from its unsaturated wings. Returns the pixels
+/// and whether the disc met the image edge or masked pixels.
 fn select(
+    img: &PixelData<'_>,
+    x: f64,
+    y: f64,
+    radius: f64,
+) -> (Vec<(usize, f64, f64)>, bool, bool) {
+    let full = std::f64::consts::PI * radius * radius;
+    let mut r = radius;
+    loop {
+        let (pix, edge, bad) = select_disc(img, x, y, r);
+        if !bad || pix.len() as f64 >= 0.8 * full || r >= radius + MAX_RADIUS_GROWTH_PX {
+            return (pix, edge, bad);
+        }
+        r += 1.0;
+    }
+}
+
+/// Largest growth of a fit disc around a saturated core, px.
+pub const MAX_RADIUS_GROWTH_PX: f64 = 8.0;
+
+fn select_disc(
     img: &PixelData<'_>,
     x: f64,
     y: f64,
