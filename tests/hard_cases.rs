@@ -278,6 +278,21 @@ fn bad_input_is_a_named_error() {
             .contains("ace.span_s")
     );
     assert!(Config::from_toml_str("[optics]\nfringe = [0.1, nan]").is_err());
+    // what sets run time or memory is bounded: a 1e6-mas jitter is refused by name, and a frame that
+    // cannot fit in memory stops at once saying how much it needs
+    let mut c = small_config();
+    c.ace.sigma_mas = 1e6;
+    let e = Simulator::new(&c).err().expect("huge σ").to_string();
+    assert!(e.contains("ace.sigma_mas") && e.contains("≤ 10000"), "{e}");
+    let mut c = small_config();
+    c.instrument.detector_px = 60_000;
+    c.instrument.photosensitive_px = 60_000;
+    c.readout.channels = 16;
+    c.readout.channel_width_px = 3750;
+    c.scene.grid_n = 2;
+    c.ace.case = AceCase::Gaussian;
+    let e = Simulator::new(&c).err().expect("too big").to_string();
+    assert!(e.contains("GiB of memory"), "{e}");
 }
 
 #[test]

@@ -6,7 +6,8 @@
 //!    light; the border of `(detector_px − photosensitive_px)/2` pixels holds no signal and is read for
 //!    noise only;
 //! 3. Poisson shot noise on the total; charge clipped at the full well (flagged);
-//! 4. plus Gaussian CDS read noise;
+//! 4. plus Gaussian read noise of the image: √2 × the per-read noise for CDS (two reads differenced),
+//!    √(2/N) × for Fowler-N ([`crate::config::Detector::image_read_noise_e`]);
 //! 5. ÷ gain + bias, rounded, clipped to `[0, 2^bits − 1]` ADU (flagged).
 //!
 //! Every stage can be switched off (`shot_noise`, `read_noise`, `digitise`, σ_flat = 0). Noise streams are
@@ -74,7 +75,7 @@ pub fn expose(
     let n = cfg.instrument.detector_px;
     let d = &cfg.detector;
     let adc_max = (2f64.powi(d.adc_bits as i32) - 1.0).min(f32::MAX as f64);
-    let read = Normal::new(0.0, d.read_noise_e.max(0.0)).ok();
+    let read = Normal::new(0.0, d.image_read_noise_e().max(0.0)).ok();
     let mut adu = vec![0.0f32; n * n];
     let mut dqv = vec![0u8; n * n];
     adu.par_chunks_mut(n)
@@ -166,17 +167,17 @@ mod tests {
             "shot mean {m}"
         );
         assert!((v / (dark / g / g) - 1.0).abs() < 0.015, "shot var {v}");
-        // read noise only: var = 15²/g²
+        // read noise only: var = (√2·15)²/g² (CDS: the difference of two reads)
         let mut c = cfg(n);
         c.detector.shot_noise = false;
         c.detector.digitise = false;
         let (m, v) = moments(&expose(&c, &zero, &flat, 1));
         assert!((m - dark / g).abs() < 4.0 * 5.0 / n as f64, "read mean {m}");
-        assert!((v / (225.0 / g / g) - 1.0).abs() < 0.015, "read var {v}");
-        // everything, digitised: var = (dark + rn²)/g² + 1/12 (quantisation)
+        assert!((v / (450.0 / g / g) - 1.0).abs() < 0.015, "read var {v}");
+        // everything, digitised: var = (dark + 2·rn²)/g² + 1/12 (quantisation)
         let c = cfg(n);
         let (m, v) = moments(&expose(&c, &zero, &flat, 2));
-        let expect = (dark + 225.0) / g / g + 1.0 / 12.0;
+        let expect = (dark + 450.0) / g / g + 1.0 / 12.0;
         assert!((m - dark / g).abs() < 0.05, "mean {m}");
         assert!((v / expect - 1.0).abs() < 0.015, "var {v} vs {expect}");
     }

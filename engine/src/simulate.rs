@@ -26,6 +26,11 @@ pub enum SimError {
     Scene(#[from] SceneError),
     #[error(transparent)]
     Kernel(#[from] KernelError),
+    #[error(
+        "this simulation needs ≈ {need_gib:.1} GiB of memory and {available_gib:.1} GiB are available: \
+         lower instrument.detector_px, the number of stars, ace.span_s or raise ace.sample_interval_ms"
+    )]
+    Memory { need_gib: f64, available_gib: f64 },
     #[error("GPU integration failed: {0}")]
     Gpu(#[from] crate::integrate::gpu::GpuError),
 }
@@ -85,6 +90,37 @@ pub struct Exposure {
     pub backend: String,
 }
 
+const GIB: f64 = 1024.0 * 1024.0 * 1024.0;
+
+/// Peak memory of a simulator of `cfg` with `n_stars` stars and of one exposure's analysis, bytes — an
+/// estimate meant to be within a factor 2: the frame arrays (noise-free electrons f64, ADU f32, DQ, flat f32,
+/// the analysis image f64 + mask: 26 B/pixel), the ACE series and its spectrum (2 axes × 48 B/sample), the
+/// stamps (f64, radius + 3σ of the ACE each side) and the PSF and kernel tables (16 B per cell for each
+/// of at most 64 colours × field zones).
+pub fn memory_estimate_bytes(cfg: &Config, n_stars: usize) -> f64 {
+    let n = cfg.instrument.detector_px as f64;
+    let frame = 26.0 * n * n;
+    let series = match cfg.ace.case {
+        AceCase::Realistic => 96.0 * cfg.ace.span_s / (cfg.ace.sample_interval_ms * 1e-3),
+        _ => 0.0,
+    };
+    let reach = cfg.fidelity.stamp_radius_px as f64
+        + 3.0 * cfg.ace.sigma_mas / cfg.instrument.plate_scale_mas();
+    let stamps = n_stars as f64 * 8.0 * (2.0 * reach + 1.0).powi(2);
+    let cells =
+        (2.0 * (cfg.optics.psf_radius_px * cfg.optics.psf_oversampling) as f64 + 1.0).powi(2);
+    let tables = 16.0 * cells * 64.0;
+    frame + series + stamps + tables
+}
+
+/// Memory available to this process now (Linux: `MemAvailable` of /proc/meminfo), bytes.
+pub fn available_memory_bytes() -> Option<f64> {
+    let text = std::fs::read_to_string("/proc/meminfo").ok()?;
+    let line = text.lines().find(|l| l.starts_with("MemAvailable:"))?;
+    let kib: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kib * 1024.0)
+}
+
 /// Shared state of a dataset's simulation.
 pub struct Simulator {
     pub cfg: Config,
@@ -126,6 +162,15 @@ impl Simulator {
             Arc::new(PsfBank::new(cfg))
         };
         let stars = scene::build(cfg)?;
+        if let Some(avail) = available_memory_bytes() {
+            let need = memory_estimate_bytes(cfg, stars.len());
+            if need > avail {
+                return Err(SimError::Memory {
+                    need_gib: need / GIB,
+                    available_gib: avail / GIB,
+                });
+            }
+        }
         let timing = ReadoutTiming::new(cfg);
         let map = IntraPixelMap::from_config(&cfg.detector, cfg.fidelity.subpixels)?;
         let series = match cfg.ace.case {

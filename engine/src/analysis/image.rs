@@ -31,7 +31,7 @@ impl AnalysisImage {
                 .map(|v| (*v as f64 - cfg.detector.bias_adu) * g)
                 .collect(),
             bad: img.dq.iter().map(|d| d & bad_bits != 0).collect(),
-            var_floor_e2: cfg.detector.read_noise_e.powi(2) + g * g / 12.0,
+            var_floor_e2: cfg.detector.noise_floor_e2(),
             plate_scale_mas: cfg.instrument.plate_scale_mas(),
         }
     }

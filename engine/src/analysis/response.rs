@@ -55,7 +55,7 @@ impl FitNoise {
         FitNoise {
             flux_e: stats::median(&rates) * d.exposure_s,
             sky_e: d.dark_e_per_s * d.exposure_s,
-            floor_e2: d.read_noise_e.powi(2) + d.gain_e_per_adu.powi(2) / 12.0,
+            floor_e2: d.noise_floor_e2(),
             radius_px,
         }
     }

@@ -8,6 +8,7 @@
 
 mod text;
 mod validate;
+pub use validate::MAX_ACE_SIGMA_MAS;
 
 pub use text::DEFAULT_TOML;
 
@@ -291,7 +292,11 @@ pub struct Detector {
     pub exposure_s: f64,
     /// Dark current + stray light, e⁻/pix/s.
     pub dark_e_per_s: f64,
-    pub read_noise_e: f64,
+    /// Read noise of ONE read of a pixel, e⁻ (the paper's table: 15 e⁻). The noise of an image depends on
+    /// how it is formed from reads ([`Sampling`]): [`Detector::image_read_noise_e`].
+    pub read_noise_per_read_e: f64,
+    /// How an image is formed from the reads of a pixel.
+    pub sampling: Sampling,
     pub gain_e_per_adu: f64,
     pub full_well_e: f64,
     pub adc_bits: u32,
@@ -310,7 +315,8 @@ impl Default for Detector {
         Self {
             exposure_s: 12.5,
             dark_e_per_s: 24.5,
-            read_noise_e: 15.0,
+            read_noise_per_read_e: 15.0,
+            sampling: Sampling::Cds,
             gain_e_per_adu: 3.0,
             full_well_e: 150_000.0,
             adc_bits: 16,
@@ -322,6 +328,40 @@ impl Default for Detector {
             digitise: true,
         }
     }
+}
+
+/// How an image is formed from the non-destructive reads of a pixel.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Hash)]
+#[serde(rename_all = "kebab-case")]
+pub enum Sampling {
+    /// Correlated double sampling: the image is (read after − read before), so the read noises of two
+    /// reads add: σ = √2 · σ_read. The JASMINE detector's mode and the original simulator's (√2 · 15 e⁻).
+    Cds,
+    /// Fowler-N: the mean of N reads after minus the mean of N reads before: σ = σ_read · √(2/N).
+    Fowler { pairs: usize },
+}
+
+impl Detector {
+    /// Read noise of an image (e⁻): √2 σ_read for CDS, σ_read √(2/N) for Fowler-N.
+    pub fn image_read_noise_e(&self) -> f64 {
+        match self.sampling {
+            Sampling::Cds => std::f64::consts::SQRT_2 * self.read_noise_per_read_e,
+            Sampling::Fowler { pairs } => {
+                self.read_noise_per_read_e * (2.0 / pairs.max(1) as f64).sqrt()
+            }
+        }
+    }
+
+    /// The variance floor of a pixel of an image, e⁻²: image read noise² plus the quantisation of the
+    /// ADC, g²/12 (g in e⁻/ADU).
+    pub fn noise_floor_e2(&self) -> f64 {
+        noise_floor_e2(self.image_read_noise_e(), self.gain_e_per_adu)
+    }
+}
+
+/// Variance floor of a pixel from its image read noise (e⁻) and gain (e⁻/ADU): `σ_RN² + g²/12`.
+pub fn noise_floor_e2(image_read_noise_e: f64, gain_e_per_adu: f64) -> f64 {
+    image_read_noise_e.powi(2) + gain_e_per_adu.powi(2) / 12.0
 }
 
 /// Readout order (SPEC §4).

@@ -1,6 +1,9 @@
 //! [`Config::validate`]: every field checked, the error naming the field and the allowed range.
 
-use super::{AceCase, Config, ConfigError, IntraPixel, SceneKind, invalid};
+use super::{AceCase, Config, ConfigError, IntraPixel, Sampling, SceneKind, invalid};
+
+/// Largest ACE σ accepted, mas.
+pub const MAX_ACE_SIGMA_MAS: f64 = 1.0e4;
 
 fn check_finite(field: &str, v: f64) -> Result<(), ConfigError> {
     if v.is_finite() {
@@ -160,7 +163,23 @@ impl Config {
             ));
         }
         check_nonneg("detector.dark_e_per_s", d.dark_e_per_s)?;
-        check_nonneg("detector.read_noise_e", d.read_noise_e)?;
+        check_nonneg("detector.read_noise_per_read_e", d.read_noise_per_read_e)?;
+        if d.read_noise_per_read_e > 1e4 {
+            return Err(invalid(
+                "detector.read_noise_per_read_e",
+                d.read_noise_per_read_e,
+                "must be ≤ 10000 e⁻",
+            ));
+        }
+        if let Sampling::Fowler { pairs } = d.sampling
+            && !(1..=1024).contains(&pairs)
+        {
+            return Err(invalid(
+                "detector.sampling.fowler.pairs",
+                pairs,
+                "must be in 1..=1024",
+            ));
+        }
         check_pos("detector.gain_e_per_adu", d.gain_e_per_adu)?;
         check_pos("detector.full_well_e", d.full_well_e)?;
         if !(1..=32).contains(&d.adc_bits) {
@@ -224,8 +243,14 @@ impl Config {
 
         let a = &self.ace;
         check_nonneg("ace.sigma_mas", a.sigma_mas)?;
-        if a.sigma_mas > 1e6 {
-            return Err(invalid("ace.sigma_mas", a.sigma_mas, "must be ≤ 1e6 mas"));
+        // beyond ≈ 20 px rms a star is a streak many times the PSF: no ePSF analysis applies, and the
+        // stamps (radius + jitter excursion) grow as σ², so the run time would have no useful bound
+        if a.sigma_mas > MAX_ACE_SIGMA_MAS {
+            return Err(invalid(
+                "ace.sigma_mas",
+                a.sigma_mas,
+                &format!("must be ≤ {MAX_ACE_SIGMA_MAS} mas (≈ 21 px rms)"),
+            ));
         }
         check_pos("ace.boundary_freq_hz", a.boundary_freq_hz)?;
         check_finite("ace.power_law_index", a.power_law_index)?;

@@ -51,7 +51,24 @@ pub fn headers(sim: &Simulator, exp: &Exposure) -> Vec<Card> {
             "[s] exposure per pixel (CDS interval)",
         ),
         Card::f("GAIN", d.gain_e_per_adu, "[e-/ADU] conversion gain"),
-        Card::f("RDNOISE", d.read_noise_e, "[e-] CDS read noise"),
+        Card::f(
+            "RDNOISE",
+            d.image_read_noise_e(),
+            "[e-] read noise of this image (all reads)",
+        ),
+        Card::f(
+            "RNREAD",
+            d.read_noise_per_read_e,
+            "[e-] read noise of one read",
+        ),
+        Card::s(
+            "SAMPLING",
+            match d.sampling {
+                crate::config::Sampling::Cds => "CDS".to_string(),
+                crate::config::Sampling::Fowler { pairs } => format!("FOWLER-{pairs}"),
+            },
+            "image = reads after - reads before",
+        ),
         Card::f(
             "DARKCUR",
             d.dark_e_per_s,
@@ -349,7 +366,7 @@ pub fn read_analysis_image(path: &Path, plate_scale_mas: f64) -> Result<Analysis
             })
             .collect(),
         bad,
-        var_floor_e2: r.read_noise_e.powi(2) + g * g / 12.0,
+        var_floor_e2: crate::config::noise_floor_e2(r.read_noise_e, g),
         plate_scale_mas,
     })
 }

@@ -187,7 +187,7 @@ fn positions_of_image(
         ny: n,
         e: star_e.into_iter().map(|v| v + sky).collect(),
         bad: vec![false; n * n],
-        var_floor_e2: d.read_noise_e.powi(2) + d.gain_e_per_adu.powi(2) / 12.0,
+        var_floor_e2: d.noise_floor_e2(),
         plate_scale_mas: sim.cfg.instrument.plate_scale_mas(),
     };
     let jobs = sim.jobs()?;
