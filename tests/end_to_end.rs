@@ -44,8 +44,13 @@ fn simulate_write_read_analyse_round_trip() {
     assert_eq!(truth_csv.len(), 64);
     assert_eq!(truth_csv, truth_fits);
     // the analysis of the file equals the analysis in memory
-    let from_file = exposure::read_analysis_image(&files.image, cfg.instrument.plate_scale_mas())
-        .expect("image");
+    let (from_file, assumed) =
+        exposure::read_analysis_image(&files.image, cfg.instrument.plate_scale_mas())
+            .expect("image");
+    assert!(
+        assumed.is_empty(),
+        "a jsim image says everything: {assumed:?}"
+    );
     let in_memory = AnalysisImage::from_detector(&cfg, &exp.image);
     let o = Options::new(&cfg.analysis);
     let a = astrometry::analyze(&from_file, Some(&truth_csv), &o).expect("analysis");

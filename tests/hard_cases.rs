@@ -145,11 +145,11 @@ fn saturated_dark_noise_floor_blended_and_edge_stars() {
     rows.push((202.2, 107.1, f64::INFINITY));
     let floor: Vec<usize> = (rows.len()..rows.len() + 16).collect();
     for k in 0..16 {
-        // Hw 16: ≈ 4600 e⁻ in 12.5 s, a peak pixel ≈ 20 σ above the dark and read noise
+        // Hw 15.5: ≈ 4600 e⁻ in 12.5 s, a peak pixel ≈ 20 σ above the dark and CDS read noise
         rows.push((
             107.4 + 95.0 * (k % 4) as f64 + 0.21 * k as f64,
             202.3 + 95.0 * (k / 4) as f64 * 0.5 + 0.37 * (k % 3) as f64 + 47.0 * (k / 8) as f64,
-            16.0,
+            15.5,
         ));
     }
     let pair = [rows.len(), rows.len() + 1];
@@ -205,7 +205,7 @@ fn saturated_dark_noise_floor_blended_and_edge_stars() {
     let (ox, oy) = (off(&|s| s.dx_px), off(&|s| s.dy_px));
     let mut chi2 = Vec::new();
     for &k in &floor {
-        let s = found(k).expect("a Hw 16 star is detected");
+        let s = found(k).expect("a Hw 15.5 star is detected");
         assert!(s.flags & flags::REJECT == 0, "{s:?}");
         chi2.push(((s.dx_px - ox) / s.crlb_x_px).powi(2));
         chi2.push(((s.dy_px - oy) / s.crlb_y_px).powi(2));
@@ -325,4 +325,59 @@ fn psf_halo_adds_the_light_beyond_the_table() {
     let t = &halo.truth[0];
     let i = t.y_px.round() as usize * 512 + t.x_px.round() as usize;
     assert!((halo.star_e[i] / plain.star_e[i] - 1.0).abs() < 1e-3);
+}
+
+/// Too few stars for an ePSF: the analysis says so and falls back to a stated PSF — the instrument's
+/// model PSF when the image's simulation is known, else a Gaussian — instead of building an ePSF from
+/// four stars.
+#[test]
+fn too_few_stars_for_an_epsf_fall_back_to_a_stated_psf() {
+    use engine::analysis::countermeasures::Plan;
+    use engine::analysis::{Source, analyse_image};
+    let mut c = small_config();
+    c.ace.case = AceCase::Gaussian;
+    c.scene.grid_n = 2;
+    c.scene.grid_spacing_px = 200.0;
+    let sim = Simulator::new(&c).expect("sim");
+    let e = sim.exposure(0).expect("exp");
+    let img = AnalysisImage::from_detector(&c, &e.image);
+    let plan = Plan::default();
+    let with_model = analyse_image(
+        &img,
+        Some(&e.truth),
+        Some(Source {
+            sim: &sim,
+            index: 0,
+        }),
+        &c.analysis,
+        &plan,
+        c.seed,
+    )
+    .expect("analysis");
+    let r = &with_model.global.report;
+    assert_eq!((r.epsf_stars, r.n_used), (4, 4), "{r:?}");
+    assert!(r.epsf_fallback.contains("model PSF"), "{r:?}");
+    assert!(r.accuracy_mas.is_finite() && r.accuracy_mas > 0.0);
+    let without =
+        analyse_image(&img, Some(&e.truth), None, &c.analysis, &plan, c.seed).expect("analysis");
+    assert!(
+        without.global.report.epsf_fallback.contains("Gaussian"),
+        "{:?}",
+        without.global.report
+    );
+    // the grid of 64 stars builds its ePSF: no fallback
+    let c = small_config();
+    let sim = Simulator::new(&c).expect("sim");
+    let e = sim.exposure(0).expect("exp");
+    let a = astrometry::analyze(
+        &AnalysisImage::from_detector(&c, &e.image),
+        Some(&e.truth),
+        &Options::new(&c.analysis),
+    )
+    .expect("analysis");
+    assert!(
+        a.report.epsf_fallback.is_empty() && a.report.epsf_stars == 64,
+        "{:?}",
+        a.report
+    );
 }

@@ -38,7 +38,15 @@ pub struct Options {
     pub seed: u64,
     /// Fit with this ePSF instead of building one (e.g. the exact ePSF from the simulator).
     pub fixed_epsf: Option<Epsf>,
+    /// The instrument's model PSF (pixel-integrated, from calibration), used when the image holds fewer
+    /// than [`MIN_EPSF_STARS`] stars to build an ePSF from; without one a Gaussian fitted to the stars'
+    /// second moments stands in.
+    pub model_epsf: Option<Epsf>,
 }
+
+/// Fewest isolated, unsaturated stars an ePSF is built from (4× oversampled, each star samples one phase
+/// per pixel: with fewer, most nodes see no star and the smoothing invents the profile).
+pub const MIN_EPSF_STARS: usize = 10;
 
 impl Options {
     pub fn new(cfg: &AnalysisCfg) -> Self {
@@ -48,6 +56,7 @@ impl Options {
             telemetry: None,
             seed: 0,
             fixed_epsf: None,
+            model_epsf: None,
         }
     }
 
@@ -120,13 +129,29 @@ pub fn analyze_prepared(
     };
     let bopt = opts.build_options();
     let pd = img.pixels();
+    let n_build = usable.iter().filter(|u| **u).count();
+    let fit_all = |e: &Epsf| -> Vec<StarFit> {
+        starts
+            .par_iter()
+            .map(|s| fit_star(&pd, e, s.x, s.y, s.flux, s.sky, &bopt.fit))
+            .collect()
+    };
+    let mut fallback = String::new();
     let (mut fits, epsf, iterations) = match &opts.fixed_epsf {
-        Some(e) => {
-            let fits: Vec<StarFit> = starts
-                .par_iter()
-                .map(|s| fit_star(&pd, e, s.x, s.y, s.flux, s.sky, &bopt.fit))
-                .collect();
-            (fits, e.clone(), 0)
+        Some(e) => (fit_all(e), e.clone(), 0),
+        None if n_build < MIN_EPSF_STARS => {
+            let (e, what) = match &opts.model_epsf {
+                Some(m) => (m.clone(), "the instrument's model PSF"),
+                None => (
+                    build::gaussian_seed(&pd, &starts, bopt.oversampling, bopt.half_px),
+                    "a Gaussian of the stars' mean second moment",
+                ),
+            };
+            fallback = format!(
+                "{n_build} isolated unsaturated star(s), fewer than {MIN_EPSF_STARS}: no ePSF built; \
+                 fitted with {what}"
+            );
+            (fit_all(&e), e, 0)
         }
         None => {
             let built = build::build(&pd, &starts, &usable, &bopt, None, None);
@@ -139,6 +164,8 @@ pub fn analyze_prepared(
     let mut report = Report {
         n_detected: det.len(),
         epsf_iterations: iterations,
+        epsf_stars: n_build,
+        epsf_fallback: fallback,
         countermeasure: Countermeasure::None.to_string(),
         ..Default::default()
     };
@@ -172,6 +199,8 @@ pub fn with_countermeasure(
     let mut report = Report {
         n_detected: plain.report.n_detected,
         epsf_iterations: plain.report.epsf_iterations,
+        epsf_stars: plain.report.epsf_stars,
+        epsf_fallback: plain.report.epsf_fallback.clone(),
         countermeasure: cm.to_string(),
         ..Default::default()
     };
@@ -301,7 +330,10 @@ pub fn analyse_image(
     plan: &Plan,
     seed: u64,
 ) -> Result<ImageAnalysis, AnalysisError> {
-    let base = Options::new(cfg);
+    let mut base = Options::new(cfg);
+    if let Some(src) = source {
+        base.model_epsf = Some(exact_epsf(&*src.sim.optical_kernel()?, cfg.epsf_radius_px));
+    }
     let (plain, prepared) = analyze_prepared(img, truth, &base)?;
     let mut global = plain.clone();
     if let (Some(src), Some(t)) = (source, truth) {

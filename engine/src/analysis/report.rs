@@ -73,6 +73,10 @@ pub struct Report {
     pub response_slope_y: f64,
     pub response_rms_mas: f64,
     pub epsf_iterations: usize,
+    /// Isolated, unsaturated stars the ePSF could be built from.
+    pub epsf_stars: usize,
+    /// Empty when the ePSF was built from the image; else what stood in for it and why (too few stars).
+    pub epsf_fallback: String,
     pub countermeasure: String,
     /// Parameters a countermeasure fitted per exposure (degrees of freedom absorbed).
     pub dof_absorbed: usize,

@@ -327,8 +327,18 @@ pub fn write_exposure(
 }
 
 /// Read an image for analysis: electrons with the bias removed (GAIN, RDNOISE, BIASADU, SATURATE headers),
-/// the mask from its DQ extension when present (else from SATURATE and non-finite values).
-pub fn read_analysis_image(path: &Path, plate_scale_mas: f64) -> Result<AnalysisImage, IoError> {
+/// the mask from its DQ extension when present (else from SATURATE and non-finite values). Headers that
+/// are missing are assumed (listed in the second value); impossible ones are refused, naming them.
+pub fn read_analysis_image(
+    path: &Path,
+    plate_scale_mas: f64,
+) -> Result<(AnalysisImage, Vec<String>), IoError> {
+    if !(plate_scale_mas > 0.0 && plate_scale_mas.is_finite()) {
+        return Err(IoError::Format {
+            path: path.to_path_buf(),
+            message: format!("plate scale {plate_scale_mas} mas/px (PLTSCALE): must be > 0"),
+        });
+    }
     let r = fits::read_image(path)?;
     if r.data.len() != r.nx * r.ny {
         return Err(IoError::Format {
@@ -352,7 +362,7 @@ pub fn read_analysis_image(path: &Path, plate_scale_mas: f64) -> Result<Analysis
             .map(|v| *v as f64 >= sat || !v.is_finite())
             .collect(),
     };
-    Ok(AnalysisImage {
+    let img = AnalysisImage {
         nx: r.nx,
         ny: r.ny,
         e: r.data
@@ -368,5 +378,6 @@ pub fn read_analysis_image(path: &Path, plate_scale_mas: f64) -> Result<Analysis
         bad,
         var_floor_e2: crate::config::noise_floor_e2(r.read_noise_e, g),
         plate_scale_mas,
-    })
+    };
+    Ok((img, r.assumed))
 }

@@ -295,6 +295,8 @@ pub struct ImageRead {
     pub bias_adu: f64,
     pub exposure_s: f64,
     pub saturation_adu: Option<f64>,
+    /// What was assumed because the header did not say (one sentence each; empty for a jsim image).
+    pub assumed: Vec<String>,
 }
 
 /// Read a float header with a default.
@@ -318,11 +320,33 @@ pub fn read_image(path: &Path) -> Result<ImageRead, IoError> {
         _ => return Err(IoError::fits(path, "the primary HDU is not a 2-D image")),
     };
     let data: Vec<f32> = hdu.read_image(&mut f).map_err(fe)?;
-    let gain = key_f64(&mut f, &hdu, "GAIN").unwrap_or(1.0);
-    let rn = key_f64(&mut f, &hdu, "RDNOISE").unwrap_or(0.0);
-    let bias = key_f64(&mut f, &hdu, "BIASADU").unwrap_or(0.0);
-    let exptime = key_f64(&mut f, &hdu, "EXPTIME").unwrap_or(1.0);
+    let mut assumed = Vec::new();
+    let mut key = |name: &str, default: f64, what: &str| -> f64 {
+        key_f64(&mut f, &hdu, name).unwrap_or_else(|| {
+            assumed.push(format!("no {name} header: {what} {default} assumed"));
+            default
+        })
+    };
+    let gain = key("GAIN", 1.0, "gain [e-/ADU]");
+    let rn = key("RDNOISE", 0.0, "read noise [e-]");
+    let bias = key("BIASADU", 0.0, "bias [ADU]");
+    let exptime = key("EXPTIME", 1.0, "exposure [s]");
     let sat = key_f64(&mut f, &hdu, "SATURATE");
+    let bad = |k: &str, v: f64, allowed: &str| {
+        Err(IoError::Format {
+            path: path.to_path_buf(),
+            message: format!("header {k} = {v}: {allowed}"),
+        })
+    };
+    if !(gain > 0.0 && gain.is_finite()) {
+        return bad("GAIN", gain, "must be a finite number > 0 [e-/ADU]");
+    }
+    if !(rn >= 0.0 && rn.is_finite()) {
+        return bad("RDNOISE", rn, "must be a finite number ≥ 0 [e-]");
+    }
+    if !bias.is_finite() {
+        return bad("BIASADU", bias, "must be finite [ADU]");
+    }
     let dq = match f.hdu("DQ") {
         Ok(h) => h
             .read_image::<Vec<u8>>(&mut f)
@@ -340,6 +364,7 @@ pub fn read_image(path: &Path) -> Result<ImageRead, IoError> {
         bias_adu: bias,
         exposure_s: exptime,
         saturation_adu: sat,
+        assumed,
     })
 }
 

@@ -179,10 +179,31 @@ pub fn image_provenance(path: &Path) -> Option<(Config, usize)> {
 pub fn analyze(session: &Session, cfg: &Config, a: &AnalyzeArgs) -> Result<()> {
     let t0 = Instant::now();
     let provenance = image_provenance(&a.image);
+    let mut assumptions = Vec::new();
+    if provenance.is_none() {
+        assumptions.push(
+            "no CONFIG extension (or IMAGEIDX): not a jsim image, so no simulation context — the \
+             telemetry has no ACE series to correct with, no ACE prediction is attached, exact-epsf \
+             does not apply; the reference seed is the command line's"
+                .to_string(),
+        );
+    }
     let img_cfg = provenance.as_ref().map(|(c, _)| c).unwrap_or(cfg);
-    let scale = fits::read_f64_key(&a.image, "PLTSCALE")
-        .unwrap_or_else(|_| img_cfg.instrument.plate_scale_mas());
-    let img = exposure::read_analysis_image(&a.image, scale)?;
+    let scale = match fits::read_f64_key(&a.image, "PLTSCALE") {
+        Ok(s) => s,
+        Err(_) => {
+            let s = img_cfg.instrument.plate_scale_mas();
+            assumptions.push(format!(
+                "no PLTSCALE header: {s:.3} mas/px from the configuration assumed"
+            ));
+            s
+        }
+    };
+    let (img, assumed) = exposure::read_analysis_image(&a.image, scale)?;
+    assumptions.extend(assumed);
+    for s in &assumptions {
+        eprintln!("jsim: {}: {s}", a.image.display());
+    }
     let truth = match &a.truth {
         Some(p) => Some(exposure::read_truth(p)?),
         None => exposure::read_truth(&a.image).ok(),
@@ -231,7 +252,7 @@ pub fn analyze(session: &Session, cfg: &Config, a: &AnalyzeArgs) -> Result<()> {
         plate_scale_mas: scale,
         countermeasure: &an.report.countermeasure,
         report: &an.report,
-        assumptions: Vec::new(),
+        assumptions,
         seconds: t0.elapsed().as_secs_f64(),
     };
     products::write_analysis(
