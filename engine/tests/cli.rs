@@ -141,3 +141,51 @@ fn simulate_then_analyze_on_a_small_scene() {
     let b = engine::io::fits::read_image(&dir.join("sim2/img_001.fits")).expect("b");
     assert_eq!(a.data, b.data);
 }
+
+/// A run stopped by Ctrl-C (SIGINT) removes what it wrote: no directory, no image, no temporary file.
+#[test]
+fn an_interrupted_simulation_leaves_nothing() {
+    let dir = temp("interrupt");
+    let cfg = small_toml(&dir);
+    let out_dir = dir.join("out");
+    let mut child = jsim()
+        .args(["simulate", "--config"])
+        .arg(&cfg)
+        .args(["--images", "200", "--set", "ace.span_s=3000", "--out"])
+        .arg(&out_dir)
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("start jsim");
+    // wait until the run has written its first files, then interrupt it
+    let image0 = out_dir.join("img_000.fits");
+    let t0 = std::time::Instant::now();
+    while !image0.exists() {
+        assert!(
+            t0.elapsed().as_secs() < 300,
+            "the simulation never wrote its first image"
+        );
+        assert!(
+            child.try_wait().expect("poll").is_none(),
+            "jsim ended before it could be interrupted"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    let kill = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .expect("kill");
+    assert!(kill.success());
+    let out = child.wait_with_output().expect("wait");
+    assert!(!out.status.success(), "an interrupted run is a failure");
+    assert!(
+        stderr_of(&out).contains("interrupted"),
+        "{}",
+        stderr_of(&out)
+    );
+    assert!(
+        !out_dir.exists(),
+        "the interrupted run left {:?}",
+        std::fs::read_dir(&out_dir).map(|d| d.count())
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -36,7 +36,10 @@ pub struct BenchArgs {
 
 pub fn bench(a: &BenchArgs) -> Result<()> {
     let cfg = a.cfg.load()?;
-    crate::ensure_dir(&a.out)?;
+    let mut outputs = crate::outputs::Outputs::in_dir(&a.out)?;
+    for name in ["bench.csv", "bench.png"] {
+        outputs.path(name);
+    }
     let session = engine::session::Session::new();
     // the GPU rows are measured when the configured backend finds one (the CPU rows always)
     let gpu = Some(session.integrator(cfg.fidelity.backend))
@@ -45,7 +48,10 @@ pub fn bench(a: &BenchArgs) -> Result<()> {
         eprintln!("jsim: {note}");
     }
     let mut rows: Vec<BenchRow> = Vec::new();
-    let save = |rows: &[BenchRow]| bench::write_bench(&a.out.join("bench.csv"), rows);
+    let save = |rows: &[BenchRow]| {
+        crate::outputs::interrupted()?;
+        bench::write_bench(&a.out.join("bench.csv"), rows).map_err(anyhow::Error::from)
+    };
     let has = |p: &str| a.parts.iter().any(|x| x == p);
     if has("methods") {
         eprintln!("bench: methods × backends …");
@@ -70,6 +76,7 @@ pub fn bench(a: &BenchArgs) -> Result<()> {
         save(&rows)?;
     }
     bench::plot_bench(&a.out.join("bench.png"), &rows)?;
+    outputs.keep();
     println!("{}", bench::render_table(&rows));
     println!("wrote {}/bench.csv and bench.png", a.out.display());
     Ok(())

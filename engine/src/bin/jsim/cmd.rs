@@ -1,6 +1,7 @@
 //! The command implementations (thin: the engine session does the work, `engine::io::products` knows the
 //! files; here we print, write and show progress).
 
+use crate::outputs::{Outputs, interrupted};
 use anyhow::{Context, Result, bail};
 use engine::analysis::countermeasures::{Countermeasure, Plan};
 use engine::analysis::vectors::VectorMap;
@@ -35,13 +36,6 @@ fn say_notes(session: &Session) {
     }
 }
 
-fn parent_dir(path: &Path) -> Result<()> {
-    if let Some(p) = path.parent().filter(|p| !p.as_os_str().is_empty()) {
-        crate::ensure_dir(p)?;
-    }
-    Ok(())
-}
-
 /// `jsim psf`
 pub fn psf(session: &Session, cfg: &Config, out: &Path) -> Result<()> {
     let t0 = Instant::now();
@@ -52,8 +46,9 @@ pub fn psf(session: &Session, cfg: &Config, out: &Path) -> Result<()> {
     );
     let psf = bank.get(cfg.scene.j_minus_h, zone);
     let elapsed = t0.elapsed().as_secs_f64();
-    parent_dir(out)?;
+    let outputs = Outputs::for_file(out)?;
     products::write_psf(out, cfg, &psf)?;
+    outputs.keep();
     let n = psf.n();
     println!(
         "wrote {} ({n}×{n} cells, {} per pixel, {} wavelengths, FWHM {:.1} mas, {:.2} % of the flux inside the table) in {elapsed:.2} s",
@@ -81,8 +76,9 @@ pub fn ace(cfg: &Config, out: &Path, every: usize) -> Result<()> {
             ]
         })
         .collect();
-    parent_dir(out)?;
+    let outputs = Outputs::for_file(out)?;
     csv::write(out, &["t_s", "x_mas", "y_mas"], &rows)?;
+    outputs.keep();
     println!(
         "wrote {} ({} samples of {} at {:.3} ms, {} scaling: σ = {:.1}/{:.1} mas) in {:.2} s",
         out.display(),
@@ -107,12 +103,15 @@ pub fn simulate(session: &Session, cfg: &Config, out: &Path) -> Result<()> {
     say_notes(session);
     sim.jobs()?; // PSFs and kernels now, so the timing below separates set-up from integration
     let setup_s = t0.elapsed().as_secs_f64();
-    crate::ensure_dir(out)?;
-    engine::io::write_atomic(&out.join("config.toml"), cfg.to_toml().as_bytes())?;
+    let mut outputs = Outputs::in_dir(out)?;
+    engine::io::write_atomic(&outputs.path("config.toml"), cfg.to_toml().as_bytes())?;
     let pb = progress(cfg.fidelity.images as u64, "simulate");
     let mut summary = Vec::new();
     for i in 0..cfg.fidelity.images {
+        interrupted()?;
         let exp = sim.exposure(i).with_context(|| format!("image {i}"))?;
+        outputs.add(&out.join(exposure::image_name(i)));
+        outputs.add(&out.join(exposure::truth_name(i)));
         let files = exposure::write_exposure(out, &sim, &exp)?;
         summary.push(serde_json::json!({
             "image": files.image.file_name().map(|n| n.to_string_lossy().to_string()),
@@ -136,9 +135,10 @@ pub fn simulate(session: &Session, cfg: &Config, out: &Path) -> Result<()> {
         "images": summary,
     });
     engine::io::write_atomic(
-        &out.join("run.json"),
+        &outputs.path("run.json"),
         serde_json::to_string_pretty(&run)?.as_bytes(),
     )?;
+    outputs.keep();
     println!(
         "wrote {} images of {} stars to {} ({} ACE, {} readout, Hw {}) on {} in {:.1} s (PSF + kernels {:.1} s)",
         cfg.fidelity.images,
@@ -240,7 +240,16 @@ pub fn analyze(session: &Session, cfg: &Config, a: &AnalyzeArgs) -> Result<()> {
             a.countermeasure
         );
     };
-    crate::ensure_dir(&a.out)?;
+    let mut outputs = Outputs::in_dir(&a.out)?;
+    for name in [
+        "catalogue.csv",
+        "epsf.fits",
+        "summary.json",
+        "vectors.csv",
+        "vectors.png",
+    ] {
+        outputs.path(name);
+    }
     let title = format!(
         "{} — deviations ({})",
         a.image.display(),
@@ -263,6 +272,7 @@ pub fn analyze(session: &Session, cfg: &Config, a: &AnalyzeArgs) -> Result<()> {
             .is_some()
             .then_some((&map, img.nx as f64, title.as_str())),
     )?;
+    outputs.keep();
     let r = &an.report;
     println!(
         "{}: {} stars detected, {} used; accuracy {:.2} mas (x {:.2}, y {:.2}), median CRLB {:.2} mas (ratio {:.2}), phase bias {:.2}/{:.2} mas [{}] in {:.2} s",
@@ -295,7 +305,10 @@ pub struct ExperimentArgs {
 pub fn experiment(session: &Session, base: &Config, a: &ExperimentArgs) -> Result<()> {
     let t0 = Instant::now();
     let datasets = experiment::grid(base, &a.aces, &a.readouts, &a.mags);
-    crate::ensure_dir(&a.out)?;
+    let mut outputs = Outputs::in_dir(&a.out)?;
+    for name in ["experiment.csv", "images.csv", "accuracy.png"] {
+        outputs.path(name);
+    }
     let total = (datasets.len() * base.fidelity.images) as u64;
     let pb = progress(total, "experiment");
     let mut rows = Vec::new();
@@ -307,6 +320,7 @@ pub fn experiment(session: &Session, base: &Config, a: &ExperimentArgs) -> Resul
             cfg.readout.order.name(),
             cfg.scene.mag_hw
         ));
+        interrupted()?;
         let sim = session.new_simulator(cfg)?;
         pb.suspend(|| say_notes(session));
         let (r, images) = experiment::run_dataset(&sim, &a.plan, &mut |_| pb.inc(1))?;
@@ -327,6 +341,8 @@ pub fn experiment(session: &Session, base: &Config, a: &ExperimentArgs) -> Resul
                 cfg.readout.order.name()
             );
             let map = VectorMap::new(stars, cfg.instrument.plate_scale_mas());
+            outputs.path(&format!("{stem}.csv"));
+            outputs.path(&format!("{stem}.png"));
             pb.suspend(|| {
                 products::write_vectors(
                     &a.out,
@@ -338,12 +354,12 @@ pub fn experiment(session: &Session, base: &Config, a: &ExperimentArgs) -> Resul
             })?;
         }
         rows.extend(r);
-        // keep the CSV current so an interrupted experiment still leaves its finished datasets
-        products::write_experiment(&a.out.join("experiment.csv"), &rows)?;
     }
     pb.finish_and_clear();
+    products::write_experiment(&a.out.join("experiment.csv"), &rows)?;
     products::write_images(&a.out.join("images.csv"), &image_rows)?;
     products::plot_accuracy(&a.out.join("accuracy.png"), &rows)?;
+    outputs.keep();
     println!("{}", experiment::render_table(&rows));
     println!(
         "wrote {}/experiment.csv, images.csv, accuracy.png in {:.1} s",

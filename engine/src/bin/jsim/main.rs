@@ -7,10 +7,11 @@ use clap::{Args, Parser, Subcommand};
 use engine::analysis::countermeasures::{DEFAULT_TELEMETRY_RATE_HZ, Plan, TelemetryQuality};
 use engine::config::{AceCase, Backend, Config, Method, ReadoutOrder};
 use engine::session::Session;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 mod bench_cmd;
 mod cmd;
+mod outputs;
 mod sweep_cmd;
 
 #[derive(Parser)]
@@ -244,6 +245,7 @@ pub struct CountermeasureArgs {
 
 fn main() {
     quiet_mesa();
+    outputs::install_interrupt_handler();
     let cli = Cli::parse();
     if let Err(e) = run(cli) {
         eprintln!("jsim: error: {e:#}");
@@ -359,10 +361,4 @@ fn quiet_mesa() {
             unsafe { std::env::set_var("XDG_RUNTIME_DIR", &dir) };
         }
     }
-}
-
-/// Create an output directory, naming it in the error.
-pub fn ensure_dir(dir: &Path) -> Result<()> {
-    std::fs::create_dir_all(dir)
-        .with_context(|| format!("cannot create output directory {}", dir.display()))
 }
