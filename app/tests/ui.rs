@@ -5,6 +5,7 @@ use app::ExplorerApp;
 use egui::accesskit::Role;
 use egui_kittest::Harness;
 use egui_kittest::kittest::Queryable;
+use engine::analysis::countermeasures::Countermeasure;
 use engine::config::{Backend, Config, ReadoutOrder};
 use std::time::{Duration, Instant};
 
@@ -29,6 +30,10 @@ fn small_config() -> Config {
     c.ace.sample_interval_ms = 0.5;
     c.validate().expect("the small test config is valid");
     c
+}
+
+fn plate_poly3() -> Countermeasure {
+    "plate-poly:3".parse().expect("a countermeasure")
 }
 
 fn small_app() -> ExplorerApp {
@@ -63,25 +68,29 @@ fn wait_idle(h: &mut Harness<'_, ExplorerApp>, what: &str) {
 /// The frame on screen was computed with the configuration on screen.
 fn assert_current(h: &Harness<'_, ExplorerApp>) {
     let app = h.state();
-    let hash = app.cfg.hash_hex();
-    let f = app.rt.frame.as_ref().expect("a frame was simulated");
+    let hash = app.settings.cfg.hash_hex();
+    let f = app
+        .rt
+        .results
+        .frame
+        .as_ref()
+        .expect("a frame was simulated");
     assert_eq!(
         f.cfg_hash, hash,
         "the frame belongs to the parameters on screen"
     );
-    assert_eq!(f.readout, app.cfg.readout.order);
-    assert_eq!(f.mag, app.cfg.scene.mag_hw);
-    let p = app.rt.prediction.as_ref().expect("a prediction");
+    assert_eq!(f.cfg, app.settings.cfg);
+    let p = app.rt.results.prediction.as_ref().expect("a prediction");
     assert_eq!(p.cfg_hash, hash);
     assert!(p.dataset_mas.is_finite() && p.dataset_mas > 0.0, "{p:?}");
     assert!(f.report.n_used >= 20, "stars measured: {:?}", f.report);
     assert!(f.report.accuracy_mas.is_finite() && f.report.accuracy_mas > 0.0);
-    let t = app.rt.twin.as_ref().expect("the Gaussian twin");
+    let t = app.rt.results.twin.as_ref().expect("the Gaussian twin");
     assert_eq!(t.cfg_hash, hash);
     assert!(
-        app.rt.note.as_ref().is_none_or(|n| !n.is_error),
+        app.rt.status.note.as_ref().is_none_or(|n| !n.is_error),
         "{:?}",
-        app.rt.note
+        app.rt.status.note
     );
 }
 
@@ -93,12 +102,12 @@ fn controls_rerun_the_engine_with_the_new_parameters() {
     {
         let app = h.state();
         assert_eq!(
-            app.rt.frame.as_ref().map(|f| f.readout),
+            app.rt.results.frame.as_ref().map(|f| f.cfg.readout.order),
             Some(ReadoutOrder::Rolling)
         );
         // the magnitude curve: both magnitudes simulated, with the CRLB and the prediction
-        assert_eq!(app.rt.curve.len(), 2, "{:?}", app.rt.curve);
-        for c in &app.rt.curve {
+        assert_eq!(app.rt.results.curve.len(), 2, "{:?}", app.rt.results.curve);
+        for c in &app.rt.results.curve {
             let rows = c.rows.as_ref().expect("Monte Carlo rows");
             assert!(
                 rows.iter()
@@ -108,8 +117,29 @@ fn controls_rerun_the_engine_with_the_new_parameters() {
             assert!(c.predicted_mas.is_some());
         }
     }
+    {
+        // the PSD panel's estimate is at its true amplitude: in the model's units (the generator's factor
+        // removed by the engine, nothing fitted) it lies on the model
+        let s = h.state().rt.results.series.clone().expect("the series");
+        assert!(s.model_gain.is_some_and(|g| g > 0.0), "{:?}", s.model_gain);
+        let psd = engine::jitter::Psd::from_config(&s.cfg.ace);
+        let mut ratios: Vec<f64> = s
+            .welch_log
+            .iter()
+            .map(|[lf, lp]| 10f64.powf(*lp) / psd.eval(10f64.powf(*lf)))
+            .collect();
+        assert!(ratios.len() > 50, "{} bins", ratios.len());
+        ratios.sort_by(|a, b| a.total_cmp(b));
+        let median = ratios[ratios.len() / 2];
+        assert!(
+            (median - 1.0).abs() < 0.15,
+            "median estimate/model {median}"
+        );
+    }
     // the panels show the numbers
     h.get_by_label_contains("Measured accuracy:");
+    h.get_by_label_contains("measured: accuracy");
+    h.get_by_label_contains("1 model unit =");
     h.get_by_label_contains("Predicted accuracy (instant):");
     h.get_by_label_contains("Gaussian twin:");
     let jobs = h.state().rt.jobs_sent;
@@ -118,27 +148,36 @@ fn controls_rerun_the_engine_with_the_new_parameters() {
     h.get_by_role_and_label(Role::Slider, "magnitude Hw")
         .set_value_accesskit(13.0);
     wait_idle(&mut h, "the new magnitude");
-    assert_eq!(h.state().cfg.scene.mag_hw, 13.0);
+    assert_eq!(h.state().settings.cfg.scene.mag_hw, 13.0);
     assert_current(&h);
     assert!(h.state().rt.jobs_sent > jobs);
 
     // a readout-order change
     h.get_by_label("global reset").click();
     wait_idle(&mut h, "the new readout order");
-    assert_eq!(h.state().cfg.readout.order, ReadoutOrder::GlobalReset);
+    assert_eq!(
+        h.state().settings.cfg.readout.order,
+        ReadoutOrder::GlobalReset
+    );
     assert_current(&h);
     assert_eq!(
-        h.state().rt.frame.as_ref().map(|f| f.readout),
+        h.state()
+            .rt
+            .results
+            .frame
+            .as_ref()
+            .map(|f| f.cfg.readout.order),
         Some(ReadoutOrder::GlobalReset)
     );
     {
         let app = h.state();
         assert!(
-            app.rt.curve.iter().all(|c| c.rows.is_some()),
+            app.rt.results.curve.iter().all(|c| c.rows.is_some()),
             "the curve follows the readout change"
         );
         assert!(
             app.rt
+                .results
                 .curve
                 .iter()
                 .flat_map(|c| c.rows.iter().flatten())
@@ -147,12 +186,12 @@ fn controls_rerun_the_engine_with_the_new_parameters() {
     }
 
     // the PSD: add a natural mode, then remove it again
-    h.state_mut().view.auto_curve = false;
+    h.state_mut().settings.view.auto_curve = false;
     h.get_by_label("natural modes (8)").click();
     h.run();
     h.get_by_label("add mode").click();
     wait_idle(&mut h, "the added mode");
-    assert_eq!(h.state().cfg.ace.modes.len(), 9);
+    assert_eq!(h.state().settings.cfg.ace.modes.len(), 9);
     assert_current(&h);
     let dels = h.get_all_by_label("del").count();
     assert_eq!(dels, 9);
@@ -161,7 +200,10 @@ fn controls_rerun_the_engine_with_the_new_parameters() {
         .expect("a del button")
         .click();
     wait_idle(&mut h, "the removed mode");
-    assert_eq!(h.state().cfg.ace.modes, Config::default().ace.modes);
+    assert_eq!(
+        h.state().settings.cfg.ace.modes,
+        Config::default().ace.modes
+    );
     assert_current(&h);
 }
 
@@ -169,18 +211,21 @@ fn controls_rerun_the_engine_with_the_new_parameters() {
 fn cancel_stops_the_work_and_drops_its_results() {
     // a curve long enough to be caught running: 4 magnitudes × 12 images
     let mut app = small_app();
-    app.cfg.fidelity.images = 12;
-    app.cfg.ace.span_s = 200.0;
+    app.settings.cfg.fidelity.images = 12;
+    app.settings.cfg.ace.span_s = 200.0;
     app.set_mags(vec![12.0, 12.5, 13.0, 13.5]);
     let mut h = harness(app, false);
     let t0 = Instant::now();
     loop {
         h.step();
-        let p = h.state().rt.progress.as_ref().map(|p| p.stage);
+        let p = h.state().rt.status.progress.as_ref().map(|p| p.stage);
         if p == Some(app::worker::Stage::Curve) {
             break;
         }
-        assert!(h.state().rt.busy, "the curve should still be running");
+        assert!(
+            h.state().rt.status.busy,
+            "the curve should still be running"
+        );
         assert!(
             t0.elapsed() < Duration::from_secs(120),
             "timed out waiting for the curve"
@@ -196,6 +241,7 @@ fn cancel_stops_the_work_and_drops_its_results() {
     let simulated = |h: &Harness<'_, ExplorerApp>| {
         h.state()
             .rt
+            .results
             .curve
             .iter()
             .filter(|c| c.rows.is_some())
@@ -214,11 +260,11 @@ fn cancel_stops_the_work_and_drops_its_results() {
     h.get_by_label_contains("cancelled");
 
     // a change after the cancel runs again, for the new parameters
-    h.state_mut().view.auto_curve = false;
+    h.state_mut().settings.view.auto_curve = false;
     h.get_by_role_and_label(Role::Slider, "ACE σ [mas]")
         .set_value_accesskit(150.0);
     wait_idle(&mut h, "the new σ");
-    assert_eq!(h.state().cfg.ace.sigma_mas, 150.0);
+    assert_eq!(h.state().settings.cfg.ace.sigma_mas, 150.0);
     assert_current(&h);
 }
 
@@ -227,13 +273,13 @@ fn config_files_errors_and_copy_as_cli() {
     let dir = std::env::temp_dir().join(format!("jsim-app-ui-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("temp dir");
     let mut app = small_app();
-    app.view.auto_curve = false;
+    app.settings.view.auto_curve = false;
     let mut h = harness(app, false);
     h.step();
 
     // a file that does not exist: the error is shown, nothing crashes
     let missing = dir.join("missing.toml");
-    h.state_mut().config_path = missing.display().to_string();
+    h.state_mut().settings.config_path = missing.display().to_string();
     h.get_by_label("Open config").click();
     h.step();
     h.step();
@@ -242,21 +288,21 @@ fn config_files_errors_and_copy_as_cli() {
     // a bad value names its field
     let bad = dir.join("bad.toml");
     std::fs::write(&bad, "[ace]\nsigma_mas = -5.0\n").expect("write");
-    h.state_mut().config_path = bad.display().to_string();
+    h.state_mut().settings.config_path = bad.display().to_string();
     h.get_by_label("Open config").click();
     h.step();
     h.step();
     h.get_by_label_contains("ace.sigma_mas");
     assert_eq!(
-        h.state().cfg,
+        h.state().settings.cfg,
         small_config(),
         "a bad file leaves the parameters alone"
     );
 
     // copy as CLI saves the configuration and puts the command on the clipboard
     let path = dir.join("explorer.toml");
-    h.state_mut().config_path = path.display().to_string();
-    h.state_mut().countermeasure = "plate-poly:3".into();
+    h.state_mut().settings.config_path = path.display().to_string();
+    h.state_mut().settings.countermeasure = plate_poly3();
     h.step();
     h.get_by_label("Copy as CLI: experiment").click();
     h.step();
@@ -284,17 +330,17 @@ fn config_files_errors_and_copy_as_cli() {
     let saved = Config::load(&path).expect("the saved config loads");
     assert_eq!(
         saved,
-        h.state().cfg,
+        h.state().settings.cfg,
         "the file reproduces the parameters on screen"
     );
     assert!(cmd.contains(&path.display().to_string()));
 
     // and opening it in a fresh app restores the app's choices too
     let mut other = ExplorerApp::new(Config::default());
-    other.config_path = path.display().to_string();
+    other.settings.config_path = path.display().to_string();
     other.open_config();
-    assert_eq!(other.cfg, saved);
-    assert_eq!(other.countermeasure, "plate-poly:3");
+    assert_eq!(other.settings.cfg, saved);
+    assert_eq!(other.settings.countermeasure, plate_poly3());
     drop(h);
     std::fs::remove_dir_all(&dir).ok();
 }

@@ -1,9 +1,9 @@
 //! The control panel: every knob edits the engine configuration (or the countermeasure / magnitudes) in
 //! place; the app notices the change after the frame and starts the work it invalidates.
 
-use crate::app::ViewSettings;
-use crate::worker::COUNTERMEASURES;
+use crate::settings::ViewSettings;
 use egui::{DragValue, Slider};
+use engine::analysis::countermeasures::Countermeasure;
 use engine::config::{AceCase, Config, Mode, ReadoutOrder, RowDirection};
 
 fn section(ui: &mut egui::Ui, title: &str) {
@@ -16,7 +16,7 @@ fn section(ui: &mut egui::Ui, title: &str) {
 pub fn controls_ui(
     ui: &mut egui::Ui,
     cfg: &mut Config,
-    countermeasure: &mut String,
+    countermeasure: &mut Countermeasure,
     view: &mut ViewSettings,
     mags_text: &mut String,
     mags_error: Option<&str>,
@@ -106,8 +106,8 @@ pub fn controls_ui(
             .on_hover_text("zones of the Y-dependent ePSF (used by the yzones countermeasure)");
         ui.label("countermeasure");
         ui.horizontal_wrapped(|ui| {
-            for name in COUNTERMEASURES {
-                ui.selectable_value(countermeasure, name.to_string(), name);
+            for cm in Countermeasure::OFFERED {
+                ui.selectable_value(countermeasure, cm, cm.to_string());
             }
         });
 

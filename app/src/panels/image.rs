@@ -1,8 +1,10 @@
 //! Image panels: the full simulated frame (pan, zoom, stretch, pixel under the cursor, channel boundaries),
 //! the close-up of the chosen star beside its Gaussian-ACE twin, and the ePSF.
 
-use crate::app::ExplorerApp;
-use crate::view::{self, Colormap, Scale, Stretch};
+use super::widgets::title;
+use crate::settings::ViewSettings;
+use crate::state::{OnScreen, Results, chosen_pixel};
+use crate::view::{Colormap, Scale, Stretch, diverging, stamp, to_color_image};
 use egui::{Color32, TextureHandle, TextureOptions, vec2};
 use egui_plot::{MarkerShape, Plot, PlotImage, PlotPoint, PlotPoints, Points, VLine};
 use engine::readout::ReadoutTiming;
@@ -42,81 +44,73 @@ fn set_texture(
     }
 }
 
-/// The pixel whose exposure window is shown: the clicked one, else the chosen star's centre.
-pub fn chosen_pixel(app: &ExplorerApp) -> Option<(usize, usize)> {
-    if let Some(p) = app.view.pixel {
-        return Some(p);
-    }
-    let f = app.rt.frame.as_ref()?;
-    let (x, y) = *f.truth_xy.get(app.view.star)?;
-    let n = f.n.max(1) as f64;
-    Some((
-        x.round().clamp(0.0, n - 1.0) as usize,
-        y.round().clamp(0.0, n - 1.0) as usize,
-    ))
-}
-
-/// The full frame.
-pub fn frame_ui(ui: &mut egui::Ui, app: &mut ExplorerApp) {
-    let hash = app.cfg.hash_hex();
-    let stale = app
-        .rt
+/// The full frame. Its channels, exposure windows and scale are those of the configuration it was
+/// simulated with.
+pub fn frame_ui(
+    ui: &mut egui::Ui,
+    screen: &OnScreen,
+    view: &mut ViewSettings,
+    results: &Results,
+    textures: &mut Textures,
+) {
+    let stale = results
         .frame
         .as_ref()
-        .is_some_and(|f| f.cfg_hash != hash || f.image_index != app.view.image_index);
-    let title = match &app.rt.frame {
+        .is_some_and(|f| f.cfg_hash != screen.cfg_hash || f.image_index != view.image_index);
+    let heading = match &results.frame {
         Some(f) => format!(
             "Simulated frame #{} — Hw {:.1}, {} ACE, {} readout ({}×{} px)",
             f.image_index,
-            f.mag,
-            f.ace_case.name(),
-            f.readout.name(),
+            f.cfg.scene.mag_hw,
+            f.cfg.ace.case.name(),
+            f.cfg.readout.order.name(),
             f.n,
             f.n
         ),
         None => "Simulated frame".into(),
     };
-    super::title(ui, &title, stale);
+    title(ui, &heading, stale);
     ui.horizontal_wrapped(|ui| {
         ui.label("stretch");
         for s in Stretch::ALL {
-            ui.radio_value(&mut app.view.stretch, s, s.name());
+            ui.radio_value(&mut view.stretch, s, s.name());
         }
         ui.separator();
-        let mut false_colour = app.view.colormap == Colormap::Inferno;
+        let mut false_colour = view.colormap == Colormap::Inferno;
         if ui.checkbox(&mut false_colour, "false colour").changed() {
-            app.view.colormap = if false_colour {
+            view.colormap = if false_colour {
                 Colormap::Inferno
             } else {
                 Colormap::Gray
             };
         }
-        ui.checkbox(&mut app.view.show_channels, "channels");
-        ui.checkbox(&mut app.view.show_stars, "star marks");
+        ui.checkbox(&mut view.show_channels, "channels");
+        ui.checkbox(&mut view.show_stars, "star marks");
     });
-    let Some(f) = &app.rt.frame else {
+    let Some(f) = &results.frame else {
         ui.centered_and_justified(|ui| {
             ui.weak("the first frame is on its way…");
         });
         return;
     };
-    let key = (app.rt.frame_serial, app.view.stretch, app.view.colormap);
-    if app.rt.textures.frame.as_ref().map(|t| t.0) != Some(key) {
-        let scale = Scale::new(app.view.stretch, f.lo_adu, f.hi_adu, 3.0 * f.noise_adu);
-        let img = view::to_color_image(&f.adu, f.n, f.n, &scale, app.view.colormap);
-        let old = app.rt.textures.frame.take().map(|t| t.1);
+    let key = (results.frame_serial, view.stretch, view.colormap);
+    if textures.frame.as_ref().map(|t| t.0) != Some(key) {
+        let scale = Scale::new(view.stretch, f.lo_adu, f.hi_adu, 3.0 * f.noise_adu);
+        let img = to_color_image(&f.adu, f.n, f.n, &scale, view.colormap);
+        let old = textures.frame.take().map(|t| t.1);
         let tex = set_texture(ui.ctx(), old, "frame", img, FRAME_TEXTURE);
-        app.rt.textures.frame = Some((key, tex));
+        textures.frame = Some((key, tex));
     }
-    let Some((_, tex)) = &app.rt.textures.frame else {
+    let Some((_, tex)) = &textures.frame else {
         return;
     };
     let n = f.n as f64;
     let centre = (n - 1.0) / 2.0;
-    let chosen = chosen_pixel(app);
-    let star = f.truth_xy.get(app.view.star).copied();
-    let w = app.cfg.readout.channel_width_px.max(1);
-    let channels = app.cfg.readout.channels;
+    let chosen = chosen_pixel(view, Some(f));
+    let star = f.truth_xy.get(view.star).copied();
+    let w = f.cfg.readout.channel_width_px.max(1);
+    let channels = f.cfg.readout.channels;
+    let (show_channels, show_stars) = (view.show_channels, view.show_stars);
     let plot_h = (ui.available_height() - 20.0).max(80.0);
     let resp = Plot::new("frame_plot")
         .data_aspect(1.0)
@@ -132,7 +126,7 @@ pub fn frame_ui(ui: &mut egui::Ui, app: &mut ExplorerApp) {
                 PlotPoint::new(centre, centre),
                 vec2(n as f32, n as f32),
             ));
-            if app.view.show_channels {
+            if show_channels {
                 for k in 1..channels {
                     let x = (k * w) as f64 - 0.5;
                     if x < n {
@@ -144,7 +138,7 @@ pub fn frame_ui(ui: &mut egui::Ui, app: &mut ExplorerApp) {
                     }
                 }
             }
-            if app.view.show_stars {
+            if show_stars {
                 let pts: PlotPoints = f.truth_xy.iter().map(|&(x, y)| [x, y]).collect();
                 pui.points(
                     Points::new("stars", pts)
@@ -187,7 +181,7 @@ pub fn frame_ui(ui: &mut egui::Ui, app: &mut ExplorerApp) {
     if resp.response.clicked()
         && let Some((px, py)) = resp.inner.and_then(pixel_at)
     {
-        app.view.pixel = Some((px, py));
+        view.pixel = Some((px, py));
         let nearest = f
             .truth_xy
             .iter()
@@ -197,10 +191,10 @@ pub fn frame_ui(ui: &mut egui::Ui, app: &mut ExplorerApp) {
         if let Some((k, d)) = nearest
             && d < 15.0
         {
-            app.view.star = k;
+            view.star = k;
         }
     }
-    let timing = ReadoutTiming::new(&app.cfg);
+    let timing = ReadoutTiming::new(&f.cfg);
     let line = match hovered.or(chosen) {
         Some((x, y)) => {
             let i = y * f.n + x;
@@ -222,16 +216,21 @@ pub fn frame_ui(ui: &mut egui::Ui, app: &mut ExplorerApp) {
 }
 
 /// The chosen star beside its Gaussian-ACE twin, and their difference.
-pub fn closeup_ui(ui: &mut egui::Ui, app: &mut ExplorerApp) {
-    super::title(
+pub fn closeup_ui(
+    ui: &mut egui::Ui,
+    view: &mut ViewSettings,
+    results: &Results,
+    textures: &mut Textures,
+) {
+    title(
         ui,
         &format!(
             "Star #{} close-up: this ACE vs its Gaussian-ACE twin",
-            app.view.star
+            view.star
         ),
         false,
     );
-    let (Some(f), Some(t)) = (&app.rt.frame, &app.rt.twin) else {
+    let (Some(f), Some(t)) = (&results.frame, &results.twin) else {
         ui.weak("waiting for the frame and its twin…");
         return;
     };
@@ -239,27 +238,27 @@ pub fn closeup_ui(ui: &mut egui::Ui, app: &mut ExplorerApp) {
         ui.weak("waiting for the twin of this frame…");
         return;
     }
-    let Some(&(sx, sy)) = f.truth_xy.get(app.view.star) else {
+    let Some(&(sx, sy)) = f.truth_xy.get(view.star) else {
         ui.weak("choose a star by clicking the frame");
         return;
     };
-    let r = app.view.closeup_radius_px as i64;
+    let r = view.closeup_radius_px as i64;
     let (cx, cy) = (sx.round() as i64, sy.round() as i64);
     let key: CloseKey = (
-        app.rt.frame_serial,
-        app.rt.twin_serial,
-        app.view.star,
-        app.view.closeup_radius_px,
-        app.view.stretch,
+        results.frame_serial,
+        results.twin_serial,
+        view.star,
+        view.closeup_radius_px,
+        view.stretch,
     );
-    if app.rt.textures.close.as_ref().map(|c| c.0) != Some(key) {
-        let a = view::stamp(&f.adu, f.n, cx, cy, r);
-        let b = view::stamp(&t.adu, t.n, cx, cy, r);
+    if textures.close.as_ref().map(|c| c.0) != Some(key) {
+        let a = stamp(&f.adu, f.n, cx, cy, r);
+        let b = stamp(&t.adu, t.n, cx, cy, r);
         let hi = a.iter().chain(&b).copied().fold(f.lo_adu + 1.0, f32::max);
-        let scale = Scale::new(app.view.stretch, f.lo_adu, hi, 3.0 * f.noise_adu);
+        let scale = Scale::new(view.stretch, f.lo_adu, hi, 3.0 * f.noise_adu);
         let side = (2 * r + 1) as usize;
-        let ia = view::to_color_image(&a, side, side, &scale, Colormap::Inferno);
-        let ib = view::to_color_image(&b, side, side, &scale, Colormap::Inferno);
+        let ia = to_color_image(&a, side, side, &scale, Colormap::Inferno);
+        let ib = to_color_image(&b, side, side, &scale, Colormap::Inferno);
         let d: Vec<f32> = a.iter().zip(&b).map(|(x, y)| x - y).collect();
         let dmax = d.iter().fold(1e-3f32, |m, v| m.max(v.abs()));
         let mut px = Vec::with_capacity(side * side);
@@ -267,17 +266,17 @@ pub fn closeup_ui(ui: &mut egui::Ui, app: &mut ExplorerApp) {
             px.extend(
                 d[row * side..(row + 1) * side]
                     .iter()
-                    .map(|v| view::diverging(v / dmax)),
+                    .map(|v| diverging(v / dmax)),
             );
         }
         let id = egui::ColorImage::new([side, side], px);
-        let old = app.rt.textures.close.take().map(|c| c.1);
+        let old = textures.close.take().map(|c| c.1);
         let [oa, ob, od] = match old {
             Some([x, y, z]) => [Some(x), Some(y), Some(z)],
             None => [None, None, None],
         };
         let ctx = ui.ctx().clone();
-        app.rt.textures.close = Some((
+        textures.close = Some((
             key,
             [
                 set_texture(&ctx, oa, "close_a", ia, TextureOptions::NEAREST),
@@ -286,21 +285,21 @@ pub fn closeup_ui(ui: &mut egui::Ui, app: &mut ExplorerApp) {
             ],
         ));
     }
-    let Some((_, texs)) = &app.rt.textures.close else {
+    let Some((_, texs)) = &textures.close else {
         return;
     };
-    let scale_mas = app.cfg.instrument.plate_scale_mas();
+    let scale_mas = f.cfg.instrument.plate_scale_mas();
     let fit = f
         .stars
         .iter()
-        .find(|s| s.truth == Some(app.view.star))
+        .find(|s| s.truth == Some(view.star))
         .map(|s| (s.dx_px * scale_mas, s.dy_px * scale_mas));
     // the accuracy ignores what all stars share: show the deviation relative to the mean too
     let (mx, my) = (f.report.bias_x_mas, f.report.bias_y_mas);
     let avail = ui.available_size();
     let side = ((avail.x - 16.0) / 3.0).min(avail.y - 64.0).max(40.0);
     let captions = [
-        format!("{} ACE", f.ace_case.name()),
+        format!("{} ACE", f.cfg.ace.case.name()),
         "Gaussian twin".to_string(),
         "difference (red +, blue −)".to_string(),
     ];
@@ -323,42 +322,42 @@ pub fn closeup_ui(ui: &mut egui::Ui, app: &mut ExplorerApp) {
     ui.horizontal_wrapped(|ui| {
         ui.small(info);
         let l = ui.small("half-size [px]");
-        ui.add(egui::DragValue::new(&mut app.view.closeup_radius_px).range(3..=40))
+        ui.add(egui::DragValue::new(&mut view.closeup_radius_px).range(3..=40))
             .labelled_by(l.id);
     });
 }
 
 /// The ePSF the analysis built.
-pub fn epsf_ui(ui: &mut egui::Ui, app: &mut ExplorerApp) {
-    let Some(f) = &app.rt.frame else {
-        super::title(ui, "ePSF", false);
+pub fn epsf_ui(ui: &mut egui::Ui, screen: &OnScreen, results: &Results, textures: &mut Textures) {
+    let Some(f) = &results.frame else {
+        title(ui, "ePSF", false);
         ui.weak("…");
         return;
     };
     let e = &f.epsf;
-    super::title(
+    title(
         ui,
         &format!(
             "ePSF ({}× oversampled, {} iterations)",
             e.oversampling, f.report_none.epsf_iterations
         ),
-        f.cfg_hash != app.cfg.hash_hex(),
+        f.cfg_hash != screen.cfg_hash,
     );
     let n = e.n();
     if n == 0 || e.data.len() != n * n {
         ui.weak("empty ePSF");
         return;
     }
-    if app.rt.textures.epsf.as_ref().map(|t| t.0) != Some(app.rt.frame_serial) {
+    if textures.epsf.as_ref().map(|t| t.0) != Some(results.frame_serial) {
         let data: Vec<f32> = e.data.iter().map(|v| *v as f32).collect();
         let hi = data.iter().copied().fold(1e-12f32, f32::max);
         let scale = Scale::new(Stretch::Log, 0.0, hi, hi * 1e-3);
-        let img = view::to_color_image(&data, n, n, &scale, Colormap::Inferno);
-        let old = app.rt.textures.epsf.take().map(|t| t.1);
+        let img = to_color_image(&data, n, n, &scale, Colormap::Inferno);
+        let old = textures.epsf.take().map(|t| t.1);
         let tex = set_texture(ui.ctx(), old, "epsf", img, TextureOptions::LINEAR);
-        app.rt.textures.epsf = Some((app.rt.frame_serial, tex));
+        textures.epsf = Some((results.frame_serial, tex));
     }
-    let Some((_, tex)) = &app.rt.textures.epsf else {
+    let Some((_, tex)) = &textures.epsf else {
         return;
     };
     let size = n as f32 / e.oversampling.max(1) as f32;

@@ -1,42 +1,38 @@
-//! The panels: free functions that draw one part of the window from the app's state.
+//! The panels: free functions that draw one part of the window from the state they are given (the
+//! settings they edit, the results they show) and return [`Action`]s for the app to perform. None of them
+//! sees the app itself.
+//!
+//! * [`toolbar`], [`controls`], [`summary`] — the edges of the window;
+//! * [`image`] — the frame, the close-up beside the Gaussian twin, the ePSF;
+//! * [`psd`], [`series`], [`vectors`], [`curve`] — the four plots; [`axes`] — what the plots share;
+//! * [`widgets`] — the framed cells and their titles.
 
+pub mod axes;
 pub mod controls;
+pub mod curve;
 pub mod image;
-pub mod plots;
+pub mod psd;
+pub mod series;
 pub mod summary;
 pub mod toolbar;
+pub mod vectors;
+pub mod widgets;
 
-use crate::app::{Action, ExplorerApp};
-use egui::{Rect, UiBuilder, pos2, vec2};
-
-/// A framed cell at a fixed rect: `add` draws inside it, clipped to it (a cell never pushes its neighbours).
-pub fn cell(ui: &mut egui::Ui, rect: Rect, add: impl FnOnce(&mut egui::Ui)) {
-    let stroke = ui.visuals().widgets.noninteractive.bg_stroke;
-    ui.painter()
-        .rect_stroke(rect, 4.0, stroke, egui::StrokeKind::Inside);
-    let inner = rect.shrink(5.0);
-    let mut child = ui.new_child(
-        UiBuilder::new()
-            .max_rect(inner)
-            .layout(egui::Layout::top_down(egui::Align::Min)),
-    );
-    child.shrink_clip_rect(inner);
-    add(&mut child);
-}
-
-/// Title line of a cell (truncated to the cell), with a tag when the content belongs to other parameters.
-pub fn title(ui: &mut egui::Ui, text: &str, stale: bool) {
-    ui.horizontal(|ui| {
-        if stale {
-            ui.colored_label(ui.visuals().warn_fg_color, "(stale)")
-                .on_hover_text("computed with the previous parameters; new results are on the way (or were cancelled)");
-        }
-        ui.add(egui::Label::new(egui::RichText::new(text).strong()).truncate());
-    });
-}
+use crate::action::Action;
+use crate::settings::ViewSettings;
+use crate::state::{OnScreen, Results};
+use egui::{Rect, pos2, vec2};
+use widgets::cell;
 
 /// The central area: the frame with its close-ups and ePSF on the left, four plots on the right.
-pub fn central_ui(ui: &mut egui::Ui, app: &mut ExplorerApp, actions: &mut Vec<Action>) {
+pub fn central_ui(
+    ui: &mut egui::Ui,
+    screen: &OnScreen,
+    view: &mut ViewSettings,
+    results: &Results,
+    textures: &mut image::Textures,
+    actions: &mut Vec<Action>,
+) {
     let r = ui.available_rect_before_wrap();
     let gap = 4.0;
     let left_w = (r.width() * 0.45).clamp(280.0, 1000.0);
@@ -60,12 +56,22 @@ pub fn central_ui(ui: &mut egui::Ui, app: &mut ExplorerApp, actions: &mut Vec<Ac
         )
     };
 
-    cell(ui, frame_rect, |ui| image::frame_ui(ui, app));
-    cell(ui, close_rect, |ui| image::closeup_ui(ui, app));
-    cell(ui, epsf_rect, |ui| image::epsf_ui(ui, app));
-    cell(ui, at(0, 0), |ui| plots::psd_ui(ui, app));
-    cell(ui, at(1, 0), |ui| plots::ace_ui(ui, app));
-    cell(ui, at(0, 1), |ui| plots::vector_ui(ui, app));
-    cell(ui, at(1, 1), |ui| plots::curve_ui(ui, app, actions));
+    cell(ui, frame_rect, |ui| {
+        image::frame_ui(ui, screen, view, results, textures)
+    });
+    cell(ui, close_rect, |ui| {
+        image::closeup_ui(ui, view, results, textures)
+    });
+    cell(ui, epsf_rect, |ui| {
+        image::epsf_ui(ui, screen, results, textures)
+    });
+    cell(ui, at(0, 0), |ui| psd::psd_ui(ui, screen, results));
+    cell(ui, at(1, 0), |ui| series::ace_ui(ui, screen, view, results));
+    cell(ui, at(0, 1), |ui| {
+        vectors::vector_ui(ui, screen, view, results)
+    });
+    cell(ui, at(1, 1), |ui| {
+        curve::curve_ui(ui, screen, view, results, actions)
+    });
     ui.advance_cursor_after_rect(r);
 }

@@ -1,7 +1,7 @@
 //! The summary line: the instant prediction, the measured accuracy of the shown image and its bound, the
 //! Gaussian twin, and where the numbers come from.
 
-use crate::app::ExplorerApp;
+use crate::state::{OnScreen, Results};
 
 fn mas(v: f64) -> String {
     if v.is_finite() {
@@ -11,12 +11,12 @@ fn mas(v: f64) -> String {
     }
 }
 
-pub fn summary_ui(ui: &mut egui::Ui, app: &ExplorerApp) {
-    let hash = app.cfg.hash_hex();
+pub fn summary_ui(ui: &mut egui::Ui, screen: &OnScreen, results: &Results) {
+    let hash = &screen.cfg_hash;
     ui.horizontal_wrapped(|ui| {
-        match &app.rt.prediction {
+        match &results.prediction {
             Some(p) => {
-                let stale = p.cfg_hash != hash || p.countermeasure != app.countermeasure;
+                let stale = p.cfg_hash != *hash || p.countermeasure != screen.countermeasure;
                 let text = format!(
                     "Predicted accuracy (instant): {} [image #{}, {}]",
                     mas(p.image_mas),
@@ -45,7 +45,7 @@ pub fn summary_ui(ui: &mut egui::Ui, app: &ExplorerApp) {
             }
         }
         ui.separator();
-        match &app.rt.frame {
+        match &results.frame {
             Some(f) => {
                 let r = &f.report;
                 let text = format!(
@@ -56,7 +56,7 @@ pub fn summary_ui(ui: &mut egui::Ui, app: &ExplorerApp) {
                     f.image_index,
                     f.countermeasure
                 );
-                if f.cfg_hash != hash {
+                if f.cfg_hash != *hash {
                     ui.weak(text);
                 } else {
                     ui.strong(text);
@@ -69,8 +69,7 @@ pub fn summary_ui(ui: &mut egui::Ui, app: &ExplorerApp) {
                     f.truth_xy.len()
                 ));
                 ui.separator();
-                let twin = app
-                    .rt
+                let twin = results
                     .twin
                     .as_ref()
                     .filter(|t| t.image_index == f.image_index)
@@ -82,10 +81,10 @@ pub fn summary_ui(ui: &mut egui::Ui, app: &ExplorerApp) {
                 ui.weak(format!(
                     "{} · {} readout · config {}",
                     f.backend,
-                    f.readout.name(),
+                    f.cfg.readout.order.name(),
                     f.cfg_hash
                 ))
-                .on_hover_text(f.gpu_note.clone().unwrap_or_else(|| {
+                .on_hover_text(f.backend_note.clone().unwrap_or_else(|| {
                     "integration backend, readout and config hash of this frame".into()
                 }));
                 ui.weak(format!(

@@ -1,13 +1,20 @@
 //! The toolbar: configuration file (open, save, copy as CLI), progress with Cancel, messages.
 
-use crate::app::{Action, ExplorerApp};
+use crate::action::Action;
+use crate::state::Status;
 
-pub fn toolbar_ui(ui: &mut egui::Ui, app: &mut ExplorerApp, actions: &mut Vec<Action>) {
+/// The toolbar; `config_path` is edited in place.
+pub fn toolbar_ui(
+    ui: &mut egui::Ui,
+    config_path: &mut String,
+    status: &Status,
+    actions: &mut Vec<Action>,
+) {
     ui.horizontal(|ui| {
         ui.heading("JASMINE astrometry explorer");
         ui.separator();
         let l = ui.label("config file");
-        ui.add(egui::TextEdit::singleline(&mut app.config_path).desired_width(220.0))
+        ui.add(egui::TextEdit::singleline(config_path).desired_width(220.0))
             .labelled_by(l.id)
             .on_hover_text(
                 "path for Open, Save and Copy as CLI (relative to the working directory)",
@@ -43,9 +50,9 @@ pub fn toolbar_ui(ui: &mut egui::Ui, app: &mut ExplorerApp, actions: &mut Vec<Ac
             actions.push(Action::CopySimulateCli);
         }
         ui.separator();
-        if app.rt.busy || !app.is_idle() {
+        if status.busy {
             ui.add(egui::Spinner::new());
-            let (frac, text) = match &app.rt.progress {
+            let (frac, text) = match &status.progress {
                 Some(p) if p.total > 0 => (
                     p.done as f32 / p.total as f32,
                     format!("{}: {}", p.stage.name(), p.note),
@@ -63,7 +70,7 @@ pub fn toolbar_ui(ui: &mut egui::Ui, app: &mut ExplorerApp, actions: &mut Vec<Ac
             }
         } else {
             let idle = ui.label("idle");
-            if let Some(t) = app.rt.last_job_s {
+            if let Some(t) = status.last_job_s {
                 idle.on_hover_text(format!("the last run took {t:.1} s"));
             }
             if ui
@@ -75,13 +82,13 @@ pub fn toolbar_ui(ui: &mut egui::Ui, app: &mut ExplorerApp, actions: &mut Vec<Ac
             }
         }
     });
-    if let Some(inv) = &app.rt.invalid {
+    if let Some(inv) = &status.invalid {
         ui.colored_label(
             ui.visuals().error_fg_color,
             format!("Parameters not run: {inv}"),
         );
     }
-    if let Some(n) = &app.rt.note {
+    if let Some(n) = &status.note {
         let color = if n.is_error {
             ui.visuals().error_fg_color
         } else {

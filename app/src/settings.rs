@@ -1,0 +1,154 @@
+//! The explorer's settings: what reproduces a view — the engine configuration, the countermeasure, the
+//! curve's magnitudes, the view settings and the path of the configuration file.
+
+use crate::view::{Colormap, Stretch};
+use crate::worker::Request;
+use engine::analysis::countermeasures::Countermeasure;
+use engine::config::Config;
+use serde::{Deserialize, Serialize};
+
+/// Default magnitudes of the accuracy curve (the paper's).
+pub const DEFAULT_MAGS: [f64; 6] = [12.0, 12.5, 13.0, 13.5, 14.0, 14.5];
+
+/// View settings (they change no result).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct ViewSettings {
+    pub stretch: Stretch,
+    pub colormap: Colormap,
+    pub show_channels: bool,
+    pub show_stars: bool,
+    /// Index of the displayed exposure within the dataset.
+    pub image_index: usize,
+    /// The chosen star (index into the scene) and pixel (for the exposure window).
+    pub star: usize,
+    pub pixel: Option<(usize, usize)>,
+    pub closeup_radius_px: usize,
+    /// Show the fit displacement the ACE predicts (the mechanism) beside the measured deviations.
+    pub show_predicted_arrows: bool,
+    /// Run the magnitude curve after every change.
+    pub auto_curve: bool,
+}
+
+impl Default for ViewSettings {
+    fn default() -> Self {
+        Self {
+            stretch: Stretch::Asinh,
+            colormap: Colormap::Gray,
+            show_channels: true,
+            show_stars: false,
+            image_index: 0,
+            star: 0,
+            pixel: None,
+            closeup_radius_px: 8,
+            show_predicted_arrows: true,
+            auto_curve: true,
+        }
+    }
+}
+
+/// Everything the user set.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct Settings {
+    /// The engine configuration: every simulation and analysis knob on screen.
+    pub cfg: Config,
+    /// Countermeasure applied in the analysis (one of [`Countermeasure::OFFERED`]).
+    #[serde(with = "countermeasure_name")]
+    pub countermeasure: Countermeasure,
+    /// Magnitudes of the accuracy curve.
+    pub mags: Vec<f64>,
+    pub view: ViewSettings,
+    /// Path for Open / Save / Copy as CLI.
+    pub config_path: String,
+}
+
+impl Default for Settings {
+    fn default() -> Self {
+        Self::new(Config::default())
+    }
+}
+
+impl Settings {
+    pub fn new(cfg: Config) -> Self {
+        Self {
+            cfg,
+            countermeasure: Countermeasure::None,
+            mags: DEFAULT_MAGS.to_vec(),
+            view: ViewSettings::default(),
+            config_path: "jsim-explorer.toml".into(),
+        }
+    }
+
+    /// The request that matches these settings.
+    pub fn request(&self) -> Request {
+        Request {
+            cfg: self.cfg.clone(),
+            countermeasure: self.countermeasure,
+            image_index: self.view.image_index,
+            mags: self.mags.clone(),
+        }
+    }
+}
+
+/// A countermeasure stored by its name (`plate-poly:3`), read back with the engine's parser.
+mod countermeasure_name {
+    use engine::analysis::countermeasures::Countermeasure;
+    use serde::{Deserialize, Deserializer, Serializer};
+
+    pub fn serialize<S: Serializer>(cm: &Countermeasure, s: S) -> Result<S::Ok, S::Error> {
+        s.collect_str(cm)
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Countermeasure, D::Error> {
+        let name = String::deserialize(d)?;
+        name.parse().map_err(serde::de::Error::custom)
+    }
+}
+
+pub fn format_mags(m: &[f64]) -> String {
+    m.iter()
+        .map(|v| v.to_string())
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// Parse a list of magnitudes: numbers separated by commas or spaces, each in −5…40, at most 20.
+pub fn parse_mags(s: &str) -> Result<Vec<f64>, String> {
+    let mut v = Vec::new();
+    for tok in s.split([',', ' ', ';']).filter(|t| !t.trim().is_empty()) {
+        let m: f64 = tok
+            .trim()
+            .parse()
+            .map_err(|_| format!("`{}` is not a magnitude", tok.trim()))?;
+        if !(-5.0..=40.0).contains(&m) {
+            return Err(format!("magnitude {m} outside −5…40"));
+        }
+        v.push(m);
+    }
+    if v.is_empty() {
+        return Err("give at least one magnitude".into());
+    }
+    if v.len() > 20 {
+        return Err("at most 20 magnitudes".into());
+    }
+    v.sort_by(|a, b| a.total_cmp(b));
+    v.dedup();
+    Ok(v)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn mags_parse_and_reject() {
+        assert_eq!(
+            parse_mags("13, 12.5 12").expect("ok"),
+            vec![12.0, 12.5, 13.0]
+        );
+        assert!(parse_mags("12, x").is_err());
+        assert!(parse_mags("").is_err());
+        assert!(parse_mags("99").is_err());
+    }
+}

@@ -1,0 +1,248 @@
+//! The engine calls of a job, stage by stage: the instant prediction, the frame with its analysis (the
+//! engine's one per-image pipeline, [`analyse_image`]) and its Gaussian-ACE twin. The curve stage is in
+//! [`super::curve`]. The engine [`Session`] owns the PSF banks, kernels, integrators and simulators; this
+//! state adds only the results the UI may ask for again (the shown exposures and the curve's rows).
+
+use super::out::{Out, StageResult, Stop, failed};
+use super::protocol::{FrameResult, Job, Msg, Prediction, Request, Stage, TwinResult};
+use super::views;
+use engine::analysis::countermeasures::{Countermeasure, Plan};
+use engine::analysis::predict::Predictor;
+use engine::analysis::vectors::VectorMap;
+use engine::analysis::{AnalysisImage, Source, analyse_image};
+use engine::config::{AceCase, Config};
+use engine::session::{Session, simulation_key};
+use engine::simulate::{Exposure, Simulator};
+use engine::studies::experiment::Row;
+use std::collections::HashMap;
+use std::sync::Arc;
+use std::time::Instant;
+
+/// What the engine thread keeps between jobs.
+#[derive(Default)]
+pub struct EngineState {
+    pub(super) session: Session,
+    /// Exposures on display by (simulation key, index): the frame and its twin, a handful at most.
+    exposures: HashMap<(String, usize), Arc<Exposure>>,
+    /// Curve results by (config hash, plan) and predictions by (config hash, countermeasure).
+    pub(super) curve_rows: HashMap<(String, String), Vec<Row>>,
+    pub(super) curve_pred: HashMap<(String, String), (f64, f64)>,
+    /// The PSD estimate of the last series shown, by simulation key (it costs an FFT of the whole series).
+    psd: Option<(String, views::PsdEstimate)>,
+    /// What the session said about the backend (e.g. why the CPU stands in for the GPU).
+    notes: Vec<String>,
+}
+
+/// The Gaussian-ACE twin of a configuration.
+pub fn twin_config(cfg: &Config) -> Config {
+    let mut c = cfg.clone();
+    c.ace.case = AceCase::Gaussian;
+    c
+}
+
+impl EngineState {
+    pub fn run(&mut self, job: &Job, out: &Out) -> StageResult<()> {
+        let r = &job.request;
+        r.cfg.validate().map_err(failed(Stage::Predict))?;
+        if r.image_index >= r.cfg.fidelity.images {
+            return Err(Stop::Failed(
+                Stage::Image,
+                format!(
+                    "image {} does not exist: the dataset has fidelity.images = {}",
+                    r.image_index, r.cfg.fidelity.images
+                ),
+            ));
+        }
+        if job.stages.predict {
+            out.check()?;
+            self.predict(r, out)?;
+        }
+        if job.stages.image {
+            // exposures of other configurations are no longer shown
+            let keep = [simulation_key(&r.cfg), simulation_key(&twin_config(&r.cfg))];
+            self.exposures.retain(|(k, _), _| keep.contains(k));
+            out.check()?;
+            self.image(r, out)?;
+            out.check()?;
+            self.twin(r, out)?;
+        }
+        if job.stages.curve {
+            out.check()?;
+            self.curve(r, out)?;
+        }
+        Ok(())
+    }
+
+    /// The session's simulator of `cfg` (its analysis knobs are those it was built with: the pipeline is
+    /// given the request's explicitly).
+    fn simulator(&mut self, cfg: &Config, stage: Stage) -> StageResult<Arc<Simulator>> {
+        let sim = self.session.simulator(cfg).map_err(failed(stage))?;
+        self.notes.extend(self.session.take_notes());
+        Ok(sim)
+    }
+
+    /// Exposure `index` of `sim`, simulated once while it is on display.
+    fn exposure(
+        &mut self,
+        sim: &Simulator,
+        index: usize,
+        stage: Stage,
+    ) -> StageResult<Arc<Exposure>> {
+        let key = (simulation_key(&sim.cfg), index);
+        if let Some(e) = self.exposures.get(&key) {
+            return Ok(e.clone());
+        }
+        let e = Arc::new(sim.exposure(index).map_err(failed(stage))?);
+        self.exposures.insert(key, e.clone());
+        Ok(e)
+    }
+
+    fn predict(&mut self, r: &Request, out: &Out) -> StageResult<()> {
+        let t0 = Instant::now();
+        out.progress(
+            Stage::Predict,
+            0,
+            1,
+            if !self.session.has_bank(&r.cfg) {
+                "computing the PSF and the ACE series"
+            } else if !self.session.has_simulator(&r.cfg) {
+                "generating the ACE series"
+            } else {
+                "predicting"
+            },
+        );
+        let sim = self.simulator(&r.cfg, Stage::Predict)?;
+        out.check()?;
+        let pred = Predictor::new(&sim).map_err(failed(Stage::Predict))?;
+        let cm = r.countermeasure;
+        let image_mas = pred.predict_image(r.image_index, &cm).unwrap_or(f64::NAN);
+        // the predictor's figure for the exact-ePSF control is the noise floor of this exposure's blur
+        let noise_floor_mas = pred
+            .predict_image(r.image_index, &Countermeasure::ExactEpsf)
+            .unwrap_or(f64::NAN);
+        out.check()?;
+        let dataset_mas = pred.predict(&cm).unwrap_or(f64::NAN);
+        let dataset_none_mas = pred.predict(&Countermeasure::None).unwrap_or(f64::NAN);
+        out.send(Msg::Prediction(Box::new(Prediction {
+            generation: out.generation,
+            cfg_hash: r.cfg.hash_hex(),
+            countermeasure: cm,
+            image_index: r.image_index,
+            dataset_mas,
+            dataset_none_mas,
+            image_mas,
+            noise_floor_mas,
+            elapsed_s: t0.elapsed().as_secs_f64(),
+        })));
+        Ok(())
+    }
+
+    fn image(&mut self, r: &Request, out: &Out) -> StageResult<()> {
+        let cfg = &r.cfg;
+        let index = r.image_index;
+        let cached = self.exposures.contains_key(&(simulation_key(cfg), index));
+        out.progress(
+            Stage::Image,
+            0,
+            2,
+            if cached {
+                "analysing the frame"
+            } else {
+                "simulating the frame"
+            },
+        );
+        let t0 = Instant::now();
+        let sim = self.simulator(cfg, Stage::Image)?;
+        let exp = self.exposure(&sim, index, Stage::Image)?;
+        let simulate_s = t0.elapsed().as_secs_f64();
+        out.check()?;
+        let key = simulation_key(cfg);
+        let psd = match &self.psd {
+            Some((k, p)) if *k == key => p.clone(),
+            _ => {
+                let p = views::psd_estimate(&sim);
+                self.psd = Some((key, p.clone()));
+                p
+            }
+        };
+        out.send(Msg::Series(Box::new(views::series_view(
+            &sim,
+            cfg,
+            index,
+            psd,
+            out.generation,
+        ))));
+        out.progress(Stage::Image, 1, 2, "ePSF analysis");
+        let t1 = Instant::now();
+        let plan = r.plan().map_err(failed(Stage::Image))?;
+        let img = AnalysisImage::from_detector(cfg, &exp.image);
+        let res = analyse_image(
+            &img,
+            Some(&exp.truth),
+            Some(Source { sim: &sim, index }),
+            &cfg.analysis,
+            &plan,
+            cfg.seed,
+        )
+        .map_err(failed(Stage::Image))?;
+        let analyse_s = t1.elapsed().as_secs_f64();
+        // a countermeasure that does not apply to this image leaves the plain analysis
+        let shown = res.of(&r.countermeasure).unwrap_or(&res.global);
+        let (lo, hi, noise) = views::display_limits(&exp.image.adu, &exp.image.dq);
+        out.send(Msg::Frame(Box::new(FrameResult {
+            generation: out.generation,
+            cfg: cfg.clone(),
+            cfg_hash: cfg.hash_hex(),
+            image_index: index,
+            countermeasure: r.countermeasure,
+            n: exp.image.n,
+            adu: exp.image.adu.clone(),
+            dq: exp.image.dq.clone(),
+            lo_adu: lo,
+            hi_adu: hi,
+            noise_adu: noise,
+            truth_xy: exp.truth.iter().map(|t| (t.x_px, t.y_px)).collect(),
+            report: shown.report.clone(),
+            stars: shown.stars.clone(),
+            vectors: VectorMap::new(&shown.stars, img.plate_scale_mas),
+            predicted: VectorMap::new(&res.global.stars, img.plate_scale_mas).predicted,
+            report_none: res.global.report.clone(),
+            epsf: res.global.epsf,
+            t_start_s: exp.t_start_s,
+            backend: exp.backend.clone(),
+            backend_note: (!self.notes.is_empty()).then(|| self.notes.join("; ")),
+            simulate_s,
+            analyse_s,
+        })));
+        Ok(())
+    }
+
+    fn twin(&mut self, r: &Request, out: &Out) -> StageResult<()> {
+        let tcfg = twin_config(&r.cfg);
+        let index = r.image_index;
+        out.progress(Stage::Twin, 0, 1, "simulating the Gaussian-ACE twin");
+        let sim = self.simulator(&tcfg, Stage::Twin)?;
+        let exp = self.exposure(&sim, index, Stage::Twin)?;
+        out.check()?;
+        let img = AnalysisImage::from_detector(&tcfg, &exp.image);
+        let report = analyse_image(
+            &img,
+            Some(&exp.truth),
+            Some(Source { sim: &sim, index }),
+            &tcfg.analysis,
+            &Plan::default(),
+            tcfg.seed,
+        )
+        .ok()
+        .map(|a| a.global.report);
+        out.send(Msg::Twin(Box::new(TwinResult {
+            generation: out.generation,
+            cfg_hash: r.cfg.hash_hex(),
+            image_index: index,
+            n: exp.image.n,
+            adu: exp.image.adu.clone(),
+            report,
+        })));
+        Ok(())
+    }
+}
