@@ -2,6 +2,7 @@
 //! (feature `testkit`, off in builds for users): a reduced but physical configuration, a synthetic PSF, the
 //! software GPU adapter with the CI rule, and scratch directories.
 
+use crate::analysis::StarResult;
 use crate::config::{Backend, Config};
 use crate::integrate::gpu::{GpuIntegrator, software_adapter};
 use crate::optics::psf::PsfTable;
@@ -95,4 +96,25 @@ pub fn temp_dir(name: &str) -> std::path::PathBuf {
         panic!("cannot create {}: {e}", d.display());
     }
     d
+}
+
+/// A measured star matched to truth star `truth`, fitted at `(x + dx, y + dy)` for a true position `(x, y)`
+/// (px), with a 0.01-px bound and no prediction attached.
+pub fn star_result(truth: usize, x: f64, y: f64, dx: f64, dy: f64) -> StarResult {
+    StarResult {
+        truth: Some(truth),
+        x: x + dx,
+        y: y + dy,
+        flux_e: 1e4,
+        sky_e: 0.0,
+        crlb_x_px: 0.01,
+        crlb_y_px: 0.01,
+        flags: 0,
+        dx_px: dx,
+        dy_px: dy,
+        predicted_dx_px: 0.0,
+        predicted_dy_px: 0.0,
+        predicted_fit_dx_px: 0.0,
+        predicted_fit_dy_px: 0.0,
+    }
 }

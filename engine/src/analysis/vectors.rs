@@ -108,22 +108,7 @@ mod tests {
     use super::*;
 
     fn star(x: f64, dx: f64, dy: f64) -> StarResult {
-        StarResult {
-            truth: Some(0),
-            x,
-            y: 0.0,
-            flux_e: 1.0,
-            sky_e: 0.0,
-            crlb_x_px: 0.0,
-            crlb_y_px: 0.0,
-            flags: 0,
-            dx_px: dx,
-            dy_px: dy,
-            predicted_dx_px: 0.0,
-            predicted_dy_px: 0.0,
-            predicted_fit_dx_px: 0.0,
-            predicted_fit_dy_px: 0.0,
-        }
+        crate::testkit::star_result(0, x - dx, 0.0, dx, dy)
     }
 
     #[test]

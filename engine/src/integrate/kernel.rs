@@ -322,32 +322,6 @@ impl KernelCache {
 mod tests {
     use super::*;
 
-    fn gaussian_psf(os: usize, half_px: usize, sigma_px: f64) -> PsfTable {
-        let half = half_px * os;
-        let n = 2 * half + 1;
-        let mut data = vec![0.0; n * n];
-        for iy in 0..n {
-            for ix in 0..n {
-                let (x, y) = (
-                    (ix as f64 - half as f64) / os as f64,
-                    (iy as f64 - half as f64) / os as f64,
-                );
-                // an asymmetric blob so that symmetry cannot hide an index error
-                data[iy * n + ix] = (-(x - 0.2).powi(2) / (2.0 * sigma_px * sigma_px)
-                    - y * y / (3.0 * sigma_px * sigma_px))
-                    .exp()
-                    * (1.0 + 0.3 * x);
-            }
-        }
-        let sum: f64 = data.iter().sum();
-        data.iter_mut().for_each(|v| *v /= sum);
-        PsfTable {
-            oversampling: os,
-            half_cells: half,
-            data,
-        }
-    }
-
     #[test]
     fn refinement_makes_offsets_grid_multiples() {
         for os in [4, 8, 13, 16] {
@@ -370,7 +344,7 @@ mod tests {
     #[test]
     fn kernel_lookup_equals_subpixel_sum_exactly() {
         for (os, s) in [(8, 4), (6, 3), (8, 8)] {
-            let psf = gaussian_psf(os, 4, 0.7);
+            let psf = crate::testkit::synthetic_psf(os, 4);
             let mut map = IntraPixelMap::uniform(s);
             // a non-uniform map
             for (i, w) in map.weights.iter_mut().enumerate() {
@@ -398,14 +372,14 @@ mod tests {
     #[test]
     fn kernel_conserves_flux_for_uniform_map() {
         // subpixels = PSF cells: the subpixel lattice samples the bilinear PSF at every cell, exactly
-        let psf = gaussian_psf(4, 5, 0.8);
+        let psf = crate::testkit::synthetic_psf(4, 5);
         let k = PixelKernel::build(&psf, &IntraPixelMap::uniform(4)).expect("kernel");
         for (px, py) in [(0.0, 0.0), (0.3, -0.2), (0.49, 0.5)] {
             let s = k.pixel_sum(px, py);
             assert!((s - psf.sum()).abs() < 1e-12, "phase ({px},{py}): {s}");
         }
         // coarser subpixels: the midpoint rule's error is small but not zero
-        let psf = gaussian_psf(8, 5, 0.8);
+        let psf = crate::testkit::synthetic_psf(8, 5);
         let k = PixelKernel::build(&psf, &IntraPixelMap::uniform(4)).expect("kernel");
         let s = k.pixel_sum(0.3, -0.2);
         assert!((s - psf.sum()).abs() < 1e-4, "{s}");

@@ -137,22 +137,7 @@ mod tests {
     use super::*;
 
     fn star(x: f64, y: f64, dx: f64, dy: f64, k: usize) -> StarResult {
-        StarResult {
-            truth: Some(k),
-            x: x + dx,
-            y: y + dy,
-            flux_e: 1e4,
-            sky_e: 0.0,
-            crlb_x_px: 0.01,
-            crlb_y_px: 0.01,
-            flags: 0,
-            dx_px: dx,
-            dy_px: dy,
-            predicted_dx_px: 0.0,
-            predicted_dy_px: 0.0,
-            predicted_fit_dx_px: 0.0,
-            predicted_fit_dy_px: 0.0,
-        }
+        crate::testkit::star_result(k, x, y, dx, dy)
     }
 
     fn truth_at(pos: &[(f64, f64)]) -> Vec<TruthRow> {
