@@ -1,4 +1,5 @@
-//! The explorer: its [`Settings`] and [`Runtime`] (the worker handle, the results, the textures).
+//! The explorer: its [`Settings`] (persisted) and [`Runtime`] (the worker handle, the results, the
+//! textures; never persisted).
 //!
 //! Each frame: take the worker's messages (dropping those of old generations), draw the panels (the controls
 //! edit the settings in place; the other panels read the state and return [`Action`]s), perform the
@@ -62,10 +63,15 @@ impl ExplorerApp {
         Self { settings, rt }
     }
 
-    /// The app for the command line `jsim-app [CONFIG.toml]`: the reference configuration, or the file
-    /// given (a file that cannot be loaded is reported in the window, on the reference configuration).
-    pub fn from_args(mut args: impl Iterator<Item = std::ffi::OsString>) -> Self {
-        let mut app = Self::with_settings(Settings::default());
+    /// The app for the command line `jsim-app [CONFIG.toml]`: the settings of the last session (from
+    /// `storage`) or the defaults, then the file given, if any (a file that cannot be loaded is reported in
+    /// the window).
+    pub fn from_args(
+        storage: Option<&dyn eframe::Storage>,
+        mut args: impl Iterator<Item = std::ffi::OsString>,
+    ) -> Self {
+        let settings = storage.and_then(Settings::load).unwrap_or_default();
+        let mut app = Self::with_settings(settings);
         if let Some(p) = args.next() {
             app.settings.config_path = p.to_string_lossy().into_owned();
             app.open_config();
@@ -383,6 +389,10 @@ impl ExplorerApp {
 impl eframe::App for ExplorerApp {
     fn ui(&mut self, ui: &mut egui::Ui, _frame: &mut eframe::Frame) {
         self.show(ui);
+    }
+
+    fn save(&mut self, storage: &mut dyn eframe::Storage) {
+        self.settings.save(storage);
     }
 }
 

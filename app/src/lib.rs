@@ -2,7 +2,7 @@
 //!
 //! * [`app`] — the app: its settings and runtime state, the frame loop, the scheduling of work;
 //! * [`settings`] — what the user set (the engine `Config`, the countermeasure, the curve's magnitudes, the
-//!   view settings);
+//!   view settings), persisted across restarts;
 //! * [`state`] — what the panels read besides the settings: results, the work's status, what is on screen;
 //! * [`action`] — what the panels ask the app to do;
 //! * [`panels`] — free functions drawing the controls, the frame, the close-ups and the plots;

@@ -1,4 +1,5 @@
-//! `jsim-app [CONFIG.toml]`: the desktop explorer. `main` only builds the window options and starts the app.
+//! `jsim-app [CONFIG.toml]`: the desktop explorer. `main` only builds the window options and starts the app
+//! (on the settings of the last session, which eframe keeps).
 
 fn main() -> eframe::Result<()> {
     let options = eframe::NativeOptions {
@@ -11,8 +12,9 @@ fn main() -> eframe::Result<()> {
     eframe::run_native(
         "JASMINE astrometry explorer",
         options,
-        Box::new(|_cc| {
+        Box::new(|cc| {
             Ok(Box::new(app::ExplorerApp::from_args(
+                cc.storage,
                 std::env::args_os().skip(1),
             )))
         }),

@@ -1,5 +1,6 @@
-//! The explorer's settings: what reproduces a view — the engine configuration, the countermeasure, the
-//! curve's magnitudes, the view settings and the path of the configuration file.
+//! The explorer's settings: what reproduces a view and persists across restarts (eframe's storage) — the
+//! engine configuration, the countermeasure, the curve's magnitudes, the view settings and the path of the
+//! configuration file.
 
 use crate::view::{Colormap, Stretch};
 use crate::worker::Request;
@@ -9,6 +10,9 @@ use serde::{Deserialize, Serialize};
 
 /// Default magnitudes of the accuracy curve (the paper's).
 pub const DEFAULT_MAGS: [f64; 6] = [12.0, 12.5, 13.0, 13.5, 14.0, 14.5];
+
+/// Key of the settings in eframe's storage.
+pub const STORAGE_KEY: &str = "jsim-explorer-settings";
 
 /// View settings (they change no result).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -89,6 +93,20 @@ impl Settings {
             mags: self.mags.clone(),
         }
     }
+
+    /// The settings saved in `storage`, if any could be read back (a configuration that no longer
+    /// validates is kept: the window says why it is not run).
+    pub fn load(storage: &dyn eframe::Storage) -> Option<Settings> {
+        let mut s: Settings = eframe::get_value(storage, STORAGE_KEY)?;
+        if parse_mags(&format_mags(&s.mags)).as_ref() != Ok(&s.mags) {
+            s.mags = DEFAULT_MAGS.to_vec();
+        }
+        Some(s)
+    }
+
+    pub fn save(&self, storage: &mut dyn eframe::Storage) {
+        eframe::set_value(storage, STORAGE_KEY, self);
+    }
 }
 
 /// A countermeasure stored by its name (`plate-poly:3`), read back with the engine's parser.
@@ -140,6 +158,7 @@ pub fn parse_mags(s: &str) -> Result<Vec<f64>, String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use std::collections::HashMap;
 
     #[test]
     fn mags_parse_and_reject() {
@@ -150,5 +169,44 @@ mod tests {
         assert!(parse_mags("12, x").is_err());
         assert!(parse_mags("").is_err());
         assert!(parse_mags("99").is_err());
+    }
+
+    /// eframe's storage, in memory.
+    #[derive(Default)]
+    struct Memory(HashMap<String, String>);
+
+    impl eframe::Storage for Memory {
+        fn get_string(&self, key: &str) -> Option<String> {
+            self.0.get(key).cloned()
+        }
+        fn set_string(&mut self, key: &str, value: String) {
+            self.0.insert(key.to_string(), value);
+        }
+        fn remove_string(&mut self, key: &str) {
+            self.0.remove(key);
+        }
+        fn flush(&mut self) {}
+    }
+
+    #[test]
+    fn settings_survive_the_storage_round_trip() {
+        let mut s = Settings::default();
+        s.cfg.ace.sigma_mas = 123.0;
+        s.cfg.readout.order = engine::config::ReadoutOrder::SampleHold;
+        s.cfg.ace.modes.pop();
+        s.countermeasure = "plate-poly:3".parse().expect("a countermeasure");
+        s.mags = vec![11.0, 13.5];
+        s.view.stretch = Stretch::Log;
+        s.view.pixel = Some((12, 34));
+        s.view.auto_curve = false;
+        s.config_path = "somewhere/else.toml".into();
+        let mut m = Memory::default();
+        s.save(&mut m);
+        assert_eq!(Settings::load(&m), Some(s));
+        assert_eq!(Settings::load(&Memory::default()), None);
+        // a stored value this version cannot read is ignored, not fatal
+        let mut bad = Memory::default();
+        eframe::Storage::set_string(&mut bad, STORAGE_KEY, "(cfg: 3)".into());
+        assert_eq!(Settings::load(&bad), None);
     }
 }
