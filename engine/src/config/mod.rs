@@ -341,15 +341,40 @@ pub enum Sampling {
     Fowler { pairs: usize },
 }
 
+impl Sampling {
+    /// Read noise of an image formed this way from reads of noise `per_read_e` (e⁻): √2 σ for CDS,
+    /// σ √(2/N) for Fowler-N.
+    pub fn image_read_noise_e(self, per_read_e: f64) -> f64 {
+        match self {
+            Sampling::Cds => std::f64::consts::SQRT_2 * per_read_e,
+            Sampling::Fowler { pairs } => per_read_e * (2.0 / pairs.max(1) as f64).sqrt(),
+        }
+    }
+
+    /// The `SAMPLING` header value: `CDS` or `FOWLER-N`.
+    pub fn header(self) -> String {
+        match self {
+            Sampling::Cds => "CDS".to_string(),
+            Sampling::Fowler { pairs } => format!("FOWLER-{pairs}"),
+        }
+    }
+
+    /// From a `SAMPLING` header value.
+    pub fn from_header(s: &str) -> Option<Sampling> {
+        match s.trim() {
+            "CDS" => Some(Sampling::Cds),
+            other => other
+                .strip_prefix("FOWLER-")
+                .and_then(|n| n.parse().ok())
+                .map(|pairs| Sampling::Fowler { pairs }),
+        }
+    }
+}
+
 impl Detector {
     /// Read noise of an image (e⁻): √2 σ_read for CDS, σ_read √(2/N) for Fowler-N.
     pub fn image_read_noise_e(&self) -> f64 {
-        match self.sampling {
-            Sampling::Cds => std::f64::consts::SQRT_2 * self.read_noise_per_read_e,
-            Sampling::Fowler { pairs } => {
-                self.read_noise_per_read_e * (2.0 / pairs.max(1) as f64).sqrt()
-            }
-        }
+        self.sampling.image_read_noise_e(self.read_noise_per_read_e)
     }
 
     /// The variance floor of a pixel of an image, e⁻²: image read noise² plus the quantisation of the

@@ -63,10 +63,7 @@ pub fn headers(sim: &Simulator, exp: &Exposure) -> Vec<Card> {
         ),
         Card::s(
             "SAMPLING",
-            match d.sampling {
-                crate::config::Sampling::Cds => "CDS".to_string(),
-                crate::config::Sampling::Fowler { pairs } => format!("FOWLER-{pairs}"),
-            },
+            d.sampling.header(),
             "image = reads after - reads before",
         ),
         Card::f(

@@ -320,6 +320,13 @@ pub fn read_image(path: &Path) -> Result<ImageRead, IoError> {
         _ => return Err(IoError::fits(path, "the primary HDU is not a 2-D image")),
     };
     let data: Vec<f32> = hdu.read_image(&mut f).map_err(fe)?;
+    // the image's read noise from the per-read noise and the sampling when the header gives them (exact:
+    // a header float keeps 15 digits), else RDNOISE
+    let sampling = hdu
+        .read_key::<String>(&mut f, "SAMPLING")
+        .ok()
+        .and_then(|s| crate::config::Sampling::from_header(&s));
+    let per_read = key_f64(&mut f, &hdu, "RNREAD");
     let mut assumed = Vec::new();
     let mut key = |name: &str, default: f64, what: &str| -> f64 {
         key_f64(&mut f, &hdu, name).unwrap_or_else(|| {
@@ -328,7 +335,10 @@ pub fn read_image(path: &Path) -> Result<ImageRead, IoError> {
         })
     };
     let gain = key("GAIN", 1.0, "gain [e-/ADU]");
-    let rn = key("RDNOISE", 0.0, "read noise [e-]");
+    let rn = match (per_read, sampling) {
+        (Some(per_read), Some(s)) => s.image_read_noise_e(per_read),
+        _ => key("RDNOISE", 0.0, "read noise [e-]"),
+    };
     let bias = key("BIASADU", 0.0, "bias [ADU]");
     let exptime = key("EXPTIME", 1.0, "exposure [s]");
     let sat = key_f64(&mut f, &hdu, "SATURATE");
