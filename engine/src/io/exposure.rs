@@ -4,7 +4,7 @@ use super::IoError;
 use super::csv::{self, Cell};
 use super::fits::{self, Card, Column, Hdu, Pixels};
 use crate::analysis::AnalysisImage;
-use crate::config::AceCase;
+use crate::config::{AceCase, Config};
 use crate::detector::dq;
 use crate::simulate::{Exposure, Simulator, TruthRow};
 use std::path::{Path, PathBuf};
@@ -377,4 +377,70 @@ pub fn read_analysis_image(
         plate_scale_mas,
     };
     Ok((img, r.assumed))
+}
+
+/// An image file read for analysis, with what it says about itself.
+#[derive(Debug, Clone)]
+pub struct AnalysisInput {
+    pub img: AnalysisImage,
+    /// The truth catalogue: the given file, else the image's TRUTH extension (if any).
+    pub truth: Option<Vec<TruthRow>>,
+    /// The configuration and exposure index the image was simulated with (its CONFIG extension and
+    /// IMAGEIDX), when it is a jsim image.
+    pub provenance: Option<(Config, usize)>,
+    /// The plate scale used: the image's configuration's, else its PLTSCALE header, else `fallback`'s.
+    pub plate_scale_mas: f64,
+    /// What was assumed because the image did not say.
+    pub assumptions: Vec<String>,
+}
+
+impl AnalysisInput {
+    /// Read `path` (and `truth_path`, if given) as `jsim analyze` does. The image's own configuration,
+    /// when it has one, gives the exact plate scale (a header float keeps only 15 digits).
+    pub fn read(
+        path: &Path,
+        truth_path: Option<&Path>,
+        fallback: &Config,
+    ) -> Result<Self, IoError> {
+        let provenance = fits::read_text(path, "CONFIG")
+            .ok()
+            .and_then(|t| Config::from_toml_str(&t).ok())
+            .and_then(|c| {
+                let i = fits::read_f64_key(path, "IMAGEIDX").ok()?;
+                (i >= 0.0 && i.fract() == 0.0).then_some((c, i as usize))
+            });
+        let mut assumptions = Vec::new();
+        let plate_scale_mas = match (&provenance, fits::read_f64_key(path, "PLTSCALE")) {
+            (Some((c, _)), _) => c.instrument.plate_scale_mas(),
+            (None, Ok(s)) => s,
+            (None, Err(_)) => {
+                let s = fallback.instrument.plate_scale_mas();
+                assumptions.push(format!(
+                    "no PLTSCALE header: {s:.3} mas/px from the configuration assumed"
+                ));
+                s
+            }
+        };
+        if provenance.is_none() {
+            assumptions.push(
+                "no CONFIG extension (or IMAGEIDX): not a jsim image, so no simulation context — the \
+                 telemetry has no ACE series to correct with, no ACE prediction is attached, exact-epsf \
+                 does not apply; the reference seed is the command line's"
+                    .to_string(),
+            );
+        }
+        let (img, assumed) = read_analysis_image(path, plate_scale_mas)?;
+        assumptions.extend(assumed);
+        let truth = match truth_path {
+            Some(p) => Some(read_truth(p)?),
+            None => read_truth(path).ok(),
+        };
+        Ok(Self {
+            img,
+            truth,
+            provenance,
+            plate_scale_mas,
+            assumptions,
+        })
+    }
 }

@@ -7,7 +7,7 @@ use engine::analysis::countermeasures::{Countermeasure, Plan};
 use engine::analysis::vectors::VectorMap;
 use engine::analysis::{Source, analyse_image};
 use engine::config::{AceCase, Config, ReadoutOrder};
-use engine::io::{csv, exposure, fits, products};
+use engine::io::{csv, exposure, products};
 use engine::jitter::AceSeries;
 use engine::session::Session;
 use engine::studies::experiment;
@@ -163,51 +163,23 @@ pub struct AnalyzeArgs {
     pub out: PathBuf,
 }
 
-/// The configuration and exposure index a FITS image was made with (its CONFIG extension and IMAGEIDX),
-/// when it says.
-pub fn image_provenance(path: &Path) -> Option<(Config, usize)> {
-    let cfg = fits::read_text(path, "CONFIG")
-        .ok()
-        .and_then(|t| Config::from_toml_str(&t).ok())?;
-    let index = fits::read_f64_key(path, "IMAGEIDX").ok()?;
-    (index >= 0.0 && index.fract() == 0.0).then_some((cfg, index as usize))
-}
-
 /// `jsim analyze`: the analysis pipeline on one image. `cfg` gives the analysis knobs; the image's own
 /// configuration (its CONFIG extension) gives what only its simulation knows (the ACE series for the
 /// telemetry and the ACE prediction, the exact ePSF of the control).
 pub fn analyze(session: &Session, cfg: &Config, a: &AnalyzeArgs) -> Result<()> {
     let t0 = Instant::now();
-    let provenance = image_provenance(&a.image);
-    let mut assumptions = Vec::new();
-    if provenance.is_none() {
-        assumptions.push(
-            "no CONFIG extension (or IMAGEIDX): not a jsim image, so no simulation context — the \
-             telemetry has no ACE series to correct with, no ACE prediction is attached, exact-epsf \
-             does not apply; the reference seed is the command line's"
-                .to_string(),
-        );
-    }
-    let img_cfg = provenance.as_ref().map(|(c, _)| c).unwrap_or(cfg);
-    let scale = match fits::read_f64_key(&a.image, "PLTSCALE") {
-        Ok(s) => s,
-        Err(_) => {
-            let s = img_cfg.instrument.plate_scale_mas();
-            assumptions.push(format!(
-                "no PLTSCALE header: {s:.3} mas/px from the configuration assumed"
-            ));
-            s
-        }
-    };
-    let (img, assumed) = exposure::read_analysis_image(&a.image, scale)?;
-    assumptions.extend(assumed);
-    for s in &assumptions {
+    let input = exposure::AnalysisInput::read(&a.image, a.truth.as_deref(), cfg)?;
+    for s in &input.assumptions {
         eprintln!("jsim: {}: {s}", a.image.display());
     }
-    let truth = match &a.truth {
-        Some(p) => Some(exposure::read_truth(p)?),
-        None => exposure::read_truth(&a.image).ok(),
-    };
+    let exposure::AnalysisInput {
+        img,
+        truth,
+        provenance,
+        plate_scale_mas: scale,
+        assumptions,
+    } = input;
+    let img_cfg = provenance.as_ref().map(|(c, _)| c).unwrap_or(cfg);
     let mut analysis_cfg = cfg.analysis.clone();
     if let Some(z) = a.zones {
         analysis_cfg.epsf_zones = z;
