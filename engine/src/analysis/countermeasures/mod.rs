@@ -204,7 +204,7 @@ impl Countermeasure {
                 {
                     return bad(format!("order {n}: allowed 1..={}", plate::MAX_PLATE_ORDER));
                 }
-                if !(reference_error_mas >= 0.0 && reference_error_mas <= MAX_ERROR_MAS) {
+                if !(0.0..=MAX_ERROR_MAS).contains(&reference_error_mas) {
                     return bad(format!(
                         "reference error {reference_error_mas} mas: allowed [0, {MAX_ERROR_MAS}]"
                     ));
