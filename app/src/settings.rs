@@ -158,7 +158,6 @@ pub fn parse_mags(s: &str) -> Result<Vec<f64>, String> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use std::collections::HashMap;
 
     #[test]
     fn mags_parse_and_reject() {
@@ -169,44 +168,5 @@ mod tests {
         assert!(parse_mags("12, x").is_err());
         assert!(parse_mags("").is_err());
         assert!(parse_mags("99").is_err());
-    }
-
-    /// eframe's storage, in memory.
-    #[derive(Default)]
-    struct Memory(HashMap<String, String>);
-
-    impl eframe::Storage for Memory {
-        fn get_string(&self, key: &str) -> Option<String> {
-            self.0.get(key).cloned()
-        }
-        fn set_string(&mut self, key: &str, value: String) {
-            self.0.insert(key.to_string(), value);
-        }
-        fn remove_string(&mut self, key: &str) {
-            self.0.remove(key);
-        }
-        fn flush(&mut self) {}
-    }
-
-    #[test]
-    fn settings_survive_the_storage_round_trip() {
-        let mut s = Settings::default();
-        s.cfg.ace.sigma_mas = 123.0;
-        s.cfg.readout.order = engine::config::ReadoutOrder::SampleHold;
-        s.cfg.ace.modes.pop();
-        s.countermeasure = "plate-poly:3".parse().expect("a countermeasure");
-        s.mags = vec![11.0, 13.5];
-        s.view.stretch = Stretch::Log;
-        s.view.pixel = Some((12, 34));
-        s.view.auto_curve = false;
-        s.config_path = "somewhere/else.toml".into();
-        let mut m = Memory::default();
-        s.save(&mut m);
-        assert_eq!(Settings::load(&m), Some(s));
-        assert_eq!(Settings::load(&Memory::default()), None);
-        // a stored value this version cannot read is ignored, not fatal
-        let mut bad = Memory::default();
-        eframe::Storage::set_string(&mut bad, STORAGE_KEY, "(cfg: 3)".into());
-        assert_eq!(Settings::load(&bad), None);
     }
 }

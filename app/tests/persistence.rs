@@ -56,3 +56,25 @@ fn settings_saved_on_exit_are_restored_at_the_next_start() {
     );
     std::fs::remove_dir_all(&dir).ok();
 }
+
+#[test]
+fn settings_survive_the_storage_round_trip() {
+    let mut s = Settings::default();
+    s.cfg.ace.sigma_mas = 123.0;
+    s.cfg.readout.order = engine::config::ReadoutOrder::SampleHold;
+    s.cfg.ace.modes.pop();
+    s.countermeasure = "plate-poly:3".parse().expect("a countermeasure");
+    s.mags = vec![11.0, 13.5];
+    s.view.stretch = app::view::Stretch::Log;
+    s.view.pixel = Some((12, 34));
+    s.view.auto_curve = false;
+    s.config_path = "somewhere/else.toml".into();
+    let mut m = Memory::default();
+    s.save(&mut m);
+    assert_eq!(Settings::load(&m), Some(s));
+    assert_eq!(Settings::load(&Memory::default()), None);
+    // a stored value this version cannot read is ignored, not fatal
+    let mut bad = Memory::default();
+    eframe::Storage::set_string(&mut bad, app::settings::STORAGE_KEY, "(cfg: 3)".into());
+    assert_eq!(Settings::load(&bad), None);
+}

@@ -6,29 +6,24 @@ use egui::accesskit::Role;
 use egui_kittest::Harness;
 use egui_kittest::kittest::Queryable;
 use engine::analysis::countermeasures::Countermeasure;
-use engine::config::{Backend, Config, ReadoutOrder};
+use engine::config::{Config, ReadoutOrder};
 use std::time::{Duration, Instant};
 
-/// A 512² detector (4 channels of 128 columns), 6 × 6 stars, a coarse PSF and a 1-minute ACE series.
+/// The engine's small test configuration (512², 4 channels) with 6 × 6 stars, a coarser PSF and a 1-minute
+/// ACE series, so that every UI test simulates in seconds.
 fn small_config() -> Config {
-    let mut c = Config::default();
-    c.instrument.detector_px = 512;
-    c.instrument.photosensitive_px = 496;
-    c.readout.channels = 4;
-    c.readout.channel_width_px = 128;
+    let mut c = engine::testkit::small_config();
     c.scene.grid_n = 6;
     c.scene.grid_spacing_px = 72.0;
     c.optics.pupil_samples = 64;
-    c.optics.psf_oversampling = 8;
     c.optics.psf_radius_px = 8;
     c.band.wavelength_step_um = 0.1;
-    c.fidelity.subpixels = 4;
-    c.fidelity.stamp_radius_px = 9;
     c.fidelity.images = 2;
-    c.fidelity.backend = Backend::Cpu;
     c.ace.span_s = 60.0;
     c.ace.sample_interval_ms = 0.5;
-    c.validate().expect("the small test config is valid");
+    if let Err(e) = c.validate() {
+        panic!("the UI test config must be valid: {e}");
+    }
     c
 }
 
