@@ -50,17 +50,17 @@ pub fn shader_sources() -> Vec<(&'static str, &'static str, String)> {
 #[derive(Debug, Clone, thiserror::Error)]
 pub enum GpuError {
     #[error("no GPU adapter found ({0}); using the CPU path")]
-    NoAdapter(String),
+    NoAdapter(#[source] Arc<wgpu::RequestAdapterError>),
     #[error(
         "only a software Vulkan adapter ({0}) is available, slower than the CPU path; using the CPU path (set fidelity.backend = \"gpu\" to use it anyway)"
     )]
     SoftwareOnly(String),
     #[error("GPU device request failed: {0}")]
-    Device(String),
+    Device(#[source] Arc<wgpu::RequestDeviceError>),
     #[error("GPU validation error: {0}")]
-    Validation(String),
+    Validation(#[source] Arc<wgpu::Error>),
     #[error("GPU readback failed: {0}")]
-    Readback(String),
+    Readback(#[source] Arc<dyn std::error::Error + Send + Sync>),
     #[error("the reference method runs on the CPU only")]
     Unsupported,
 }
@@ -169,7 +169,7 @@ impl GpuIntegrator {
             compatible_surface: None,
             ..Default::default()
         }))
-        .map_err(|e| GpuError::NoAdapter(e.to_string()))?;
+        .map_err(|e| GpuError::NoAdapter(Arc::new(e)))?;
         Self::from_adapter(adapter)
     }
 
@@ -182,7 +182,7 @@ impl GpuIntegrator {
             required_limits: adapter.limits(),
             ..Default::default()
         }))
-        .map_err(|e| GpuError::Device(e.to_string()))?;
+        .map_err(|e| GpuError::Device(Arc::new(e)))?;
         let scope = device.push_error_scope(wgpu::ErrorFilter::Validation);
         let make = |name: &str, entry: &str, src: &str| {
             let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
@@ -203,7 +203,7 @@ impl GpuIntegrator {
         let deposit = make(src[1].0, src[1].1, &src[1].2);
         let fast = make(src[2].0, src[2].1, &src[2].2);
         if let Some(e) = pollster::block_on(scope.pop()) {
-            return Err(GpuError::Validation(e.to_string()));
+            return Err(GpuError::Validation(Arc::new(e)));
         }
         Ok(Self {
             device,
@@ -567,7 +567,7 @@ impl GpuIntegrator {
         enc.copy_buffer_to_buffer(&out_buf, 0, &staging, 0, out_size);
         self.queue.submit(Some(enc.finish()));
         if let Some(e) = pollster::block_on(scope.pop()) {
-            return Err(GpuError::Validation(e.to_string()));
+            return Err(GpuError::Validation(Arc::new(e)));
         }
         let values = self.read_back(&staging, n_pixels)?;
         Ok(batch
@@ -622,14 +622,14 @@ impl GpuIntegrator {
         });
         self.device
             .poll(wgpu::PollType::wait_indefinitely())
-            .map_err(|e| GpuError::Readback(e.to_string()))?;
+            .map_err(|e| GpuError::Readback(Arc::new(e)))?;
         rx.recv()
-            .map_err(|e| GpuError::Readback(e.to_string()))?
-            .map_err(|e| GpuError::Readback(e.to_string()))?;
+            .map_err(|e| GpuError::Readback(Arc::new(e)))?
+            .map_err(|e| GpuError::Readback(Arc::new(e)))?;
         let values = {
             let view = slice
                 .get_mapped_range()
-                .map_err(|e| GpuError::Readback(e.to_string()))?;
+                .map_err(|e| GpuError::Readback(Arc::new(e)))?;
             bytemuck::cast_slice::<u8, f32>(&view)[..n].to_vec()
         };
         staging.unmap();

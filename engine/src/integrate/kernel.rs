@@ -27,6 +27,11 @@ use std::sync::{Arc, Mutex};
 pub enum KernelError {
     #[error("intra-pixel map {path}: {message}")]
     MapFile { path: String, message: String },
+    #[error("intra-pixel map {path}: {source}")]
+    MapRead {
+        path: String,
+        source: std::io::Error,
+    },
     #[error(
         "pixel kernel grid too fine: psf_oversampling {os} with {s} subpixels needs {g} nodes per pixel (max 256); pick subpixels dividing the oversampling"
     )]
@@ -85,7 +90,10 @@ impl IntraPixelMap {
             path: path.display().to_string(),
             message,
         };
-        let text = std::fs::read_to_string(path).map_err(|e| err(e.to_string()))?;
+        let text = std::fs::read_to_string(path).map_err(|source| KernelError::MapRead {
+            path: path.display().to_string(),
+            source,
+        })?;
         let rows: Vec<Vec<f64>> = text
             .lines()
             .map(str::trim)
