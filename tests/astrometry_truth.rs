@@ -29,10 +29,11 @@ fn noise_free_image_gives_positions_exact_to_1e_3_px() {
     }
 }
 
-/// Scatter of (fitted − true) over many noise realisations against the median CRLB: within 15 % — with the
-/// sky from the annulus (3 parameters) and with the sky fitted (4 parameters, a larger bound).
+/// Scatter of (fitted − true) over many noise realisations against the median CRLB — with the sky from the
+/// annulus (3 parameters) and with the sky fitted (4 parameters, a larger bound). 1152 residuals: the rms has a
+/// relative standard error of 1/√2304 = 2.1 %, so ±7 % is 3.4 σ.
 #[test]
-fn scatter_matches_the_cramer_rao_bound_within_15_percent() {
+fn scatter_matches_the_cramer_rao_bound_within_7_percent() {
     let stars = grid_stars(12, 30.0, 7.0e4, 2);
     for fit_sky in [false, true] {
         let mut cfg = Analysis::default();
@@ -63,8 +64,9 @@ fn scatter_matches_the_cramer_rao_bound_within_15_percent() {
             resid.len(),
             stats::median(&crlb)
         );
+        assert_eq!(resid.len(), 2 * 144 * 4, "every star used");
         assert!(
-            (ratio - 1.0).abs() < 0.15,
+            (ratio - 1.0).abs() < 0.07,
             "fit_sky {fit_sky}: scatter / CRLB = {ratio}"
         );
     }
@@ -103,9 +105,22 @@ fn hard_cases_give_flags_or_sane_results_never_nan() {
         sat.flags & flags::SATURATED != 0,
         "saturated star flagged: {sat:?}"
     );
-    if let Some(e) = find(36) {
+    for k in [36, 37] {
+        let e = find(k).expect("an edge star is detected");
         assert!(e.flags & flags::EDGE != 0, "edge star flagged: {e:?}");
     }
+    // the 1.1-px pair is seen as one star (or two) and never passes as a clean, isolated fit
+    let pair: Vec<_> = a
+        .stars
+        .iter()
+        .filter(|s| matches!(s.truth, Some(40 | 41)))
+        .collect();
+    assert!(!pair.is_empty(), "the blended pair is detected");
+    assert!(
+        pair.iter()
+            .all(|s| s.flags & (flags::POOR_FIT | flags::BLENDED) != 0),
+        "the blended pair is flagged: {pair:?}"
+    );
     // the regular grid keeps its accuracy despite its odd neighbours
     assert!(a.report.n_used >= 36, "{:?}", a.report);
     assert!(a.report.accuracy_mas < 10.0, "{:?}", a.report);
