@@ -127,7 +127,8 @@ impl Session {
             sim.psf_for(s);
         }
         if sim.stars.is_empty() {
-            sim.bank().get(sim.cfg.scene.j_minus_h, 0);
+            let bank = sim.bank();
+            bank.get(sim.cfg.scene.j_minus_h, &bank.centre_key());
         }
     }
 }

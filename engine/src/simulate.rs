@@ -244,7 +244,7 @@ impl Simulator {
     /// The PSF of a star (from the bank).
     pub fn psf_for(&self, star: &Star) -> Arc<PsfTable> {
         self.bank
-            .get(star.j_minus_h, self.bank.zone_of(star.x_px, star.y_px))
+            .get(star.j_minus_h, &self.bank.field_key(star.x_px, star.y_px))
     }
 
     /// The pixel kernel of a PSF with this simulation's blur and intra-pixel map (cached).
@@ -266,7 +266,9 @@ impl Simulator {
     pub fn optical_kernel(&self) -> Result<Arc<PixelKernel>, SimError> {
         let psf = match self.stars.first() {
             Some(s) => self.psf_for(s),
-            None => self.bank.get(self.cfg.scene.j_minus_h, 0),
+            None => self
+                .bank
+                .get(self.cfg.scene.j_minus_h, &self.bank.centre_key()),
         };
         self.kernel_with_blur(&psf, 0.0)
     }
@@ -358,7 +360,7 @@ impl Simulator {
         for s in &self.stars {
             let halo = self.bank.halo(
                 s.j_minus_h,
-                self.bank.zone_of(s.x_px, s.y_px),
+                &self.bank.field_key(s.x_px, s.y_px),
                 self.cfg.fidelity.halo_radius_px,
             );
             let key = Arc::as_ptr(&halo) as usize;
@@ -405,7 +407,11 @@ impl Simulator {
         psf.sum()
             + self
                 .bank
-                .halo(star.j_minus_h, self.bank.zone_of(star.x_px, star.y_px), h)
+                .halo(
+                    star.j_minus_h,
+                    &self.bank.field_key(star.x_px, star.y_px),
+                    h,
+                )
                 .sum()
     }
 

@@ -79,7 +79,10 @@ impl Predictor {
             .stars
             .first()
             .map(|s| sim.psf_for(s))
-            .unwrap_or_else(|| sim.bank().get(cfg.scene.j_minus_h, 0));
+            .unwrap_or_else(|| {
+                sim.bank()
+                    .get(cfg.scene.j_minus_h, &sim.bank().centre_key())
+            });
         let images = (0..cfg.fidelity.images)
             .map(|i| {
                 let a = sim.ace_stats(i);

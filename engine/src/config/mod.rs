@@ -217,6 +217,35 @@ pub enum WfeUnit {
     Um,
 }
 
+/// The shape of a field table: (distinct x, distinct y) when its rows cover every node of that rectangular
+/// grid exactly once, else why not.
+pub fn field_grid_shape(rows: &[FieldWfe]) -> Result<(Vec<f64>, Vec<f64>), String> {
+    let distinct = |v: &mut Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v.dedup();
+    };
+    let mut xs: Vec<f64> = rows.iter().map(|r| r.x_px).collect();
+    let mut ys: Vec<f64> = rows.iter().map(|r| r.y_px).collect();
+    distinct(&mut xs);
+    distinct(&mut ys);
+    let mut seen = std::collections::HashSet::new();
+    for r in rows {
+        if !seen.insert((r.x_px.to_bits(), r.y_px.to_bits())) {
+            return Err(format!("the node ({}, {}) is given twice", r.x_px, r.y_px));
+        }
+    }
+    if rows.len() != xs.len() * ys.len() {
+        return Err(format!(
+            "{} rows on {} distinct x × {} distinct y: the rows must cover every (x, y) of a rectangular \
+             grid exactly once",
+            rows.len(),
+            xs.len(),
+            ys.len()
+        ));
+    }
+    Ok((xs, ys))
+}
+
 /// Zernike coefficients at one field position (pixels, detector frame).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -241,10 +270,13 @@ pub struct Optics {
     pub reference_wavelength_um: f64,
     /// Fringe Zernike coefficients Z1..Z37 (index 0 is Z1, piston). Shorter lists are zero-padded.
     pub fringe: Vec<f64>,
-    /// Optional field-dependent table; when non-empty it replaces `fringe`, interpolated to each PSF zone.
+    /// Optional field-dependent table on a rectangular grid of field positions; when non-empty it replaces
+    /// `fringe`, interpolated bilinearly to each star.
     pub field_table: Vec<FieldWfe>,
-    /// PSF zones per detector axis used with a field table (stars in a zone share one PSF).
-    pub field_zones: usize,
+    /// Tolerance of PSF sharing with a field table: a star's interpolated coefficients are rounded to
+    /// multiples of this OPD (nm), and stars that round alike share one PSF (0: one PSF per distinct
+    /// position). The speed-against-error knob of the field-dependent PSF.
+    pub field_wfe_step_nm: f64,
 }
 
 impl Default for Optics {
@@ -258,7 +290,7 @@ impl Default for Optics {
             reference_wavelength_um: 1.4,
             fringe: default_fringe(),
             field_table: Vec::new(),
-            field_zones: 4,
+            field_wfe_step_nm: 1.0,
         }
     }
 }

@@ -151,7 +151,19 @@ impl Config {
                 check_finite(&format!("optics.field_table[{t}].fringe[{k}]"), *c)?;
             }
         }
-        check_range_usize("optics.field_zones", o.field_zones, 1, 64)?;
+        if !o.field_table.is_empty()
+            && let Err(why) = super::field_grid_shape(&o.field_table)
+        {
+            return Err(invalid("optics.field_table", o.field_table.len(), &why));
+        }
+        check_nonneg("optics.field_wfe_step_nm", o.field_wfe_step_nm)?;
+        if o.field_wfe_step_nm > 100.0 {
+            return Err(invalid(
+                "optics.field_wfe_step_nm",
+                o.field_wfe_step_nm,
+                "must be ≤ 100 nm",
+            ));
+        }
 
         let d = &self.detector;
         check_pos("detector.exposure_s", d.exposure_s)?;

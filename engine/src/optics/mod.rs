@@ -4,6 +4,7 @@
 //! [`PsfBank`] computes each distinct PSF once — keyed by colour and field zone — and shares it.
 
 pub mod airy;
+pub mod field;
 pub mod psf;
 pub mod pupil;
 pub mod spectrum;
@@ -26,33 +27,20 @@ pub fn to_um(optics: &Optics, coeffs: &[f64]) -> Vec<f64> {
     v
 }
 
-/// Fringe coefficients (µm OPD) at a field position: `optics.fringe` when there is no field table, else the
-/// inverse-distance-squared weighted mean of the table rows (exact at a table point).
-pub fn fringe_um_at(optics: &Optics, x_px: f64, y_px: f64) -> Vec<f64> {
-    if optics.field_table.is_empty() {
-        return to_um(optics, &optics.fringe);
-    }
-    let mut acc = vec![0.0; zernike::N_FRINGE];
-    let mut wsum = 0.0;
-    for row in &optics.field_table {
-        let d2 = (row.x_px - x_px).powi(2) + (row.y_px - y_px).powi(2);
-        if d2 < 1e-12 {
-            return to_um(optics, &row.fringe);
-        }
-        let w = 1.0 / d2;
-        for (a, c) in acc.iter_mut().zip(to_um(optics, &row.fringe)) {
-            *a += w * c;
-        }
-        wsum += w;
-    }
-    acc.iter().map(|a| a / wsum).collect()
+/// A PSF's place in the field: its wavefront (Fringe coefficients, µm OPD), exactly (`Exact`, bit
+/// patterns) or rounded to the bank's tolerance (`Rounded`, multiples of `optics.field_wfe_step_nm`), so that
+/// stars whose interpolated wavefronts round alike share one PSF.
+#[derive(Debug, Clone, PartialEq, Eq, Hash)]
+pub enum FieldKey {
+    Exact(Vec<u64>),
+    Rounded(Vec<i64>),
 }
 
-/// Key of a cached PSF: colour in milli-magnitudes and field zone.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+/// Key of a cached PSF: colour in milli-magnitudes and its wavefront.
+#[derive(Debug, Clone, PartialEq, Eq, Hash)]
 struct BankKey {
     j_minus_h_milli: i64,
-    zone: usize,
+    field: FieldKey,
     /// 0 for the main PSF; the outer radius (px) for a halo table.
     halo_px: usize,
 }
@@ -62,6 +50,8 @@ pub struct PsfBank {
     instrument: Instrument,
     optics: Optics,
     band: Band,
+    /// The field table as a grid (none: one wavefront everywhere).
+    grid: Option<field::FieldGrid>,
     cache: Mutex<HashMap<BankKey, Arc<PsfTable>>>,
 }
 
@@ -71,6 +61,8 @@ impl PsfBank {
             instrument: cfg.instrument.clone(),
             optics: cfg.optics.clone(),
             band: cfg.band.clone(),
+            // a validated configuration's table is a grid; an invalid one falls back to `fringe`
+            grid: field::grid_of(&cfg.optics).ok().flatten(),
             cache: Mutex::new(HashMap::new()),
         }
     }
@@ -80,53 +72,66 @@ impl PsfBank {
         self.instrument == cfg.instrument && self.optics == cfg.optics && self.band == cfg.band
     }
 
-    /// Number of field zones (1 without a field table).
-    pub fn zones(&self) -> usize {
-        if self.optics.field_table.is_empty() {
-            1
+    /// The wavefront key of a detector position: `optics.fringe` exactly without a field table, else the
+    /// table interpolated to (x, y) and rounded to `optics.field_wfe_step_nm` (exact when it is 0).
+    pub fn field_key(&self, x_px: f64, y_px: f64) -> FieldKey {
+        let coeffs = match &self.grid {
+            None => {
+                return FieldKey::Exact(
+                    to_um(&self.optics, &self.optics.fringe)
+                        .iter()
+                        .map(|c| c.to_bits())
+                        .collect(),
+                );
+            }
+            Some(g) => g.at(x_px, y_px),
+        };
+        let step_um = self.optics.field_wfe_step_nm * 1e-3;
+        if step_um > 0.0 {
+            FieldKey::Rounded(
+                coeffs
+                    .iter()
+                    .map(|c| (c / step_um).round() as i64)
+                    .collect(),
+            )
         } else {
-            self.optics.field_zones * self.optics.field_zones
+            FieldKey::Exact(coeffs.iter().map(|c| c.to_bits()).collect())
         }
     }
 
-    /// Zone of a detector position.
-    pub fn zone_of(&self, x_px: f64, y_px: f64) -> usize {
-        if self.optics.field_table.is_empty() {
-            return 0;
+    /// The wavefront key at the centre of the detector.
+    pub fn centre_key(&self) -> FieldKey {
+        let c = self.instrument.detector_px as f64 / 2.0;
+        self.field_key(c, c)
+    }
+
+    /// The wavefront (µm OPD) a key stands for.
+    fn coefficients(&self, key: &FieldKey) -> Vec<f64> {
+        match key {
+            FieldKey::Exact(bits) => bits.iter().map(|b| f64::from_bits(*b)).collect(),
+            FieldKey::Rounded(k) => {
+                let step_um = self.optics.field_wfe_step_nm * 1e-3;
+                k.iter().map(|v| *v as f64 * step_um).collect()
+            }
         }
-        let nz = self.optics.field_zones;
-        let size = self.instrument.detector_px as f64 / nz as f64;
-        let zx = ((x_px / size).floor().max(0.0) as usize).min(nz - 1);
-        let zy = ((y_px / size).floor().max(0.0) as usize).min(nz - 1);
-        zy * nz + zx
     }
 
-    /// Centre of a zone (pixels): where its WFE is interpolated.
-    pub fn zone_centre(&self, zone: usize) -> (f64, f64) {
-        let nz = self.optics.field_zones.max(1);
-        let size = self.instrument.detector_px as f64 / nz as f64;
-        (
-            ((zone % nz) as f64 + 0.5) * size,
-            ((zone / nz) as f64 + 0.5) * size,
-        )
-    }
-
-    /// The PSF for a colour and zone (computed on first use).
-    pub fn get(&self, j_minus_h: f64, zone: usize) -> Arc<PsfTable> {
-        self.table(j_minus_h, zone, 0)
+    /// The PSF for a colour and wavefront (computed on first use).
+    pub fn get(&self, j_minus_h: f64, field: &FieldKey) -> Arc<PsfTable> {
+        self.table(j_minus_h, field, 0)
     }
 
     /// The PSF halo for a colour and zone: the same PSF at 2 cells per pixel out to
     /// `psf_radius_px + halo_radius_px`, with the square the main table covers set to zero, so the two add
     /// up to the PSF over the larger field (light beyond the main table is no longer dropped).
-    pub fn halo(&self, j_minus_h: f64, zone: usize, halo_radius_px: usize) -> Arc<PsfTable> {
-        self.table(j_minus_h, zone, halo_radius_px.max(1))
+    pub fn halo(&self, j_minus_h: f64, field: &FieldKey, halo_radius_px: usize) -> Arc<PsfTable> {
+        self.table(j_minus_h, field, halo_radius_px.max(1))
     }
 
-    fn table(&self, j_minus_h: f64, zone: usize, halo_px: usize) -> Arc<PsfTable> {
+    fn table(&self, j_minus_h: f64, field: &FieldKey, halo_px: usize) -> Arc<PsfTable> {
         let key = BankKey {
             j_minus_h_milli: (j_minus_h * 1000.0).round() as i64,
-            zone,
+            field: field.clone(),
             halo_px,
         };
         if let Some(p) = self
@@ -137,7 +142,6 @@ impl PsfBank {
         {
             return p.clone();
         }
-        let (zx, zy) = self.zone_centre(zone);
         let mut optics = self.optics.clone();
         if halo_px > 0 {
             optics.psf_oversampling = 2;
@@ -149,7 +153,7 @@ impl PsfBank {
             band: &self.band,
             pixel_rad: self.instrument.pixel_rad(),
             j_minus_h: key.j_minus_h_milli as f64 / 1000.0,
-            fringe_um: fringe_um_at(&self.optics, zx, zy),
+            fringe_um: self.coefficients(&key.field),
         };
         let mut table = psf::polychromatic(&req);
         if halo_px > 0 {
@@ -206,25 +210,61 @@ pub fn monochromatic(cfg: &Config, lambda_um: f64) -> PsfTable {
 mod tests {
     use super::*;
 
+    /// Stars share a PSF when their interpolated wavefronts agree within the tolerance, and get their own
+    /// otherwise; without a field table every star shares the one PSF of `optics.fringe`.
     #[test]
-    fn field_table_interpolation_is_exact_at_nodes() {
-        let mut o = Optics::default();
-        o.wfe_unit = WfeUnit::Um;
-        o.field_table = vec![
-            crate::config::FieldWfe {
-                x_px: 0.0,
-                y_px: 0.0,
-                fringe: vec![0.0, 0.0, 0.0, 0.1],
-            },
-            crate::config::FieldWfe {
-                x_px: 1000.0,
-                y_px: 0.0,
-                fringe: vec![0.0, 0.0, 0.0, 0.3],
-            },
-        ];
-        assert!((fringe_um_at(&o, 0.0, 0.0)[3] - 0.1).abs() < 1e-12);
-        assert!((fringe_um_at(&o, 1000.0, 0.0)[3] - 0.3).abs() < 1e-12);
-        assert!((fringe_um_at(&o, 500.0, 0.0)[3] - 0.2).abs() < 1e-12);
+    fn the_bank_shares_psfs_by_wavefront_within_the_tolerance() {
+        let mut cfg = Config::default();
+        cfg.optics.pupil_samples = 64;
+        cfg.optics.psf_oversampling = 4;
+        cfg.optics.psf_radius_px = 4;
+        cfg.band.wavelength_step_um = 0.2;
+        cfg.optics.wfe_unit = WfeUnit::Um;
+        // Z7 (coma) from 0 to 0.1 µm across 1000 px: 0.1 nm per px
+        cfg.optics.field_table = [
+            (0.0, 0.0, 0.0),
+            (1000.0, 0.0, 0.1),
+            (0.0, 1000.0, 0.0),
+            (1000.0, 1000.0, 0.1),
+        ]
+        .into_iter()
+        .map(|(x_px, y_px, z7)| crate::config::FieldWfe {
+            x_px,
+            y_px,
+            fringe: vec![0.0, 0.0, 0.0, 0.0, 0.0, 0.0, z7],
+        })
+        .collect();
+        cfg.optics.field_wfe_step_nm = 1.0;
+        cfg.validate().expect("valid");
+        let bank = PsfBank::new(&cfg);
+        // 2 px apart: 0.2 nm, the same 1-nm step; 30 px apart: 3 nm, another PSF
+        assert_eq!(bank.field_key(500.0, 10.0), bank.field_key(500.4, 900.0));
+        assert_ne!(bank.field_key(500.0, 10.0), bank.field_key(530.0, 10.0));
+        let a = bank.get(2.0, &bank.field_key(500.0, 10.0));
+        let b = bank.get(2.0, &bank.field_key(500.4, 900.0));
+        assert!(Arc::ptr_eq(&a, &b));
+        let c = bank.get(2.0, &bank.field_key(530.0, 10.0));
+        assert!(!Arc::ptr_eq(&a, &c));
+        assert_eq!(bank.len(), 2);
+        // the shared PSF is the one of the rounded wavefront: 0.050 µm of coma
+        let key = bank.field_key(500.0, 10.0);
+        assert!((bank.coefficients(&key)[6] - 0.050).abs() < 1e-12);
+        // step 0: exact, one PSF per distinct wavefront
+        let mut exact = cfg.clone();
+        exact.optics.field_wfe_step_nm = 0.0;
+        let bank = PsfBank::new(&exact);
+        assert_ne!(bank.field_key(500.0, 10.0), bank.field_key(500.4, 10.0));
+        // no table: one wavefront everywhere
+        let plain = PsfBank::new(&Config::default());
+        assert_eq!(plain.field_key(0.0, 0.0), plain.field_key(1900.0, 1500.0));
+        // a table that is not a grid is a named configuration error
+        let mut bad = cfg.clone();
+        bad.optics.field_table.pop();
+        let e = bad.validate().expect_err("3 of 4 nodes").to_string();
+        assert!(
+            e.contains("optics.field_table") && e.contains("rectangular grid"),
+            "{e}"
+        );
     }
 
     #[test]
@@ -235,10 +275,11 @@ mod tests {
         cfg.optics.pupil_samples = 64;
         cfg.band.wavelength_step_um = 0.2;
         let bank = PsfBank::new(&cfg);
-        let a = bank.get(2.0, 0);
-        let b = bank.get(2.0, 0);
+        let k = bank.centre_key();
+        let a = bank.get(2.0, &k);
+        let b = bank.get(2.0, &k);
         assert!(Arc::ptr_eq(&a, &b));
-        let _c = bank.get(1.0, 0);
+        let _c = bank.get(1.0, &k);
         assert_eq!(bank.len(), 2);
         assert!(bank.serves(&cfg));
     }

@@ -648,7 +648,7 @@ mod tests {
         };
         let fwhm_of = |geometry: PupilGeometry, optics: &Optics| {
             let req = PsfRequest {
-                fringe_um: crate::optics::fringe_um_at(optics, 984.0, 984.0),
+                fringe_um: crate::optics::to_um(optics, &optics.fringe),
                 geometry,
                 optics,
                 band: &cfg.band,

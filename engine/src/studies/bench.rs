@@ -403,6 +403,35 @@ pub fn scaling(
     Ok(rows)
 }
 
+/// A field table for the field-WFE knob: a 3 × 3 grid over the array whose coma (Z7, Z8) and
+/// astigmatism (Z5) grow linearly across the field by ≈ 40 nm, on top of the default design residual — the
+/// size of the field dependence of a wide-field design.
+pub fn demo_field_table(detector_px: f64) -> Vec<crate::config::FieldWfe> {
+    let mut rows = Vec::new();
+    for fy in [0.0, 0.5, 1.0] {
+        for fx in [0.0, 0.5, 1.0] {
+            let (u, v) = (fx - 0.5, fy - 0.5);
+            let mut f = vec![
+                0.0,
+                0.0,
+                0.0,
+                0.07,
+                0.05 + 0.02 * u,
+                -0.03,
+                0.03 * u,
+                0.03 * v,
+            ];
+            f.truncate(8);
+            rows.push(crate::config::FieldWfe {
+                x_px: fx * detector_px,
+                y_px: fy * detector_px,
+                fringe: f,
+            });
+        }
+    }
+    rows
+}
+
 /// The knob sweeps of the reference configuration (`quick` uses a 5 × 5 grid for speed).
 pub fn knob_settings(base: &Config, quick: bool) -> Vec<(String, Vec<(String, Config)>, bool)> {
     let mut b = bench_config(base);
@@ -465,6 +494,27 @@ pub fn knob_settings(base: &Config, quick: bool) -> Vec<(String, Vec<(String, Co
             [0.1f64, 0.05, 0.02, 0.01]
                 .iter()
                 .map(|&s| (format!("{s} µm"), gauss(&|c| c.band.wavelength_step_um = s)))
+                .collect(),
+            true,
+        ),
+        (
+            "field WFE step (with a field table)".into(),
+            [20.0f64, 5.0, 1.0, 0.0]
+                .iter()
+                .map(|&s| {
+                    (
+                        if s > 0.0 {
+                            format!("{s} nm")
+                        } else {
+                            "exact (one PSF per star)".into()
+                        },
+                        gauss(&|c| {
+                            c.optics.field_table =
+                                demo_field_table(c.instrument.detector_px as f64);
+                            c.optics.field_wfe_step_nm = s;
+                        }),
+                    )
+                })
                 .collect(),
             true,
         ),

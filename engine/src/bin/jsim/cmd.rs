@@ -40,11 +40,7 @@ fn say_notes(session: &Session) {
 pub fn psf(session: &Session, cfg: &Config, out: &Path) -> Result<()> {
     let t0 = Instant::now();
     let bank = session.bank(cfg);
-    let zone = bank.zone_of(
-        cfg.instrument.detector_px as f64 / 2.0,
-        cfg.instrument.detector_px as f64 / 2.0,
-    );
-    let psf = bank.get(cfg.scene.j_minus_h, zone);
+    let psf = bank.get(cfg.scene.j_minus_h, &bank.centre_key());
     let elapsed = t0.elapsed().as_secs_f64();
     let outputs = Outputs::for_file(out)?;
     products::write_psf(out, cfg, &psf)?;
