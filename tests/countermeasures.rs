@@ -18,16 +18,23 @@ fn rms_mas(v: &[(f64, f64)], scale: f64) -> f64 {
     ((stats::std_dev(&x).powi(2) + stats::std_dev(&y).powi(2)) / 2.0).sqrt()
 }
 
-/// The telemetry's predictions against what the fit actually measured: the position errors of a noise-free,
-/// flat-free rolling-readout image (fitted with the ePSF built from it, as the pipeline does).
-#[test]
-fn telemetry_predicts_the_measured_errors_of_a_noise_free_image() {
+/// The small scene under a strong realistic ACE (450 mas) with the rolling readout, noise- and flat-free:
+/// the only position errors are what the jitter did.
+fn noise_free_rolling() -> engine::config::Config {
     let mut c = small_config();
     c.ace.sigma_mas = 450.0;
     c.detector.shot_noise = false;
     c.detector.read_noise = false;
     c.detector.digitise = false;
     c.detector.inter_pixel_flat_sigma = 0.0;
+    c
+}
+
+/// The telemetry's predictions against what the fit actually measured: the position errors of a noise-free,
+/// flat-free rolling-readout image (fitted with the ePSF built from it, as the pipeline does).
+#[test]
+fn telemetry_predicts_the_measured_errors_of_a_noise_free_image() {
+    let c = noise_free_rolling();
     let sim = Simulator::new(&c).expect("sim");
     let e = sim.exposure(0).expect("exposure");
     let kernel = sim.optical_kernel().expect("kernel");
@@ -96,12 +103,7 @@ fn telemetry_predicts_the_measured_errors_of_a_noise_free_image() {
 
 #[test]
 fn telemetry_and_plate_model_fix_a_noise_free_rolling_image_and_sample_hold_needs_no_fix() {
-    let mut c = small_config();
-    c.ace.sigma_mas = 450.0;
-    c.detector.shot_noise = false;
-    c.detector.read_noise = false;
-    c.detector.digitise = false;
-    c.detector.inter_pixel_flat_sigma = 0.0;
+    let c = noise_free_rolling();
     let accuracy = |c: &engine::config::Config, cm: &str| -> f64 {
         let sim = Simulator::new(c).expect("sim");
         let exp = sim.exposure(0).expect("exposure");
@@ -145,12 +147,7 @@ fn telemetry_and_plate_model_fix_a_noise_free_rolling_image_and_sample_hold_need
 /// noisy Gaussian-ACE image sits at the bound.
 #[test]
 fn every_countermeasure_does_what_it_should_on_a_small_scene() {
-    let mut c = small_config();
-    c.ace.sigma_mas = 450.0;
-    c.detector.shot_noise = false;
-    c.detector.read_noise = false;
-    c.detector.digitise = false;
-    c.detector.inter_pixel_flat_sigma = 0.0;
+    let c = noise_free_rolling();
     let names = [
         "none",
         "yzones",

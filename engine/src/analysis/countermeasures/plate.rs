@@ -208,42 +208,37 @@ mod tests {
         }
     }
 
+    /// An affine plate fit of stars in one row at `spacing_px`, each displaced by 0.1 px in x.
+    fn affine_fit_of_a_row(
+        n: usize,
+        spacing_px: f64,
+    ) -> (Result<usize, CountermeasureError>, Vec<StarResult>) {
+        let pos: Vec<(f64, f64)> = (0..n).map(|k| (k as f64 * spacing_px, 500.0)).collect();
+        let truth = truth_at(&pos);
+        let mut stars: Vec<StarResult> = pos
+            .iter()
+            .enumerate()
+            .map(|(k, &(x, y))| star(x, y, 0.1, 0.0, k))
+            .collect();
+        let r = plate_fit(
+            &mut stars,
+            &truth,
+            PlateModel::Affine,
+            "plate-affine",
+            0.0,
+            0,
+        );
+        (r, stars)
+    }
+
     #[test]
     fn plate_fit_degenerate_inputs_are_named_errors() {
-        let pos: Vec<(f64, f64)> = (0..3).map(|k| (k as f64 * 100.0, 500.0)).collect();
-        let truth = truth_at(&pos);
-        let mut stars: Vec<StarResult> = pos
-            .iter()
-            .enumerate()
-            .map(|(k, &(x, y))| star(x, y, 0.1, 0.0, k))
-            .collect();
-        let e = plate_fit(
-            &mut stars,
-            &truth,
-            PlateModel::Affine,
-            "plate-affine",
-            0.0,
-            0,
-        )
-        .expect_err("too few");
+        let (r, _) = affine_fit_of_a_row(3, 100.0);
+        let e = r.expect_err("too few");
         assert!(matches!(e, CountermeasureError::TooFewStars { .. }), "{e}");
         // all stars in one row: y has no lever arm
-        let pos: Vec<(f64, f64)> = (0..20).map(|k| (k as f64 * 90.0, 500.0)).collect();
-        let truth = truth_at(&pos);
-        let mut stars: Vec<StarResult> = pos
-            .iter()
-            .enumerate()
-            .map(|(k, &(x, y))| star(x, y, 0.1, 0.0, k))
-            .collect();
-        let e = plate_fit(
-            &mut stars,
-            &truth,
-            PlateModel::Affine,
-            "plate-affine",
-            0.0,
-            0,
-        )
-        .expect_err("one row");
+        let (r, stars) = affine_fit_of_a_row(20, 90.0);
+        let e = r.expect_err("one row");
         assert!(matches!(e, CountermeasureError::Degenerate { .. }), "{e}");
         assert!(stars.iter().all(|s| s.dx_px.is_finite()));
     }
