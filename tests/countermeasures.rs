@@ -52,23 +52,26 @@ fn telemetry_predicts_the_measured_errors_of_a_noise_free_image() {
     let scale = c.instrument.plate_scale_mas();
     let noise = FitNoise::of_simulation(&sim, c.analysis.fit_radius_px);
     let series = sim.series().expect("series");
-    let tel = |noise_mas: f64, rate_hz: f64| {
+    let tel_q = |q: TelemetryQuality| {
         Telemetry::from_series(
             series,
             sim.timing,
             sim.exposure_start_s(0),
             scale,
-            &TelemetryQuality {
-                noise_mas,
-                rate_hz,
-                latency_s: 0.0,
-            },
+            &q,
             c.seed,
             &kernel,
             &noise,
         )
         .expect("telemetry")
         .predicted_px(&pos)
+    };
+    let tel = |noise_mas: f64, rate_hz: f64| {
+        tel_q(TelemetryQuality {
+            noise_mas,
+            rate_hz,
+            ..TelemetryQuality::IDEAL
+        })
     };
     let resid = |p: &[(f64, f64)]| -> Vec<(f64, f64)> {
         measured
@@ -94,6 +97,21 @@ fn telemetry_predicts_the_measured_errors_of_a_noise_free_image() {
     assert!(
         perfect < 0.4 * before,
         "perfect telemetry leaves {perfect} of {before} mas"
+    );
+    // an error of the same rms that is correlated over the exposure (Gauss–Markov, τ = 2 s) does not
+    // average away as the white one does: it leaves more
+    let correlated = rms_mas(
+        &resid(&tel_q(TelemetryQuality {
+            correlated_mas: 200.0,
+            correlation_time_s: 2.0,
+            ..TelemetryQuality::IDEAL
+        })),
+        scale,
+    );
+    eprintln!("200-mas correlated error (τ 2 s): {correlated:.3} mas");
+    assert!(
+        correlated > noisy,
+        "correlated {correlated} vs white {noisy} mas"
     );
     assert!(
         noisy > perfect && slow > perfect,

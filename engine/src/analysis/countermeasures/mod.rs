@@ -82,7 +82,11 @@ pub const MAX_TELEMETRY_LATENCY_S: f64 = 60.0;
 /// number past it is a unit mistake).
 pub const MAX_ERROR_MAS: f64 = 1.0e5;
 
-/// Quality of the attitude telemetry used by the `telemetry` countermeasure.
+/// Quality of the attitude telemetry used by the `telemetry` countermeasure. Its error is white noise per
+/// sample (sensor read noise, which averages away over an exposure) plus a correlated part: a first-order
+/// Gauss–Markov process of rms `correlated_mas` and correlation time `correlation_time_s` (PSD flat below the
+/// knee 1/(2π τ), falling as f⁻² above) — the residual of gyro bias instability after star-tracker fusion, the
+/// error that does *not* average away within an exposure.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct TelemetryQuality {
     /// Gaussian noise per sample, mas.
@@ -91,6 +95,10 @@ pub struct TelemetryQuality {
     pub rate_hz: f64,
     /// Latency, s: the sample reported at t is the attitude of t − latency.
     pub latency_s: f64,
+    /// RMS of the correlated (Gauss–Markov) error, mas (0: none).
+    pub correlated_mas: f64,
+    /// Correlation time of the correlated error, s.
+    pub correlation_time_s: f64,
 }
 
 impl TelemetryQuality {
@@ -99,6 +107,8 @@ impl TelemetryQuality {
         noise_mas: 0.0,
         rate_hz: DEFAULT_TELEMETRY_RATE_HZ,
         latency_s: 0.0,
+        correlated_mas: 0.0,
+        correlation_time_s: 1.0,
     };
 
     /// Check the values, naming the offending one and its allowed range.
@@ -114,6 +124,18 @@ impl TelemetryQuality {
             return bad(format!(
                 "rate {} Hz must be > 0 and ≤ {MAX_TELEMETRY_RATE_HZ}",
                 self.rate_hz
+            ));
+        }
+        if !(0.0..=MAX_ERROR_MAS).contains(&self.correlated_mas) {
+            return bad(format!(
+                "correlated error {} mas must be a finite number in [0, {MAX_ERROR_MAS}]",
+                self.correlated_mas
+            ));
+        }
+        if !(self.correlation_time_s > 0.0 && self.correlation_time_s <= 1e6) {
+            return bad(format!(
+                "correlation time {} s must be > 0 and ≤ 1e6",
+                self.correlation_time_s
             ));
         }
         if !(self.latency_s.abs() <= MAX_TELEMETRY_LATENCY_S) {
@@ -489,6 +511,7 @@ mod tests {
             noise_mas: 2.0,
             rate_hz: 100.0,
             latency_s: 0.01,
+            ..TelemetryQuality::IDEAL
         };
         let p = Plan::parse(&["none", "plate-poly:3", "telemetry"], q, 5.0).expect("plan");
         assert_eq!(p.names(), ["none", "plate-poly:3", "telemetry"]);

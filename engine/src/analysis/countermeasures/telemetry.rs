@@ -40,6 +40,8 @@ impl Telemetry {
             noise_mas,
             rate_hz,
             latency_s,
+            correlated_mas,
+            correlation_time_s,
         } = *quality;
         if series.is_empty() {
             return Err(CountermeasureError::Telemetry(
@@ -70,6 +72,22 @@ impl Telemetry {
             let t = t0 + k as f64 * dt;
             xs.push(at(t - latency_s, &series.x_mas) + normal.sample(&mut r));
             ys.push(at(t - latency_s, &series.y_mas) + normal.sample(&mut r));
+        }
+        if correlated_mas > 0.0 {
+            // its own stream, so that the white noise of a telemetry without this term is unchanged
+            let mut rc = rng::stream(
+                seed,
+                Stream::Telemetry,
+                (exposure_start_s * 1e3) as u64 | 1 << 62,
+            );
+            for v in [&mut xs, &mut ys] {
+                for (e, s) in gauss_markov(n, dt, correlated_mas, correlation_time_s, &mut rc)
+                    .into_iter()
+                    .zip(v.iter_mut())
+                {
+                    *s += e;
+                }
+            }
         }
         // resample on the integration grid (at most 1 ms, and no coarser than the series)
         let step = series.dt_s.max(dt.min(1e-3) / 4.0).min(1e-3);
@@ -110,6 +128,22 @@ impl Telemetry {
     }
 }
 
+/// `n` samples at `dt` of a stationary first-order Gauss–Markov process of rms `sigma` and correlation time
+/// `tau`: `e₀ ~ N(0, σ²)`, `eₖ = a eₖ₋₁ + √(1 − a²) σ zₖ` with `a = exp(−dt/τ)`, so that every sample has
+/// variance σ² and the autocorrelation at lag τ is 1/e.
+pub fn gauss_markov(n: usize, dt: f64, sigma: f64, tau: f64, r: &mut impl rand::Rng) -> Vec<f64> {
+    let a = (-dt / tau).exp();
+    let b = (1.0 - a * a).sqrt() * sigma;
+    let mut out = Vec::with_capacity(n);
+    let mut e = 0.0;
+    for k in 0..n {
+        let z: f64 = rand_distr::StandardNormal.sample(r);
+        e = if k == 0 { sigma * z } else { a * e + b * z };
+        out.push(e);
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -130,7 +164,7 @@ mod tests {
         let q = |noise_mas, rate_hz| TelemetryQuality {
             noise_mas,
             rate_hz,
-            latency_s: 0.0,
+            ..TelemetryQuality::IDEAL
         };
         let empty = AceSeries::still(1e-3, 0);
         let e = Telemetry::from_series(&empty, timing, 0.0, 472.0, &q(1.0, 10.0), 1, &k, &nm)
@@ -146,5 +180,34 @@ mod tests {
                 Telemetry::from_series(&s, timing, 0.0, 472.0, &bad, 1, &k, &nm).expect_err(what);
             assert!(e.to_string().contains(what), "{e}");
         }
+    }
+
+    #[test]
+    fn gauss_markov_has_its_variance_and_correlation_time() {
+        // 400 s at 1 ms with τ = 0.5 s: the rms has a relative standard error √(τ/T) = 3.5 %, the lag-τ
+        // autocorrelation (Bartlett's formula for this AR(1)) 0.027; the bounds are ≈ 3.3 σ
+        let mut r = crate::rng::stream(3, Stream::Test, 0);
+        let (dt, tau, sigma) = (1e-3, 0.5, 20.0);
+        let e = gauss_markov(400_000, dt, sigma, tau, &mut r);
+        let n = e.len() as f64;
+        let mean = e.iter().sum::<f64>() / n;
+        let var = e.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n;
+        assert!(
+            (var.sqrt() / sigma - 1.0).abs() < 0.12,
+            "rms {}",
+            var.sqrt()
+        );
+        let lag = (tau / dt) as usize;
+        let cov = e
+            .iter()
+            .zip(&e[lag..])
+            .map(|(a, b)| (a - mean) * (b - mean))
+            .sum::<f64>()
+            / (n - lag as f64);
+        let rho = cov / var;
+        assert!(
+            (rho - (-1.0f64).exp()).abs() < 0.12,
+            "autocorrelation at τ: {rho}"
+        );
     }
 }

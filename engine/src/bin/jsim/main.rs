@@ -215,6 +215,12 @@ pub struct TelemetryArgs {
     /// Telemetry latency, s.
     #[arg(long = "telemetry-latency-s", default_value_t = 0.0)]
     pub latency_s: f64,
+    /// RMS of the telemetry's correlated (Gauss–Markov) error, mas.
+    #[arg(long = "telemetry-correlated-mas", default_value_t = 0.0)]
+    pub correlated_mas: f64,
+    /// Correlation time of that error, s.
+    #[arg(long = "telemetry-correlation-s", default_value_t = 1.0)]
+    pub correlation_time_s: f64,
     /// Error of the plate models' reference positions, mas.
     #[arg(long = "reference-error-mas", default_value_t = 0.0)]
     pub reference_error_mas: f64,
@@ -228,6 +234,8 @@ impl TelemetryArgs {
             noise_mas: self.noise_mas,
             rate_hz: self.rate_hz,
             latency_s: self.latency_s,
+            correlated_mas: self.correlated_mas,
+            correlation_time_s: self.correlation_time_s,
         };
         Ok(Plan::parse(names, q, self.reference_error_mas)?)
     }

@@ -43,7 +43,16 @@ pub struct RecordTelemetry {
     pub noise_mas: f64,
     pub rate_hz: f64,
     pub latency_s: f64,
+    /// The correlated error (absent in sweeps recorded before it existed: none).
+    #[serde(default)]
+    pub correlated_mas: f64,
+    #[serde(default = "default_correlation_time_s")]
+    pub correlation_time_s: f64,
     pub reference_error_mas: f64,
+}
+
+fn default_correlation_time_s() -> f64 {
+    crate::analysis::countermeasures::TelemetryQuality::IDEAL.correlation_time_s
 }
 
 /// What `DIR/sweep.json` holds: everything `merge` and `report` need.

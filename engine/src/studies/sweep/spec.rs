@@ -33,6 +33,8 @@ struct TelemetryFile {
     noise_mas: Option<f64>,
     rate_hz: Option<f64>,
     latency_s: Option<f64>,
+    correlated_mas: Option<f64>,
+    correlation_time_s: Option<f64>,
     reference_error_mas: Option<f64>,
 }
 
@@ -159,6 +161,10 @@ impl Sweep {
             noise_mas: t.noise_mas.unwrap_or(0.0),
             rate_hz: t.rate_hz.unwrap_or(DEFAULT_TELEMETRY_RATE_HZ),
             latency_s: t.latency_s.unwrap_or(0.0),
+            correlated_mas: t.correlated_mas.unwrap_or(0.0),
+            correlation_time_s: t
+                .correlation_time_s
+                .unwrap_or(TelemetryQuality::IDEAL.correlation_time_s),
         };
         let reference_error_mas = t.reference_error_mas.unwrap_or(0.0);
         let plan = Plan::parse(&names, telemetry, reference_error_mas)
@@ -290,6 +296,14 @@ impl Sweep {
             "telemetry={:?},{:?},{:?},{:?}",
             telemetry.noise_mas, telemetry.rate_hz, telemetry.latency_s, reference_error_mas
         );
+        // (added only when used, so the hash of every earlier sweep stays what it was)
+        if telemetry.correlated_mas > 0.0 {
+            let _ = writeln!(
+                canon,
+                "telemetry_correlated={:?},{:?}",
+                telemetry.correlated_mas, telemetry.correlation_time_s
+            );
+        }
         for p in &params {
             let _ = writeln!(canon, "grid {}={}", p.field, p.toml.join(" ; "));
         }
@@ -377,6 +391,8 @@ impl Sweep {
                 noise_mas: self.telemetry.noise_mas,
                 rate_hz: self.telemetry.rate_hz,
                 latency_s: self.telemetry.latency_s,
+                correlated_mas: self.telemetry.correlated_mas,
+                correlation_time_s: self.telemetry.correlation_time_s,
                 reference_error_mas: self.reference_error_mas,
             },
             base_config: self.base.to_toml(),
