@@ -57,6 +57,23 @@ pub fn inter_pixel_flat(cfg: &Config) -> Vec<f32> {
     flat
 }
 
+/// The calibration flat a pipeline would hold: the true flat with its own relative error `error` (1σ,
+/// independent per pixel, from its own stream of the run seed).
+pub fn calibration_flat(cfg: &Config, error: f64) -> Vec<f32> {
+    let n = cfg.instrument.detector_px;
+    let mut flat = inter_pixel_flat(cfg);
+    if error > 0.0 {
+        flat.par_chunks_mut(n).enumerate().for_each(|(y, row)| {
+            let mut r = rng::stream(cfg.seed, Stream::CalibrationFlat, y as u64);
+            for v in row.iter_mut() {
+                let z: f64 = StandardNormal.sample(&mut r);
+                *v = (*v as f64 * (1.0 + error * z)).max(1e-6) as f32;
+            }
+        });
+    }
+    flat
+}
+
 /// Is pixel (x, y) photosensitive?
 pub fn photosensitive(cfg: &Config, x: usize, y: usize) -> bool {
     let b = cfg.instrument.border_px();

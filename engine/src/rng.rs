@@ -19,6 +19,8 @@ pub enum Stream {
     Telemetry = 7,
     Sweep = 8,
     ReferenceCatalogue = 9,
+    /// The calibration flat's own error (what the instrument team's flat field got wrong).
+    CalibrationFlat = 10,
     Test = 99,
 }
 

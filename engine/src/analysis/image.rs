@@ -2,8 +2,8 @@
 //! noise floor of every pixel.
 
 use crate::analysis::epsf::fit::PixelData;
-use crate::config::Config;
-use crate::detector::{DetectorImage, dq};
+use crate::config::{Config, FlatField};
+use crate::detector::{self, DetectorImage, dq};
 
 /// An image ready for analysis: electrons with bias removed, a mask, the noise floor.
 #[derive(Debug, Clone)]
@@ -14,15 +14,17 @@ pub struct AnalysisImage {
     pub bad: Vec<bool>,
     /// RN² + g²/12 (e⁻²).
     pub var_floor_e2: f64,
+    /// Relative flat-field error counted as noise in the fit (0 when the flat is ignored: uncalibrated).
+    pub flat_sigma: f64,
     pub plate_scale_mas: f64,
 }
 
 impl AnalysisImage {
-    /// From a simulated detector image.
+    /// From a simulated detector image, flat-fielded as `cfg.analysis.flat_field` says.
     pub fn from_detector(cfg: &Config, img: &DetectorImage) -> Self {
         let g = cfg.detector.gain_e_per_adu;
         let bad_bits = dq::BORDER | dq::SATURATED | dq::ADC_HIGH;
-        Self {
+        let mut a = Self {
             nx: img.n,
             ny: img.n,
             e: img
@@ -32,8 +34,28 @@ impl AnalysisImage {
                 .collect(),
             bad: img.dq.iter().map(|d| d & bad_bits != 0).collect(),
             var_floor_e2: cfg.detector.noise_floor_e2(),
+            flat_sigma: 0.0,
             plate_scale_mas: cfg.instrument.plate_scale_mas(),
+        };
+        a.flat_field(cfg, cfg.analysis.flat_field);
+        a
+    }
+
+    /// Flat-field an image of a simulation of `image_cfg` as a pipeline would: `Uncalibrated` leaves it as it
+    /// is (the fit ignores the flat); `Calibrated { error }` divides every pixel by the calibration flat
+    /// ([`detector::calibration_flat`]: the true flat with its own relative error) and counts that error as
+    /// noise on the star's signal in the fit.
+    pub fn flat_field(&mut self, image_cfg: &Config, mode: FlatField) {
+        let FlatField::Calibrated { error } = mode else {
+            return;
+        };
+        let flat = detector::calibration_flat(image_cfg, error);
+        if flat.len() == self.e.len() {
+            for (v, f) in self.e.iter_mut().zip(&flat) {
+                *v /= *f as f64;
+            }
         }
+        self.flat_sigma = error;
     }
 
     pub fn pixels(&self) -> PixelData<'_> {
@@ -43,6 +65,7 @@ impl AnalysisImage {
             e: &self.e,
             bad: &self.bad,
             var_floor_e2: self.var_floor_e2,
+            flat_sigma: self.flat_sigma,
         }
     }
 }

@@ -134,7 +134,11 @@ impl Predictor {
             .gaussian_blurred_xy(key.0 as f64 * 5.0 / scale, key.1 as f64 * 5.0 / scale);
         let d = &self.cfg.detector;
         let f = self.noise.flux_e;
-        let flat = d.inter_pixel_flat_sigma;
+        // the flat error the fit leaves: the whole flat uncalibrated, the calibration flat's error calibrated
+        let flat = match self.cfg.analysis.flat_field {
+            crate::config::FlatField::Uncalibrated => d.inter_pixel_flat_sigma,
+            crate::config::FlatField::Calibrated { error } => error,
+        };
         let r = self.noise.radius_px;
         let h = 1e-3;
         let k = |x: f64, y: f64| subpixel_sum(&psf, &self.map, x, y);

@@ -757,6 +757,21 @@ pub struct Analysis {
     pub fit_max_iter: usize,
     /// Sigma-clipping threshold for the ePSF stacking.
     pub clip_sigma: f64,
+    /// What the analysis knows of the inter-pixel flat.
+    pub flat_field: FlatField,
+}
+
+/// What the analysis knows of the detector's inter-pixel flat.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum FlatField {
+    /// The paper's setting: the image is not flat-fielded and the fit's weights ignore the flat (the
+    /// predictor counts it as noise).
+    Uncalibrated,
+    /// A calibrated pipeline: the image is divided by a calibration flat that is the true flat with its own
+    /// relative error `error` (1σ; e.g. 0.002 = 0.2 %), and that residual is counted as noise, ∝ the star's
+    /// signal, in the fit's weights, the Cramér–Rao bound and the predictor alike.
+    Calibrated { error: f64 },
 }
 
 impl Default for Analysis {
@@ -772,6 +787,7 @@ impl Default for Analysis {
             detect_sigma: 10.0,
             fit_max_iter: 30,
             clip_sigma: 3.0,
+            flat_field: FlatField::Uncalibrated,
         }
     }
 }

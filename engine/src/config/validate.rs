@@ -338,6 +338,15 @@ impl Config {
 
         let an = &self.analysis;
         check_range_usize("analysis.epsf_oversampling", an.epsf_oversampling, 1, 16)?;
+        if let super::FlatField::Calibrated { error } = an.flat_field
+            && !(0.0..=0.5).contains(&error)
+        {
+            return Err(invalid(
+                "analysis.flat_field.calibrated.error",
+                error,
+                "must be a relative error in [0, 0.5]",
+            ));
+        }
         check_range_usize("analysis.epsf_iterations", an.epsf_iterations, 0, 100)?;
         check_range_usize("analysis.epsf_radius_px", an.epsf_radius_px, 2, 64)?;
         check_pos("analysis.fit_radius_px", an.fit_radius_px)?;

@@ -374,6 +374,7 @@ pub fn read_analysis_image(
             .collect(),
         bad,
         var_floor_e2: crate::config::noise_floor_e2(r.read_noise_e, g),
+        flat_sigma: 0.0,
         plate_scale_mas,
     };
     Ok((img, r.assumed))
@@ -429,8 +430,18 @@ impl AnalysisInput {
                     .to_string(),
             );
         }
-        let (img, assumed) = read_analysis_image(path, plate_scale_mas)?;
+        let (mut img, assumed) = read_analysis_image(path, plate_scale_mas)?;
         assumptions.extend(assumed);
+        let mode = fallback.analysis.flat_field;
+        match &provenance {
+            Some((c, _)) => img.flat_field(c, mode),
+            None if mode != crate::config::FlatField::Uncalibrated => assumptions.push(
+                "analysis.flat_field is calibrated, but a non-jsim image has no calibration flat here: \
+                 analysed without flat-fielding"
+                    .to_string(),
+            ),
+            None => {}
+        }
         let truth = match truth_path {
             Some(p) => Some(read_truth(p)?),
             None => read_truth(path).ok(),

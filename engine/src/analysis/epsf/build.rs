@@ -183,7 +183,13 @@ fn fit_flux_at(
                 continue;
             }
             let psi = epsf.value(px as f64 - x, py as f64 - y);
-            let w = 1.0 / ((f0 * psi + s).max(0.0) + img.var_floor_e2);
+            let w = 1.0
+                / super::fit::pixel_variance(
+                    f0 * psi + s,
+                    f0 * psi,
+                    img.var_floor_e2,
+                    img.flat_sigma,
+                );
             num += w * psi * (img.e[i] - s);
             den += w * psi * psi;
         }

@@ -20,6 +20,16 @@ pub struct PixelData<'a> {
     pub bad: &'a [bool],
     /// RN² + g²/12, e⁻².
     pub var_floor_e2: f64,
+    /// Relative flat-field error the weights count as noise: a pixel with star signal s has the extra
+    /// variance (σ s)² (0: the flat is ignored).
+    pub flat_sigma: f64,
+}
+
+/// The variance of a pixel predicted to hold `mu` e⁻ of which `star` come from the star: Poisson + floor +
+/// the flat error on the star's signal.
+#[inline]
+pub fn pixel_variance(mu: f64, star: f64, floor: f64, flat_sigma: f64) -> f64 {
+    mu.max(0.0) + floor + (flat_sigma * star).powi(2)
 }
 
 /// Fit flags (bits).
@@ -226,6 +236,7 @@ fn fisher(
     f: f64,
     s: f64,
     floor: f64,
+    flat_sigma: f64,
     fit_sky: bool,
 ) -> (Vec<f64>, usize) {
     let np = if fit_sky { 4 } else { 3 };
@@ -233,7 +244,7 @@ fn fisher(
     for &(_, px, py) in pix {
         let (psi, gx, gy) = epsf.eval(px - x, py - y);
         let mu = f * psi + s;
-        let w = 1.0 / (mu.max(0.0) + floor);
+        let w = 1.0 / pixel_variance(mu, f * psi, floor, flat_sigma);
         let j = [-f * gx, -f * gy, psi, 1.0];
         for a in 0..np {
             for b in 0..np {
@@ -244,7 +255,7 @@ fn fisher(
     (m, np)
 }
 
-/// Cramér–Rao bounds (σx, σy, σf) of a star with the given true parameters.
+/// Cramér–Rao bounds (σx, σy, σf) of a star with the given true parameters (no flat-field error).
 pub fn crlb(
     img_shape: (usize, usize),
     epsf: &Epsf,
@@ -271,7 +282,7 @@ pub fn crlb(
             }
         }
     }
-    let (m, np) = fisher(epsf, &pix, x, y, f, s, floor, fit_sky);
+    let (m, np) = fisher(epsf, &pix, x, y, f, s, floor, 0.0, fit_sky);
     let inv = linalg::inverse(&m, np)?;
     Some((
         inv[0].max(0.0).sqrt(),
@@ -306,8 +317,9 @@ pub fn fit_star(
     let chi2_of = |p: &[f64; 4], pix: &[(usize, f64, f64)]| -> f64 {
         pix.iter()
             .map(|&(i, px, py)| {
-                let mu = p[2] * epsf.value(px - p[0], py - p[1]) + p[3];
-                (img.e[i] - mu).powi(2) / (mu.max(0.0) + img.var_floor_e2)
+                let star = p[2] * epsf.value(px - p[0], py - p[1]);
+                let mu = star + p[3];
+                (img.e[i] - mu).powi(2) / pixel_variance(mu, star, img.var_floor_e2, img.flat_sigma)
             })
             .sum()
     };
@@ -324,7 +336,7 @@ pub fn fit_star(
         for &(i, px, py) in &pix {
             let (psi, gx, gy) = epsf.eval(px - p[0], py - p[1]);
             let mu = p[2] * psi + p[3];
-            let w = 1.0 / (mu.max(0.0) + img.var_floor_e2);
+            let w = 1.0 / pixel_variance(mu, p[2] * psi, img.var_floor_e2, img.flat_sigma);
             let r = img.e[i] - mu;
             chi2 += w * r * r;
             let j = [-p[2] * gx, -p[2] * gy, psi, 1.0];
@@ -416,6 +428,7 @@ pub fn fit_star(
         p[2],
         p[3],
         img.var_floor_e2,
+        img.flat_sigma,
         opt.fit_sky,
     );
     match linalg::inverse(&m, npar) {
@@ -483,6 +496,7 @@ mod tests {
             e: &img,
             bad: &bad,
             var_floor_e2: 225.0,
+            flat_sigma: 0.0,
         };
         let opt = FitOptions {
             radius_px: 3.0,
@@ -514,6 +528,7 @@ mod tests {
             e: &img,
             bad: &bad,
             var_floor_e2: 225.0,
+            flat_sigma: 0.0,
         };
         let opt = FitOptions {
             radius_px: 2.5,
@@ -536,6 +551,7 @@ mod tests {
             e: &img,
             bad: &allbad,
             var_floor_e2: 225.0,
+            flat_sigma: 0.0,
         };
         let r = fit_star(&pd, &e, 10.0, 10.0, 1000.0, 300.0, &opt);
         assert!(r.flags & flags::FEW_PIXELS != 0 && !r.usable());
