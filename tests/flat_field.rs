@@ -22,7 +22,10 @@ fn ratios(cfg: &Config) -> (f64, f64) {
         let r = analyse_image(
             &img,
             Some(&e.truth),
-            Some(Source { sim: &sim, index: i }),
+            Some(Source {
+                sim: &sim,
+                index: i,
+            }),
             &cfg.analysis,
             &plan,
             cfg.seed,
