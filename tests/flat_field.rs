@@ -39,7 +39,7 @@ fn ratios(cfg: &Config) -> (f64, f64) {
     }
     let accuracy = (sq / n).sqrt();
     bound.sort_by(f64::total_cmp);
-    let predicted = Predictor::new(&sim)
+    let predicted = Predictor::new(&sim, &cfg.analysis)
         .expect("predictor")
         .predict(&Countermeasure::None)
         .expect("prediction");

@@ -60,7 +60,7 @@ impl EngineState {
                         format!("predicting Hw = {}", c.scene.mag_hw),
                     );
                     let sim = self.dataset_simulator(c).map_err(failed(Stage::Curve))?;
-                    let pred = Predictor::new(&sim).map_err(failed(Stage::Curve))?;
+                    let pred = Predictor::new(&sim, &c.analysis).map_err(failed(Stage::Curve))?;
                     let v = (
                         pred.predict(&cm).unwrap_or(f64::NAN),
                         pred.predict(&Countermeasure::None).unwrap_or(f64::NAN),

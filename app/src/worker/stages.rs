@@ -113,7 +113,7 @@ impl EngineState {
         );
         let sim = self.simulator(&r.cfg, Stage::Predict)?;
         out.check()?;
-        let pred = Predictor::new(&sim).map_err(failed(Stage::Predict))?;
+        let pred = Predictor::new(&sim, &r.cfg.analysis).map_err(failed(Stage::Predict))?;
         let cm = r.countermeasure;
         let image_mas = pred.predict_image(r.image_index, &cm).unwrap_or(f64::NAN);
         // the predictor's figure for the exact-ePSF control is the noise floor of this exposure's blur

@@ -73,8 +73,11 @@ pub enum PredictError {
 }
 
 impl Predictor {
-    pub fn new(sim: &Simulator) -> Result<Self, SimError> {
-        let cfg = sim.cfg.clone();
+    /// The predictor of `sim`'s dataset analysed with `analysis` (passed explicitly: a session's cached
+    /// simulator keeps the analysis settings it was built with).
+    pub fn new(sim: &Simulator, analysis: &crate::config::Analysis) -> Result<Self, SimError> {
+        let mut cfg = sim.cfg.clone();
+        cfg.analysis = analysis.clone();
         let psf = sim
             .stars
             .first()
@@ -102,7 +105,7 @@ impl Predictor {
         Ok(Self {
             map: IntraPixelMap::from_config(&cfg.detector, cfg.fidelity.subpixels)?,
             kernel: sim.optical_kernel()?,
-            noise: FitNoise::of_simulation(sim, sim.cfg.analysis.fit_radius_px),
+            noise: FitNoise::of_simulation(sim, analysis.fit_radius_px),
             timing: sim.timing,
             series: sim.series_arc(),
             stars: sim.stars.iter().map(|s| (s.x_px, s.y_px)).collect(),

@@ -121,7 +121,7 @@ pub fn run_dataset(
 ) -> Result<(Vec<Row>, Vec<ImageResult>), ExperimentError> {
     let t0 = Instant::now();
     let cfg = &sim.cfg;
-    let pred = Predictor::new(sim)?;
+    let pred = Predictor::new(sim, &sim.cfg.analysis)?;
     let mut images = Vec::with_capacity(cfg.fidelity.images);
     for i in 0..cfg.fidelity.images {
         let r = analyse_exposure(sim, i, plan)?;

@@ -343,7 +343,7 @@ pub fn predict(session: &Session, cfg: &Config, plan: &Plan) -> Result<()> {
     let sim = session.new_simulator(cfg)?;
     let setup = t0.elapsed().as_secs_f64();
     let t1 = Instant::now();
-    let p = engine::analysis::predict::Predictor::new(&sim)?;
+    let p = engine::analysis::predict::Predictor::new(&sim, &cfg.analysis)?;
     println!(
         "Hw {} {} ACE, {} readout, {} images:",
         cfg.scene.mag_hw,

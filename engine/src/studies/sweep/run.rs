@@ -88,7 +88,7 @@ pub fn compute_unit(sweep: &Sweep, unit: usize, session: &Session) -> Result<Uni
     session.warm(&sim);
     let analysed = experiment::analyse_exposure(&sim, 0, &sweep.plan);
     let tp = Instant::now();
-    let predictor = crate::analysis::predict::Predictor::new(&sim).ok();
+    let predictor = crate::analysis::predict::Predictor::new(&sim, &cfg.analysis).ok();
     // a prediction that cannot be made is recorded as NaN beside the measured row (the file has no other
     // place for the reason; `jsim predict` reports it)
     let predicted: Vec<f64> = sweep
