@@ -118,6 +118,16 @@ pub fn analyze_prepared(
     truth: Option<&[TruthRow]>,
     opts: &Options,
 ) -> Result<(Analysis, Prepared), AnalysisError> {
+    analyze_prepared_with(img, truth, opts, &|| Ok(opts.model_epsf.clone()))
+}
+
+/// [`analyze_prepared`] with the model PSF of the few-star fallback made only when it is needed.
+fn analyze_prepared_with(
+    img: &AnalysisImage,
+    truth: Option<&[TruthRow]>,
+    opts: &Options,
+    model_epsf: &dyn Fn() -> Result<Option<Epsf>, AnalysisError>,
+) -> Result<(Analysis, Prepared), AnalysisError> {
     let det = detect(img, opts.cfg.detect_sigma);
     if det.is_empty() {
         return Err(AnalysisError::NoStars(opts.cfg.detect_sigma));
@@ -141,8 +151,8 @@ pub fn analyze_prepared(
     let (mut fits, epsf, iterations) = match &opts.fixed_epsf {
         Some(e) => (fit_all(e), e.clone(), 0),
         None if n_build < MIN_EPSF_STARS => {
-            let (e, what) = match &opts.model_epsf {
-                Some(m) => (m.clone(), "the instrument's model PSF"),
+            let (e, what) = match model_epsf()? {
+                Some(m) => (m, "the instrument's model PSF"),
                 None => (
                     build::gaussian_seed(&pd, &starts, bopt.oversampling, bopt.half_px),
                     "a Gaussian of the stars' mean second moment",
@@ -331,11 +341,17 @@ pub fn analyse_image(
     plan: &Plan,
     seed: u64,
 ) -> Result<ImageAnalysis, AnalysisError> {
-    let mut base = Options::new(cfg);
-    if let Some(src) = source {
-        base.model_epsf = Some(exact_epsf(&*src.sim.optical_kernel()?, cfg.epsf_radius_px));
-    }
-    let (plain, prepared) = analyze_prepared(img, truth, &base)?;
+    let base = Options::new(cfg);
+    let model = || -> Result<Option<Epsf>, AnalysisError> {
+        match source {
+            Some(src) => Ok(Some(exact_epsf(
+                &*src.sim.optical_kernel()?,
+                cfg.epsf_radius_px,
+            ))),
+            None => Ok(None),
+        }
+    };
+    let (plain, prepared) = analyze_prepared_with(img, truth, &base, &model)?;
     let mut global = plain.clone();
     if let (Some(src), Some(t)) = (source, truth) {
         src.attach_ace_prediction(t, &mut global, cfg, img.plate_scale_mas)?;

@@ -18,6 +18,7 @@
 //! table (≈ 30 ms).
 
 use crate::analysis::countermeasures::{Countermeasure, CountermeasureError, Telemetry};
+use crate::analysis::epsf::fit::pixel_variance;
 use crate::analysis::response::{FitNoise, FitResponse};
 use crate::config::AceCase;
 use crate::integrate::kernel::{IntraPixelMap, PixelKernel, subpixel_sum};
@@ -162,7 +163,7 @@ impl Predictor {
                         let gx = (k(dx + h, dy) - k(dx - h, dy)) / (2.0 * h);
                         let gy = (k(dx, dy + h) - k(dx, dy - h)) / (2.0 * h);
                         let mu = f * psi + self.noise.sky_e;
-                        let w = 1.0 / (mu + self.noise.floor_e2 + (flat * f * psi).powi(2));
+                        let w = 1.0 / pixel_variance(mu, f * psi, self.noise.floor_e2, flat);
                         let j = [-f * gx, -f * gy, psi];
                         for a in 0..3 {
                             for b in 0..3 {
