@@ -3,14 +3,15 @@
 
 mod common;
 
-use common::small_config;
+use common::{pooled_accuracy_over_bound, small_config};
+use engine::analysis::AnalysisImage;
 use engine::analysis::countermeasures::{Countermeasure, Plan, Telemetry, TelemetryQuality};
 use engine::analysis::pipeline::Options;
 use engine::analysis::response::FitNoise;
-use engine::analysis::{AnalysisImage, Source, analyse_image};
 use engine::config::{AceCase, ReadoutOrder};
 use engine::numerics::stats;
 use engine::simulate::Simulator;
+use engine::studies::experiment::analyse_exposure;
 
 fn rms_mas(v: &[(f64, f64)], scale: f64) -> f64 {
     let x: Vec<f64> = v.iter().map(|p| p.0 * scale).collect();
@@ -124,23 +125,10 @@ fn telemetry_and_plate_model_fix_a_noise_free_rolling_image_and_sample_hold_need
     let c = noise_free_rolling();
     let accuracy = |c: &engine::config::Config, cm: &str| -> f64 {
         let sim = Simulator::new(c).expect("sim");
-        let exp = sim.exposure(0).expect("exposure");
-        let img = AnalysisImage::from_detector(c, &exp.image);
         let plan = Plan::new(vec![cm.parse().expect("name")]).expect("plan");
-        let source = Source {
-            sim: &sim,
-            index: 0,
-        };
-        let r = analyse_image(
-            &img,
-            Some(&exp.truth),
-            Some(source),
-            &c.analysis,
-            &plan,
-            c.seed,
-        )
-        .expect("analysis");
-        r.measured[0].1.report.accuracy_mas
+        analyse_exposure(&sim, 0, &plan).expect("analysis").measured[0]
+            .report
+            .accuracy_mas
     };
     let none = accuracy(&c, "none");
     let tel = accuracy(&c, "telemetry");
@@ -177,23 +165,12 @@ fn every_countermeasure_does_what_it_should_on_a_small_scene() {
     ];
     let plan = Plan::parse(&names, TelemetryQuality::IDEAL, 0.0).expect("plan");
     let sim = Simulator::new(&c).expect("sim");
-    let exp = sim.exposure(0).expect("exposure");
-    let img = AnalysisImage::from_detector(&c, &exp.image);
-    let r = analyse_image(
-        &img,
-        Some(&exp.truth),
-        Some(Source {
-            sim: &sim,
-            index: 0,
-        }),
-        &c.analysis,
-        &plan,
-        c.seed,
-    )
-    .expect("analysis");
+    let r = analyse_exposure(&sim, 0, &plan).expect("analysis");
     let acc = |n: &str| {
-        r.of(&n.parse().expect("name"))
-            .map(|a| a.report.accuracy_mas)
+        r.measured
+            .iter()
+            .find(|m| m.countermeasure == n)
+            .map(|m| m.report.accuracy_mas)
             .unwrap_or(f64::NAN)
     };
     let got: Vec<String> = names.iter().map(|n| format!("{n} {:.3}", acc(n))).collect();
@@ -215,38 +192,15 @@ fn every_countermeasure_does_what_it_should_on_a_small_scene() {
     );
     assert!(acc("telemetry") < 0.5 * none, "{}", acc("telemetry"));
     // exact-epsf is the static-ACE control: it does not apply to a realistic-ACE image
-    assert!(r.of(&Countermeasure::ExactEpsf).is_none());
+    assert!(r.measured.iter().all(|m| m.countermeasure != "exact-epsf"));
     // on a noisy Gaussian-ACE image without flat it reaches the bound: 3 images × 64 stars × 2 axes, the
     // accuracy's relative standard error is 1/√(2·384) = 3.6 %, so ±12 % is 3.3 σ
     let mut g = small_config();
     g.ace.case = AceCase::Gaussian;
     g.detector.inter_pixel_flat_sigma = 0.0;
     let sim = Simulator::new(&g).expect("sim");
-    let control = Plan::new(vec![Countermeasure::ExactEpsf]).expect("plan");
-    let mut ratios = Vec::new();
-    let (mut sq, mut n, mut crlb) = (0.0, 0.0, Vec::new());
-    for i in 0..3 {
-        let e = sim.exposure(i).expect("exposure");
-        let r = analyse_image(
-            &AnalysisImage::from_detector(&g, &e.image),
-            Some(&e.truth),
-            Some(Source {
-                sim: &sim,
-                index: i,
-            }),
-            &g.analysis,
-            &control,
-            g.seed,
-        )
-        .expect("analysis");
-        let rep = &r.of(&Countermeasure::ExactEpsf).expect("applies").report;
-        ratios.push(rep.accuracy_over_crlb);
-        sq += (rep.accuracy_x_mas.powi(2) + rep.accuracy_y_mas.powi(2)) * rep.n_used as f64;
-        n += 2.0 * rep.n_used as f64;
-        crlb.push(rep.crlb_median_mas);
-    }
-    let ratio = (sq / n).sqrt() / stats::median(&crlb);
-    eprintln!("exact-ePSF control: accuracy / bound = {ratio:.3} (per image {ratios:?})");
+    let (ratio, _) = pooled_accuracy_over_bound(&sim, Countermeasure::ExactEpsf);
+    eprintln!("exact-ePSF control: accuracy / bound = {ratio:.3}");
     assert!(
         (ratio - 1.0).abs() < 0.12,
         "exact-ePSF control at {ratio} × the bound"

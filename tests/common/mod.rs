@@ -90,3 +90,30 @@ pub fn grid_stars(n_side: usize, spacing: f64, flux: f64, seed: u64) -> Vec<(f64
     }
     v
 }
+
+/// Every exposure of `sim` through the pipeline under countermeasure `cm`
+/// (`engine::studies::experiment::analyse_exposure`): the per-axis accuracy pooled over all images' used
+/// stars divided by the median of the images' bounds, and the mean of the per-image accuracies (mas).
+pub fn pooled_accuracy_over_bound(
+    sim: &engine::simulate::Simulator,
+    cm: engine::analysis::countermeasures::Countermeasure,
+) -> (f64, f64) {
+    let plan = engine::analysis::countermeasures::Plan::new(vec![cm]).expect("plan");
+    let (mut sq, mut n, mut bound, mut acc) = (0.0, 0.0, Vec::new(), Vec::new());
+    for i in 0..sim.cfg.fidelity.images {
+        let r = engine::studies::experiment::analyse_exposure(sim, i, &plan).expect("analysis");
+        let rep = &r
+            .measured
+            .first()
+            .expect("the countermeasure applies")
+            .report;
+        sq += (rep.accuracy_x_mas.powi(2) + rep.accuracy_y_mas.powi(2)) * rep.n_used as f64;
+        n += 2.0 * rep.n_used as f64;
+        bound.push(rep.crlb_median_mas);
+        acc.push(rep.accuracy_mas);
+    }
+    (
+        (sq / n).sqrt() / engine::numerics::stats::median(&bound),
+        acc.iter().sum::<f64>() / acc.len() as f64,
+    )
+}
