@@ -104,8 +104,11 @@ pub fn memory_estimate_bytes(cfg: &Config, n_stars: usize) -> f64 {
         AceCase::Realistic => 96.0 * cfg.ace.span_s / (cfg.ace.sample_interval_ms * 1e-3),
         _ => 0.0,
     };
-    let reach = cfg.fidelity.stamp_radius_px as f64
-        + 3.0 * cfg.ace.sigma_mas / cfg.instrument.plate_scale_mas();
+    let radius = match cfg.fidelity.stamp_radius_px {
+        0 => cfg.optics.psf_radius_px as f64 + 2.0, // the kernel's reach
+        r => r as f64,
+    };
+    let reach = radius + 3.0 * cfg.ace.sigma_mas / cfg.instrument.plate_scale_mas();
     let stamps = n_stars as f64 * 8.0 * (2.0 * reach + 1.0).powi(2);
     let cells =
         (2.0 * (cfg.optics.psf_radius_px * cfg.optics.psf_oversampling) as f64 + 1.0).powi(2);
@@ -398,13 +401,14 @@ impl Simulator {
         Ok(out)
     }
 
-    /// Fraction of a star's light the simulation models: the main table, plus the halo when enabled.
-    pub fn modelled_fraction(&self, star: &Star, psf: &PsfTable) -> f64 {
+    /// Fraction of a star's light the simulation models: what its kernel delivers (the PSF table, after the
+    /// Gaussian-ACE blur when there is one), plus the halo when enabled.
+    pub fn modelled_fraction(&self, star: &Star, kernel: &PixelKernel) -> f64 {
         let h = self.cfg.fidelity.halo_radius_px;
         if h == 0 {
-            return psf.sum();
+            return kernel.light_fraction;
         }
-        psf.sum()
+        kernel.light_fraction
             + self
                 .bank
                 .halo(
@@ -471,7 +475,7 @@ impl Simulator {
                     mag_hw: s.mag_hw,
                     j_minus_h: s.j_minus_h,
                     flux_e: j.star.rate_e_per_s * (b - a),
-                    modelled_fraction: self.modelled_fraction(s, &j.psf),
+                    modelled_fraction: self.modelled_fraction(s, &j.kernel),
                     t_start_s: a,
                     exptime_s: b - a,
                     jitter_dx_px: jx,

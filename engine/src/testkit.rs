@@ -23,7 +23,6 @@ pub fn small_config() -> Config {
     c.optics.psf_radius_px = 10;
     c.band.wavelength_step_um = 0.05;
     c.fidelity.subpixels = 4;
-    c.fidelity.stamp_radius_px = 9;
     c.fidelity.images = 3;
     c.fidelity.backend = Backend::Cpu;
     c.ace.span_s = 120.0;

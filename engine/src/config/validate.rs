@@ -331,7 +331,7 @@ impl Config {
 
         let f = &self.fidelity;
         check_range_usize("fidelity.images", f.images, 1, 100_000)?;
-        check_range_usize("fidelity.stamp_radius_px", f.stamp_radius_px, 1, 512)?;
+        check_range_usize("fidelity.stamp_radius_px", f.stamp_radius_px, 0, 512)?;
         check_range_usize("fidelity.subpixels", f.subpixels, 1, 64)?;
         check_range_usize("fidelity.time_stride", f.time_stride, 1, 1_000_000)?;
         check_range_usize("fidelity.halo_radius_px", f.halo_radius_px, 0, 1024)?;

@@ -160,6 +160,10 @@ pub struct PixelKernel {
     pub nodes_per_px: usize,
     pub half_nodes: usize,
     pub data: Vec<f64>,
+    /// Fraction of a star's light the kernel delivers to pixels: the sum of the PSF table it was built
+    /// from (after any jitter blur, whose flux beyond the table is dropped), weighted by the mean of the
+    /// intra-pixel map (1). The truth's `psf_fraction`.
+    pub light_fraction: f64,
 }
 
 impl PixelKernel {
@@ -197,15 +201,23 @@ impl PixelKernel {
                 *out = acc * inv_s2 * (os * os) as f64;
             }
         });
+        let mean_w = map.weights.iter().sum::<f64>() * inv_s2;
         Ok(Self {
             nodes_per_px: g,
             half_nodes: half,
             data,
+            light_fraction: psf.sum() * mean_w,
         })
     }
 
     pub fn n(&self) -> usize {
         2 * self.half_nodes + 1
+    }
+
+    /// Stamp half-size that keeps all of K's light for a star anywhere in its pixel:
+    /// `⌈support + ½⌉` (the stamp is centred on the star's rounded position).
+    pub fn stamp_radius_px(&self) -> usize {
+        (self.support_px() + 0.5).ceil() as usize
     }
 
     /// Value at node offsets from the centre (0 outside).

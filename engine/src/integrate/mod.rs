@@ -45,6 +45,8 @@ pub struct StarJob {
 pub struct FrameSpec<'a> {
     pub timing: &'a ReadoutTiming,
     pub detector_px: usize,
+    /// Stamp half-size before the jitter margin: 0 = each star's kernel reach (all light kept, the
+    /// default); a positive value truncates the stamp there (an approximation `jsim bench` measures).
     pub stamp_radius_px: usize,
     pub method: Method,
     pub map: &'a IntraPixelMap,
@@ -60,11 +62,15 @@ pub fn bounds_of(
         Motion::Static => None,
         Motion::Track(t) => Some(t),
     };
+    let radius = match frame.stamp_radius_px {
+        0 => job.kernel.stamp_radius_px(),
+        r => r,
+    };
     cpu::stamp_bounds(
         job.star.x_px,
         job.star.y_px,
         track,
-        frame.stamp_radius_px,
+        radius,
         frame.detector_px,
     )
 }

@@ -521,11 +521,15 @@ pub fn knob_settings(base: &Config, quick: bool) -> Vec<(String, Vec<(String, Co
         ),
         (
             "stamp radius (flux kept)".into(),
-            [6usize, 8, 12, 20]
+            // the last setting is the reference: 0 = the kernel's reach, every modelled photon kept
+            [6usize, 8, 12, 0]
                 .iter()
                 .map(|&r| {
                     (
-                        format!("{r} px"),
+                        match r {
+                            0 => "kernel reach (exact)".to_string(),
+                            r => format!("{r} px"),
+                        },
                         gauss(&|c| c.fidelity.stamp_radius_px = r),
                     )
                 })
