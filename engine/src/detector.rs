@@ -60,8 +60,13 @@ pub fn inter_pixel_flat(cfg: &Config) -> Vec<f32> {
 /// The calibration flat a pipeline would hold: the true flat with its own relative error `error` (1σ,
 /// independent per pixel, from its own stream of the run seed).
 pub fn calibration_flat(cfg: &Config, error: f64) -> Vec<f32> {
+    calibration_flat_of(cfg, inter_pixel_flat(cfg), error)
+}
+
+/// [`calibration_flat`] from the true flat already at hand.
+pub fn calibration_flat_of(cfg: &Config, true_flat: Vec<f32>, error: f64) -> Vec<f32> {
     let n = cfg.instrument.detector_px;
-    let mut flat = inter_pixel_flat(cfg);
+    let mut flat = true_flat;
     if error > 0.0 {
         flat.par_chunks_mut(n).enumerate().for_each(|(y, row)| {
             let mut r = rng::stream(cfg.seed, Stream::CalibrationFlat, y as u64);

@@ -3,7 +3,7 @@
 //! exposures of a dataset (PSFs, kernels, the ACE series, the flat), so a dataset costs one PSF per
 //! distinct colour/zone and one integration per exposure.
 
-use crate::config::{AceCase, Config};
+use crate::config::{AceCase, Config, FlatField};
 use crate::detector::{self, DetectorImage};
 use crate::integrate::kernel::{IntraPixelMap, KernelCache, KernelError, PixelKernel};
 use crate::integrate::track::Track;
@@ -134,6 +134,8 @@ pub struct Simulator {
     kernels: Arc<KernelCache>,
     series: Option<Arc<AceSeries>>,
     flat: Vec<f32>,
+    /// The calibration flat of `analysis.flat_field` (made on first use, once per simulator).
+    calibration: std::sync::OnceLock<Arc<Vec<f32>>>,
     integrator: Integrator,
 }
 
@@ -207,6 +209,7 @@ impl Simulator {
             kernels,
             series,
             flat,
+            calibration: std::sync::OnceLock::new(),
             integrator,
         })
     }
@@ -417,6 +420,25 @@ impl Simulator {
                     h,
                 )
                 .sum()
+    }
+
+    /// The calibration flat a pipeline holds for this detector (its true flat with the relative error of
+    /// `analysis.flat_field`), made once; `None` when the analysis is uncalibrated.
+    pub fn calibration_flat(&self) -> Option<Arc<Vec<f32>>> {
+        let FlatField::Calibrated { error } = self.cfg.analysis.flat_field else {
+            return None;
+        };
+        Some(
+            self.calibration
+                .get_or_init(|| {
+                    Arc::new(detector::calibration_flat_of(
+                        &self.cfg,
+                        self.flat.clone(),
+                        error,
+                    ))
+                })
+                .clone(),
+        )
     }
 
     /// Simulate exposure `index` of the dataset.

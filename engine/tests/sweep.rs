@@ -413,7 +413,7 @@ fn report_fractions_match_the_merged_rows() {
     }
     // one histogram + CDF per point and countermeasure, and the fraction plot
     for p in 0..2 {
-        for cm in ["none", "plate-poly_3", "telemetry"] {
+        for cm in ["none", "plate-poly_3_catalogue", "telemetry"] {
             let f = dir.join(format!("report/dist_p{p:03}_{cm}.png"));
             assert!(
                 std::fs::metadata(&f)
@@ -782,4 +782,60 @@ fn a_shard_runs_in_one_process_at_a_time() {
     let s = run(&quick(), &dir, Shard::ALL, 1, None);
     assert_eq!(s.computed, 0);
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A sweep of stares: each unit is a stare of `stare_exposures` consecutive exposures on one ACE series, the
+/// stack of which references the plate model. Rows come per exposure; the stack-referenced plate sits between
+/// the uncorrected and the oracle-referenced one; a stack plate without a stare is a named error.
+#[test]
+fn a_sweep_of_stares_references_the_plate_to_each_stare_stack() {
+    let text = std::fs::read_to_string(quick_path())
+        .expect("quick sweep")
+        .replace(
+            "countermeasures = [\"none\", \"plate-poly:3@catalogue\", \"telemetry\"]",
+            "countermeasures = [\"none\", \"plate-poly:3\", \"plate-poly:3@oracle\"]\nstare_exposures = 4",
+        )
+        .replace("\"ace.sigma_mas\" = [150, 300]", "\"ace.sigma_mas\" = [300]");
+    let d = scratch("stares");
+    let sw = Sweep::from_toml_str(&text, &d.join("s.toml"), &d).expect("parses");
+    assert_eq!((sw.n_points(), sw.n_units(), sw.stare_exposures), (1, 1, 4));
+    assert_eq!(sw.unit_config(0).fidelity.images, 4);
+    let dir = d.join("out");
+    let s = run(&sw, &dir, Shard::ALL, 1, None);
+    assert_eq!(s.computed, 1);
+    let merged = merged_text(&dir);
+    let mut lines = merged.lines();
+    let header: Vec<&str> = lines.next().expect("header").split(',').collect();
+    let col = |name: &str| header.iter().position(|h| *h == name).expect(name);
+    let (e_col, cm_col, acc_col) = (col("exposure"), col("countermeasure"), col("accuracy_mas"));
+    let rows: Vec<Vec<String>> = lines
+        .map(|l| l.split(',').map(str::to_string).collect())
+        .collect();
+    assert_eq!(rows.len(), 4 * 3, "one row per exposure and countermeasure");
+    let mean = |cm: &str| {
+        let v: Vec<f64> = rows
+            .iter()
+            .filter(|r| r[cm_col] == cm)
+            .map(|r| r[acc_col].parse::<f64>().expect("accuracy"))
+            .collect();
+        assert_eq!(v.len(), 4, "{cm}: every exposure of the stare");
+        v.iter().sum::<f64>() / 4.0
+    };
+    let exposures: Vec<&str> = rows.iter().map(|r| r[e_col].as_str()).collect();
+    assert_eq!(exposures[..4], ["0", "0", "0", "1"]);
+    let (none, stack, oracle) = (
+        mean("none"),
+        mean("plate-poly:3"),
+        mean("plate-poly:3@oracle"),
+    );
+    eprintln!("stare of 4: none {none:.2}, stack {stack:.2}, oracle {oracle:.2} mas");
+    assert!(
+        oracle < stack && stack < none,
+        "the stack sits between: {oracle} < {stack} < {none}"
+    );
+    // a stack reference needs a stare
+    let single = text.replace("stare_exposures = 4", "stare_exposures = 1");
+    let e = Sweep::from_toml_str(&single, &d.join("s.toml"), &d).expect_err("no stare");
+    assert!(e.to_string().contains("stare_exposures"), "{e}");
+    let _ = std::fs::remove_dir_all(&d);
 }

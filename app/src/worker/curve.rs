@@ -91,7 +91,8 @@ impl EngineState {
             out.check()?;
             let t0 = Instant::now();
             let sim = self.dataset_simulator(c).map_err(failed(Stage::Curve))?;
-            let mut results: Vec<ImageResult> = Vec::with_capacity(images);
+            // the dataset is one stare: its stack references the stack-referenced plate models
+            let mut stare = Vec::with_capacity(images);
             for i in 0..images {
                 out.check()?;
                 out.progress(
@@ -100,10 +101,12 @@ impl EngineState {
                     total,
                     format!("Hw = {}: image {}/{}", c.scene.mag_hw, i + 1, images),
                 );
-                results.push(
-                    experiment::analyse_exposure(&sim, i, &plan).map_err(failed(Stage::Curve))?,
+                stare.push(
+                    experiment::analyse_in_stare(&sim, i, &plan).map_err(failed(Stage::Curve))?,
                 );
             }
+            let results: Vec<ImageResult> =
+                experiment::finish_stare(&sim, &plan, stare).map_err(failed(Stage::Curve))?;
             // the predictions of step 1, for the plan's countermeasures
             let p = self
                 .curve_pred

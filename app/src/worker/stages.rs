@@ -175,7 +175,7 @@ impl EngineState {
         out.progress(Stage::Image, 1, 2, "ePSF analysis");
         let t1 = Instant::now();
         let plan = r.plan().map_err(failed(Stage::Image))?;
-        let img = AnalysisImage::from_detector(cfg, &exp.image);
+        let img = AnalysisImage::of_exposure(&sim, &exp.image);
         let res = analyse_image(
             &img,
             Some(&exp.truth),
@@ -224,7 +224,7 @@ impl EngineState {
         let sim = self.simulator(&tcfg, Stage::Twin)?;
         let exp = self.exposure(&sim, index, Stage::Twin)?;
         out.check()?;
-        let img = AnalysisImage::from_detector(&tcfg, &exp.image);
+        let img = AnalysisImage::of_exposure(&sim, &exp.image);
         let report = analyse_image(
             &img,
             Some(&exp.truth),

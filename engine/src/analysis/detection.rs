@@ -123,38 +123,51 @@ pub fn sky_annulus(cfg: &AnalysisCfg) -> (f64, f64) {
 /// centring convention) is the median displacement of the detections to their nearest truth star within
 /// 20 px (when at least 3 such pairs exist; else none), as a cross-match with an offset search would find it.
 pub fn match_truth(pos: &[(f64, f64)], truth: &[TruthRow]) -> Vec<Option<usize>> {
-    let coarse = nearest_truth(pos, truth, 20.0, (0.0, 0.0));
+    let refs: Vec<(f64, f64)> = truth.iter().map(|t| (t.x_px, t.y_px)).collect();
+    match_positions(pos, &refs, 20.0, 2.0)
+}
+
+/// Cross-match positions to reference positions: the common offset is the median displacement of the pairs
+/// nearest within `search_px` (when at least 3 exist; else none), then each position takes the nearest
+/// reference within `radius_px` of it minus that offset.
+pub fn match_positions(
+    pos: &[(f64, f64)],
+    refs: &[(f64, f64)],
+    search_px: f64,
+    radius_px: f64,
+) -> Vec<Option<usize>> {
+    let coarse = nearest_within(pos, refs, search_px, (0.0, 0.0));
     let (dx, dy): (Vec<f64>, Vec<f64>) = pos
         .iter()
         .zip(&coarse)
-        .filter_map(|(&(x, y), m)| m.map(|k| (x - truth[k].x_px, y - truth[k].y_px)))
+        .filter_map(|(&(x, y), m)| m.map(|k| (x - refs[k].0, y - refs[k].1)))
         .unzip();
     let offset = if dx.len() >= 3 {
         (stats::median(&dx), stats::median(&dy))
     } else {
         (0.0, 0.0)
     };
-    nearest_truth(pos, truth, 2.0, offset)
+    nearest_within(pos, refs, radius_px, offset)
 }
 
-/// For each position, the nearest truth star within `radius_px` of the position minus `offset`.
-fn nearest_truth(
+/// For each position, the index of the nearest reference position within `radius_px` of the position minus
+/// `offset` (a grid of cells one radius wide: O(n) for any number of stars).
+pub fn nearest_within(
     pos: &[(f64, f64)],
-    truth: &[TruthRow],
+    refs: &[(f64, f64)],
     radius_px: f64,
     offset: (f64, f64),
 ) -> Vec<Option<usize>> {
-    // bucket the truth on a grid of cells one radius wide
     let cell = radius_px.max(1.0);
     let mut grid: std::collections::HashMap<(i64, i64), Vec<usize>> =
         std::collections::HashMap::new();
-    for (k, t) in truth.iter().enumerate() {
-        grid.entry((
-            (t.x_px / cell).floor() as i64,
-            (t.y_px / cell).floor() as i64,
-        ))
-        .or_default()
-        .push(k);
+    for (k, &(rx, ry)) in refs.iter().enumerate() {
+        if !(rx.is_finite() && ry.is_finite()) {
+            continue;
+        }
+        grid.entry(((rx / cell).floor() as i64, (ry / cell).floor() as i64))
+            .or_default()
+            .push(k);
     }
     pos.iter()
         .map(|&(x, y)| {
@@ -164,7 +177,7 @@ fn nearest_truth(
             for gy in cy - 1..=cy + 1 {
                 for gx in cx - 1..=cx + 1 {
                     for &k in grid.get(&(gx, gy)).map(|v| v.as_slice()).unwrap_or(&[]) {
-                        let d = (truth[k].x_px - x).powi(2) + (truth[k].y_px - y).powi(2);
+                        let d = (refs[k].0 - x).powi(2) + (refs[k].1 - y).powi(2);
                         if d <= radius_px * radius_px && best.is_none_or(|(_, bd)| d < bd) {
                             best = Some((k, d));
                         }

@@ -4,6 +4,7 @@
 use crate::analysis::epsf::fit::PixelData;
 use crate::config::{Config, FlatField};
 use crate::detector::{self, DetectorImage, dq};
+use crate::simulate::Simulator;
 
 /// An image ready for analysis: electrons with bias removed, a mask, the noise floor.
 #[derive(Debug, Clone)]
@@ -20,11 +21,31 @@ pub struct AnalysisImage {
 }
 
 impl AnalysisImage {
-    /// From a simulated detector image, flat-fielded as `cfg.analysis.flat_field` says.
+    /// An exposure of `sim`, flat-fielded as its `analysis.flat_field` says with the simulator's (cached)
+    /// calibration flat.
+    pub fn of_exposure(sim: &Simulator, img: &DetectorImage) -> Self {
+        let mut a = Self::unflattened(&sim.cfg, img);
+        if let (Some(flat), FlatField::Calibrated { error }) =
+            (sim.calibration_flat(), sim.cfg.analysis.flat_field)
+        {
+            a.divide_by(&flat, error);
+        }
+        a
+    }
+
+    /// From a simulated detector image, flat-fielded as `cfg.analysis.flat_field` says (the calibration
+    /// flat made anew: [`AnalysisImage::of_exposure`] reuses a simulator's).
     pub fn from_detector(cfg: &Config, img: &DetectorImage) -> Self {
+        let mut a = Self::unflattened(cfg, img);
+        a.flat_field(cfg, cfg.analysis.flat_field);
+        a
+    }
+
+    /// Electrons, mask and noise floor, not flat-fielded.
+    fn unflattened(cfg: &Config, img: &DetectorImage) -> Self {
         let g = cfg.detector.gain_e_per_adu;
         let bad_bits = dq::BORDER | dq::SATURATED | dq::ADC_HIGH;
-        let mut a = Self {
+        Self {
             nx: img.n,
             ny: img.n,
             e: img
@@ -36,9 +57,7 @@ impl AnalysisImage {
             var_floor_e2: cfg.detector.noise_floor_e2(),
             flat_sigma: 0.0,
             plate_scale_mas: cfg.instrument.plate_scale_mas(),
-        };
-        a.flat_field(cfg, cfg.analysis.flat_field);
-        a
+        }
     }
 
     /// Flat-field an image of a simulation of `image_cfg` as a pipeline would: `Uncalibrated` leaves it as it
@@ -49,9 +68,13 @@ impl AnalysisImage {
         let FlatField::Calibrated { error } = mode else {
             return;
         };
-        let flat = detector::calibration_flat(image_cfg, error);
+        self.divide_by(&detector::calibration_flat(image_cfg, error), error);
+    }
+
+    /// Divide by a calibration flat of relative error `error`, counted as noise in the fit.
+    fn divide_by(&mut self, flat: &[f32], error: f64) {
         if flat.len() == self.e.len() {
-            for (v, f) in self.e.iter_mut().zip(&flat) {
+            for (v, f) in self.e.iter_mut().zip(flat) {
                 *v /= *f as f64;
             }
         }

@@ -4,7 +4,7 @@
 //! the tests and for studies that need one step alone.
 
 use crate::analysis::AnalysisError;
-use crate::analysis::countermeasures::{self, Context, Countermeasure, Plan, Telemetry};
+use crate::analysis::countermeasures::{self, Context, Countermeasure, Plan, Telemetry, stack};
 use crate::analysis::detection::{detect, match_truth, starts};
 use crate::analysis::epsf::Epsf;
 use crate::analysis::epsf::build::{self, BuildOptions, StarStart};
@@ -227,6 +227,10 @@ pub fn with_countermeasure(
         seed,
     };
     report.dof_absorbed = countermeasures::apply(cm, &ctx, &mut stars)?;
+    if cm.needs_stare() {
+        // the image alone is its own stack: nothing corrected until the stare is finished
+        report.stare_exposures = 1;
+    }
     summarise(&stars, truth, img.plate_scale_mas, &mut report);
     Ok(Analysis {
         report,
@@ -384,4 +388,56 @@ pub fn analyse_image(
         measured.push((*cm, analysis));
     }
     Ok(ImageAnalysis { global, measured })
+}
+
+/// Finish the analyses of a stare's exposures (`images[k]`, with `truths[k]` when known): every plate model
+/// of the plan referenced to the stack is fitted over all of them ([`stack::stack_plate`], from each image's
+/// global fits) and replaces each image's stare-of-one result. A stare of one exposure is left as it is.
+pub fn finish_stare(
+    images: &mut [ImageAnalysis],
+    truths: &[Option<&[TruthRow]>],
+    plan: &Plan,
+    plate_scale_mas: f64,
+) -> Result<(), AnalysisError> {
+    if images.len() < 2 {
+        return Ok(());
+    }
+    for cm in plan.countermeasures.iter().filter(|c| c.needs_stare()) {
+        let Countermeasure::Plate { model, .. } = cm else {
+            continue;
+        };
+        let n = images.len();
+        let mut stars: Vec<Vec<StarResult>> =
+            images.iter().map(|im| im.global.stars.clone()).collect();
+        let out = stack::stack_plate(&mut stars, *model, &cm.to_string())?;
+        for (k, (im, st)) in images.iter_mut().zip(stars).enumerate() {
+            let g = &im.global.report;
+            let mut report = Report {
+                n_detected: g.n_detected,
+                epsf_iterations: g.epsf_iterations,
+                epsf_stars: g.epsf_stars,
+                epsf_fallback: g.epsf_fallback.clone(),
+                countermeasure: cm.to_string(),
+                dof_absorbed: out.dof_absorbed,
+                stare_exposures: n,
+                ..Default::default()
+            };
+            summarise(
+                &st,
+                truths.get(k).copied().flatten(),
+                plate_scale_mas,
+                &mut report,
+            );
+            let analysis = Analysis {
+                report,
+                stars: st,
+                epsf: im.global.epsf.clone(),
+            };
+            match im.measured.iter_mut().find(|(c, _)| c == cm) {
+                Some(slot) => slot.1 = analysis,
+                None => im.measured.push((*cm, analysis)),
+            }
+        }
+    }
+    Ok(())
 }

@@ -17,7 +17,7 @@
 //! Cost: the bound is cached per 5-mas blur step (≈ 30 ms each); each realistic image costs one fit-response
 //! table (≈ 30 ms).
 
-use crate::analysis::countermeasures::{Countermeasure, CountermeasureError, Telemetry};
+use crate::analysis::countermeasures::{Countermeasure, CountermeasureError, Reference, Telemetry};
 use crate::analysis::epsf::fit::pixel_variance;
 use crate::analysis::response::{FitNoise, FitResponse};
 use crate::config::AceCase;
@@ -231,14 +231,34 @@ impl Predictor {
     ) -> Result<(f64, usize), PredictError> {
         let d = self.displacements(i);
         match cm {
-            Countermeasure::Plate { model, .. } => {
-                let fit = |v: Vec<f64>| {
+            Countermeasure::Plate { model, reference } => {
+                // against a fixed reference the plate removes what the model holds of the displacement:
+                // r = d − P d. Against the stare's stack it can only remove the departure from the stare's
+                // mean field d̄, which stays (stack::stack_plate's fixed point): r = d − P (d − d̄).
+                let mean = match reference {
+                    Reference::Stack => Some(self.mean_displacements()),
+                    _ => None,
+                };
+                let fitted = |v: &[f64]| -> Result<Vec<f64>, PredictError> {
                     model
-                        .residuals(&self.stars, &v)
+                        .residuals(&self.stars, v)
                         .ok_or_else(|| PredictError::Degenerate(cm.to_string()))
                 };
-                let rx = fit(d.iter().map(|p| p.0).collect())?;
-                let ry = fit(d.iter().map(|p| p.1).collect())?;
+                let axis = |a: fn(&(f64, f64)) -> f64| -> Result<Vec<f64>, PredictError> {
+                    let v: Vec<f64> = match &mean {
+                        Some(m) => d.iter().zip(m.iter()).map(|(p, q)| a(p) - a(q)).collect(),
+                        None => d.iter().map(a).collect(),
+                    };
+                    let res = fitted(&v)?;
+                    // residual of the fit = v − P v; the error left is d − P v = d − v + res
+                    Ok(d.iter()
+                        .zip(&v)
+                        .zip(res)
+                        .map(|((p, vi), ri)| a(p) - vi + ri)
+                        .collect())
+                };
+                let rx = axis(|p| p.0)?;
+                let ry = axis(|p| p.1)?;
                 let r: Vec<(f64, f64)> = rx.into_iter().zip(ry).collect();
                 Ok((rms2(&r), 2 * model.n_params()))
             }
@@ -268,6 +288,19 @@ impl Predictor {
         }
     }
 
+    /// The stare's mean fit displacement per star over all the predictor's images, px (the stack's field).
+    fn mean_displacements(&self) -> Vec<(f64, f64)> {
+        let n = self.images.len().max(1) as f64;
+        let mut m = vec![(0.0, 0.0); self.stars.len()];
+        for i in 0..self.images.len() {
+            for (a, d) in m.iter_mut().zip(self.displacements(i).iter()) {
+                a.0 += d.0 / n;
+                a.1 += d.1 / n;
+            }
+        }
+        m
+    }
+
     /// Predicted per-image accuracy (mas) of image `i` under a countermeasure.
     pub fn predict_image(&self, i: usize, cm: &Countermeasure) -> Result<f64, PredictError> {
         let Some(im) = self.images.get(i) else {
@@ -284,9 +317,9 @@ impl Predictor {
         let absorbed = (p as f64 / n).min(0.9);
         let reference_error_mas = match cm {
             Countermeasure::Plate {
-                reference_error_mas,
+                reference: Reference::Catalogue { error_mas },
                 ..
-            } => *reference_error_mas,
+            } => *error_mas,
             _ => 0.0,
         };
         let reference2 = if p > 0 {

@@ -80,6 +80,9 @@ pub struct Report {
     pub countermeasure: String,
     /// Parameters a countermeasure fitted per exposure (degrees of freedom absorbed).
     pub dof_absorbed: usize,
+    /// Exposures of the stare whose stack referenced a plate model (1: the image alone, nothing to
+    /// correct; 0: no stack reference).
+    pub stare_exposures: usize,
 }
 
 /// Largest |mean(d) − overall mean| over five bins of sub-pixel phase.

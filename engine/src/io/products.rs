@@ -228,7 +228,7 @@ pub fn write_experiment(path: &Path, rows: &[Row]) -> Result<(), IoError> {
 }
 
 /// Columns of `images.csv`: one row per image and countermeasure.
-pub const IMAGES_HEADER: [&str; 25] = [
+pub const IMAGES_HEADER: [&str; 26] = [
     "ace",
     "readout",
     "countermeasure",
@@ -250,6 +250,7 @@ pub const IMAGES_HEADER: [&str; 25] = [
     "response_slope_y",
     "n_used",
     "dof_absorbed",
+    "stare_exposures",
     "ace_sigma_mas",
     "ace_drift_mas",
     "simulate_s",
@@ -284,6 +285,7 @@ pub fn image_rows(cfg: &Config, images: &[ImageResult]) -> Vec<Vec<Cell>> {
                 Cell::F(r.response_slope_y),
                 Cell::I(r.n_used as i64),
                 Cell::I(r.dof_absorbed as i64),
+                Cell::I(r.stare_exposures as i64),
                 Cell::F(im.ace_sigma_mas),
                 Cell::F(im.ace_drift_mas),
                 Cell::F(im.simulate_s),

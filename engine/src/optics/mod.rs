@@ -10,17 +10,22 @@ pub mod pupil;
 pub mod spectrum;
 pub mod zernike;
 
-use crate::config::{Band, Config, Instrument, Optics, WfeUnit};
+use crate::config::{Band, Config, Instrument, OpdSign, Optics, WfeUnit};
 use psf::{PsfRequest, PsfTable};
 use pupil::PupilGeometry;
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 
-/// Fringe coefficients at the reference (`optics.fringe`) converted to OPD in µm.
+/// Fringe coefficients at the reference (`optics.fringe`) converted to OPD in µm, in the engine's sign
+/// (`optics.opd_sign`: image along +∇W).
 pub fn to_um(optics: &Optics, coeffs: &[f64]) -> Vec<f64> {
-    let f = match optics.wfe_unit {
+    let unit = match optics.wfe_unit {
         WfeUnit::Waves => optics.reference_wavelength_um,
         WfeUnit::Um => 1.0,
+    };
+    let f = match optics.opd_sign {
+        OpdSign::ImageAlongGradient => unit,
+        OpdSign::ImageAgainstGradient => -unit,
     };
     let mut v: Vec<f64> = coeffs.iter().map(|c| c * f).collect();
     v.resize(zernike::N_FRINGE, 0.0);

@@ -523,6 +523,78 @@ mod tests {
         );
     }
 
+    /// The OPD sign, stated in `config::OpdSign` and checked against the centroid theorem (the PSF centroid
+    /// is the pupil-averaged wavefront slope, exactly, for any aberration: Teague 1982), evaluated from
+    /// the analytic gradient of the Fringe polynomial on the pupil samples — not from the transform. A
+    /// positive Z7 (x coma) moves the centroid toward +x by f⟨∂W/∂x⟩; the opposite sign convention
+    /// moves it toward −x by as much; Z7 leaves y alone.
+    #[test]
+    fn a_positive_coma_moves_the_centroid_along_the_stated_sign() {
+        use crate::config::{OpdSign, Optics, WfeUnit};
+        let g = geometry();
+        let inst = Instrument::default();
+        let os = 4;
+        let cell = inst.pixel_rad() / os as f64;
+        let half = 40 * os;
+        let lambda = 1.4e-6;
+        let pupil = Pupil::sample(&g, 128);
+        let c_um = 0.08;
+        // ⟨∂W/∂x⟩ over the transmitting pupil: W = c·(3ρ³ − 2ρ)cos θ = c·(3(u² + v²)u − 2u), u = x/R,
+        // so ∂W/∂x = (c/R)(9u² + 3v² − 2)
+        let n = pupil.n;
+        let (mut sum, mut wsum) = (0.0, 0.0);
+        for iy in 0..n {
+            for ix in 0..n {
+                let t = pupil.transmission[iy * n + ix];
+                if t == 0.0 {
+                    continue;
+                }
+                let (u, v) = (
+                    pupil.coord_m(ix) / g.radius_m,
+                    pupil.coord_m(iy) / g.radius_m,
+                );
+                sum += t * (9.0 * u * u + 3.0 * v * v - 2.0);
+                wsum += t;
+            }
+        }
+        let slope_rad = c_um * 1e-6 / g.radius_m * sum / wsum;
+        let expect_px = slope_rad / inst.pixel_rad();
+        for (sign, dir) in [
+            (OpdSign::ImageAlongGradient, 1.0),
+            (OpdSign::ImageAgainstGradient, -1.0),
+        ] {
+            let optics = Optics {
+                wfe_unit: WfeUnit::Um,
+                opd_sign: sign,
+                ..Optics::default()
+            };
+            let mut fr = vec![0.0; 7];
+            fr[6] = c_um;
+            let w = crate::optics::to_um(&optics, &fr);
+            let t = PsfTable {
+                oversampling: os,
+                half_cells: half,
+                data: mft_psf(
+                    &pupil,
+                    &opd_map_m(&pupil, g.radius_m, &w),
+                    lambda,
+                    cell,
+                    half,
+                ),
+            };
+            let (cx, cy) = t.centroid_px();
+            eprintln!(
+                "{sign:?}: centroid ({cx:.4}, {cy:.4}) px, theorem {:.4} px",
+                dir * expect_px
+            );
+            assert!(
+                (cx - dir * expect_px).abs() < 0.05 * expect_px.abs() && cy.abs() < 1e-3,
+                "{sign:?}: centroid ({cx}, {cy}) px vs {} px",
+                dir * expect_px
+            );
+        }
+    }
+
     #[test]
     fn three_spiders_give_six_fold_spikes() {
         // A real pupil gives a centrosymmetric PSF; three vanes at 120° therefore give six spikes, one every

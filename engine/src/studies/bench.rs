@@ -549,8 +549,11 @@ pub fn epsf_iterations(
     c.ace.case = AceCase::Gaussian;
     c.fidelity.images = images.max(1);
     let sim = session.new_simulator(&c)?;
-    let exps: Vec<_> = (0..c.fidelity.images)
-        .map(|i| sim.exposure(i))
+    let imgs: Vec<_> = (0..c.fidelity.images)
+        .map(|i| {
+            sim.exposure(i)
+                .map(|e| (AnalysisImage::of_exposure(&sim, &e.image), e.truth))
+        })
         .collect::<Result<_, _>>()?;
     let mut rows = Vec::new();
     for (label, it, sm) in [
@@ -578,9 +581,8 @@ pub fn epsf_iterations(
         let t0 = Instant::now();
         let mut acc = Vec::new();
         let mut ratio = Vec::new();
-        for e in &exps {
-            let img = AnalysisImage::from_detector(&c, &e.image);
-            if let Ok(a) = analyze(&img, Some(&e.truth), &o) {
+        for (img, truth) in &imgs {
+            if let Ok(a) = analyze(img, Some(truth), &o) {
                 acc.push(a.report.accuracy_mas);
                 ratio.push(a.report.accuracy_over_crlb);
             }
@@ -590,7 +592,7 @@ pub fn epsf_iterations(
             setting: label.into(),
             backend: "cpu".into(),
             stars: sim.stars.len(),
-            time_s: t0.elapsed().as_secs_f64() / exps.len().max(1) as f64,
+            time_s: t0.elapsed().as_secs_f64() / imgs.len().max(1) as f64,
             max_err: f64::NAN,
             rms_err: f64::NAN,
             flux_err: f64::NAN,

@@ -6,12 +6,13 @@
 //! instant predictor expects ([`crate::analysis::predict`]).
 
 use crate::analysis::countermeasures::Plan;
+use crate::analysis::pipeline::{self, ImageAnalysis};
 use crate::analysis::predict::{PredictError, Predictor};
 pub use crate::analysis::report::{ImageResult, Measured, Row};
 use crate::analysis::{AnalysisError, AnalysisImage, Source, analyse_image};
 use crate::config::{AceCase, Config, ReadoutOrder};
 use crate::numerics::stats;
-use crate::simulate::{SimError, Simulator};
+use crate::simulate::{SimError, Simulator, TruthRow};
 use std::time::Instant;
 
 #[derive(Debug, thiserror::Error)]
@@ -24,17 +25,29 @@ pub enum ExperimentError {
     Predict(#[from] PredictError),
 }
 
+/// One exposure of a stare, analysed by the pipeline; the countermeasures that need the whole stare (plate
+/// models referenced to the stack) are completed by [`finish_stare`].
+pub struct StareImage {
+    index: usize,
+    analysis: ImageAnalysis,
+    truth: Vec<TruthRow>,
+    ace_sigma_mas: f64,
+    ace_drift_mas: f64,
+    simulate_s: f64,
+    analyse_s: f64,
+}
+
 /// Simulate exposure `index` of `sim` and run the analysis pipeline on it under `plan`.
-pub fn analyse_exposure(
+pub fn analyse_in_stare(
     sim: &Simulator,
     index: usize,
     plan: &Plan,
-) -> Result<ImageResult, ExperimentError> {
+) -> Result<StareImage, ExperimentError> {
     let t0 = Instant::now();
     let exp = sim.exposure(index)?;
     let t1 = Instant::now();
-    let img = AnalysisImage::from_detector(&sim.cfg, &exp.image);
-    let res = analyse_image(
+    let img = AnalysisImage::of_exposure(sim, &exp.image);
+    let analysis = analyse_image(
         &img,
         Some(&exp.truth),
         Some(Source { sim, index }),
@@ -42,22 +55,93 @@ pub fn analyse_exposure(
         plan,
         sim.cfg.seed,
     )?;
-    Ok(ImageResult {
+    Ok(StareImage {
         index,
+        analysis,
+        truth: exp.truth,
         ace_sigma_mas: ((exp.ace.sigma_x_mas.powi(2) + exp.ace.sigma_y_mas.powi(2)) / 2.0).sqrt(),
         ace_drift_mas: exp.ace.drift_mas,
         simulate_s: (t1 - t0).as_secs_f64(),
         analyse_s: t1.elapsed().as_secs_f64(),
-        measured: res
-            .measured
-            .into_iter()
-            .map(|(c, a)| Measured {
-                countermeasure: c.to_string(),
-                report: a.report,
-            })
-            .collect(),
-        stars: (index == 0).then_some(res.global.stars),
     })
+}
+
+/// Finish a stare's exposures (the stack reference over all of them) and report each.
+pub fn finish_stare(
+    sim: &Simulator,
+    plan: &Plan,
+    images: Vec<StareImage>,
+) -> Result<Vec<ImageResult>, ExperimentError> {
+    let t0 = Instant::now();
+    let mut analyses: Vec<ImageAnalysis> = Vec::with_capacity(images.len());
+    let mut rest = Vec::with_capacity(images.len());
+    for im in images {
+        analyses.push(im.analysis);
+        rest.push((
+            im.index,
+            im.truth,
+            im.ace_sigma_mas,
+            im.ace_drift_mas,
+            im.simulate_s,
+            im.analyse_s,
+        ));
+    }
+    let truths: Vec<Option<&[TruthRow]>> = rest.iter().map(|r| Some(&r.1[..])).collect();
+    pipeline::finish_stare(
+        &mut analyses,
+        &truths,
+        plan,
+        sim.cfg.instrument.plate_scale_mas(),
+    )?;
+    // the stack's cost, shared out over the stare's images
+    let stack_s = t0.elapsed().as_secs_f64() / analyses.len().max(1) as f64;
+    Ok(analyses
+        .into_iter()
+        .zip(rest)
+        .map(|(a, (index, _, sigma, drift, sim_s, an_s))| ImageResult {
+            index,
+            ace_sigma_mas: sigma,
+            ace_drift_mas: drift,
+            simulate_s: sim_s,
+            analyse_s: an_s + stack_s,
+            measured: a
+                .measured
+                .into_iter()
+                .map(|(c, a)| Measured {
+                    countermeasure: c.to_string(),
+                    report: a.report,
+                })
+                .collect(),
+            stars: (index == 0).then_some(a.global.stars),
+        })
+        .collect())
+}
+
+/// Exposures `indices` of `sim` as one stare, analysed under `plan`; `on_image` is called after each
+/// exposure's own analysis (before the stare is finished).
+pub fn analyse_stare(
+    sim: &Simulator,
+    indices: std::ops::Range<usize>,
+    plan: &Plan,
+    on_image: &mut dyn FnMut(usize),
+) -> Result<Vec<ImageResult>, ExperimentError> {
+    let mut images = Vec::with_capacity(indices.len());
+    for i in indices {
+        images.push(analyse_in_stare(sim, i, plan)?);
+        on_image(i);
+    }
+    finish_stare(sim, plan, images)
+}
+
+/// Exposure `index` of `sim` alone through the pipeline under `plan` (a stare of one exposure: a
+/// stack-referenced plate model has nothing to correct; [`analyse_stare`] runs a stare).
+pub fn analyse_exposure(
+    sim: &Simulator,
+    index: usize,
+    plan: &Plan,
+) -> Result<ImageResult, ExperimentError> {
+    let mut r = analyse_stare(sim, index..index + 1, plan, &mut |_| {})?;
+    Ok(r.remove(0))
 }
 
 /// Summarise a dataset into one row per countermeasure.
@@ -113,21 +197,18 @@ pub fn summarise(
         .collect()
 }
 
-/// One dataset: `cfg.fidelity.images` images of `sim`, analysed per `plan`. `on_image` is called after each.
+/// One dataset: the `cfg.fidelity.images` consecutive exposures of `sim` — one stare, whose stack is the
+/// reference of the stack-referenced plate models — analysed per `plan`. `on_image` is called after each
+/// exposure's analysis.
 pub fn run_dataset(
     sim: &Simulator,
     plan: &Plan,
-    on_image: &mut dyn FnMut(&ImageResult),
+    on_image: &mut dyn FnMut(usize),
 ) -> Result<(Vec<Row>, Vec<ImageResult>), ExperimentError> {
     let t0 = Instant::now();
     let cfg = &sim.cfg;
     let pred = Predictor::new(sim, &sim.cfg.analysis)?;
-    let mut images = Vec::with_capacity(cfg.fidelity.images);
-    for i in 0..cfg.fidelity.images {
-        let r = analyse_exposure(sim, i, plan)?;
-        on_image(&r);
-        images.push(r);
-    }
+    let images = analyse_stare(sim, 0..cfg.fidelity.images, plan, on_image)?;
     let mut predicted = std::collections::HashMap::new();
     for c in &plan.countermeasures {
         predicted.insert(c.to_string(), pred.predict(c)?);

@@ -11,10 +11,13 @@
 //!   convention, so the zones disagree by what their stars' jitter did and the scatter grows. Displacements
 //!   need a reference (plate model) or telemetry.
 //! * `plate-affine`, `plate-poly:N` — per exposure, fit a smooth transformation of the fitted positions onto
-//!   the reference positions (the truth, optionally with its own error) by least squares over all stars,
-//!   as an astrometric pipeline does against a reference catalogue: affine (6 parameters) or
-//!   `Δx = a₀ + a₁x + Σₖ₌₁..N bₖ yᵏ` and the same for Δy (2(N + 2) parameters). The parameters absorbed are
-//!   reported (`dof_absorbed`): with n stars the residual variance of pure noise shrinks by (1 − p/n).
+//!   reference positions by least squares over all stars, as an astrometric pipeline does: affine
+//!   (6 parameters) or `Δx = a₀ + a₁x + Σₖ₌₁..N bₖ yᵏ` and the same for Δy (2(N + 2) parameters). The
+//!   parameters absorbed are reported (`dof_absorbed`): with n stars the residual variance of pure noise
+//!   shrinks by (1 − p/n). The reference ([`Reference`]) is, by default, **the stare's own stack**: the mean
+//!   position of each star over the stare's exposures, iterated with the per-exposure plates
+//!   ([`stack`]; the instrument has it). `@catalogue` takes an external catalogue with a stated error
+//!   (simulated as the truth plus that error); `@oracle` takes the simulation's truth (an upper limit).
 //! * `telemetry` — subtract, from each star, the displacement the attitude telemetry predicts for its fit:
 //!   the ACE series sampled at `rate_hz`, delayed by `latency_s`, with Gaussian noise `noise_mas` per sample,
 //!   linearly interpolated, and turned into each star's fitted shift through the fit's response to the jitter
@@ -25,6 +28,7 @@
 //! The names are typed ([`Countermeasure`], `FromStr`/`Display`); [`Plan`] is a validated list of them.
 
 pub mod plate;
+pub mod stack;
 pub mod telemetry;
 pub mod zones;
 
@@ -43,8 +47,14 @@ use std::fmt;
 use std::str::FromStr;
 
 /// Every countermeasure name, as the CLI, the sweep files and the CSVs spell them.
-pub const NAMES: &str =
-    "none, yzones[:K], yzones-shared[:K], plate-affine, plate-poly:N, telemetry, exact-epsf";
+pub const NAMES: &str = "none, yzones[:K], yzones-shared[:K], plate-affine[@R], plate-poly:N[@R] \
+     (R: stack (default), catalogue, oracle), telemetry, exact-epsf";
+
+/// Default error of an external reference catalogue, mas: a Gaia-DR3-like star of G ≈ 17–18 propagated
+/// ~15 years to the 2030s (position ≈ 0.1–0.3 mas at 2016 plus ≈ 0.1–0.2 mas/yr of proper-motion error;
+/// Lindegren et al. 2021, A&A 649, A2). Most of JASMINE's reddened bulge stars are fainter in G or absent,
+/// which is why the stack, not a catalogue, is the default reference.
+pub const DEFAULT_CATALOGUE_ERROR_MAS: f64 = 2.0;
 
 #[derive(Debug, thiserror::Error, Clone, PartialEq)]
 pub enum CountermeasureError {
@@ -66,13 +76,17 @@ pub enum CountermeasureError {
     Degenerate { what: String },
     #[error("{0} needs the truth catalogue (reference positions)")]
     NeedsTruth(String),
+    #[error(
+        "{what}: the stack reference needs stars seen in at least 2 exposures of the stare, found {have}"
+    )]
+    ThinStack { what: String, have: usize },
     #[error("telemetry: {0}")]
     Telemetry(String),
     #[error("{0} is run by the analysis pipeline, not applied to fits")]
     NotACorrection(String),
 }
 
-/// Telemetry rate of the default (ideal) telemetry, Hz.
+/// Telemetry rate of the default telemetry, Hz.
 pub const DEFAULT_TELEMETRY_RATE_HZ: f64 = 1000.0;
 /// Highest telemetry rate accepted (a gyro reads at ≤ 10 kHz; above this the samples only cost memory).
 pub const MAX_TELEMETRY_RATE_HZ: f64 = 1.0e5;
@@ -102,12 +116,29 @@ pub struct TelemetryQuality {
 }
 
 impl TelemetryQuality {
-    /// Ideal telemetry: noise-free, 1 kHz, no latency.
+    /// Ideal telemetry: noise-free, 1 kHz, no latency (an oracle: the true attitude).
     pub const IDEAL: TelemetryQuality = TelemetryQuality {
         noise_mas: 0.0,
         rate_hz: DEFAULT_TELEMETRY_RATE_HZ,
         latency_s: 0.0,
         correlated_mas: 0.0,
+        correlation_time_s: 1.0,
+    };
+
+    /// The default: a plausible attitude-determination system, not a perfect one. Gyro samples at 1 kHz
+    /// with 20 mas of white noise each (read noise: averages away within an exposure), no latency, and a
+    /// correlated error of 5 mas rms with a 1-s correlation time. The correlated part is the gyro's angle
+    /// random walk bounded by the fusion with the star tracker: its increments over Δt ≪ τ are
+    /// σ√(2Δt/τ) ≈ 7 mas/√s, the angle random walk of an inertial reference unit of the class flown on
+    /// imaging and astrometric missions (≈ 1e-4 °/√h ≈ 6 mas/√s); over the 1.2-s spread of the rolling
+    /// readout's windows that is a few mas, the size of the effect it corrects. The issue's numbers are
+    /// not a JASMINE specification (none is public); `jsim experiment --telemetry-correlated-mas E` and
+    /// the README's table show the accuracy against E.
+    pub const DEFAULT: TelemetryQuality = TelemetryQuality {
+        noise_mas: 20.0,
+        rate_hz: DEFAULT_TELEMETRY_RATE_HZ,
+        latency_s: 0.0,
+        correlated_mas: 5.0,
         correlation_time_s: 1.0,
     };
 
@@ -150,7 +181,7 @@ impl TelemetryQuality {
 
 impl Default for TelemetryQuality {
     fn default() -> Self {
-        Self::IDEAL
+        Self::DEFAULT
     }
 }
 
@@ -162,15 +193,26 @@ pub enum Countermeasure {
     /// Y-zoned ePSFs: `zones` (default: the analysis configuration's `epsf_zones`), re-centred per zone or
     /// held in the global frame (`shared`).
     YZones { zones: Option<usize>, shared: bool },
-    /// A per-exposure plate model against reference positions with their own error (mas).
+    /// A per-exposure plate model against a reference.
     Plate {
         model: PlateModel,
-        reference_error_mas: f64,
+        reference: Reference,
     },
     /// The telemetry correction.
     Telemetry(TelemetryQuality),
     /// The control fit with the exact ePSF (static ACE only).
     ExactEpsf,
+}
+
+/// The reference positions of a plate model.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Reference {
+    /// The stare's own stack: each star's mean position over the stare's exposures (default; no truth).
+    Stack,
+    /// An external catalogue: the true positions with their own Gaussian error (mas, > 0), seeded.
+    Catalogue { error_mas: f64 },
+    /// The simulation's true positions: an oracle, for comparison only.
+    Oracle,
 }
 
 impl Countermeasure {
@@ -183,26 +225,42 @@ impl Countermeasure {
         },
         Countermeasure::Plate {
             model: PlateModel::Affine,
-            reference_error_mas: 0.0,
+            reference: Reference::Stack,
         },
         Countermeasure::Plate {
             model: PlateModel::PolyY(3),
-            reference_error_mas: 0.0,
+            reference: Reference::Stack,
         },
-        Countermeasure::Telemetry(TelemetryQuality::IDEAL),
+        Countermeasure::Telemetry(TelemetryQuality::DEFAULT),
     ];
 
-    /// The same countermeasure with the given telemetry quality and reference error (for the variants that
+    /// The same countermeasure with the given telemetry quality and catalogue error (for the variants that
     /// have them).
-    pub fn with_quality(self, telemetry: TelemetryQuality, reference_error_mas: f64) -> Self {
+    pub fn with_quality(self, telemetry: TelemetryQuality, catalogue_error_mas: f64) -> Self {
         match self {
             Countermeasure::Telemetry(_) => Countermeasure::Telemetry(telemetry),
-            Countermeasure::Plate { model, .. } => Countermeasure::Plate {
+            Countermeasure::Plate {
                 model,
-                reference_error_mas,
+                reference: Reference::Catalogue { .. },
+            } => Countermeasure::Plate {
+                model,
+                reference: Reference::Catalogue {
+                    error_mas: catalogue_error_mas,
+                },
             },
             other => other,
         }
+    }
+
+    /// Whether this countermeasure needs the stare's other exposures (a stack-referenced plate model).
+    pub fn needs_stare(&self) -> bool {
+        matches!(
+            self,
+            Countermeasure::Plate {
+                reference: Reference::Stack,
+                ..
+            }
+        )
     }
 
     /// Check the parameters.
@@ -217,18 +275,18 @@ impl Countermeasure {
             Countermeasure::YZones { zones: Some(k), .. } if !(2..=64).contains(&k) => {
                 bad(format!("{k} zones: allowed 2..=64"))
             }
-            Countermeasure::Plate {
-                model,
-                reference_error_mas,
-            } => {
+            Countermeasure::Plate { model, reference } => {
                 if let PlateModel::PolyY(n) = model
                     && !(1..=plate::MAX_PLATE_ORDER).contains(&n)
                 {
                     return bad(format!("order {n}: allowed 1..={}", plate::MAX_PLATE_ORDER));
                 }
-                if !(0.0..=MAX_ERROR_MAS).contains(&reference_error_mas) {
+                if let Reference::Catalogue { error_mas } = reference
+                    && !(error_mas > 0.0 && error_mas <= MAX_ERROR_MAS)
+                {
                     return bad(format!(
-                        "reference error {reference_error_mas} mas: allowed [0, {MAX_ERROR_MAS}]"
+                        "catalogue error {error_mas} mas: allowed (0, {MAX_ERROR_MAS}] (a catalogue \
+                         without error is the truth: name it @oracle)"
                     ));
                 }
                 Ok(())
@@ -250,14 +308,17 @@ impl fmt::Display for Countermeasure {
                     None => Ok(()),
                 }
             }
-            Countermeasure::Plate {
-                model: PlateModel::Affine,
-                ..
-            } => write!(f, "plate-affine"),
-            Countermeasure::Plate {
-                model: PlateModel::PolyY(n),
-                ..
-            } => write!(f, "plate-poly:{n}"),
+            Countermeasure::Plate { model, reference } => {
+                match model {
+                    PlateModel::Affine => write!(f, "plate-affine")?,
+                    PlateModel::PolyY(n) => write!(f, "plate-poly:{n}")?,
+                }
+                match reference {
+                    Reference::Stack => Ok(()),
+                    Reference::Catalogue { .. } => write!(f, "@catalogue"),
+                    Reference::Oracle => write!(f, "@oracle"),
+                }
+            }
             Countermeasure::Telemetry(_) => write!(f, "telemetry"),
             Countermeasure::ExactEpsf => write!(f, "exact-epsf"),
         }
@@ -267,10 +328,27 @@ impl fmt::Display for Countermeasure {
 impl FromStr for Countermeasure {
     type Err = CountermeasureError;
 
-    /// Parse a name with default parameters (ideal telemetry, an error-free reference) and check it.
+    /// Parse a name with default parameters (the default telemetry, the default catalogue error) and
+    /// check it.
     fn from_str(s: &str) -> Result<Self, Self::Err> {
         let s = s.trim();
         let unknown = || CountermeasureError::Unknown(s.to_string());
+        let (name, reference) = match s.split_once('@') {
+            None => (s, Reference::Stack),
+            Some((n, "stack")) => (n, Reference::Stack),
+            Some((n, "catalogue")) => (
+                n,
+                Reference::Catalogue {
+                    error_mas: DEFAULT_CATALOGUE_ERROR_MAS,
+                },
+            ),
+            Some((n, "oracle")) => (n, Reference::Oracle),
+            Some(_) => return Err(unknown()),
+        };
+        if name.len() != s.len() && !name.starts_with("plate-") {
+            return Err(unknown());
+        }
+        let s = name;
         let (head, arg) = match s.split_once(':') {
             Some((h, a)) => (h, Some(a)),
             None => (s, None),
@@ -284,14 +362,14 @@ impl FromStr for Countermeasure {
         let cm = match (head, arg) {
             ("none", None) => Countermeasure::None,
             ("exact-epsf", None) => Countermeasure::ExactEpsf,
-            ("telemetry", None) => Countermeasure::Telemetry(TelemetryQuality::IDEAL),
+            ("telemetry", None) => Countermeasure::Telemetry(TelemetryQuality::DEFAULT),
             ("plate-affine", None) => Countermeasure::Plate {
                 model: PlateModel::Affine,
-                reference_error_mas: 0.0,
+                reference,
             },
             ("plate-poly", Some(a)) => Countermeasure::Plate {
                 model: PlateModel::PolyY(number(a)?),
-                reference_error_mas: 0.0,
+                reference,
             },
             ("yzones" | "yzones-shared", a) => Countermeasure::YZones {
                 zones: a.map(number).transpose()?,
@@ -325,19 +403,19 @@ impl Default for Plan {
 }
 
 impl Plan {
-    /// Parse names, give the telemetry and the plate models their quality, and validate: the one place a
-    /// plan is checked (CLI, sweep files, the explorer).
+    /// Parse names, give the telemetry and the catalogue-referenced plate models their quality, and
+    /// validate: the one place a plan is checked (CLI, sweep files, the explorer).
     pub fn parse<S: AsRef<str>>(
         names: &[S],
         telemetry: TelemetryQuality,
-        reference_error_mas: f64,
+        catalogue_error_mas: f64,
     ) -> Result<Plan, CountermeasureError> {
         let cms = names
             .iter()
             .map(|n| {
                 n.as_ref()
                     .parse::<Countermeasure>()
-                    .map(|c| c.with_quality(telemetry, reference_error_mas))
+                    .map(|c| c.with_quality(telemetry, catalogue_error_mas))
             })
             .collect::<Result<Vec<_>, _>>()?;
         Plan::new(cms)
@@ -363,6 +441,11 @@ impl Plan {
     /// The names, as the CSVs write them.
     pub fn names(&self) -> Vec<String> {
         self.countermeasures.iter().map(|c| c.to_string()).collect()
+    }
+
+    /// Whether any countermeasure needs the stare's other exposures.
+    pub fn needs_stare(&self) -> bool {
+        self.countermeasures.iter().any(|c| c.needs_stare())
     }
 }
 
@@ -435,19 +518,26 @@ pub fn apply(
             }
             Ok(0)
         }
+        // the stack reference of a stare of one exposure is that exposure: nothing to correct (a stare is
+        // corrected by `stack::stack_plate`, which the stare's analysis runs over all its exposures)
         Countermeasure::Plate {
-            model,
-            reference_error_mas,
-        } => {
+            reference: Reference::Stack,
+            ..
+        } => Ok(0),
+        Countermeasure::Plate { model, reference } => {
             let t = ctx
                 .truth
                 .ok_or_else(|| CountermeasureError::NeedsTruth(cm.to_string()))?;
+            let err_mas = match reference {
+                Reference::Catalogue { error_mas } => error_mas,
+                _ => 0.0,
+            };
             plate::plate_fit(
                 stars,
                 t,
                 model,
                 &cm.to_string(),
-                reference_error_mas / ctx.img.plate_scale_mas,
+                err_mas / ctx.img.plate_scale_mas,
                 ctx.seed,
             )
         }
@@ -480,6 +570,8 @@ mod tests {
             "yzones-shared",
             "plate-affine",
             "plate-poly:3",
+            "plate-affine@catalogue",
+            "plate-poly:3@oracle",
             "telemetry",
             "exact-epsf",
         ] {
@@ -496,6 +588,8 @@ mod tests {
             "yzones:1",
             "zones",
             "none:2",
+            "plate-poly:3@truth",
+            "none@oracle",
         ] {
             let e = bad.parse::<Countermeasure>().expect_err(bad);
             assert!(
@@ -513,16 +607,46 @@ mod tests {
             latency_s: 0.01,
             ..TelemetryQuality::IDEAL
         };
-        let p = Plan::parse(&["none", "plate-poly:3", "telemetry"], q, 5.0).expect("plan");
-        assert_eq!(p.names(), ["none", "plate-poly:3", "telemetry"]);
+        let p = Plan::parse(
+            &[
+                "none",
+                "plate-poly:3@catalogue",
+                "telemetry",
+                "plate-affine",
+            ],
+            q,
+            5.0,
+        )
+        .expect("plan");
+        assert_eq!(
+            p.names(),
+            [
+                "none",
+                "plate-poly:3@catalogue",
+                "telemetry",
+                "plate-affine"
+            ]
+        );
         assert_eq!(p.countermeasures[2], Countermeasure::Telemetry(q));
         assert_eq!(
             p.countermeasures[1],
             Countermeasure::Plate {
                 model: PlateModel::PolyY(3),
-                reference_error_mas: 5.0
+                reference: Reference::Catalogue { error_mas: 5.0 }
             }
         );
+        // the default reference is the stack, and the stack takes no catalogue error
+        assert_eq!(
+            p.countermeasures[3],
+            Countermeasure::Plate {
+                model: PlateModel::Affine,
+                reference: Reference::Stack
+            }
+        );
+        assert!(p.needs_stare());
+        // a catalogue without error would be the truth under another name
+        let e = Plan::parse(&["plate-affine@catalogue"], q, 0.0).expect_err("zero error");
+        assert!(e.to_string().contains("@oracle"), "{e}");
         assert_eq!(
             Plan::parse(&["none", "none"], q, 0.0),
             Err(CountermeasureError::Duplicate("none".into()))
@@ -552,7 +676,7 @@ mod tests {
             let e = Plan::parse(&["telemetry"], bad, 0.0).expect_err(what);
             assert!(e.to_string().contains(what), "{e}");
         }
-        let e = Plan::parse(&["plate-affine"], q, -1.0).expect_err("negative error");
-        assert!(e.to_string().contains("reference error"), "{e}");
+        let e = Plan::parse(&["plate-affine@catalogue"], q, -1.0).expect_err("negative error");
+        assert!(e.to_string().contains("catalogue error"), "{e}");
     }
 }

@@ -84,8 +84,8 @@ pub(super) fn reference(truth: &[TruthRow], k: usize, err_px: f64, seed: u64) ->
     }
 }
 
-/// Fit Δ = design · coefficients per axis over the matched, usable stars, subtract, and return the number of
-/// parameters absorbed.
+/// Fit Δ = design · coefficients per axis over the matched, usable stars onto the reference (the truth, with
+/// its own error `err_px` when > 0), subtract, and return the number of parameters absorbed.
 pub fn plate_fit(
     stars: &mut [StarResult],
     truth: &[TruthRow],
@@ -94,42 +94,86 @@ pub fn plate_fit(
     err_px: f64,
     seed: u64,
 ) -> Result<usize, CountermeasureError> {
-    let idx: Vec<usize> = (0..stars.len()).filter(|&k| stars[k].is_used()).collect();
+    let (pos, target): (Vec<(f64, f64)>, Vec<(f64, f64)>) = stars
+        .iter()
+        .filter(|s| s.is_used())
+        .map(|s| {
+            (
+                (s.x, s.y),
+                reference(truth, s.truth.unwrap_or(0), err_px, seed),
+            )
+        })
+        .unzip();
+    let c = fit_correction(model, &pos, &target, what)?;
+    c.apply(stars);
+    Ok(2 * model.n_params())
+}
+
+/// A fitted plate correction: Δx, Δy as functions of the position.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Correction {
+    pub model: PlateModel,
+    pub cx: Vec<f64>,
+    pub cy: Vec<f64>,
+}
+
+impl Correction {
+    /// (Δx, Δy) at (x, y), px.
+    pub fn at(&self, x: f64, y: f64) -> (f64, f64) {
+        let b = self.model.basis(x, y);
+        (
+            b.iter().zip(&self.cx).map(|(a, c)| a * c).sum(),
+            b.iter().zip(&self.cy).map(|(a, c)| a * c).sum(),
+        )
+    }
+
+    /// Move every star (and its error against the truth) by the correction at its position.
+    pub fn apply(&self, stars: &mut [StarResult]) {
+        for s in stars.iter_mut() {
+            let (ddx, ddy) = self.at(s.x, s.y);
+            s.x += ddx;
+            s.y += ddy;
+            s.dx_px += ddx;
+            s.dy_px += ddy;
+        }
+    }
+}
+
+/// The least-squares correction mapping `positions` onto `targets` (Δ = target − position per axis,
+/// unweighted): a named error when there are too few stars or they do not constrain the model.
+pub fn fit_correction(
+    model: PlateModel,
+    positions: &[(f64, f64)],
+    targets: &[(f64, f64)],
+    what: &str,
+) -> Result<Correction, CountermeasureError> {
     let p = model.n_params();
-    if idx.len() <= p {
+    if positions.len() <= p {
         return Err(CountermeasureError::TooFewStars {
             what: what.into(),
             need: p + 1,
-            have: idx.len(),
+            have: positions.len(),
         });
     }
-    let mut design = Vec::with_capacity(idx.len() * p);
-    let (mut rx, mut ry) = (Vec::new(), Vec::new());
-    for &k in &idx {
-        let s = &stars[k];
-        let (xr, yr) = reference(truth, s.truth.unwrap_or(0), err_px, seed);
-        design.extend(model.basis(s.x, s.y));
-        // the correction maps fitted → reference: Δ = reference − fitted
-        rx.push(xr - s.x);
-        ry.push(yr - s.y);
-    }
-    let w = vec![1.0; idx.len()];
-    let (cx, _) = linalg::weighted_lstsq(&design, &rx, &w, p)
-        .ok_or_else(|| CountermeasureError::Degenerate { what: what.into() })?;
-    let (cy, _) = linalg::weighted_lstsq(&design, &ry, &w, p)
-        .ok_or_else(|| CountermeasureError::Degenerate { what: what.into() })?;
-    for s in stars.iter_mut() {
-        let b = model.basis(s.x, s.y);
-        let (ddx, ddy) = (
-            b.iter().zip(&cx).map(|(a, c)| a * c).sum::<f64>(),
-            b.iter().zip(&cy).map(|(a, c)| a * c).sum::<f64>(),
-        );
-        s.x += ddx;
-        s.y += ddy;
-        s.dx_px += ddx;
-        s.dy_px += ddy;
-    }
-    Ok(2 * p)
+    let design: Vec<f64> = positions
+        .iter()
+        .flat_map(|&(x, y)| model.basis(x, y))
+        .collect();
+    let rx: Vec<f64> = positions
+        .iter()
+        .zip(targets)
+        .map(|(a, t)| t.0 - a.0)
+        .collect();
+    let ry: Vec<f64> = positions
+        .iter()
+        .zip(targets)
+        .map(|(a, t)| t.1 - a.1)
+        .collect();
+    let w = vec![1.0; positions.len()];
+    let degenerate = || CountermeasureError::Degenerate { what: what.into() };
+    let (cx, _) = linalg::weighted_lstsq(&design, &rx, &w, p).ok_or_else(degenerate)?;
+    let (cy, _) = linalg::weighted_lstsq(&design, &ry, &w, p).ok_or_else(degenerate)?;
+    Ok(Correction { model, cx, cy })
 }
 
 #[cfg(test)]

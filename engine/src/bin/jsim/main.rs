@@ -4,7 +4,7 @@
 
 use anyhow::{Context, Result, bail};
 use clap::{Args, Parser, Subcommand};
-use engine::analysis::countermeasures::{DEFAULT_TELEMETRY_RATE_HZ, Plan, TelemetryQuality};
+use engine::analysis::countermeasures::{DEFAULT_CATALOGUE_ERROR_MAS, Plan, TelemetryQuality};
 use engine::config::{AceCase, Backend, Config, Method, ReadoutOrder};
 use engine::session::Session;
 use std::path::PathBuf;
@@ -203,26 +203,27 @@ enum Command {
     },
 }
 
-/// Telemetry quality and reference-catalogue error for the countermeasures.
+/// Telemetry quality and reference-catalogue error for the countermeasures (defaults: the engine's
+/// `TelemetryQuality::DEFAULT`, a plausible attitude-determination system, and `DEFAULT_CATALOGUE_ERROR_MAS`).
 #[derive(Args, Clone, Debug)]
 pub struct TelemetryArgs {
-    /// Telemetry noise per sample, mas.
-    #[arg(long = "telemetry-noise-mas", default_value_t = 0.0)]
+    /// Telemetry white noise per sample, mas.
+    #[arg(long = "telemetry-noise-mas", default_value_t = TelemetryQuality::DEFAULT.noise_mas)]
     pub noise_mas: f64,
     /// Telemetry sampling rate, Hz.
-    #[arg(long = "telemetry-rate-hz", default_value_t = DEFAULT_TELEMETRY_RATE_HZ)]
+    #[arg(long = "telemetry-rate-hz", default_value_t = TelemetryQuality::DEFAULT.rate_hz)]
     pub rate_hz: f64,
     /// Telemetry latency, s.
-    #[arg(long = "telemetry-latency-s", default_value_t = 0.0)]
+    #[arg(long = "telemetry-latency-s", default_value_t = TelemetryQuality::DEFAULT.latency_s)]
     pub latency_s: f64,
     /// RMS of the telemetry's correlated (Gauss–Markov) error, mas.
-    #[arg(long = "telemetry-correlated-mas", default_value_t = 0.0)]
+    #[arg(long = "telemetry-correlated-mas", default_value_t = TelemetryQuality::DEFAULT.correlated_mas)]
     pub correlated_mas: f64,
     /// Correlation time of that error, s.
-    #[arg(long = "telemetry-correlation-s", default_value_t = 1.0)]
+    #[arg(long = "telemetry-correlation-s", default_value_t = TelemetryQuality::DEFAULT.correlation_time_s)]
     pub correlation_time_s: f64,
-    /// Error of the plate models' reference positions, mas.
-    #[arg(long = "reference-error-mas", default_value_t = 0.0)]
+    /// Error of the reference catalogue of the plate models named `…@catalogue`, mas.
+    #[arg(long = "reference-error-mas", default_value_t = DEFAULT_CATALOGUE_ERROR_MAS)]
     pub reference_error_mas: f64,
 }
 
@@ -244,7 +245,8 @@ impl TelemetryArgs {
 /// The countermeasure of `jsim analyze`.
 #[derive(Args, Clone, Debug)]
 pub struct CountermeasureArgs {
-    /// none, yzones[:K], yzones-shared[:K], plate-affine, plate-poly:N, telemetry or exact-epsf.
+    /// none, yzones[:K], yzones-shared[:K], plate-affine[@R], plate-poly:N[@R] (R: stack, catalogue,
+    /// oracle), telemetry or exact-epsf. A single image is a stare of one: the stack corrects nothing.
     #[arg(long, default_value = "none")]
     pub countermeasure: String,
     #[command(flatten)]

@@ -51,6 +51,10 @@ pub struct RecordTelemetry {
     pub reference_error_mas: f64,
 }
 
+fn one() -> usize {
+    1
+}
+
 fn default_correlation_time_s() -> f64 {
     crate::analysis::countermeasures::TelemetryQuality::IDEAL.correlation_time_s
 }
@@ -63,6 +67,9 @@ pub struct Record {
     pub name: String,
     pub seed: u64,
     pub exposures: usize,
+    /// Exposures per stare, one unit (absent in sweeps recorded before stares: 1).
+    #[serde(default = "one")]
+    pub stare_exposures: usize,
     pub points: usize,
     pub countermeasures: Vec<String>,
     pub threshold_mas: f64,
@@ -76,7 +83,7 @@ pub struct Record {
 
 impl Record {
     pub fn n_units(&self) -> usize {
-        self.points * self.exposures
+        self.points * (self.exposures / self.stare_exposures.max(1))
     }
 
     /// Column names of the unit CSVs (`check` last when `with_check`).
@@ -230,16 +237,18 @@ pub type UnitRows = Vec<Vec<String>>;
 
 pub(super) fn unit_rows_valid(rec: &Record, unit: usize, rows: &UnitRows) -> bool {
     let ncol = rec.header(false).len();
-    let (p, e) = (unit % rec.points, unit / rec.points);
+    let k = rec.stare_exposures.max(1);
+    let (p, first) = (unit % rec.points, (unit / rec.points) * k);
     let cm_col = HEAD_COLUMNS.len() + rec.grid.len();
-    rows.len() == rec.countermeasures.len()
-        && rows.iter().zip(&rec.countermeasures).all(|(r, cm)| {
+    let n_cm = rec.countermeasures.len();
+    rows.len() == k * n_cm
+        && rows.iter().enumerate().all(|(i, r)| {
             r.len() == ncol
                 && r[0] == unit.to_string()
                 && r[1] == p.to_string()
-                && r[2] == e.to_string()
+                && r[2] == (first + i / n_cm).to_string()
                 && r[3..cm_col] == rec.point_values[p][..]
-                && &r[cm_col] == cm
+                && r[cm_col] == rec.countermeasures[i % n_cm]
         })
 }
 

@@ -70,100 +70,108 @@ pub struct RunSummary {
     pub file: PathBuf,
 }
 
-/// Compute one unit: simulate, analyse with every countermeasure, predict. Configuration and simulator
-/// errors are returned; an analysis failure of this exposure is recorded in the rows (`status`).
+/// Compute one unit: simulate its stare, analyse every exposure with every countermeasure (the stack of the
+/// stare as the stack-referenced plate models' reference), predict. Configuration and simulator errors are
+/// returned; an analysis failure is recorded in the rows (`status`) of every exposure of the stare.
 pub fn compute_unit(sweep: &Sweep, unit: usize, session: &Session) -> Result<UnitRows, SweepError> {
     let t0 = Instant::now();
-    let (point, exposure) = sweep.unit(unit);
+    let (point, first) = sweep.unit(unit);
     let cfg = sweep.unit_config(unit);
     let uerr = |message: String| SweepError::Unit {
         unit,
         point,
-        exposure,
+        exposure: first,
         message,
     };
     let sim = session
         .new_simulator(&cfg)
         .map_err(|e| uerr(e.to_string()))?;
     session.warm(&sim);
-    let analysed = experiment::analyse_exposure(&sim, 0, &sweep.plan);
+    let k_stare = sweep.stare_exposures;
+    let analysed = experiment::analyse_stare(&sim, 0..k_stare, &sweep.plan, &mut |_| {});
     let tp = Instant::now();
     let predictor = crate::analysis::predict::Predictor::new(&sim, &cfg.analysis).ok();
     // a prediction that cannot be made is recorded as NaN beside the measured row (the file has no other
     // place for the reason; `jsim predict` reports it)
-    let predicted: Vec<f64> = sweep
-        .plan
-        .countermeasures
-        .iter()
-        .map(|c| {
-            predictor
-                .as_ref()
-                .and_then(|p| p.predict_image(0, c).ok())
-                .unwrap_or(f64::NAN)
+    let predicted: Vec<Vec<f64>> = (0..k_stare)
+        .map(|i| {
+            sweep
+                .plan
+                .countermeasures
+                .iter()
+                .map(|c| {
+                    predictor
+                        .as_ref()
+                        .and_then(|p| p.predict_image(i, c).ok())
+                        .unwrap_or(f64::NAN)
+                })
+                .collect()
         })
         .collect();
-    let predict_s = tp.elapsed().as_secs_f64();
-    let unit_s = t0.elapsed().as_secs_f64();
-    let mut rows = Vec::with_capacity(sweep.countermeasures.len());
-    for (k, cm) in sweep.countermeasures.iter().enumerate() {
-        let mut r: Vec<String> = vec![unit.to_string(), point.to_string(), exposure.to_string()];
-        r.extend(sweep.points[point].values.iter().cloned());
-        r.push(cm.clone());
-        let nan = f64::NAN;
-        match &analysed {
-            Ok(im) => {
-                let m = im.measured.iter().find(|m| &m.countermeasure == cm);
-                match m {
-                    Some(m) => {
-                        let rep = &m.report;
-                        r.push("ok".into());
-                        for v in [
-                            rep.accuracy_mas,
-                            rep.accuracy_x_mas,
-                            rep.accuracy_y_mas,
-                            rep.bias_x_mas,
-                            rep.bias_y_mas,
-                            rep.crlb_median_mas,
-                            predicted[k],
-                        ] {
-                            r.push(float_cell(v));
+    let predict_s = tp.elapsed().as_secs_f64() / k_stare as f64;
+    let unit_s = t0.elapsed().as_secs_f64() / k_stare as f64;
+    let nan = f64::NAN;
+    let mut rows = Vec::with_capacity(k_stare * sweep.countermeasures.len());
+    for i in 0..k_stare {
+        for (k, cm) in sweep.countermeasures.iter().enumerate() {
+            let mut r: Vec<String> =
+                vec![unit.to_string(), point.to_string(), (first + i).to_string()];
+            r.extend(sweep.points[point].values.iter().cloned());
+            r.push(cm.clone());
+            match analysed.as_ref().map(|v| &v[i]) {
+                Ok(im) => {
+                    match im.measured.iter().find(|m| &m.countermeasure == cm) {
+                        Some(m) => {
+                            let rep = &m.report;
+                            r.push("ok".into());
+                            for v in [
+                                rep.accuracy_mas,
+                                rep.accuracy_x_mas,
+                                rep.accuracy_y_mas,
+                                rep.bias_x_mas,
+                                rep.bias_y_mas,
+                                rep.crlb_median_mas,
+                                predicted[i][k],
+                            ] {
+                                r.push(float_cell(v));
+                            }
+                            r.push(rep.n_used.to_string());
                         }
-                        r.push(rep.n_used.to_string());
-                    }
-                    None => {
-                        r.push("not applicable".into());
-                        for v in [nan, nan, nan, nan, nan, nan, predicted[k]] {
-                            r.push(float_cell(v));
+                        None => {
+                            r.push("not applicable".into());
+                            for v in [nan, nan, nan, nan, nan, nan, predicted[i][k]] {
+                                r.push(float_cell(v));
+                            }
+                            r.push("0".into());
                         }
-                        r.push("0".into());
                     }
+                    r.push(float_cell(im.ace_sigma_mas));
+                    r.push(float_cell(im.ace_drift_mas));
+                    r.push(cfg.seed.to_string());
+                    r.push(float_cell(im.simulate_s));
+                    r.push(float_cell(im.analyse_s));
                 }
-                r.push(float_cell(im.ace_sigma_mas));
-                r.push(float_cell(im.ace_drift_mas));
-                r.push(cfg.seed.to_string());
-                r.push(float_cell(im.simulate_s));
-                r.push(float_cell(im.analyse_s));
-            }
-            Err(e) => {
-                let msg = format!("error: {e}").replace(['\n', '\r'], " ");
-                r.push(msg);
-                for v in [nan, nan, nan, nan, nan, nan, predicted[k]] {
-                    r.push(float_cell(v));
+                Err(e) => {
+                    let msg = format!("error: {e}").replace(['\n', '\r'], " ");
+                    r.push(msg);
+                    for v in [nan, nan, nan, nan, nan, nan, predicted[i][k]] {
+                        r.push(float_cell(v));
+                    }
+                    r.push("0".into());
+                    let a = sim.ace_stats(i);
+                    r.push(float_cell(
+                        ((a.sigma_x_mas.powi(2) + a.sigma_y_mas.powi(2)) / 2.0).sqrt(),
+                    ));
+                    r.push(float_cell(a.drift_mas));
+                    r.push(cfg.seed.to_string());
+                    r.push(float_cell(nan));
+                    r.push(float_cell(nan));
                 }
-                r.push("0".into());
-                let a = sim.ace_stats(0);
-                r.push(float_cell(
-                    ((a.sigma_x_mas.powi(2) + a.sigma_y_mas.powi(2)) / 2.0).sqrt(),
-                ));
-                r.push(float_cell(a.drift_mas));
-                r.push(cfg.seed.to_string());
-                r.push(float_cell(nan));
-                r.push(float_cell(nan));
             }
+            r.push(float_cell(predict_s));
+            r.push(float_cell(unit_s));
+            rows.push(r);
         }
-        r.push(float_cell(predict_s));
-        r.push(float_cell(unit_s));
-        rows.push(r);
     }
     Ok(rows)
 }

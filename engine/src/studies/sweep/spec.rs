@@ -3,7 +3,7 @@
 
 use super::error::SweepError;
 use super::record::{self, FORMAT, Record, RecordParam, RecordTelemetry, read_record, render_line};
-use crate::analysis::countermeasures::{DEFAULT_TELEMETRY_RATE_HZ, Plan, TelemetryQuality};
+use crate::analysis::countermeasures::{DEFAULT_CATALOGUE_ERROR_MAS, Plan, TelemetryQuality};
 use crate::config::{Config, ConfigError};
 use crate::digest;
 use crate::io;
@@ -18,6 +18,7 @@ struct SweepFile {
     name: Option<String>,
     seed: u64,
     exposures: i64,
+    stare_exposures: Option<i64>,
     countermeasures: Option<Vec<String>>,
     threshold_mas: Option<f64>,
     common_random_numbers: Option<bool>,
@@ -66,6 +67,9 @@ pub struct Sweep {
     pub source: PathBuf,
     pub seed: u64,
     pub exposures: usize,
+    /// Consecutive exposures per stare (one work unit, one ACE series; the stack of a stack-referenced
+    /// plate model): `exposures` is a multiple of it.
+    pub stare_exposures: usize,
     pub countermeasures: Vec<String>,
     pub threshold_mas: f64,
     pub common_random_numbers: bool,
@@ -147,6 +151,16 @@ impl Sweep {
         if exposures > 100_000_000 {
             return Err(ferr(format!("`exposures` = {exposures}: must be ≤ 1e8")));
         }
+        let stare_exposures = f.stare_exposures.unwrap_or(1);
+        if !(1..=1000).contains(&stare_exposures)
+            || !exposures.is_multiple_of(stare_exposures as usize)
+        {
+            return Err(ferr(format!(
+                "`stare_exposures` = {stare_exposures}: must be in 1..=1000 and divide `exposures` = \
+                 {exposures}"
+            )));
+        }
+        let stare_exposures = stare_exposures as usize;
         let threshold_mas = f.threshold_mas.unwrap_or(4.0);
         if !(threshold_mas > 0.0) || !threshold_mas.is_finite() {
             return Err(ferr(format!(
@@ -157,18 +171,23 @@ impl Sweep {
         // countermeasures: one plan, validated where every plan is
         let names = f.countermeasures.unwrap_or_else(|| vec!["none".into()]);
         let t = f.telemetry.unwrap_or_default();
+        let d = TelemetryQuality::DEFAULT;
         let telemetry = TelemetryQuality {
-            noise_mas: t.noise_mas.unwrap_or(0.0),
-            rate_hz: t.rate_hz.unwrap_or(DEFAULT_TELEMETRY_RATE_HZ),
-            latency_s: t.latency_s.unwrap_or(0.0),
-            correlated_mas: t.correlated_mas.unwrap_or(0.0),
-            correlation_time_s: t
-                .correlation_time_s
-                .unwrap_or(TelemetryQuality::IDEAL.correlation_time_s),
+            noise_mas: t.noise_mas.unwrap_or(d.noise_mas),
+            rate_hz: t.rate_hz.unwrap_or(d.rate_hz),
+            latency_s: t.latency_s.unwrap_or(d.latency_s),
+            correlated_mas: t.correlated_mas.unwrap_or(d.correlated_mas),
+            correlation_time_s: t.correlation_time_s.unwrap_or(d.correlation_time_s),
         };
-        let reference_error_mas = t.reference_error_mas.unwrap_or(0.0);
+        let reference_error_mas = t.reference_error_mas.unwrap_or(DEFAULT_CATALOGUE_ERROR_MAS);
         let plan = Plan::parse(&names, telemetry, reference_error_mas)
             .map_err(|e| ferr(format!("`countermeasures`/`[telemetry]`: {e}")))?;
+        if plan.needs_stare() && stare_exposures < 2 {
+            return Err(ferr(format!(
+                "`countermeasures` reference a plate model to the stare's stack: `stare_exposures` = \
+                 {stare_exposures} must be ≥ 2 (or name the reference: @catalogue, @oracle)"
+            )));
+        }
         let countermeasures = plan.names();
 
         // base configuration
@@ -267,7 +286,7 @@ impl Sweep {
                             message: config_error_text(&e).replace('\n', " ").trim().to_string(),
                         })?;
             }
-            cfg.fidelity.images = 1;
+            cfg.fidelity.images = stare_exposures;
             cfg.validate().map_err(|e| {
                 ferr(format!(
                     "grid point {index} ({}): {e}",
@@ -291,6 +310,9 @@ impl Sweep {
         let _ = writeln!(canon, "seed={}", f.seed);
         let _ = writeln!(canon, "common_random_numbers={common_random_numbers}");
         let _ = writeln!(canon, "countermeasures={}", countermeasures.join(";"));
+        if stare_exposures > 1 {
+            let _ = writeln!(canon, "stare_exposures={stare_exposures}");
+        }
         let _ = writeln!(
             canon,
             "telemetry={:?},{:?},{:?},{:?}",
@@ -320,6 +342,7 @@ impl Sweep {
             source: source.to_path_buf(),
             seed: f.seed,
             exposures,
+            stare_exposures,
             plan,
             telemetry,
             reference_error_mas,
@@ -338,14 +361,17 @@ impl Sweep {
         self.points.len()
     }
 
-    /// Number of work units (points × exposures).
+    /// Number of work units (points × stares).
     pub fn n_units(&self) -> usize {
-        self.points.len() * self.exposures
+        self.points.len() * (self.exposures / self.stare_exposures)
     }
 
-    /// (point, exposure) of unit `u`.
+    /// (point, first exposure) of unit `u`: its stare holds exposures `first .. first + stare_exposures`.
     pub fn unit(&self, u: usize) -> (usize, usize) {
-        (u % self.points.len(), u / self.points.len())
+        (
+            u % self.points.len(),
+            (u / self.points.len()) * self.stare_exposures,
+        )
     }
 
     /// The master seed of unit `u`.
@@ -358,11 +384,11 @@ impl Sweep {
         rng::derive_seed(self.seed, &[Stream::Sweep as u64, k as u64])
     }
 
-    /// The configuration of unit `u` (its point's, with the unit's seed and one image).
+    /// The configuration of unit `u` (its point's, with the unit's seed and its stare's images).
     pub fn unit_config(&self, u: usize) -> Config {
         let mut c = self.points[u % self.points.len()].config.clone();
         c.seed = self.unit_seed(u);
-        c.fidelity.images = 1;
+        c.fidelity.images = self.stare_exposures;
         c
     }
 
@@ -374,6 +400,7 @@ impl Sweep {
             name: self.name.clone(),
             seed: self.seed,
             exposures: self.exposures,
+            stare_exposures: self.stare_exposures,
             points: self.points.len(),
             countermeasures: self.countermeasures.clone(),
             threshold_mas: self.threshold_mas,
@@ -496,7 +523,7 @@ pub(super) mod tests {
     pub(crate) const QUICK: &str = r#"
 seed = 11
 exposures = 3
-countermeasures = ["none", "plate-poly:3"]
+countermeasures = ["none", "plate-poly:3@oracle"]
 [base.scene]
 grid_n = 5
 [grid]
