@@ -157,22 +157,7 @@ mod tests {
     use super::*;
 
     fn star(x: f64, y: f64, dx: f64, dy: f64) -> StarResult {
-        StarResult {
-            truth: Some(0),
-            x: x + dx,
-            y: y + dy,
-            flux_e: 1e5,
-            sky_e: 0.0,
-            crlb_x_px: 0.01,
-            crlb_y_px: 0.01,
-            flags: 0,
-            dx_px: dx,
-            dy_px: dy,
-            predicted_dx_px: 0.0,
-            predicted_dy_px: 0.0,
-            predicted_fit_dx_px: 0.0,
-            predicted_fit_dy_px: 0.0,
-        }
+        crate::testkit::star_result(0, x, y, dx, dy)
     }
 
     /// Exposures whose displacement fields the model holds, without noise: every exposure ends at the
