@@ -196,6 +196,19 @@ fn analyze_prepared_with(
     ))
 }
 
+/// The report of a countermeasure applied to a plain analysis, before its statistics: what the plain
+/// analysis found (detections, the ePSF and how it was made) and the countermeasure's name.
+fn countermeasure_report(plain: &Report, cm: &Countermeasure) -> Report {
+    Report {
+        n_detected: plain.n_detected,
+        epsf_iterations: plain.epsf_iterations,
+        epsf_stars: plain.epsf_stars,
+        epsf_fallback: plain.epsf_fallback.clone(),
+        countermeasure: cm.to_string(),
+        ..Default::default()
+    }
+}
+
 /// Apply a countermeasure to the plain analysis of an image (from [`analyze_prepared`]) and report.
 pub fn with_countermeasure(
     img: &AnalysisImage,
@@ -207,14 +220,7 @@ pub fn with_countermeasure(
     seed: u64,
 ) -> Result<Analysis, AnalysisError> {
     let mut stars = plain.stars.clone();
-    let mut report = Report {
-        n_detected: plain.report.n_detected,
-        epsf_iterations: plain.report.epsf_iterations,
-        epsf_stars: plain.report.epsf_stars,
-        epsf_fallback: plain.report.epsf_fallback.clone(),
-        countermeasure: cm.to_string(),
-        ..Default::default()
-    };
+    let mut report = countermeasure_report(&plain.report, cm);
     let ctx = Context {
         img,
         starts: &prepared.starts,
@@ -402,26 +408,18 @@ pub fn finish_stare(
     if images.len() < 2 {
         return Ok(());
     }
+    let n = images.len();
     for cm in plan.countermeasures.iter().filter(|c| c.needs_stare()) {
         let Countermeasure::Plate { model, .. } = cm else {
             continue;
         };
-        let n = images.len();
         let mut stars: Vec<Vec<StarResult>> =
             images.iter().map(|im| im.global.stars.clone()).collect();
         let out = stack::stack_plate(&mut stars, *model, &cm.to_string())?;
         for (k, (im, st)) in images.iter_mut().zip(stars).enumerate() {
-            let g = &im.global.report;
-            let mut report = Report {
-                n_detected: g.n_detected,
-                epsf_iterations: g.epsf_iterations,
-                epsf_stars: g.epsf_stars,
-                epsf_fallback: g.epsf_fallback.clone(),
-                countermeasure: cm.to_string(),
-                dof_absorbed: out.dof_absorbed,
-                stare_exposures: n,
-                ..Default::default()
-            };
+            let mut report = countermeasure_report(&im.global.report, cm);
+            report.dof_absorbed = out.dof_absorbed;
+            report.stare_exposures = n;
             summarise(
                 &st,
                 truths.get(k).copied().flatten(),

@@ -28,8 +28,13 @@ pub enum ExperimentError {
 /// One exposure of a stare, analysed by the pipeline; the countermeasures that need the whole stare (plate
 /// models referenced to the stack) are completed by [`finish_stare`].
 pub struct StareImage {
-    index: usize,
     analysis: ImageAnalysis,
+    exposure: ExposureInfo,
+}
+
+/// What a stare image's report needs of its exposure besides the analysis.
+struct ExposureInfo {
+    index: usize,
     truth: Vec<TruthRow>,
     ace_sigma_mas: f64,
     ace_drift_mas: f64,
@@ -56,13 +61,16 @@ pub fn analyse_in_stare(
         sim.cfg.seed,
     )?;
     Ok(StareImage {
-        index,
         analysis,
-        truth: exp.truth,
-        ace_sigma_mas: ((exp.ace.sigma_x_mas.powi(2) + exp.ace.sigma_y_mas.powi(2)) / 2.0).sqrt(),
-        ace_drift_mas: exp.ace.drift_mas,
-        simulate_s: (t1 - t0).as_secs_f64(),
-        analyse_s: t1.elapsed().as_secs_f64(),
+        exposure: ExposureInfo {
+            index,
+            truth: exp.truth,
+            ace_sigma_mas: ((exp.ace.sigma_x_mas.powi(2) + exp.ace.sigma_y_mas.powi(2)) / 2.0)
+                .sqrt(),
+            ace_drift_mas: exp.ace.drift_mas,
+            simulate_s: (t1 - t0).as_secs_f64(),
+            analyse_s: t1.elapsed().as_secs_f64(),
+        },
     })
 }
 
@@ -73,20 +81,11 @@ pub fn finish_stare(
     images: Vec<StareImage>,
 ) -> Result<Vec<ImageResult>, ExperimentError> {
     let t0 = Instant::now();
-    let mut analyses: Vec<ImageAnalysis> = Vec::with_capacity(images.len());
-    let mut rest = Vec::with_capacity(images.len());
-    for im in images {
-        analyses.push(im.analysis);
-        rest.push((
-            im.index,
-            im.truth,
-            im.ace_sigma_mas,
-            im.ace_drift_mas,
-            im.simulate_s,
-            im.analyse_s,
-        ));
-    }
-    let truths: Vec<Option<&[TruthRow]>> = rest.iter().map(|r| Some(&r.1[..])).collect();
+    let (mut analyses, exposures): (Vec<ImageAnalysis>, Vec<ExposureInfo>) = images
+        .into_iter()
+        .map(|im| (im.analysis, im.exposure))
+        .unzip();
+    let truths: Vec<Option<&[TruthRow]>> = exposures.iter().map(|e| Some(&e.truth[..])).collect();
     pipeline::finish_stare(
         &mut analyses,
         &truths,
@@ -97,13 +96,13 @@ pub fn finish_stare(
     let stack_s = t0.elapsed().as_secs_f64() / analyses.len().max(1) as f64;
     Ok(analyses
         .into_iter()
-        .zip(rest)
-        .map(|(a, (index, _, sigma, drift, sim_s, an_s))| ImageResult {
-            index,
-            ace_sigma_mas: sigma,
-            ace_drift_mas: drift,
-            simulate_s: sim_s,
-            analyse_s: an_s + stack_s,
+        .zip(exposures)
+        .map(|(a, e)| ImageResult {
+            index: e.index,
+            ace_sigma_mas: e.ace_sigma_mas,
+            ace_drift_mas: e.ace_drift_mas,
+            simulate_s: e.simulate_s,
+            analyse_s: e.analyse_s + stack_s,
             measured: a
                 .measured
                 .into_iter()
@@ -112,7 +111,7 @@ pub fn finish_stare(
                     report: a.report,
                 })
                 .collect(),
-            stars: (index == 0).then_some(a.global.stars),
+            stars: (e.index == 0).then_some(a.global.stars),
         })
         .collect())
 }

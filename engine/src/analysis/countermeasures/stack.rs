@@ -112,14 +112,12 @@ pub fn stack_plate(
             .iter()
             .map(|&(x, y, n)| (n >= 2).then(|| (x / n as f64, y / n as f64)))
             .collect();
+        // how far the reference moved since the last pass (the same stars have one every pass)
         let moved = next
             .iter()
             .zip(&reference)
-            .map(|(a, b)| match (a, b) {
-                (Some(a), Some(b)) => (a.0 - b.0).abs().max((a.1 - b.1).abs()),
-                _ => f64::INFINITY,
-            })
-            .filter(|v| v.is_finite() || iterations == 1)
+            .filter_map(|(a, b)| Some((a.as_ref()?, b.as_ref()?)))
+            .map(|(a, b)| (a.0 - b.0).abs().max((a.1 - b.1).abs()))
             .fold(0.0, f64::max);
         reference = next;
         if iterations > 1 && moved < TOLERANCE_PX {
