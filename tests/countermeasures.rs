@@ -172,8 +172,10 @@ fn the_stack_reference_approaches_the_oracle_as_the_stare_grows() {
     for k in [2usize, 8] {
         c.fidelity.images = k;
         let sim = Simulator::new(&c).expect("sim");
-        let (rows, _) =
-            engine::studies::experiment::run_dataset(&sim, &plan, &mut |_| {}).expect("stare");
+        let (rows, _) = engine::studies::experiment::run_dataset(&sim, &plan, &mut |_| {
+            std::ops::ControlFlow::Continue(())
+        })
+        .expect("stare");
         let acc = |n: &str| {
             rows.iter()
                 .find(|r| r.countermeasure == n)

@@ -6,7 +6,7 @@ use common::{small_config, temp_dir};
 use engine::analysis::AnalysisImage;
 use engine::analysis::pipeline::{self as astrometry, Options};
 use engine::config::AceCase;
-use engine::io::{exposure, fits};
+use engine::io::{analysis_input, exposure, fits};
 use engine::simulate::Simulator;
 
 #[test]
@@ -21,7 +21,7 @@ fn simulate_write_read_analyse_round_trip() {
     let back = fits::read_image(&files.image).expect("read");
     assert_eq!((back.nx, back.ny), (512, 512));
     assert!(back.data.iter().zip(&exp.image.adu).all(|(a, b)| a == b));
-    assert_eq!(back.gain_e_per_adu, 3.0);
+    assert_eq!(back.facts.gain_e_per_adu, 3.0);
     assert_eq!(
         fits::read_f64_key(&files.image, "SEED").expect("SEED") as u64,
         cfg.seed
@@ -45,7 +45,7 @@ fn simulate_write_read_analyse_round_trip() {
     assert_eq!(truth_csv, truth_fits);
     // the analysis of the file equals the analysis in memory
     let (mut from_file, assumed) =
-        exposure::read_analysis_image(&files.image, cfg.instrument.plate_scale_mas())
+        analysis_input::read_analysis_image(&files.image, cfg.instrument.plate_scale_mas())
             .expect("image");
     // the reader gives the raw image; the pipeline flat-fields it as the configuration says
     from_file.flat_field(&cfg, cfg.analysis.flat_field);

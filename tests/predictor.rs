@@ -30,7 +30,8 @@ fn predictor_agrees_with_simulations() {
             c.scene.mag_hw = mag;
             c.fidelity.images = 4;
             let sim = session.new_simulator(&c).expect("simulator");
-            let (rows, _) = run_dataset(&sim, &plan, &mut |_| {}).expect("dataset");
+            let (rows, _) = run_dataset(&sim, &plan, &mut |_| std::ops::ControlFlow::Continue(()))
+                .expect("dataset");
             for r in rows {
                 let tol = (2.0 * r.sem_mas).max(0.15 * r.accuracy_mas);
                 let miss = (r.predicted_mas - r.accuracy_mas).abs();

@@ -2,17 +2,18 @@
 //! and the explorer worker's image stage give the same reports (`none` and `plate-poly:3`).
 //!
 //! The `jsim` binary is not built for this crate's tests, so the CLI side calls what `jsim analyze` calls
-//! (engine/src/bin/jsim/cmd.rs): `engine::io::exposure::AnalysisInput::read` (the image, its truth, its own
-//! configuration and exposure index, the plate scale from that configuration), a session simulator of the
-//! image's configuration as the source, and the pipeline. The reports must be identical, bit for bit: the
+//! (engine/src/bin/jsim/cmd.rs): `engine::io::analysis_input::AnalysisInput::read` (the image, its truth, its own
+//! configuration and exposure index, the plate scale from that configuration) and
+//! `Session::analyze_input` (a session simulator of the image's configuration as the source, and the
+//! pipeline). The reports must be identical, bit for bit: the
 //! read noise comes back exactly from the per-read noise and the sampling (RNREAD, SAMPLING), the plate
 //! scale from the image's configuration.
 
 use app::worker::{FrameResult, Job, Msg, Request, Stages, Worker};
-use engine::analysis::countermeasures::{Countermeasure, Plan};
-use engine::analysis::{Report, Source, analyse_image};
-use engine::config::{Backend, Config};
-use engine::io::{exposure, fits};
+use engine::analysis::Report;
+use engine::analysis::countermeasures::Countermeasure;
+use engine::config::Config;
+use engine::io::{analysis_input, exposure, fits};
 use engine::session::Session;
 use engine::testkit::{small_config, temp_dir};
 use std::path::Path;
@@ -26,32 +27,18 @@ fn image_config(image: &Path) -> Config {
 
 /// `jsim analyze --image IMAGE --countermeasure CM` with the image's own configuration, up to its report.
 fn cli_report(image: &Path, cm: Countermeasure) -> Report {
-    let input = exposure::AnalysisInput::read(image, None, &Config::default()).expect("the image");
+    let input =
+        analysis_input::AnalysisInput::read(image, None, &Config::default()).expect("the image");
     assert!(
         input.assumptions.is_empty(),
         "nothing assumed of a simulated image: {:?}",
         input.assumptions
     );
-    let (img_cfg, index) = input.provenance.clone().expect("a jsim image");
-    let mut c = img_cfg.clone();
-    c.fidelity.backend = Backend::Cpu;
-    c.fidelity.images = index + 1;
-    let session = Session::new();
-    let sim = session.simulator(&c).expect("the image's simulator");
-    let plan = Plan::new(vec![cm]).expect("a plan");
-    let res = analyse_image(
-        &input.img,
-        input.truth.as_deref(),
-        Some(Source { sim: &sim, index }),
-        &img_cfg.analysis,
-        &plan,
-        img_cfg.seed,
-    )
-    .expect("the analysis");
-    res.of(&cm)
-        .expect("the countermeasure applies")
+    let (img_cfg, _) = input.provenance.clone().expect("a jsim image");
+    Session::new()
+        .analyze_input(&img_cfg, &input, None, cm)
+        .expect("the analysis")
         .report
-        .clone()
 }
 
 /// The frame the explorer's worker sends for `cfg`, exposure `index`, under `cm`.

@@ -11,14 +11,15 @@
 //! image        simulate: one dataset's exposures (image + truth)
 //! analysis     image, detection, epsf, countermeasures, response, predict, report, vectors, and the one
 //!              per-image pipeline
-//! io           fits, csv, plot (figures), exposure (image files), products (the schema of every output)
+//! io           fits, csv, plot (figures), exposure (image files), analysis_input (reading an image for
+//!              analysis), products (the schema of every output)
 //! session      the engine session: PSF banks, kernels, the integrator, simulators (what front ends hold)
 //! studies      experiment, bench, sweep (spec, record, shard, run, merge, report, slurm)
 //! error        engine::Error, joining every module's error
 //! ```
 //!
-//! Front ends (the `jsim` CLI in `src/bin/jsim`, the explorer in `app/`) parse, call a [`session::Session`]
-//! and print; every number, schema and reduction lives here.
+//! Front ends (the `jsim` CLI in `src/bin/jsim`, the explorer in `app/`, the Python module in `python/`)
+//! parse, call a [`session::Session`] and print; every number, schema and reduction lives here.
 //!
 //! ## Conventions (used everywhere)
 //! * **Pixels**: 0-based; pixel `(X, Y)` covers `X − ½ ≤ x < X + ½`, so integer coordinates are pixel *centres*.

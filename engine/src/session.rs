@@ -6,9 +6,12 @@
 //! Every stage is bit-identical whatever is cached: a simulator from a session gives the same image as one
 //! built alone ([`Simulator::new`]).
 
+use crate::analysis::countermeasures::{Countermeasure, Plan};
+use crate::analysis::{Analysis, AnalysisError, Source, analyse_image};
 use crate::config::{Backend, Config};
 use crate::integrate::Integrator;
 use crate::integrate::kernel::KernelCache;
+use crate::io::analysis_input::AnalysisInput;
 use crate::optics::PsfBank;
 use crate::simulate::{SimError, Simulator};
 use std::collections::HashMap;
@@ -130,6 +133,52 @@ impl Session {
             let bank = sim.bank();
             bank.get(sim.cfg.scene.j_minus_h, &bank.centre_key());
         }
+    }
+}
+
+impl Session {
+    /// The analysis pipeline on one image read for analysis (`jsim analyze`, the Python module's
+    /// `Session.analyze`): `cfg` gives the analysis knobs (`epsf_zones` overrides its zones); the image's
+    /// own configuration, when it has one, gives what only its simulation knows (the ACE series for the
+    /// telemetry and the ACE prediction, the exact ePSF of the control) and the reference seed.
+    pub fn analyze_input(
+        &self,
+        cfg: &Config,
+        input: &AnalysisInput,
+        epsf_zones: Option<usize>,
+        countermeasure: Countermeasure,
+    ) -> crate::Result<Analysis> {
+        let img_cfg = input.provenance.as_ref().map(|(c, _)| c).unwrap_or(cfg);
+        let mut analysis_cfg = cfg.analysis.clone();
+        if let Some(z) = epsf_zones {
+            analysis_cfg.epsf_zones = z;
+        }
+        let sim = match &input.provenance {
+            Some((c, index)) => {
+                let mut c = c.clone();
+                c.fidelity.backend = Backend::Cpu;
+                c.fidelity.images = index + 1;
+                Some((self.simulator(&c)?, *index))
+            }
+            None => None,
+        };
+        let source = sim.as_ref().map(|(s, index)| Source {
+            sim: s,
+            index: *index,
+        });
+        let plan = Plan::new(vec![countermeasure])?;
+        let res = analyse_image(
+            &input.img,
+            input.truth.as_deref(),
+            source,
+            &analysis_cfg,
+            &plan,
+            img_cfg.seed,
+        )?;
+        res.into_of(&countermeasure)
+            .ok_or(crate::Error::Analysis(AnalysisError::NotApplicable {
+                countermeasure: countermeasure.to_string(),
+            }))
     }
 }
 

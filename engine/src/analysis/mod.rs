@@ -26,4 +26,8 @@ pub enum AnalysisError {
     /// What the analysis asked of the simulation the image came from (its kernel, its stars).
     #[error(transparent)]
     Simulation(#[from] crate::simulate::SimError),
+    #[error(
+        "{countermeasure} does not apply to this image (exact-epsf needs a static-ACE image simulated by jsim)"
+    )]
+    NotApplicable { countermeasure: String },
 }

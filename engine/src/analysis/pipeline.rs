@@ -337,6 +337,14 @@ impl ImageAnalysis {
     pub fn of(&self, cm: &Countermeasure) -> Option<&Analysis> {
         self.measured.iter().find(|(c, _)| c == cm).map(|(_, a)| a)
     }
+
+    /// The analysis of one countermeasure, if it applied, taken out.
+    pub fn into_of(self, cm: &Countermeasure) -> Option<Analysis> {
+        self.measured
+            .into_iter()
+            .find(|(c, _)| c == cm)
+            .map(|(_, a)| a)
+    }
 }
 
 /// The pipeline: analyse one image under every countermeasure of `plan`, detecting the stars and building

@@ -3,9 +3,7 @@
 use super::IoError;
 use super::csv::{self, Cell};
 use super::fits::{self, Card, Column, Hdu, Pixels};
-use crate::analysis::AnalysisImage;
 use crate::config::{AceCase, Config};
-use crate::detector::dq;
 use crate::simulate::{Exposure, Simulator, TruthRow};
 use std::path::{Path, PathBuf};
 
@@ -174,7 +172,8 @@ pub fn headers(sim: &Simulator, exp: &Exposure) -> Vec<Card> {
     ]
 }
 
-fn truth_columns(t: &[TruthRow]) -> Vec<Column> {
+/// The TRUTH table's columns ([`TRUTH_HEADER`]).
+pub fn truth_columns(t: &[TruthRow]) -> Vec<Column> {
     vec![
         Column::I64("id".into(), t.iter().map(|r| r.id as i64).collect()),
         Column::F64("x".into(), t.iter().map(|r| r.x_px).collect()),
@@ -214,10 +213,9 @@ pub const TRUTH_HEADER: [&str; 11] = [
     "jitter_dy",
 ];
 
-/// Write the truth catalogue as CSV.
-pub fn write_truth_csv(path: &Path, t: &[TruthRow]) -> Result<(), IoError> {
-    let rows: Vec<Vec<Cell>> = t
-        .iter()
+/// The truth catalogue as rows of [`TRUTH_HEADER`].
+pub fn truth_rows(t: &[TruthRow]) -> Vec<Vec<Cell>> {
+    t.iter()
         .map(|r| {
             vec![
                 Cell::I(r.id as i64),
@@ -233,8 +231,32 @@ pub fn write_truth_csv(path: &Path, t: &[TruthRow]) -> Result<(), IoError> {
                 Cell::F(r.jitter_dy_px),
             ]
         })
-        .collect();
-    csv::write(path, &TRUTH_HEADER, &rows)
+        .collect()
+}
+
+/// Write the truth catalogue as CSV.
+pub fn write_truth_csv(path: &Path, t: &[TruthRow]) -> Result<(), IoError> {
+    csv::write(path, &TRUTH_HEADER, &truth_rows(t))
+}
+
+/// The truth catalogue from its columns ([`TRUTH_HEADER`], in that order).
+pub fn truth_from_columns(cols: &[Vec<f64>]) -> Vec<TruthRow> {
+    let n = cols.first().map(|c| c.len()).unwrap_or(0);
+    (0..n)
+        .map(|i| TruthRow {
+            id: cols[0][i] as usize,
+            x_px: cols[1][i],
+            y_px: cols[2][i],
+            mag_hw: cols[3][i],
+            j_minus_h: cols[4][i],
+            flux_e: cols[5][i],
+            modelled_fraction: cols[6][i],
+            t_start_s: cols[7][i],
+            exptime_s: cols[8][i],
+            jitter_dx_px: cols[9][i],
+            jitter_dy_px: cols[10][i],
+        })
+        .collect()
 }
 
 /// Read a truth catalogue (CSV written by [`write_truth_csv`], or the TRUTH extension of an image).
@@ -251,62 +273,42 @@ pub fn read_truth(path: &Path) -> Result<Vec<TruthRow>, IoError> {
             .map(|c| csv::column_f64(path, &h, &rows, c))
             .collect::<Result<_, _>>()?
     };
-    let n = cols[0].len();
-    Ok((0..n)
-        .map(|i| TruthRow {
-            id: cols[0][i] as usize,
-            x_px: cols[1][i],
-            y_px: cols[2][i],
-            mag_hw: cols[3][i],
-            j_minus_h: cols[4][i],
-            flux_e: cols[5][i],
-            modelled_fraction: cols[6][i],
-            t_start_s: cols[7][i],
-            exptime_s: cols[8][i],
-            jitter_dx_px: cols[9][i],
-            jitter_dy_px: cols[10][i],
-        })
-        .collect())
+    Ok(truth_from_columns(&cols))
 }
 
-/// Write one exposure into `dir`.
-pub fn write_exposure(
-    dir: &Path,
+/// The image as the FITS file stores it: `uint16` when digitised with ≤ 16 bits (clamped to 0–65535),
+/// else `None` (the ADU values are stored as `float32`).
+pub fn stored_u16(cfg: &Config, adu: &[f32]) -> Option<Vec<u16>> {
+    (cfg.detector.digitise && cfg.detector.adc_bits <= 16)
+        .then(|| adu.iter().map(|v| v.clamp(0.0, 65535.0) as u16).collect())
+}
+
+/// Write the image file of one exposure (image, DQ, TRUTH, CONFIG) to `path`, with `pixels` and `dq` as the
+/// image planes (the exposure's own, or a front end's copy of them).
+pub fn write_image_file(
+    path: &Path,
     sim: &Simulator,
     exp: &Exposure,
-) -> Result<ExposureFiles, IoError> {
+    pixels: Pixels<'_>,
+    dq: &[u8],
+) -> Result<(), IoError> {
     let n = exp.image.n;
-    let image = dir.join(image_name(exp.index));
-    let truth_csv = dir.join(truth_name(exp.index));
-    let cards = headers(sim, exp);
-    let u16_data: Vec<u16>;
-    let pixels = if sim.cfg.detector.digitise && sim.cfg.detector.adc_bits <= 16 {
-        u16_data = exp
-            .image
-            .adu
-            .iter()
-            .map(|v| v.clamp(0.0, 65535.0) as u16)
-            .collect();
-        Pixels::U16(&u16_data)
-    } else {
-        Pixels::F32(&exp.image.adu)
-    };
     let config_text = sim.cfg.to_toml();
     fits::write(
-        &image,
+        path,
         &[
             Hdu::Image {
                 name: "",
                 nx: n,
                 ny: n,
                 pixels,
-                cards,
+                cards: headers(sim, exp),
             },
             Hdu::U8Image {
                 name: "DQ",
                 nx: n,
                 ny: n,
-                data: &exp.image.dq,
+                data: dq,
             },
             Hdu::Table {
                 name: "TRUTH",
@@ -318,140 +320,23 @@ pub fn write_exposure(
                 text: &config_text,
             },
         ],
-    )?;
+    )
+}
+
+/// Write one exposure into `dir`: `img_NNN.fits` and `truth_NNN.csv`.
+pub fn write_exposure(
+    dir: &Path,
+    sim: &Simulator,
+    exp: &Exposure,
+) -> Result<ExposureFiles, IoError> {
+    let image = dir.join(image_name(exp.index));
+    let truth_csv = dir.join(truth_name(exp.index));
+    let u16_data = stored_u16(&sim.cfg, &exp.image.adu);
+    let pixels = match &u16_data {
+        Some(d) => Pixels::U16(d),
+        None => Pixels::F32(&exp.image.adu),
+    };
+    write_image_file(&image, sim, exp, pixels, &exp.image.dq)?;
     write_truth_csv(&truth_csv, &exp.truth)?;
     Ok(ExposureFiles { image, truth_csv })
-}
-
-/// Read an image for analysis: electrons with the bias removed (GAIN, RDNOISE, BIASADU, SATURATE headers),
-/// the mask from its DQ extension when present (else from SATURATE and non-finite values). Headers that
-/// are missing are assumed (listed in the second value); impossible ones are refused, naming them.
-pub fn read_analysis_image(
-    path: &Path,
-    plate_scale_mas: f64,
-) -> Result<(AnalysisImage, Vec<String>), IoError> {
-    if !(plate_scale_mas > 0.0 && plate_scale_mas.is_finite()) {
-        return Err(IoError::Format {
-            path: path.to_path_buf(),
-            message: format!("plate scale {plate_scale_mas} mas/px (PLTSCALE): must be > 0"),
-        });
-    }
-    let r = fits::read_image(path)?;
-    if r.data.len() != r.nx * r.ny {
-        return Err(IoError::Format {
-            path: path.to_path_buf(),
-            message: format!(
-                "image is {}×{} but holds {} values",
-                r.nx,
-                r.ny,
-                r.data.len()
-            ),
-        });
-    }
-    let g = r.gain_e_per_adu;
-    let sat = r.saturation_adu.unwrap_or(f64::INFINITY);
-    let bad_bits = dq::BORDER | dq::SATURATED | dq::ADC_HIGH;
-    let bad = match &r.dq {
-        Some(d) => d.iter().map(|q| q & bad_bits != 0).collect(),
-        None => r
-            .data
-            .iter()
-            .map(|v| *v as f64 >= sat || !v.is_finite())
-            .collect(),
-    };
-    let img = AnalysisImage {
-        nx: r.nx,
-        ny: r.ny,
-        e: r.data
-            .iter()
-            .map(|v| {
-                if v.is_finite() {
-                    (*v as f64 - r.bias_adu) * g
-                } else {
-                    0.0
-                }
-            })
-            .collect(),
-        bad,
-        var_floor_e2: crate::config::noise_floor_e2(r.read_noise_e, g),
-        flat_sigma: 0.0,
-        plate_scale_mas,
-    };
-    Ok((img, r.assumed))
-}
-
-/// An image file read for analysis, with what it says about itself.
-#[derive(Debug, Clone)]
-pub struct AnalysisInput {
-    pub img: AnalysisImage,
-    /// The truth catalogue: the given file, else the image's TRUTH extension (if any).
-    pub truth: Option<Vec<TruthRow>>,
-    /// The configuration and exposure index the image was simulated with (its CONFIG extension and
-    /// IMAGEIDX), when it is a jsim image.
-    pub provenance: Option<(Config, usize)>,
-    /// The plate scale used: the image's configuration's, else its PLTSCALE header, else `fallback`'s.
-    pub plate_scale_mas: f64,
-    /// What was assumed because the image did not say.
-    pub assumptions: Vec<String>,
-}
-
-impl AnalysisInput {
-    /// Read `path` (and `truth_path`, if given) as `jsim analyze` does. The image's own configuration,
-    /// when it has one, gives the exact plate scale (a header float keeps only 15 digits).
-    pub fn read(
-        path: &Path,
-        truth_path: Option<&Path>,
-        fallback: &Config,
-    ) -> Result<Self, IoError> {
-        let provenance = fits::read_text(path, "CONFIG")
-            .ok()
-            .and_then(|t| Config::from_toml_str(&t).ok())
-            .and_then(|c| {
-                let i = fits::read_f64_key(path, "IMAGEIDX").ok()?;
-                (i >= 0.0 && i.fract() == 0.0).then_some((c, i as usize))
-            });
-        let mut assumptions = Vec::new();
-        let plate_scale_mas = match (&provenance, fits::read_f64_key(path, "PLTSCALE")) {
-            (Some((c, _)), _) => c.instrument.plate_scale_mas(),
-            (None, Ok(s)) => s,
-            (None, Err(_)) => {
-                let s = fallback.instrument.plate_scale_mas();
-                assumptions.push(format!(
-                    "no PLTSCALE header: {s:.3} mas/px from the configuration assumed"
-                ));
-                s
-            }
-        };
-        if provenance.is_none() {
-            assumptions.push(
-                "no CONFIG extension (or IMAGEIDX): not a jsim image, so no simulation context — the \
-                 telemetry has no ACE series to correct with, no ACE prediction is attached, exact-epsf \
-                 does not apply; the reference seed is the command line's"
-                    .to_string(),
-            );
-        }
-        let (mut img, assumed) = read_analysis_image(path, plate_scale_mas)?;
-        assumptions.extend(assumed);
-        let mode = fallback.analysis.flat_field;
-        match &provenance {
-            Some((c, _)) => img.flat_field(c, mode),
-            None if mode != crate::config::FlatField::Uncalibrated => assumptions.push(
-                "analysis.flat_field is calibrated, but a non-jsim image has no calibration flat here: \
-                 analysed without flat-fielding"
-                    .to_string(),
-            ),
-            None => {}
-        }
-        let truth = match truth_path {
-            Some(p) => Some(read_truth(p)?),
-            None => read_truth(path).ok(),
-        };
-        Ok(Self {
-            img,
-            truth,
-            provenance,
-            plate_scale_mas,
-            assumptions,
-        })
-    }
 }

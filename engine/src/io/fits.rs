@@ -282,15 +282,14 @@ fn write_inner(path: &Path, hdus: &[Hdu<'_>]) -> Result<(), IoError> {
     Ok(())
 }
 
-/// An image read back, with the headers the analysis needs.
-#[derive(Debug, Clone)]
-pub struct ImageRead {
-    pub nx: usize,
-    pub ny: usize,
-    /// Pixel values as stored (ADU), as f32.
-    pub data: Vec<f32>,
-    pub dq: Option<Vec<u8>>,
+/// What an image's header says about its pixel values (the keys the analysis needs), with what was
+/// assumed where it is silent. One reading of the header for every front end: the FITS reader
+/// ([`read_image`]) and the Python module (a dict of cards) look the keys up their own way.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ImageFacts {
     pub gain_e_per_adu: f64,
+    /// The image's read noise (all reads): from `RNREAD` and `SAMPLING` when both are given (exact), else
+    /// `RDNOISE`.
     pub read_noise_e: f64,
     pub bias_adu: f64,
     pub exposure_s: f64,
@@ -299,9 +298,60 @@ pub struct ImageRead {
     pub assumed: Vec<String>,
 }
 
-/// Read a float header with a default.
-fn key_f64(f: &mut FitsFile, hdu: &fitsio::hdu::FitsHdu, key: &str) -> Option<f64> {
-    hdu.read_key::<f64>(f, key).ok()
+impl ImageFacts {
+    /// Read the facts through `number(KEY)` and `text(KEY)` lookups; an impossible value is an error naming
+    /// its key and the allowed range.
+    pub fn from_keys(
+        mut number: impl FnMut(&str) -> Option<f64>,
+        mut text: impl FnMut(&str) -> Option<String>,
+    ) -> Result<Self, String> {
+        let sampling = text("SAMPLING").and_then(|s| crate::config::Sampling::from_header(&s));
+        let per_read = number("RNREAD");
+        let mut assumed = Vec::new();
+        let mut key = |name: &str, default: f64, what: &str| -> f64 {
+            number(name).unwrap_or_else(|| {
+                assumed.push(format!("no {name} header: {what} {default} assumed"));
+                default
+            })
+        };
+        let gain = key("GAIN", 1.0, "gain [e-/ADU]");
+        let rn = match (per_read, sampling) {
+            (Some(per_read), Some(s)) => s.image_read_noise_e(per_read),
+            _ => key("RDNOISE", 0.0, "read noise [e-]"),
+        };
+        let bias = key("BIASADU", 0.0, "bias [ADU]");
+        let exposure_s = key("EXPTIME", 1.0, "exposure [s]");
+        let saturation_adu = number("SATURATE");
+        let bad = |k: &str, v: f64, allowed: &str| Err(format!("header {k} = {v}: {allowed}"));
+        if !(gain > 0.0 && gain.is_finite()) {
+            return bad("GAIN", gain, "must be a finite number > 0 [e-/ADU]");
+        }
+        if !(rn >= 0.0 && rn.is_finite()) {
+            return bad("RDNOISE", rn, "must be a finite number ≥ 0 [e-]");
+        }
+        if !bias.is_finite() {
+            return bad("BIASADU", bias, "must be finite [ADU]");
+        }
+        Ok(Self {
+            gain_e_per_adu: gain,
+            read_noise_e: rn,
+            bias_adu: bias,
+            exposure_s,
+            saturation_adu,
+            assumed,
+        })
+    }
+}
+
+/// An image read back, with what its header says.
+#[derive(Debug, Clone)]
+pub struct ImageRead {
+    pub nx: usize,
+    pub ny: usize,
+    /// Pixel values as stored (ADU), as f32.
+    pub data: Vec<f32>,
+    pub dq: Option<Vec<u8>>,
+    pub facts: ImageFacts,
 }
 
 /// Read the primary image (and DQ extension, if any) of a file.
@@ -320,43 +370,21 @@ pub fn read_image(path: &Path) -> Result<ImageRead, IoError> {
         _ => return Err(IoError::fits(path, "the primary HDU is not a 2-D image")),
     };
     let data: Vec<f32> = hdu.read_image(&mut f).map_err(fe)?;
-    // the image's read noise from the per-read noise and the sampling when the header gives them (exact:
-    // a header float keeps 15 digits), else RDNOISE
-    let sampling = hdu
-        .read_key::<String>(&mut f, "SAMPLING")
-        .ok()
-        .and_then(|s| crate::config::Sampling::from_header(&s));
-    let per_read = key_f64(&mut f, &hdu, "RNREAD");
-    let mut assumed = Vec::new();
-    let mut key = |name: &str, default: f64, what: &str| -> f64 {
-        key_f64(&mut f, &hdu, name).unwrap_or_else(|| {
-            assumed.push(format!("no {name} header: {what} {default} assumed"));
-            default
-        })
-    };
-    let gain = key("GAIN", 1.0, "gain [e-/ADU]");
-    let rn = match (per_read, sampling) {
-        (Some(per_read), Some(s)) => s.image_read_noise_e(per_read),
-        _ => key("RDNOISE", 0.0, "read noise [e-]"),
-    };
-    let bias = key("BIASADU", 0.0, "bias [ADU]");
-    let exptime = key("EXPTIME", 1.0, "exposure [s]");
-    let sat = key_f64(&mut f, &hdu, "SATURATE");
-    let bad = |k: &str, v: f64, allowed: &str| {
-        Err(IoError::Format {
-            path: path.to_path_buf(),
-            message: format!("header {k} = {v}: {allowed}"),
-        })
-    };
-    if !(gain > 0.0 && gain.is_finite()) {
-        return bad("GAIN", gain, "must be a finite number > 0 [e-/ADU]");
-    }
-    if !(rn >= 0.0 && rn.is_finite()) {
-        return bad("RDNOISE", rn, "must be a finite number ≥ 0 [e-]");
-    }
-    if !bias.is_finite() {
-        return bad("BIASADU", bias, "must be finite [ADU]");
-    }
+    let numbers: std::collections::HashMap<&str, f64> = [
+        "RNREAD", "GAIN", "RDNOISE", "BIASADU", "EXPTIME", "SATURATE",
+    ]
+    .into_iter()
+    .filter_map(|k| hdu.read_key::<f64>(&mut f, k).ok().map(|v| (k, v)))
+    .collect();
+    let sampling = hdu.read_key::<String>(&mut f, "SAMPLING").ok();
+    let facts = ImageFacts::from_keys(
+        |k| numbers.get(k).copied(),
+        |k| (k == "SAMPLING").then(|| sampling.clone()).flatten(),
+    )
+    .map_err(|message| IoError::Format {
+        path: path.to_path_buf(),
+        message,
+    })?;
     let dq = match f.hdu("DQ") {
         Ok(h) => h
             .read_image::<Vec<u8>>(&mut f)
@@ -369,12 +397,7 @@ pub fn read_image(path: &Path) -> Result<ImageRead, IoError> {
         ny,
         data,
         dq,
-        gain_e_per_adu: gain,
-        read_noise_e: rn,
-        bias_adu: bias,
-        exposure_s: exptime,
-        saturation_adu: sat,
-        assumed,
+        facts,
     })
 }
 
@@ -477,7 +500,7 @@ mod tests {
         assert_eq!((r.nx, r.ny), (5, 3));
         assert_eq!(r.data[7], 7000.0);
         assert_eq!(r.data[14], 14000.0); // above 32767: BZERO handled
-        assert_eq!(r.gain_e_per_adu, 3.0);
+        assert_eq!(r.facts.gain_e_per_adu, 3.0);
         assert_eq!(r.dq.as_deref(), Some(&dq[..]));
         let t = read_table(&path, "TRUTH", &["x", "id"]).expect("table");
         assert_eq!(t[0], vec![1.5, 2.5]);

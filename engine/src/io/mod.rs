@@ -2,6 +2,7 @@
 //! name and renamed into place, so an interrupted run never leaves a half-written output. [`shell_quote`] writes
 //! a path as one shell word for the scripts and command lines we write or show.
 
+pub mod analysis_input;
 pub mod csv;
 pub mod exposure;
 pub mod fits;

@@ -207,8 +207,12 @@ pub const EXPERIMENT_HEADER: [&str; 10] = [
 
 /// Write `experiment.csv`.
 pub fn write_experiment(path: &Path, rows: &[Row]) -> Result<(), IoError> {
-    let cells: Vec<Vec<Cell>> = rows
-        .iter()
+    csv::write(path, &EXPERIMENT_HEADER, &experiment_rows(rows))
+}
+
+/// The rows of `experiment.csv` ([`EXPERIMENT_HEADER`]).
+pub fn experiment_rows(rows: &[Row]) -> Vec<Vec<Cell>> {
+    rows.iter()
         .map(|r| {
             vec![
                 Cell::S(r.ace.clone()),
@@ -223,8 +227,7 @@ pub fn write_experiment(path: &Path, rows: &[Row]) -> Result<(), IoError> {
                 Cell::F(r.time_s),
             ]
         })
-        .collect();
-    csv::write(path, &EXPERIMENT_HEADER, &cells)
+        .collect()
 }
 
 /// Columns of `images.csv`: one row per image and countermeasure.

@@ -13,6 +13,7 @@ use crate::analysis::{AnalysisError, AnalysisImage, Source, analyse_image};
 use crate::config::{AceCase, Config, ReadoutOrder};
 use crate::numerics::stats;
 use crate::simulate::{SimError, Simulator, TruthRow};
+use std::ops::ControlFlow;
 use std::time::Instant;
 
 #[derive(Debug, thiserror::Error)]
@@ -23,6 +24,9 @@ pub enum ExperimentError {
     Analysis(#[from] AnalysisError),
     #[error(transparent)]
     Predict(#[from] PredictError),
+    /// The caller's progress callback asked to stop (Ctrl-C in the CLI or in Python).
+    #[error("stopped")]
+    Stopped,
 }
 
 /// One exposure of a stare, analysed by the pipeline; the countermeasures that need the whole stare (plate
@@ -117,17 +121,20 @@ pub fn finish_stare(
 }
 
 /// Exposures `indices` of `sim` as one stare, analysed under `plan`; `on_image` is called after each
-/// exposure's own analysis (before the stare is finished).
+/// exposure's own analysis (before the stare is finished) and stops the stare with
+/// [`ExperimentError::Stopped`] by returning `Break`.
 pub fn analyse_stare(
     sim: &Simulator,
     indices: std::ops::Range<usize>,
     plan: &Plan,
-    on_image: &mut dyn FnMut(usize),
+    on_image: &mut dyn FnMut(usize) -> ControlFlow<()>,
 ) -> Result<Vec<ImageResult>, ExperimentError> {
     let mut images = Vec::with_capacity(indices.len());
     for i in indices {
         images.push(analyse_in_stare(sim, i, plan)?);
-        on_image(i);
+        if on_image(i).is_break() {
+            return Err(ExperimentError::Stopped);
+        }
     }
     finish_stare(sim, plan, images)
 }
@@ -139,7 +146,9 @@ pub fn analyse_exposure(
     index: usize,
     plan: &Plan,
 ) -> Result<ImageResult, ExperimentError> {
-    let mut r = analyse_stare(sim, index..index + 1, plan, &mut |_| {})?;
+    let mut r = analyse_stare(sim, index..index + 1, plan, &mut |_| {
+        ControlFlow::Continue(())
+    })?;
     Ok(r.remove(0))
 }
 
@@ -198,11 +207,11 @@ pub fn summarise(
 
 /// One dataset: the `cfg.fidelity.images` consecutive exposures of `sim` — one stare, whose stack is the
 /// reference of the stack-referenced plate models — analysed per `plan`. `on_image` is called after each
-/// exposure's analysis.
+/// exposure's analysis (`Break` stops the dataset with [`ExperimentError::Stopped`]).
 pub fn run_dataset(
     sim: &Simulator,
     plan: &Plan,
-    on_image: &mut dyn FnMut(usize),
+    on_image: &mut dyn FnMut(usize) -> ControlFlow<()>,
 ) -> Result<(Vec<Row>, Vec<ImageResult>), ExperimentError> {
     let t0 = Instant::now();
     let cfg = &sim.cfg;

@@ -2,12 +2,11 @@
 //! files; here we print, write and show progress).
 
 use crate::outputs::{Outputs, interrupted};
-use anyhow::{Context, Result, bail};
+use anyhow::{Context, Result};
 use engine::analysis::countermeasures::{Countermeasure, Plan};
 use engine::analysis::vectors::VectorMap;
-use engine::analysis::{Source, analyse_image};
 use engine::config::{AceCase, Config, ReadoutOrder};
-use engine::io::{csv, exposure, products};
+use engine::io::{analysis_input, csv, exposure, products};
 use engine::jitter::AceSeries;
 use engine::session::Session;
 use engine::studies::experiment;
@@ -164,50 +163,19 @@ pub struct AnalyzeArgs {
 /// telemetry and the ACE prediction, the exact ePSF of the control).
 pub fn analyze(session: &Session, cfg: &Config, a: &AnalyzeArgs) -> Result<()> {
     let t0 = Instant::now();
-    let input = exposure::AnalysisInput::read(&a.image, a.truth.as_deref(), cfg)?;
+    let input = analysis_input::AnalysisInput::read(&a.image, a.truth.as_deref(), cfg)?;
     for s in &input.assumptions {
         eprintln!("jsim: {}: {s}", a.image.display());
     }
-    let exposure::AnalysisInput {
+    let an = session.analyze_input(cfg, &input, a.zones, a.countermeasure)?;
+    let analysis_input::AnalysisInput {
         img,
         truth,
-        provenance,
         plate_scale_mas: scale,
         assumptions,
+        ..
     } = input;
-    let img_cfg = provenance.as_ref().map(|(c, _)| c).unwrap_or(cfg);
-    let mut analysis_cfg = cfg.analysis.clone();
-    if let Some(z) = a.zones {
-        analysis_cfg.epsf_zones = z;
-    }
-    let sim = match &provenance {
-        Some((c, index)) => {
-            let mut c = c.clone();
-            c.fidelity.backend = engine::config::Backend::Cpu;
-            c.fidelity.images = index + 1;
-            Some((session.simulator(&c)?, *index))
-        }
-        None => None,
-    };
-    let source = sim.as_ref().map(|(s, index)| Source {
-        sim: s,
-        index: *index,
-    });
-    let plan = Plan::new(vec![a.countermeasure])?;
-    let res = analyse_image(
-        &img,
-        truth.as_deref(),
-        source,
-        &analysis_cfg,
-        &plan,
-        img_cfg.seed,
-    )?;
-    let Some(an) = res.of(&a.countermeasure) else {
-        bail!(
-            "{} does not apply to this image (exact-epsf needs a static-ACE image simulated by jsim)",
-            a.countermeasure
-        );
-    };
+    let an = &an;
     let mut outputs = Outputs::in_dir(&a.out)?;
     for name in [
         "catalogue.csv",
@@ -291,7 +259,15 @@ pub fn experiment(session: &Session, base: &Config, a: &ExperimentArgs) -> Resul
         interrupted()?;
         let sim = session.new_simulator(cfg)?;
         pb.suspend(|| say_notes(session));
-        let (r, images) = experiment::run_dataset(&sim, &a.plan, &mut |_| pb.inc(1))?;
+        let (r, images) = experiment::run_dataset(&sim, &a.plan, &mut |_| {
+            pb.inc(1);
+            // a Ctrl-C stops between images (the outputs guard removes what was written)
+            if interrupted().is_err() {
+                std::ops::ControlFlow::Break(())
+            } else {
+                std::ops::ControlFlow::Continue(())
+            }
+        })?;
         image_rows.extend(products::image_rows(cfg, &images));
         if let Some(stars) = images.first().and_then(|im| im.stars.as_ref())
             && cfg.scene.mag_hw == a.mags[0]

@@ -88,7 +88,9 @@ pub fn compute_unit(sweep: &Sweep, unit: usize, session: &Session) -> Result<Uni
         .map_err(|e| uerr(e.to_string()))?;
     session.warm(&sim);
     let k_stare = sweep.stare_exposures;
-    let analysed = experiment::analyse_stare(&sim, 0..k_stare, &sweep.plan, &mut |_| {});
+    let analysed = experiment::analyse_stare(&sim, 0..k_stare, &sweep.plan, &mut |_| {
+        std::ops::ControlFlow::Continue(())
+    });
     let tp = Instant::now();
     let predictor = crate::analysis::predict::Predictor::new(&sim, &cfg.analysis).ok();
     // a prediction that cannot be made is recorded as NaN beside the measured row (the file has no other

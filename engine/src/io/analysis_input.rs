@@ -1,0 +1,221 @@
+//! Reading an image for analysis, from a file or from memory: the header's facts, electrons with the bias
+//! removed, the mask, the image's own configuration (its simulation context) and what was assumed where the
+//! image is silent. `jsim analyze` and the Python module read images only through here.
+
+use super::IoError;
+use super::exposure::read_truth;
+use super::fits::{self, ImageFacts};
+use crate::analysis::AnalysisImage;
+use crate::config::Config;
+use crate::detector::dq;
+use crate::simulate::TruthRow;
+use std::path::Path;
+
+/// An image in ADU as an analysis image: electrons with the bias removed (the header facts), the mask
+/// from its DQ plane when given (else from SATURATE and non-finite values).
+pub fn analysis_image(
+    nx: usize,
+    ny: usize,
+    data: &[f32],
+    dq: Option<&[u8]>,
+    facts: &ImageFacts,
+    plate_scale_mas: f64,
+) -> Result<AnalysisImage, String> {
+    if !(plate_scale_mas > 0.0 && plate_scale_mas.is_finite()) {
+        return Err(format!(
+            "plate scale {plate_scale_mas} mas/px (PLTSCALE): must be > 0"
+        ));
+    }
+    if data.len() != nx * ny {
+        return Err(format!(
+            "image is {nx}×{ny} but holds {} values",
+            data.len()
+        ));
+    }
+    if let Some(d) = dq
+        && d.len() != nx * ny
+    {
+        return Err(format!(
+            "the DQ plane holds {} values, the image {nx}×{ny}",
+            d.len()
+        ));
+    }
+    let g = facts.gain_e_per_adu;
+    let sat = facts.saturation_adu.unwrap_or(f64::INFINITY);
+    let bad_bits = dq::BORDER | dq::SATURATED | dq::ADC_HIGH;
+    let bad = match dq {
+        Some(d) => d.iter().map(|q| q & bad_bits != 0).collect(),
+        None => data
+            .iter()
+            .map(|v| *v as f64 >= sat || !v.is_finite())
+            .collect(),
+    };
+    Ok(AnalysisImage {
+        nx,
+        ny,
+        e: data
+            .iter()
+            .map(|v| {
+                if v.is_finite() {
+                    (*v as f64 - facts.bias_adu) * g
+                } else {
+                    0.0
+                }
+            })
+            .collect(),
+        bad,
+        var_floor_e2: crate::config::noise_floor_e2(facts.read_noise_e, g),
+        flat_sigma: 0.0,
+        plate_scale_mas,
+    })
+}
+
+/// Read an image file for analysis ([`analysis_image`] of its primary HDU and DQ extension). Headers that
+/// are missing are assumed (listed in the second value); impossible ones are refused, naming them.
+pub fn read_analysis_image(
+    path: &Path,
+    plate_scale_mas: f64,
+) -> Result<(AnalysisImage, Vec<String>), IoError> {
+    let r = fits::read_image(path)?;
+    let img = analysis_image(
+        r.nx,
+        r.ny,
+        &r.data,
+        r.dq.as_deref(),
+        &r.facts,
+        plate_scale_mas,
+    )
+    .map_err(|message| IoError::Format {
+        path: path.to_path_buf(),
+        message,
+    })?;
+    Ok((img, r.facts.assumed))
+}
+
+/// An image file read for analysis, with what it says about itself.
+#[derive(Debug, Clone)]
+pub struct AnalysisInput {
+    pub img: AnalysisImage,
+    /// The truth catalogue: the given file, else the image's TRUTH extension (if any).
+    pub truth: Option<Vec<TruthRow>>,
+    /// The configuration and exposure index the image was simulated with (its CONFIG extension and
+    /// IMAGEIDX), when it is a jsim image.
+    pub provenance: Option<(Config, usize)>,
+    /// The plate scale used: the image's configuration's, else its PLTSCALE header, else `fallback`'s.
+    pub plate_scale_mas: f64,
+    /// What was assumed because the image did not say.
+    pub assumptions: Vec<String>,
+}
+
+impl AnalysisInput {
+    /// Read `path` (and `truth_path`, if given) as `jsim analyze` does. The image's own configuration,
+    /// when it has one, gives the exact plate scale (a header float keeps only 15 digits).
+    pub fn read(
+        path: &Path,
+        truth_path: Option<&Path>,
+        fallback: &Config,
+    ) -> Result<Self, IoError> {
+        let provenance = fits::read_text(path, "CONFIG")
+            .ok()
+            .and_then(|t| Config::from_toml_str(&t).ok())
+            .and_then(|c| {
+                let i = fits::read_f64_key(path, "IMAGEIDX").ok()?;
+                (i >= 0.0 && i.fract() == 0.0).then_some((c, i as usize))
+            });
+        let r = fits::read_image(path)?;
+        let truth = match truth_path {
+            Some(p) => Some(read_truth(p)?),
+            None => read_truth(path).ok(),
+        };
+        Self::from_parts(
+            ImageParts {
+                nx: r.nx,
+                ny: r.ny,
+                data: &r.data,
+                dq: r.dq.as_deref(),
+                facts: r.facts,
+                plate_scale_header_mas: fits::read_f64_key(path, "PLTSCALE").ok(),
+            },
+            truth,
+            provenance,
+            fallback,
+        )
+        .map_err(|message| IoError::Format {
+            path: path.to_path_buf(),
+            message,
+        })
+    }
+
+    /// The analysis input of an image held in memory (what [`AnalysisInput::read`] makes of a file, and
+    /// what the Python module makes of an array and its header): `provenance` is the configuration and
+    /// exposure index it was simulated with, when known; `fallback` gives the analysis knobs and, where
+    /// the image says nothing, the plate scale.
+    pub fn from_parts(
+        parts: ImageParts<'_>,
+        truth: Option<Vec<TruthRow>>,
+        provenance: Option<(Config, usize)>,
+        fallback: &Config,
+    ) -> Result<Self, String> {
+        let ImageParts {
+            nx,
+            ny,
+            data,
+            dq,
+            facts,
+            plate_scale_header_mas,
+        } = parts;
+        let mut assumptions = Vec::new();
+        let plate_scale_mas = match (&provenance, plate_scale_header_mas) {
+            (Some((c, _)), _) => c.instrument.plate_scale_mas(),
+            (None, Some(s)) => s,
+            (None, None) => {
+                let s = fallback.instrument.plate_scale_mas();
+                assumptions.push(format!(
+                    "no PLTSCALE header: {s:.3} mas/px from the configuration assumed"
+                ));
+                s
+            }
+        };
+        if provenance.is_none() {
+            assumptions.push(
+                "no CONFIG extension (or IMAGEIDX): not a jsim image, so no simulation context — the \
+                 telemetry has no ACE series to correct with, no ACE prediction is attached, exact-epsf \
+                 does not apply; the reference seed is the command line's"
+                    .to_string(),
+            );
+        }
+        let mut img = analysis_image(nx, ny, data, dq, &facts, plate_scale_mas)?;
+        assumptions.extend(facts.assumed);
+        let mode = fallback.analysis.flat_field;
+        match &provenance {
+            Some((c, _)) => img.flat_field(c, mode),
+            None if mode != crate::config::FlatField::Uncalibrated => assumptions.push(
+                "analysis.flat_field is calibrated, but a non-jsim image has no calibration flat here: \
+                 analysed without flat-fielding"
+                    .to_string(),
+            ),
+            None => {}
+        }
+        Ok(Self {
+            img,
+            truth,
+            provenance,
+            plate_scale_mas,
+            assumptions,
+        })
+    }
+}
+
+/// An image in ADU as a front end holds it, with what its header says.
+#[derive(Debug, Clone)]
+pub struct ImageParts<'a> {
+    pub nx: usize,
+    pub ny: usize,
+    /// Pixel values (ADU), row-major: `data[y * nx + x]`.
+    pub data: &'a [f32],
+    /// The DQ plane, when there is one.
+    pub dq: Option<&'a [u8]>,
+    pub facts: ImageFacts,
+    /// The PLTSCALE header [mas/px], when there is one.
+    pub plate_scale_header_mas: Option<f64>,
+}
