@@ -1,0 +1,128 @@
+"""Type stubs of the jsim module (the Rust extension jsim._jsim and its Python wrapper)."""
+
+from os import PathLike
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, Union
+
+import numpy as np
+import numpy.typing as npt
+
+__version__: str
+COUNTERMEASURES: str
+"""The countermeasure names: none, yzones[:K], yzones-shared[:K], plate-affine[@R], plate-poly:N[@R]
+(R: stack (default), catalogue, oracle), telemetry, exact-epsf."""
+
+Table = Dict[str, Union[npt.NDArray[np.float64], npt.NDArray[np.int64], List[str]]]
+ConfigValue = Union[bool, int, float, str, Sequence[Union[bool, int, float, str]]]
+
+class Config:
+    """The simulator's configuration (the TOML of ``jsim --config``)."""
+
+    @staticmethod
+    def default() -> Config:
+        """The default configuration: the paper's scene (400 stars, Hw 12.5, J − H = 2), realistic
+        ACE, rolling readout, 11 images."""
+    @staticmethod
+    def from_toml(path_or_str: Union[str, PathLike[str]]) -> Config:
+        """From a TOML file (a path, or a str naming an existing file) or TOML text; ValueError names a
+        bad field."""
+    def set(self, field: str, value: ConfigValue) -> None:
+        """Set one field by dotted path (``"ace.sigma_mas"``, ``"ace.modes.0.freq_hz"``); ValueError
+        names an unknown field or a value of the wrong kind. Ranges are checked by ``validate()`` or
+        when a Session is made."""
+    def get(self, field: str) -> Any:
+        """The value of one field by dotted path."""
+    def validate(self) -> None:
+        """Check every range; ValueError names the first bad field and its allowed range."""
+    def to_toml(self) -> str:
+        """The configuration as TOML."""
+    def hash(self) -> str:
+        """The CONFHASH header: SHA-256 of the TOML, 16 hex digits."""
+    def copy(self) -> Config: ...
+
+class Exposure:
+    """One simulated exposure."""
+
+    @property
+    def image(self) -> Union[npt.NDArray[np.uint16], npt.NDArray[np.float32]]:
+        """ADU as the FITS file stores it (uint16 when digitised with ≤ 16 bits, else float32), shape
+        (ny, nx), ``image[y, x]``; handed over without a copy."""
+    @property
+    def dq(self) -> npt.NDArray[np.uint8]:
+        """Data-quality bits, shape (ny, nx): 1 border, 2 full well, 4 ADC high, 8 ADC low."""
+    @property
+    def truth(self) -> Table:
+        """The input catalogue: id, x, y [px], mag_hw, j_h, flux_e [e-], psf_fraction, t_start_s,
+        exptime_s, jitter_dx, jitter_dy [px]."""
+    @property
+    def header(self) -> Dict[str, Union[float, int, str]]:
+        """The primary header cards (GAIN e-/ADU, RDNOISE e-, SEED, …)."""
+    @property
+    def ace(self) -> Dict[str, npt.NDArray[np.float64]]:
+        """The attitude during the exposure: t_s, x_mas, y_mas."""
+    @property
+    def index(self) -> int: ...
+    @property
+    def config(self) -> Config: ...
+    def write_fits(self, path: Union[str, PathLike[str]]) -> None:
+        """Write the FITS file ``jsim simulate`` writes (image, DQ, TRUTH, CONFIG)."""
+
+class Analysis:
+    """ePSF astrometry of one image."""
+
+    catalogue: Table
+    """x, y [px], flux_e, sky_e [e-], crlb_x_mas, crlb_y_mas, flags, truth_id (-1 unmatched), dx_mas,
+    dy_mas (fitted − true)."""
+    summary: Dict[str, Any]
+    """The report of summary.json: accuracy_mas (std of fitted − true, combined), accuracy_x_mas,
+    accuracy_y_mas, crlb_median_mas, accuracy_over_crlb, n_detected, n_used, …"""
+    assumptions: List[str]
+    epsf: npt.NDArray[np.float64]
+    epsf_oversampling: int
+    countermeasure: str
+    plate_scale_mas: float
+
+class Session:
+    """An engine session on one configuration."""
+
+    def __init__(self, config: Optional[Config] = None, backend: str = "auto") -> None:
+        """``backend``: "auto" (GPU if present, else CPU with a RuntimeWarning), "cpu" or "gpu".
+        ValueError names a bad configuration field."""
+    @property
+    def config(self) -> Config: ...
+    def simulate(self, image: int = 0) -> Exposure:
+        """Simulate exposure ``image`` (0 ≤ image < fidelity.images): the image ``jsim simulate``
+        writes for the same configuration and seed. Releases the GIL."""
+    def psf(self, j_minus_h: Optional[float] = None) -> Tuple[npt.NDArray[np.float64], int]:
+        """The polychromatic PSF at the field centre: (table of flux fraction per cell, cells per px)."""
+    def ace(self) -> Dict[str, npt.NDArray[np.float64]]:
+        """The dataset's ACE series: t_s [s], x_mas, y_mas [mas]."""
+    def analyze(
+        self,
+        image: Union[Exposure, npt.ArrayLike],
+        header: Optional[Dict[str, Union[float, int, str]]] = None,
+        *,
+        dq: Optional[npt.NDArray[np.uint8]] = None,
+        truth: Optional[Table] = None,
+        config: Optional[Config] = None,
+        countermeasure: str = "none",
+        epsf_zones: Optional[int] = None,
+    ) -> Analysis:
+        """ePSF astrometry of one image (``jsim analyze``): an Exposure, or a 2-D ADU array with its
+        header (GAIN, RDNOISE or RNREAD+SAMPLING, BIASADU, SATURATE, PLTSCALE, IMAGEIDX), dq, truth
+        and the config it was simulated with. TypeError for a non-numeric dtype, ValueError for a
+        shape that is not 2-D."""
+    def predict(self, countermeasures: Union[str, Sequence[str], None] = None) -> Dict[str, float]:
+        """The instant predictor: expected accuracy [mas] per countermeasure."""
+
+def experiment(
+    config: Optional[Config] = None,
+    *,
+    aces: Optional[Sequence[str]] = None,
+    readouts: Optional[Sequence[str]] = None,
+    mags: Optional[Sequence[float]] = None,
+    countermeasures: Union[str, Sequence[str], None] = None,
+    progress: Optional[Callable[[int, int], Any]] = None,
+    as_frame: Optional[bool] = None,
+) -> Any:
+    """The paper's experiment (``jsim experiment``): rows as a pandas DataFrame when pandas is installed
+    (``as_frame=None``), else a dict of arrays."""

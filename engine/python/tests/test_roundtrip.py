@@ -1,0 +1,128 @@
+"""Python and the CLI give the same files and the same analysis: FITS round trips through astropy, the
+header cards, and `analyze` through Python against `jsim analyze` on the written file."""
+
+import json
+import subprocess
+
+import numpy as np
+from astropy.io import fits
+
+import jsim
+
+
+def test_write_fits_reads_back_in_astropy_as_the_image(exposure, tmp_path):
+    path = tmp_path / "img.fits"
+    exposure.write_fits(path)
+    with fits.open(path) as h:
+        assert h[0].data.dtype == exposure.image.dtype
+        assert h[0].data.shape == exposure.image.shape
+        np.testing.assert_array_equal(h[0].data, exposure.image)
+        np.testing.assert_array_equal(h["DQ"].data, exposure.dq)
+        truth = h["TRUTH"].data
+        for name, col in exposure.truth.items():
+            np.testing.assert_array_equal(truth[name], col)
+        for key, value in exposure.header.items():
+            got = h[0].header[key]
+            if isinstance(value, float):
+                assert got == np.float64(value) or abs(got - value) <= 1e-14 * abs(value), key
+            else:
+                assert got == value, key
+        assert h[0].header["SEED"] == exposure.config.get("seed")
+        assert h[0].header["IMAGEIDX"] == exposure.index
+
+
+def test_the_image_is_handed_over_without_a_copy(exposure):
+    img = exposure.image
+    assert not img.flags.owndata, "the array must wrap the engine's buffer"
+    assert img.base is not None
+    assert img is exposure.image, "the same array every time"
+    assert img.flags.c_contiguous
+
+
+def read_catalogue(path):
+    data = np.genfromtxt(path, delimiter=",", names=True)
+    return {name: data[name] for name in data.dtype.names}
+
+
+def test_analyze_in_python_equals_jsim_analyze_on_the_file(session, exposure, tmp_path, jsim_bin):
+    path = tmp_path / "img.fits"
+    exposure.write_fits(path)
+    for cm in ["none", "plate-poly:3@oracle"]:
+        out = tmp_path / f"an-{cm.replace(':', '_').replace('@', '_')}"
+        subprocess.run(
+            [jsim_bin, "analyze", "--image", str(path), "--countermeasure", cm, "--out", str(out)],
+            check=True,
+            capture_output=True,
+        )
+        cli = read_catalogue(out / "catalogue.csv")
+        summary = json.loads((out / "summary.json").read_text())
+        py = session.analyze(exposure, countermeasure=cm)
+        assert set(cli) == set(py.catalogue)
+        for name in cli:
+            np.testing.assert_array_equal(py.catalogue[name], cli[name], err_msg=name)
+        for key in ["accuracy_mas", "accuracy_x_mas", "crlb_median_mas", "n_used", "n_detected"]:
+            assert py.summary[key] == summary["report"][key], key
+        assert py.assumptions == summary["assumptions"] == []
+        assert py.summary["countermeasure"] == cm
+
+
+def test_an_array_with_its_header_analyses_as_the_exposure(session, exposure):
+    by_exposure = session.analyze(exposure, countermeasure="none")
+    by_array = session.analyze(
+        np.asarray(exposure.image, dtype=np.float64),
+        exposure.header,
+        dq=exposure.dq,
+        truth=exposure.truth,
+        config=exposure.config,
+    )
+    for name, col in by_exposure.catalogue.items():
+        np.testing.assert_array_equal(by_array.catalogue[name], col, err_msg=name)
+    assert by_array.summary == by_exposure.summary
+
+
+def test_an_array_without_a_header_says_what_it_assumed(session, exposure):
+    a = session.analyze(exposure.image.astype(np.float32), truth=exposure.truth)
+    joined = " ".join(a.assumptions)
+    for key in ["GAIN", "RDNOISE", "BIASADU", "PLTSCALE", "CONFIG"]:
+        assert key in joined, key
+    assert np.isfinite(a.summary["accuracy_mas"])
+
+
+def test_the_psf_is_the_cli_psf(session, tmp_path, jsim_bin):
+    table, cells_per_px = session.psf()
+    n = table.shape[0]
+    assert table.shape == (n, n) and n % 2 == 1
+    assert np.unravel_index(np.argmax(table), table.shape) == (n // 2, n // 2)
+    # encircled energy inside a ±10 px table of an f/… telescope: most, never all, of the light
+    assert 0.9 < table.sum() < 1.0
+    toml = tmp_path / "cfg.toml"
+    toml.write_text(session.config.to_toml())
+    subprocess.run(
+        [jsim_bin, "psf", "--config", str(toml), "--out", str(tmp_path / "psf.fits")],
+        check=True,
+        capture_output=True,
+    )
+    with fits.open(tmp_path / "psf.fits") as h:
+        np.testing.assert_array_equal(h[0].data, table)
+        assert h[0].header["OVERSAMP"] == cells_per_px
+
+
+def test_experiment_rows_equal_the_cli(cfg, tmp_path, jsim_bin):
+    rows = jsim.experiment(
+        cfg, aces=["gaussian"], mags=[13.0], countermeasures="none,plate-poly:3", as_frame=False
+    )
+    assert list(rows["countermeasure"]) == ["none", "plate-poly:3"]
+    toml = tmp_path / "cfg.toml"
+    toml.write_text(cfg.to_toml())
+    out = tmp_path / "exp"
+    subprocess.run(
+        [jsim_bin, "experiment", "--config", str(toml), "--aces", "gaussian", "--mags", "13",
+         "--countermeasures", "none,plate-poly:3", "--out", str(out)],
+        check=True,
+        capture_output=True,
+    )
+    cli = np.genfromtxt(out / "experiment.csv", delimiter=",", names=True, dtype=None, encoding="utf-8")
+    for k in range(2):
+        for key in ["accuracy_mas", "sem_mas", "crlb_mas", "predicted_mas"]:
+            assert rows[key][k] == cli[key][k], key
+        assert rows["n_images"][k] == cli["n_images"][k] == 3
