@@ -223,9 +223,10 @@ pub fn bench_config(base: &Config) -> Config {
     c
 }
 
-/// A sweep of one knob: `settings` are (label, configuration); the last one is the reference.
+/// A sweep of one knob: `settings` are (label, configuration); the last one is the reference. Each setting
+/// runs in a fresh session, so its time includes the PSFs and kernels it needs (a shared session would
+/// hand a setting equal to an earlier one its cached PSFs for free).
 pub fn knob_sweep(
-    session: &Session,
     group: &str,
     settings: &[(String, Config)],
     astro: bool,
@@ -233,7 +234,7 @@ pub fn knob_sweep(
     let mut runs = Vec::new();
     for (label, cfg) in settings {
         let t0 = Instant::now();
-        let sim = session.new_simulator(cfg)?;
+        let sim = Session::new().new_simulator(cfg)?;
         let (stamps, t_int) = integrate_stamps(&sim, cfg.fidelity.method, &Integrator::Cpu, None)?;
         let setup = t0.elapsed().as_secs_f64() - t_int;
         let pos = if astro {

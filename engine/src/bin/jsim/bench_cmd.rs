@@ -61,7 +61,7 @@ pub fn bench(a: &BenchArgs) -> Result<()> {
     if has("knobs") {
         for (group, settings, astro) in bench::knob_settings(&cfg, a.quick) {
             eprintln!("bench: {group} …");
-            rows.extend(bench::knob_sweep(&session, &group, &settings, astro)?);
+            rows.extend(bench::knob_sweep(&group, &settings, astro)?);
             save(&rows)?;
         }
     }
