@@ -2,6 +2,7 @@
 TypeError/ValueError (never a crash), the GIL released and Ctrl-C honoured between images."""
 
 import _thread
+import signal
 import sys
 import threading
 
@@ -144,15 +145,21 @@ def test_ctrl_c_stops_an_experiment_between_images():
         if done == 1:
             _thread.interrupt_main()  # a Ctrl-C arriving while the engine works on image 2
 
-    with pytest.raises(KeyboardInterrupt):
-        jsim.experiment(
-            small_config(),
-            aces=["gaussian"],
-            mags=[12.5, 13.0],
-            countermeasures="none",
-            progress=progress,
-            as_frame=False,
-        )
+    # Python's own Ctrl-C handler (a process started in the background, as under CI, inherits SIGINT
+    # ignored, and then Python installs none and interrupt_main does nothing)
+    old = signal.signal(signal.SIGINT, signal.default_int_handler)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            jsim.experiment(
+                small_config(),
+                aces=["gaussian"],
+                mags=[12.5, 13.0],
+                countermeasures="none",
+                progress=progress,
+                as_frame=False,
+            )
+    finally:
+        signal.signal(signal.SIGINT, old)
     assert calls and calls[-1] < 6, calls
 
 
