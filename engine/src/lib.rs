@@ -6,6 +6,7 @@
 //! ```text
 //! foundations  numerics, rng, digest, photometry        maths, seeded streams, content digests, magnitudes
 //! config       the configuration: types, defaults, validation (imports no physics)
+//! sky          pointing, TAN (+SIP) world coordinates of an array (the CDS `wcs` crate), FITS WCS keywords
 //! stages       scene ─► optics ─► readout ─► jitter ─► integrate (kernel, track, cpu, gpu) ─► detector
 //!              stars    PSF       windows    ACE       pixel integration, CPU or wgpu        flat, noise, ADC
 //! image        simulate: one dataset's exposures (image + truth)
@@ -49,6 +50,7 @@ pub mod rng;
 pub mod scene;
 pub mod session;
 pub mod simulate;
+pub mod sky;
 pub mod studies;
 #[cfg(any(test, feature = "testkit"))]
 pub mod testkit;
