@@ -6,7 +6,7 @@
 //! ```text
 //! foundations  numerics, rng, digest, photometry        maths, seeded streams, content digests, magnitudes
 //! config       the configuration: types, defaults, validation (imports no physics)
-//! sky          pointing, TAN (+SIP) world coordinates of an array (the CDS `wcs` crate), FITS WCS keywords
+//! sky          pointing, TAN (+SIP) world coordinates of an array (the CDS `wcs` crate), the 2 × 2 focal plane
 //! stages       scene ─► optics ─► readout ─► jitter ─► integrate (kernel, track, cpu, gpu) ─► detector
 //!              stars    PSF       windows    ACE       pixel integration, CPU or wgpu        flat, noise, ADC
 //! image        simulate: one dataset's exposures (image + truth)

@@ -6,6 +6,7 @@
 //! header cards the image files carry — with optional SIP distortion polynomials (Shupe et al. 2005) on the
 //! pixel side. Angles are degrees in the configuration and the headers, radians inside.
 
+pub mod focal_plane;
 pub mod wcs;
 
 /// Where the optical axis points and how the focal plane is turned on the sky.
