@@ -31,6 +31,29 @@ def test_write_fits_reads_back_in_astropy_as_the_image(exposure, tmp_path):
         assert h[0].header["IMAGEIDX"] == exposure.index
 
 
+def test_the_image_wcs_reads_in_astropy_without_warnings(exposure, tmp_path):
+    import warnings
+
+    from astropy.wcs import WCS
+
+    path = tmp_path / "img.fits"
+    exposure.write_fits(path)
+    with fits.open(path) as h, warnings.catch_warnings():
+        warnings.simplefilter("error")
+        w = WCS(h[0].header)
+    n = exposure.image.shape[0]
+    cfg = exposure.config
+    # the optical axis is the array centre; the pixel scale is the plate scale; north is +y, east is −x
+    ra, dec = w.all_pix2world([[(n - 1) / 2, (n - 1) / 2]], 0)[0]
+    assert abs(ra - cfg.get("sky.ra_deg")) < 1e-10 and abs(dec - cfg.get("sky.dec_deg")) < 1e-10
+    (x0, y0), (xn, yn), (xe, ye) = w.all_world2pix(
+        [[ra, dec], [ra, dec + 0.01], [ra + 0.01, dec]], 0
+    )
+    scale_mas = exposure.header["PLTSCALE"]
+    assert abs((yn - y0) - 36000.0 / scale_mas) < 1e-3 and abs(xn - x0) < 1e-6
+    assert xe < x0 and abs(ye - y0) < 0.1
+
+
 def test_the_image_is_handed_over_without_a_copy(exposure):
     img = exposure.image
     assert not img.flags.owndata, "the array must wrap the engine's buffer"

@@ -55,6 +55,7 @@ pub struct Config {
     pub ace: Ace,
     pub photometry: Photometry,
     pub scene: Scene,
+    pub sky: Sky,
     pub fidelity: Fidelity,
     pub analysis: Analysis,
 }
@@ -71,6 +72,7 @@ impl Default for Config {
             ace: Ace::default(),
             photometry: Photometry::default(),
             scene: Scene::default(),
+            sky: Sky::default(),
             fidelity: Fidelity::default(),
             analysis: Analysis::default(),
         }
@@ -625,6 +627,29 @@ impl Default for Ace {
             sample_interval_ms: 0.15,
             span_s: 360.0,
             first_exposure_start_s: 0.0,
+        }
+    }
+}
+
+/// Where the telescope points: the images' world coordinate system (`engine::sky`). The default is the
+/// Galactic centre (Sgr A*, ICRS), JASMINE's survey field, with the detector's +y to the north.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Sky {
+    /// Right ascension of the optical axis (ICRS), degrees, 0 ≤ RA < 360.
+    pub ra_deg: f64,
+    /// Declination of the optical axis (ICRS), degrees, −90 … 90.
+    pub dec_deg: f64,
+    /// Position angle of the detector's +y axis, degrees east of north.
+    pub pa_deg: f64,
+}
+
+impl Default for Sky {
+    fn default() -> Self {
+        Self {
+            ra_deg: 266.416_8,
+            dec_deg: -29.007_8,
+            pa_deg: 0.0,
         }
     }
 }

@@ -309,6 +309,23 @@ impl Config {
             self.photometry.zero_point_e_per_s,
         )?;
 
+        let sky = &self.sky;
+        if !(sky.ra_deg >= 0.0 && sky.ra_deg < 360.0) {
+            return Err(invalid(
+                "sky.ra_deg",
+                sky.ra_deg,
+                "must be in [0, 360) degrees",
+            ));
+        }
+        if !(-90.0..=90.0).contains(&sky.dec_deg) {
+            return Err(invalid(
+                "sky.dec_deg",
+                sky.dec_deg,
+                "must be in -90..=90 degrees",
+            ));
+        }
+        check_finite("sky.pa_deg", sky.pa_deg)?;
+
         let s = &self.scene;
         check_finite("scene.mag_hw", s.mag_hw)?;
         if !(-5.0..=40.0).contains(&s.mag_hw) {

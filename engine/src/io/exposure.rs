@@ -5,6 +5,7 @@ use super::csv::{self, Cell};
 use super::fits::{self, Card, Column, Hdu, Pixels};
 use crate::config::{AceCase, Config};
 use crate::simulate::{Exposure, Simulator, TruthRow};
+use crate::sky::wcs::KeyValue;
 use std::path::{Path, PathBuf};
 
 /// Paths written for one exposure.
@@ -37,7 +38,7 @@ pub fn headers(sim: &Simulator, exp: &Exposure) -> Vec<Card> {
         .first()
         .map(|t| t.modelled_fraction)
         .unwrap_or(1.0);
-    vec![
+    let mut cards = vec![
         Card::s(
             "BUNIT",
             if d.digitise { "ADU" } else { "ADU (float)" },
@@ -169,7 +170,19 @@ pub fn headers(sim: &Simulator, exp: &Exposure) -> Vec<Card> {
             "0-based, integer = pixel centre",
             "TRUTH x,y convention (ds9: +1)",
         ),
-    ]
+    ];
+    // the world coordinate system (config validated: it always exists)
+    if let Ok(w) = crate::sky::single_array_wcs(c) {
+        cards.extend(w.keywords().into_iter().map(|k| {
+            let comment = k.comment;
+            match k.value {
+                KeyValue::F(v) => Card::f(&k.key, v, comment),
+                KeyValue::I(v) => Card::i(&k.key, v, comment),
+                KeyValue::S(v) => Card::s(&k.key, v, comment),
+            }
+        }));
+    }
+    cards
 }
 
 /// The TRUTH table's columns ([`TRUTH_HEADER`]).

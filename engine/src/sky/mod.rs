@@ -9,6 +9,23 @@
 pub mod focal_plane;
 pub mod wcs;
 
+use crate::config::Config;
+
+/// The WCS of the single array of `cfg` (today's scene): the optical axis at the array's centre, the
+/// pointing of `cfg.sky`, no distortion.
+pub fn single_array_wcs(cfg: &Config) -> Result<wcs::ArrayWcs, String> {
+    let n = cfg.instrument.detector_px;
+    let centre = (n as f64 - 1.0) / 2.0;
+    wcs::ArrayWcs::new(
+        &Pointing::from(&cfg.sky),
+        0.0,
+        cfg.instrument.plate_scale_mas(),
+        [centre, centre],
+        [n, n],
+        None,
+    )
+}
+
 /// Where the optical axis points and how the focal plane is turned on the sky.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Pointing {
@@ -20,8 +37,19 @@ pub struct Pointing {
     pub pa_deg: f64,
 }
 
+impl From<&crate::config::Sky> for Pointing {
+    fn from(s: &crate::config::Sky) -> Self {
+        Self {
+            ra_deg: s.ra_deg,
+            dec_deg: s.dec_deg,
+            pa_deg: s.pa_deg,
+        }
+    }
+}
+
 impl Pointing {
-    /// The Galactic centre (Sgr A*, ICRS: 266.4168°, −29.0078°) with the focal plane's +y to the north.
+    /// The Galactic centre (Sgr A*, ICRS: 266.4168°, −29.0078°) with the focal plane's +y to the north (the
+    /// configuration's default, `config::Sky`).
     pub const GALACTIC_CENTRE: Pointing = Pointing {
         ra_deg: 266.416_8,
         dec_deg: -29.007_8,
