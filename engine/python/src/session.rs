@@ -160,8 +160,11 @@ impl PySession {
     }
 
     /// Simulate exposure `image` (0 ≤ image < `fidelity.images`) of the dataset: the same image as `jsim
-    /// simulate` writes to `img_NNN.fits` for the same configuration and seed. Releases the GIL; the first
-    /// call also builds the PSFs, the ACE series and the scene (seconds), later calls reuse them.
+    /// simulate` writes to `img_NNN.fits` for the same configuration and seed. Returns a `jsim.Exposure`:
+    /// `image` in ADU (uint16 when digitised), `dq` bits, `truth` positions in pixels (0-based, integer =
+    /// pixel centre) and fluxes in electrons, `header` cards (GAIN e⁻/ADU, RDNOISE e⁻, EXPTIME s, …), `ace` in
+    /// mas against seconds. Releases the GIL; the first call also builds the PSFs, the ACE series and the
+    /// scene (seconds), later calls reuse them.
     #[pyo3(signature = (image = 0))]
     fn simulate(&self, py: Python<'_>, image: usize) -> PyResult<PyExposure> {
         let n = self.cfg.fidelity.images;

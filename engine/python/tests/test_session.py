@@ -187,5 +187,7 @@ def test_experiment_as_frame_only_with_pandas(cfg):
 def test_help_states_the_units():
     assert "uint16" in jsim.Exposure.image.__doc__
     assert "fidelity.images" in jsim.Session.simulate.__doc__
+    for unit in ["ADU", "pixels", "electrons", "mas"]:
+        assert unit in jsim.Session.simulate.__doc__, unit
     assert "mas" in jsim.Session.predict.__doc__
     assert "_mas" in jsim.__doc__
