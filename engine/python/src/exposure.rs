@@ -42,7 +42,12 @@ impl PyExposure {
         };
         let dq = convert::plane(py, std::mem::take(&mut exp.image.dq), n, n)?;
         exp.star_e = Vec::new();
-        let truth = convert::table(py, &files::TRUTH_HEADER, &files::truth_rows(&exp.truth))?;
+        let wcs = engine::sky::single_array_wcs(&sim.cfg).ok();
+        let truth = convert::table(
+            py,
+            &files::truth_header(),
+            &files::truth_rows(&exp.truth, wcs.as_ref()),
+        )?;
         let header = PyDict::new(py);
         for c in files::headers(&sim, &exp) {
             match c.value {
@@ -185,7 +190,8 @@ impl PyExposure {
 
     /// The input catalogue: `id, x, y` (px, 0-based, integer = pixel centre), `mag_hw, j_h, flux_e` (e⁻
     /// delivered during the star's window), `psf_fraction, t_start_s, exptime_s, jitter_dx, jitter_dy`
-    /// (px: the mean ACE displacement over the window) — a dict of 1-D arrays.
+    /// (px: the mean ACE displacement over the window), `ra_deg, dec_deg` (through the image's WCS) — a
+    /// dict of 1-D arrays.
     #[getter]
     fn truth(&self, py: Python<'_>) -> Py<PyDict> {
         self.truth.clone_ref(py)

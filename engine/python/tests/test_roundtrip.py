@@ -49,6 +49,12 @@ def test_the_image_wcs_reads_in_astropy_without_warnings(exposure, tmp_path):
     (x0, y0), (xn, yn), (xe, ye) = w.all_world2pix(
         [[ra, dec], [ra, dec + 0.01], [ra + 0.01, dec]], 0
     )
+    # every star's RA, Dec in the truth is astropy's sky position of its pixel position (< 1 µas)
+    t = exposure.truth
+    sky = w.all_pix2world(np.column_stack([t["x"], t["y"]]), 0)
+    cosd = np.cos(np.radians(sky[:, 1]))
+    err_uas = np.hypot((t["ra_deg"] - sky[:, 0]) * cosd, t["dec_deg"] - sky[:, 1]) * 3.6e9
+    assert err_uas.max() < 1.0, err_uas.max()
     scale_mas = exposure.header["PLTSCALE"]
     assert abs((yn - y0) - 36000.0 / scale_mas) < 1e-3 and abs(xn - x0) < 1e-6
     assert xe < x0 and abs(ye - y0) < 0.1

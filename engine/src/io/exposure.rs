@@ -5,7 +5,7 @@ use super::csv::{self, Cell};
 use super::fits::{self, Card, Column, Hdu, Pixels};
 use crate::config::{AceCase, Config};
 use crate::simulate::{Exposure, Simulator, TruthRow};
-use crate::sky::wcs::KeyValue;
+use crate::sky::wcs::{ArrayWcs, KeyValue};
 use std::path::{Path, PathBuf};
 
 /// Paths written for one exposure.
@@ -185,30 +185,36 @@ pub fn headers(sim: &Simulator, exp: &Exposure) -> Vec<Card> {
     cards
 }
 
-/// The TRUTH table's columns ([`TRUTH_HEADER`]).
-pub fn truth_columns(t: &[TruthRow]) -> Vec<Column> {
-    vec![
-        Column::I64("id".into(), t.iter().map(|r| r.id as i64).collect()),
-        Column::F64("x".into(), t.iter().map(|r| r.x_px).collect()),
-        Column::F64("y".into(), t.iter().map(|r| r.y_px).collect()),
-        Column::F64("mag_hw".into(), t.iter().map(|r| r.mag_hw).collect()),
-        Column::F64("j_h".into(), t.iter().map(|r| r.j_minus_h).collect()),
-        Column::F64("flux_e".into(), t.iter().map(|r| r.flux_e).collect()),
-        Column::F64(
-            "psf_fraction".into(),
-            t.iter().map(|r| r.modelled_fraction).collect(),
-        ),
-        Column::F64("t_start_s".into(), t.iter().map(|r| r.t_start_s).collect()),
-        Column::F64("exptime_s".into(), t.iter().map(|r| r.exptime_s).collect()),
-        Column::F64(
-            "jitter_dx".into(),
-            t.iter().map(|r| r.jitter_dx_px).collect(),
-        ),
-        Column::F64(
-            "jitter_dy".into(),
-            t.iter().map(|r| r.jitter_dy_px).collect(),
-        ),
-    ]
+/// The TRUTH table's columns ([`truth_header`]).
+pub fn truth_columns(t: &[TruthRow], wcs: Option<&ArrayWcs>) -> Vec<Column> {
+    let rows = truth_rows(t, wcs);
+    truth_header()
+        .iter()
+        .enumerate()
+        .map(|(j, name)| {
+            if j == 0 {
+                Column::I64(
+                    (*name).into(),
+                    rows.iter()
+                        .map(|r| match r[j] {
+                            Cell::I(v) => v,
+                            _ => -1,
+                        })
+                        .collect(),
+                )
+            } else {
+                Column::F64(
+                    (*name).into(),
+                    rows.iter()
+                        .map(|r| match r[j] {
+                            Cell::F(v) => v,
+                            _ => f64::NAN,
+                        })
+                        .collect(),
+                )
+            }
+        })
+        .collect()
 }
 
 /// Columns of the truth CSV.
@@ -226,10 +232,26 @@ pub const TRUTH_HEADER: [&str; 11] = [
     "jitter_dy",
 ];
 
-/// The truth catalogue as rows of [`TRUTH_HEADER`].
-pub fn truth_rows(t: &[TruthRow]) -> Vec<Vec<Cell>> {
+/// The sky position columns the written truth tables add after [`TRUTH_HEADER`]: each star's RA and Dec
+/// (degrees, ICRS) through the image's WCS.
+pub const TRUTH_SKY: [&str; 2] = ["ra_deg", "dec_deg"];
+
+/// The columns of the written truth tables: [`TRUTH_HEADER`], then [`TRUTH_SKY`].
+pub fn truth_header() -> Vec<&'static str> {
+    TRUTH_HEADER
+        .iter()
+        .chain(TRUTH_SKY.iter())
+        .copied()
+        .collect()
+}
+
+/// The truth catalogue as rows of [`truth_header`] (the sky position NaN without a WCS).
+pub fn truth_rows(t: &[TruthRow], wcs: Option<&ArrayWcs>) -> Vec<Vec<Cell>> {
     t.iter()
         .map(|r| {
+            let (ra, dec) = wcs
+                .and_then(|w| w.pixel_to_sky(r.x_px, r.y_px))
+                .unwrap_or((f64::NAN, f64::NAN));
             vec![
                 Cell::I(r.id as i64),
                 Cell::F(r.x_px),
@@ -242,14 +264,16 @@ pub fn truth_rows(t: &[TruthRow]) -> Vec<Vec<Cell>> {
                 Cell::F(r.exptime_s),
                 Cell::F(r.jitter_dx_px),
                 Cell::F(r.jitter_dy_px),
+                Cell::F(ra),
+                Cell::F(dec),
             ]
         })
         .collect()
 }
 
-/// Write the truth catalogue as CSV.
-pub fn write_truth_csv(path: &Path, t: &[TruthRow]) -> Result<(), IoError> {
-    csv::write(path, &TRUTH_HEADER, &truth_rows(t))
+/// Write the truth catalogue as CSV ([`truth_header`]).
+pub fn write_truth_csv(path: &Path, t: &[TruthRow], wcs: Option<&ArrayWcs>) -> Result<(), IoError> {
+    csv::write(path, &truth_header(), &truth_rows(t, wcs))
 }
 
 /// The truth catalogue from its columns ([`TRUTH_HEADER`], in that order).
@@ -325,7 +349,10 @@ pub fn write_image_file(
             },
             Hdu::Table {
                 name: "TRUTH",
-                columns: truth_columns(&exp.truth),
+                columns: truth_columns(
+                    &exp.truth,
+                    crate::sky::single_array_wcs(&sim.cfg).ok().as_ref(),
+                ),
                 cards: vec![],
             },
             Hdu::Text {
@@ -350,6 +377,10 @@ pub fn write_exposure(
         None => Pixels::F32(&exp.image.adu),
     };
     write_image_file(&image, sim, exp, pixels, &exp.image.dq)?;
-    write_truth_csv(&truth_csv, &exp.truth)?;
+    write_truth_csv(
+        &truth_csv,
+        &exp.truth,
+        crate::sky::single_array_wcs(&sim.cfg).ok().as_ref(),
+    )?;
     Ok(ExposureFiles { image, truth_csv })
 }

@@ -52,7 +52,7 @@ class Exposure:
     @property
     def truth(self) -> Table:
         """The input catalogue: id, x, y [px], mag_hw, j_h, flux_e [e-], psf_fraction, t_start_s,
-        exptime_s, jitter_dx, jitter_dy [px]."""
+        exptime_s, jitter_dx, jitter_dy [px], ra_deg, dec_deg (through the image's WCS)."""
     @property
     def header(self) -> Dict[str, Union[float, int, str]]:
         """The primary header cards (GAIN e-/ADU, RDNOISE e-, SEED, …)."""
