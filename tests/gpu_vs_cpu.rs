@@ -68,6 +68,7 @@ fn gpu_matches_cpu_for_every_method_and_readout_over_a_full_exposure() {
         },
         kernel: kernel.clone(),
         psf: psf.clone(),
+        radius_px: 0,
     })
     .collect();
     for order in ReadoutOrder::ALL {

@@ -21,6 +21,10 @@ pub enum Stream {
     ReferenceCatalogue = 9,
     /// The calibration flat's own error (what the instrument team's flat field got wrong).
     CalibrationFlat = 10,
+    /// The mock bulge field's stars.
+    Bulge = 11,
+    /// Each array's own flat and noise streams (a derived seed per array of the quad focal plane).
+    Array = 12,
     Test = 99,
 }
 

@@ -13,7 +13,7 @@ use crate::integrate::Integrator;
 use crate::integrate::kernel::KernelCache;
 use crate::io::analysis_input::AnalysisInput;
 use crate::optics::PsfBank;
-use crate::simulate::{SimError, Simulator};
+use crate::simulate::{FocalPlaneSimulator, SimError, Simulator};
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex, MutexGuard};
 
@@ -88,6 +88,18 @@ impl Session {
     pub fn new_simulator(&self, cfg: &Config) -> Result<Simulator, SimError> {
         cfg.validate()?;
         Simulator::build(
+            cfg,
+            self.bank(cfg),
+            self.kernels.clone(),
+            self.integrator(cfg.fidelity.backend),
+        )
+    }
+
+    /// New simulators of every array of `cfg`'s focal plane (validated), on the session's bank, kernels and
+    /// integrator.
+    pub fn new_focal_plane(&self, cfg: &Config) -> Result<FocalPlaneSimulator, SimError> {
+        cfg.validate()?;
+        FocalPlaneSimulator::build(
             cfg,
             self.bank(cfg),
             self.kernels.clone(),

@@ -42,7 +42,7 @@ impl PyExposure {
         };
         let dq = convert::plane(py, std::mem::take(&mut exp.image.dq), n, n)?;
         exp.star_e = Vec::new();
-        let wcs = engine::sky::single_array_wcs(&sim.cfg).ok();
+        let wcs = sim.wcs();
         let truth = convert::table(
             py,
             &files::truth_header(),

@@ -6,8 +6,10 @@
 //! Here: the types and their defaults, and derived quantities. `text` reads and writes the TOML (load,
 //! overrides by dotted path, the hash), `validate` checks every field.
 
+mod sky;
 mod text;
 mod validate;
+pub use sky::{Bulge, FocalPlaneLayout, Layout, SipTerm, Sky};
 pub use validate::MAX_ACE_SIGMA_MAS;
 
 pub use text::DEFAULT_TOML;
@@ -56,6 +58,7 @@ pub struct Config {
     pub photometry: Photometry,
     pub scene: Scene,
     pub sky: Sky,
+    pub focal_plane: FocalPlaneLayout,
     pub fidelity: Fidelity,
     pub analysis: Analysis,
 }
@@ -73,6 +76,7 @@ impl Default for Config {
             photometry: Photometry::default(),
             scene: Scene::default(),
             sky: Sky::default(),
+            focal_plane: FocalPlaneLayout::default(),
             fidelity: Fidelity::default(),
             analysis: Analysis::default(),
         }
@@ -631,29 +635,6 @@ impl Default for Ace {
     }
 }
 
-/// Where the telescope points: the images' world coordinate system (`engine::sky`). The default is the
-/// Galactic centre (Sgr A*, ICRS), JASMINE's survey field, with the detector's +y to the north.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct Sky {
-    /// Right ascension of the optical axis (ICRS), degrees, 0 ≤ RA < 360.
-    pub ra_deg: f64,
-    /// Declination of the optical axis (ICRS), degrees, −90 … 90.
-    pub dec_deg: f64,
-    /// Position angle of the detector's +y axis, degrees east of north.
-    pub pa_deg: f64,
-}
-
-impl Default for Sky {
-    fn default() -> Self {
-        Self {
-            ra_deg: 266.416_8,
-            dec_deg: -29.007_8,
-            pa_deg: 0.0,
-        }
-    }
-}
-
 /// Photometric zero point (SPEC §5).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -677,8 +658,11 @@ impl Default for Photometry {
 pub enum SceneKind {
     /// The paper's regular grid (SPEC §6).
     Grid,
-    /// A CSV catalogue `x,y,hw,j_h` (pixels).
+    /// A catalogue (CSV or FITS table): `x, y` in pixels of the single array, or `ra, dec` on the sky;
+    /// `hw, j_h` or `j, h`; optional `a_hw` extinction (`scene::catalogue`).
     Catalogue,
+    /// The built-in mock Galactic-bulge field on the sky (`scene.bulge`, `scene::bulge`).
+    Bulge,
 }
 
 /// Scene (SPEC §6).
@@ -693,6 +677,8 @@ pub struct Scene {
     pub mag_hw: f64,
     pub j_minus_h: f64,
     pub catalogue: Option<PathBuf>,
+    /// The mock bulge field (`kind = "bulge"`).
+    pub bulge: Bulge,
 }
 
 impl Default for Scene {
@@ -705,6 +691,7 @@ impl Default for Scene {
             mag_hw: 12.5,
             j_minus_h: 2.0,
             catalogue: None,
+            bulge: Bulge::default(),
         }
     }
 }
@@ -759,6 +746,14 @@ pub struct Fidelity {
     pub backend: Backend,
     /// Add the PSF halo (static, at 1 cell per pixel) out to this radius beyond the PSF table; 0 = off.
     pub halo_radius_px: usize,
+    /// Stars share a PSF when their J − H round to the same multiple of this (mag); 0 = each colour its
+    /// own PSF (to 1 mmag). The truth keeps every star's own colour; `jsim bench` reports the centroid
+    /// and shape error the binning costs.
+    pub colour_step_mag: f64,
+    /// Each star's stamp reaches as far as its PSF puts more than this many electrons in a pixel
+    /// (bright stars further, into the halo table when `halo_radius_px` > 0; faint ones less); 0 = every
+    /// stamp the kernel's full reach. `jsim bench` reports the time and the light it drops.
+    pub wing_threshold_e: f64,
 }
 
 impl Default for Fidelity {
@@ -771,6 +766,8 @@ impl Default for Fidelity {
             method: Method::Fast,
             backend: Backend::Auto,
             halo_radius_px: 0,
+            colour_step_mag: 0.05,
+            wing_threshold_e: 0.0,
         }
     }
 }

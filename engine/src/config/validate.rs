@@ -326,6 +326,43 @@ impl Config {
         }
         check_finite("sky.pa_deg", sky.pa_deg)?;
 
+        let fp = &self.focal_plane;
+        check_nonneg("focal_plane.gap_px", fp.gap_px)?;
+        if fp.gap_px > 10.0 * self.instrument.detector_px as f64 {
+            return Err(invalid(
+                "focal_plane.gap_px",
+                fp.gap_px,
+                "must be at most 10 × instrument.detector_px",
+            ));
+        }
+        for (k, r) in fp.rotations_deg.iter().enumerate() {
+            if ![0.0, 90.0, 180.0, 270.0].contains(r) {
+                return Err(invalid(
+                    &format!("focal_plane.rotations_deg[{k}]"),
+                    r,
+                    "must be 0, 90, 180 or 270",
+                ));
+            }
+        }
+        for (name, terms) in [
+            ("focal_plane.sip_a", &fp.sip_a),
+            ("focal_plane.sip_b", &fp.sip_b),
+        ] {
+            if terms.len() > 64 {
+                return Err(invalid(name, terms.len(), "at most 64 terms"));
+            }
+            for (k, t) in terms.iter().enumerate() {
+                if !(2..=9).contains(&(t.p + t.q)) {
+                    return Err(invalid(
+                        &format!("{name}[{k}]"),
+                        format!("p = {}, q = {}", t.p, t.q),
+                        "p + q must be 2 … 9 (first-order terms belong to the CD matrix)",
+                    ));
+                }
+                check_finite(&format!("{name}[{k}].value"), t.value)?;
+            }
+        }
+
         let s = &self.scene;
         check_finite("scene.mag_hw", s.mag_hw)?;
         if !(-5.0..=40.0).contains(&s.mag_hw) {
@@ -338,6 +375,57 @@ impl Config {
         check_range_usize("scene.grid_n", s.grid_n, 1, 1000)?;
         check_pos("scene.grid_spacing_px", s.grid_spacing_px)?;
         check_nonneg("scene.grid_random_px", s.grid_random_px)?;
+        let b = &s.bulge;
+        check_nonneg("scene.bulge.density_per_arcmin2", b.density_per_arcmin2)?;
+        if b.density_per_arcmin2 > 1.0e4 {
+            return Err(invalid(
+                "scene.bulge.density_per_arcmin2",
+                b.density_per_arcmin2,
+                "must be at most 1e4 stars per arcmin² (ten per pixel)",
+            ));
+        }
+        for (name, v) in [
+            ("scene.bulge.hw_min", b.hw_min),
+            ("scene.bulge.hw_max", b.hw_max),
+        ] {
+            check_finite(name, v)?;
+            if !(-5.0..=35.0).contains(&v) {
+                return Err(invalid(name, v, "must be in -5..=35"));
+            }
+        }
+        if b.hw_min >= b.hw_max {
+            return Err(invalid(
+                "scene.bulge.hw_min",
+                b.hw_min,
+                "must be < scene.bulge.hw_max",
+            ));
+        }
+        check_finite("scene.bulge.lf_slope", b.lf_slope)?;
+        if !(-2.0..=2.0).contains(&b.lf_slope) {
+            return Err(invalid(
+                "scene.bulge.lf_slope",
+                b.lf_slope,
+                "must be in -2..=2",
+            ));
+        }
+        for (name, v) in [
+            ("scene.bulge.jh_mean", b.jh_mean),
+            ("scene.bulge.jh_min", b.jh_min),
+            ("scene.bulge.jh_max", b.jh_max),
+        ] {
+            check_finite(name, v)?;
+            if !(-1.0..=10.0).contains(&v) {
+                return Err(invalid(name, v, "must be in -1..=10"));
+            }
+        }
+        check_nonneg("scene.bulge.jh_sigma", b.jh_sigma)?;
+        if b.jh_min > b.jh_max {
+            return Err(invalid(
+                "scene.bulge.jh_min",
+                b.jh_min,
+                "must be ≤ scene.bulge.jh_max",
+            ));
+        }
         if s.kind == SceneKind::Catalogue && s.catalogue.is_none() {
             return Err(invalid(
                 "scene.catalogue",
@@ -352,6 +440,22 @@ impl Config {
         check_range_usize("fidelity.subpixels", f.subpixels, 1, 64)?;
         check_range_usize("fidelity.time_stride", f.time_stride, 1, 1_000_000)?;
         check_range_usize("fidelity.halo_radius_px", f.halo_radius_px, 0, 1024)?;
+        check_nonneg("fidelity.colour_step_mag", f.colour_step_mag)?;
+        if f.colour_step_mag > 1.0 {
+            return Err(invalid(
+                "fidelity.colour_step_mag",
+                f.colour_step_mag,
+                "must be in 0..=1 mag",
+            ));
+        }
+        check_nonneg("fidelity.wing_threshold_e", f.wing_threshold_e)?;
+        if f.wing_threshold_e > 1.0e6 {
+            return Err(invalid(
+                "fidelity.wing_threshold_e",
+                f.wing_threshold_e,
+                "must be in 0..=1e6 e⁻",
+            ));
+        }
 
         let an = &self.analysis;
         check_range_usize("analysis.epsf_oversampling", an.epsf_oversampling, 1, 16)?;

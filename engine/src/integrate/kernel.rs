@@ -164,6 +164,8 @@ pub struct PixelKernel {
     /// from (after any jitter blur, whose flux beyond the table is dropped), weighted by the mean of the
     /// intra-pixel map (1). The truth's `psf_fraction`.
     pub light_fraction: f64,
+    /// [`PixelKernel::envelope`], made on first use.
+    envelope: std::sync::OnceLock<Vec<f64>>,
 }
 
 impl PixelKernel {
@@ -207,6 +209,7 @@ impl PixelKernel {
             half_nodes: half,
             data,
             light_fraction: psf.sum() * mean_w,
+            envelope: std::sync::OnceLock::new(),
         })
     }
 
@@ -262,6 +265,45 @@ impl PixelKernel {
             }
         }
         s
+    }
+
+    /// The wings' envelope: element r is the largest |K| at a Chebyshev distance of r pixels or more from
+    /// the star (r = 0 … ⌈support⌉; 0 beyond). A stamp of half-size R around the star's rounded position
+    /// leaves out only pixels ≥ R + ½ px away, none of which receives more than `flux · envelope[R]`.
+    pub fn envelope(&self) -> &[f64] {
+        self.envelope.get_or_init(|| {
+            let g = self.nodes_per_px as i64;
+            let h = self.half_nodes as i64;
+            let n = self.n();
+            let rings = (self.support_px().ceil() as usize) + 2;
+            let mut env = vec![0.0f64; rings + 1];
+            for iy in -h..=h {
+                for ix in -h..=h {
+                    let d = ix.abs().max(iy.abs()) as f64 / g as f64;
+                    let v = self.data[((iy + h) * n as i64 + ix + h) as usize].abs();
+                    let r = (d.floor() as usize).min(rings);
+                    env[r] = env[r].max(v);
+                }
+            }
+            for r in (0..rings).rev() {
+                env[r] = env[r].max(env[r + 1]);
+            }
+            env
+        })
+    }
+
+    /// The smallest stamp half-size R (≥ 1 px, at most [`PixelKernel::stamp_radius_px`]) outside which a
+    /// star of `flux_e` electrons puts less than `threshold_e` in any pixel.
+    pub fn reach_px(&self, flux_e: f64, threshold_e: f64) -> usize {
+        let full = self.stamp_radius_px();
+        if threshold_e <= 0.0 {
+            return full;
+        }
+        self.envelope()
+            .iter()
+            .position(|e| flux_e * e < threshold_e)
+            .unwrap_or(full)
+            .clamp(1, full)
     }
 
     /// Largest |Δ| (px) with a non-zero table value.

@@ -38,6 +38,9 @@ pub struct StarJob {
     pub kernel: Arc<PixelKernel>,
     /// Needed by the reference method only.
     pub psf: Arc<PsfTable>,
+    /// This star's stamp half-size before the jitter margin (its light's reach,
+    /// `fidelity.wing_threshold_e`); 0 = the frame's rule.
+    pub radius_px: usize,
 }
 
 /// Frame-level parameters of an integration.
@@ -62,9 +65,11 @@ pub fn bounds_of(
         Motion::Static => None,
         Motion::Track(t) => Some(t),
     };
-    let radius = match frame.stamp_radius_px {
-        0 => job.kernel.stamp_radius_px(),
-        r => r,
+    let radius = match (job.radius_px, frame.stamp_radius_px) {
+        (0, 0) => job.kernel.stamp_radius_px(),
+        (0, r) => r,
+        (own, 0) => own,
+        (own, r) => own.min(r),
     };
     cpu::stamp_bounds(
         job.star.x_px,

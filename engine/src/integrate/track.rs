@@ -90,6 +90,23 @@ impl Track {
         })
     }
 
+    /// The track in the pixel axes of an array turned by `rotation_deg` on the sky: a focal-plane
+    /// displacement d is R(−r)·d on the array (`sky::focal_plane`). Exact for multiples of 90°.
+    pub fn turned_into_array(self, rotation_deg: f64) -> Self {
+        if rotation_deg == 0.0 {
+            return self;
+        }
+        let quarter = ((rotation_deg / 90.0).round() as i64).rem_euclid(4);
+        let (c, s) = [(1.0, 0.0), (0.0, 1.0), (-1.0, 0.0), (0.0, -1.0)][quarter as usize];
+        let (dx, dy) = self
+            .dx_px
+            .iter()
+            .zip(&self.dy_px)
+            .map(|(&x, &y)| (c * x + s * y, -s * x + c * y))
+            .unzip();
+        Self::new(self.dt_s, self.t0_s, dx, dy)
+    }
+
     /// Cut the exposure starting at absolute series time `t_start_s` and lasting `span_s` from the series,
     /// converting mas to pixels, keeping every `stride`-th sample.
     pub fn from_series(

@@ -126,7 +126,11 @@ pub fn headers(sim: &Simulator, exp: &Exposure) -> Vec<Card> {
         ),
         Card::f("MAGHW", c.scene.mag_hw, "scene Hw magnitude (grid)"),
         Card::f("JMINUSH", c.scene.j_minus_h, "scene J-H colour (grid)"),
-        Card::i("NSTARS", exp.truth.len() as i64, "stars in the scene"),
+        Card::i(
+            "NSTARS",
+            exp.truth.len() as i64,
+            "stars in the truth (this array)",
+        ),
         Card::f(
             "ZEROPT",
             c.photometry.zero_point_e_per_s,
@@ -171,18 +175,29 @@ pub fn headers(sim: &Simulator, exp: &Exposure) -> Vec<Card> {
             "TRUTH x,y convention (ds9: +1)",
         ),
     ];
+    if let Some(counts) = &sim.counts {
+        cards.extend(counts.cards().map(|(k, v, c)| Card::i(k, v, c)));
+    }
     // the world coordinate system (config validated: it always exists)
-    if let Ok(w) = crate::sky::single_array_wcs(c) {
-        cards.extend(w.keywords().into_iter().map(|k| {
+    if let Some(w) = sim.wcs() {
+        cards.extend(wcs_cards(&w));
+    }
+    cards
+}
+
+/// The FITS cards of a WCS.
+pub fn wcs_cards(w: &ArrayWcs) -> Vec<Card> {
+    w.keywords()
+        .into_iter()
+        .map(|k| {
             let comment = k.comment;
             match k.value {
                 KeyValue::F(v) => Card::f(&k.key, v, comment),
                 KeyValue::I(v) => Card::i(&k.key, v, comment),
                 KeyValue::S(v) => Card::s(&k.key, v, comment),
             }
-        }));
-    }
-    cards
+        })
+        .collect()
 }
 
 /// The TRUTH table's columns ([`truth_header`]).
@@ -349,10 +364,7 @@ pub fn write_image_file(
             },
             Hdu::Table {
                 name: "TRUTH",
-                columns: truth_columns(
-                    &exp.truth,
-                    crate::sky::single_array_wcs(&sim.cfg).ok().as_ref(),
-                ),
+                columns: truth_columns(&exp.truth, sim.wcs().as_ref()),
                 cards: vec![],
             },
             Hdu::Text {
@@ -377,10 +389,6 @@ pub fn write_exposure(
         None => Pixels::F32(&exp.image.adu),
     };
     write_image_file(&image, sim, exp, pixels, &exp.image.dq)?;
-    write_truth_csv(
-        &truth_csv,
-        &exp.truth,
-        crate::sky::single_array_wcs(&sim.cfg).ok().as_ref(),
-    )?;
+    write_truth_csv(&truth_csv, &exp.truth, sim.wcs().as_ref())?;
     Ok(ExposureFiles { image, truth_csv })
 }

@@ -89,6 +89,10 @@ pub enum Pixels<'a> {
 /// One HDU to write.
 #[derive(Debug, Clone)]
 pub enum Hdu<'a> {
+    /// A header without data: only as the primary HDU (a multi-extension file's).
+    Header {
+        cards: Vec<Card>,
+    },
     Image {
         name: &'a str,
         nx: usize,
@@ -149,40 +153,56 @@ pub fn write(path: &Path, hdus: &[Hdu<'_>]) -> Result<(), IoError> {
 
 fn write_inner(path: &Path, hdus: &[Hdu<'_>]) -> Result<(), IoError> {
     let fe = |e: fitsio::errors::Error| IoError::fits(path, e);
-    let Some(Hdu::Image {
-        nx,
-        ny,
-        pixels,
-        cards,
-        ..
-    }) = hdus.first()
-    else {
-        return Err(IoError::fits(path, "the primary HDU must be an image"));
+    let mut f = match hdus.first() {
+        Some(Hdu::Header { cards }) => {
+            let mut f = FitsFile::create(path).open().map_err(fe)?;
+            let primary = f.primary_hdu().map_err(fe)?;
+            write_cards(&mut f, &primary, cards, path)?;
+            f
+        }
+        Some(Hdu::Image {
+            nx,
+            ny,
+            pixels,
+            cards,
+            ..
+        }) => {
+            let primary_type = match pixels {
+                Pixels::U16(_) => ImageType::UnsignedShort,
+                Pixels::F32(_) => ImageType::Float,
+                Pixels::F64(_) => ImageType::Double,
+            };
+            let dims = [*ny, *nx];
+            let desc = ImageDescription {
+                data_type: primary_type,
+                dimensions: &dims,
+            };
+            let mut f = FitsFile::create(path)
+                .with_custom_primary(&desc)
+                .open()
+                .map_err(fe)?;
+            let primary = f.primary_hdu().map_err(fe)?;
+            match pixels {
+                Pixels::U16(d) => primary.write_image(&mut f, d),
+                Pixels::F32(d) => primary.write_image(&mut f, d),
+                Pixels::F64(d) => primary.write_image(&mut f, d),
+            }
+            .map_err(fe)?;
+            write_cards(&mut f, &primary, cards, path)?;
+            f
+        }
+        _ => {
+            return Err(IoError::fits(
+                path,
+                "the primary HDU must be an image or a header",
+            ));
+        }
     };
-    let primary_type = match pixels {
-        Pixels::U16(_) => ImageType::UnsignedShort,
-        Pixels::F32(_) => ImageType::Float,
-        Pixels::F64(_) => ImageType::Double,
-    };
-    let dims = [*ny, *nx];
-    let desc = ImageDescription {
-        data_type: primary_type,
-        dimensions: &dims,
-    };
-    let mut f = FitsFile::create(path)
-        .with_custom_primary(&desc)
-        .open()
-        .map_err(fe)?;
-    let primary = f.primary_hdu().map_err(fe)?;
-    match pixels {
-        Pixels::U16(d) => primary.write_image(&mut f, d),
-        Pixels::F32(d) => primary.write_image(&mut f, d),
-        Pixels::F64(d) => primary.write_image(&mut f, d),
-    }
-    .map_err(fe)?;
-    write_cards(&mut f, &primary, cards, path)?;
     for h in &hdus[1..] {
         match h {
+            Hdu::Header { .. } => {
+                return Err(IoError::fits(path, "a header-only HDU must be the primary"));
+            }
             Hdu::Image {
                 name,
                 nx,

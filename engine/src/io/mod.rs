@@ -6,6 +6,7 @@ pub mod analysis_input;
 pub mod csv;
 pub mod exposure;
 pub mod fits;
+pub mod focal_plane;
 pub mod plot;
 pub mod products;
 

@@ -36,6 +36,32 @@ impl PsfTable {
         2 * self.half_cells + 1
     }
 
+    /// The PSF as an array turned by `rotation_deg` (a multiple of 90°) on the sky sees it: the value at
+    /// array offset d′ is the focal-plane PSF at R(r)·d′ — an exact permutation of the cells.
+    pub fn turned_into_array(&self, rotation_deg: f64) -> PsfTable {
+        let quarter = ((rotation_deg / 90.0).round() as i64).rem_euclid(4);
+        let h = self.half_cells as i64;
+        let n = self.n();
+        let mut data = vec![0.0; n * n];
+        for iy in -h..=h {
+            for ix in -h..=h {
+                let (x, y) = match quarter {
+                    0 => (ix, iy),
+                    1 => (-iy, ix),
+                    2 => (-ix, -iy),
+                    _ => (iy, -ix),
+                };
+                data[((iy + h) * n as i64 + ix + h) as usize] =
+                    self.data[((y + h) * n as i64 + x + h) as usize];
+            }
+        }
+        PsfTable {
+            oversampling: self.oversampling,
+            half_cells: self.half_cells,
+            data,
+        }
+    }
+
     /// Half-width in detector pixels.
     pub fn half_px(&self) -> f64 {
         self.half_cells as f64 / self.oversampling as f64

@@ -243,6 +243,54 @@ mod tests {
     }
 
     #[test]
+    fn a_distortion_turned_into_each_array_agrees_with_the_plane() {
+        // a distortion given in focal-plane axes (Sip::rotated into each array's axes): the array's WCS puts
+        // a sky position on the same focal-plane point as one distorted WCS of the whole plane
+        let fp = jasmine();
+        let p = Pointing::GALACTIC_CENTRE;
+        let scale = 472.1;
+        let k3 = 3.7e-11; // 1 px of radial distortion at 3000 px from the axis
+        let sip = Sip {
+            a: crate::sky::wcs::SipPolynomial {
+                terms: vec![(3, 0, k3), (1, 2, k3), (2, 0, 2e-8), (0, 2, -1e-8)],
+            },
+            b: crate::sky::wcs::SipPolynomial {
+                terms: vec![(2, 1, k3), (0, 3, k3), (1, 1, 3e-8)],
+            },
+        };
+        let plane = ArrayWcs::new(&p, 0.0, scale, [0.0, 0.0], [4236, 4236], Some(sip.clone()))
+            .expect("plane");
+        let mut seen = [0usize; 4];
+        for k in 0..4 {
+            let w = fp
+                .array_wcs(k, &p, scale, Some(sip.rotated(fp.rotations_deg[k])))
+                .expect("array");
+            for (x, y) in [
+                (10.0, 20.0),
+                (1900.0, 40.0),
+                (983.5, 983.5),
+                (30.0, 1950.0),
+                (1960.0, 1960.0),
+            ] {
+                let (fx, fy) = fp.to_focal_plane(k, x, y);
+                let a = w.pixel_to_sky(x, y).expect("sky");
+                let b = plane.pixel_to_sky(fx, fy).expect("sky");
+                let d_mas = ((a.0 - b.0) * p.dec_deg.to_radians().cos()).hypot(a.1 - b.1) * 3.6e6;
+                assert!(d_mas < 1e-3, "array {k} ({x}, {y}): {d_mas} mas apart");
+                seen[k] += 1;
+            }
+        }
+        assert_eq!(seen, [5; 4]);
+        // the identity turn changes nothing; four quarter turns come back
+        assert_eq!(sip.rotated(0.0), sip);
+        let back = sip.rotated(90.0).rotated(90.0).rotated(90.0).rotated(90.0);
+        for (x, y) in [(100.0, -300.0), (-2000.0, 1500.0)] {
+            assert!((back.a.eval(x, y) - sip.a.eval(x, y)).abs() < 1e-12);
+            assert!((back.b.eval(x, y) - sip.b.eval(x, y)).abs() < 1e-12);
+        }
+    }
+
+    #[test]
     fn a_bad_layout_is_named() {
         let mut fp = jasmine();
         fp.rotations_deg[2] = 45.0;

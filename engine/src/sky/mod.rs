@@ -9,19 +9,80 @@
 pub mod focal_plane;
 pub mod wcs;
 
-use crate::config::Config;
+use crate::config::{Config, Layout};
+use focal_plane::FocalPlane;
+use wcs::{ArrayWcs, Sip, SipPolynomial};
 
-/// The WCS of the single array of `cfg` (today's scene): the optical axis at the array's centre, the
-/// pointing of `cfg.sky`, no distortion.
-pub fn single_array_wcs(cfg: &Config) -> Result<wcs::ArrayWcs, String> {
-    let n = cfg.instrument.detector_px;
-    let centre = (n as f64 - 1.0) / 2.0;
-    wcs::ArrayWcs::new(
+/// How many arrays the configured focal plane holds (1 or 4).
+pub fn array_count(cfg: &Config) -> usize {
+    match cfg.focal_plane.layout {
+        Layout::Single => 1,
+        Layout::Quad => 4,
+    }
+}
+
+/// The 2 × 2 focal plane of `cfg` (its arrays of `instrument.detector_px`, the configured gap and turns).
+pub fn focal_plane(cfg: &Config) -> FocalPlane {
+    FocalPlane {
+        array_px: cfg.instrument.detector_px,
+        photosensitive_px: cfg.instrument.photosensitive_px,
+        gap_px: cfg.focal_plane.gap_px,
+        rotations_deg: cfg.focal_plane.rotations_deg,
+    }
+}
+
+/// The rotation of array k on the sky (0 for the single array).
+pub fn array_rotation_deg(cfg: &Config, k: usize) -> f64 {
+    match cfg.focal_plane.layout {
+        Layout::Single => 0.0,
+        Layout::Quad => cfg.focal_plane.rotations_deg[k.min(3)],
+    }
+}
+
+/// The configured forward distortion in focal-plane axes, if any.
+pub fn distortion(cfg: &Config) -> Option<Sip> {
+    let fp = &cfg.focal_plane;
+    if fp.sip_a.is_empty() && fp.sip_b.is_empty() {
+        return None;
+    }
+    let poly = |t: &[crate::config::SipTerm]| SipPolynomial {
+        terms: t.iter().map(|t| (t.p, t.q, t.value)).collect(),
+    };
+    Some(Sip {
+        a: poly(&fp.sip_a),
+        b: poly(&fp.sip_b),
+    })
+}
+
+/// The WCS of array k of `cfg`: the single array with the optical axis at its centre, or array k of the
+/// 2 × 2 focal plane; the configured distortion turned into the array's axes.
+pub fn array_wcs(cfg: &Config, k: usize) -> Result<ArrayWcs, String> {
+    let pointing = Pointing::from(&cfg.sky);
+    let scale = cfg.instrument.plate_scale_mas();
+    let sip = distortion(cfg).map(|s| s.rotated(array_rotation_deg(cfg, k)));
+    match cfg.focal_plane.layout {
+        Layout::Single => {
+            let n = cfg.instrument.detector_px;
+            let centre = (n as f64 - 1.0) / 2.0;
+            ArrayWcs::new(&pointing, 0.0, scale, [centre, centre], [n, n], sip)
+        }
+        Layout::Quad => focal_plane(cfg).array_wcs(k, &pointing, scale, sip),
+    }
+}
+
+/// The WCS of the single array of `cfg` (array 0): the optical axis at the array's centre.
+pub fn single_array_wcs(cfg: &Config) -> Result<ArrayWcs, String> {
+    array_wcs(cfg, 0)
+}
+
+/// The undistorted gnomonic projection with focal-plane pixels (from the optical axis) as its pixels.
+pub fn focal_plane_projection(cfg: &Config) -> Result<ArrayWcs, String> {
+    ArrayWcs::new(
         &Pointing::from(&cfg.sky),
         0.0,
         cfg.instrument.plate_scale_mas(),
-        [centre, centre],
-        [n, n],
+        [0.0, 0.0],
+        [1, 1],
         None,
     )
 }

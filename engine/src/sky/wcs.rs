@@ -75,6 +75,40 @@ impl Sip {
         self.a.order().max(self.b.order()).max(2)
     }
 
+    /// The same distortion in the axes of an array turned by `rotation_deg` (a multiple of 90°): with
+    /// focal-plane offsets d = R(r)·u′ of array offsets u′, the array's polynomials are
+    /// (A′, B′)(u′) = R(−r)·(A, B)(R(r)·u′) — exact, term by term.
+    pub fn rotated(&self, rotation_deg: f64) -> Sip {
+        let quarter = ((rotation_deg / 90.0).round() as i64).rem_euclid(4);
+        // u, v as (which array axis, sign) under R(r); (A, B) back to array axes by R(−r)
+        let ((iu, su), (iv, sv)): ((usize, f64), (usize, f64)) = match quarter {
+            0 => ((0, 1.0), (1, 1.0)),
+            1 => ((1, -1.0), (0, 1.0)),
+            2 => ((0, -1.0), (1, -1.0)),
+            _ => ((1, 1.0), (0, -1.0)),
+        };
+        let substitute = |poly: &SipPolynomial, sign: f64| SipPolynomial {
+            terms: poly
+                .terms
+                .iter()
+                .map(|&(p, q, c)| {
+                    let mut e = [0usize; 2];
+                    e[iu] += p;
+                    e[iv] += q;
+                    let s = su.powi(p as i32) * sv.powi(q as i32) * sign;
+                    (e[0], e[1], c * s)
+                })
+                .collect(),
+        };
+        let (a, b) = match quarter {
+            0 => (substitute(&self.a, 1.0), substitute(&self.b, 1.0)),
+            1 => (substitute(&self.b, 1.0), substitute(&self.a, -1.0)),
+            2 => (substitute(&self.a, -1.0), substitute(&self.b, -1.0)),
+            _ => (substitute(&self.b, -1.0), substitute(&self.a, 1.0)),
+        };
+        Sip { a, b }
+    }
+
     fn validate(&self) -> Result<(), String> {
         for (name, poly) in [("A", &self.a), ("B", &self.b)] {
             for &(p, q, c) in &poly.terms {

@@ -37,6 +37,10 @@ pub struct ConfigArgs {
     /// Hw magnitude of the grid stars.
     #[arg(long)]
     pub mag: Option<f64>,
+    /// Scene: grid (the paper's, one array), bulge (the mock Galactic-centre field on the quad focal plane:
+    /// also sets focal_plane.layout = quad) or a catalogue file (CSV or FITS; x,y or ra,dec).
+    #[arg(long, value_name = "grid|bulge|FILE")]
+    pub scene: Option<String>,
     /// ACE model: gaussian, realistic or none.
     #[arg(long)]
     pub ace: Option<String>,
@@ -69,6 +73,18 @@ impl ConfigArgs {
         }
         if let Some(m) = self.mag {
             cfg.scene.mag_hw = m;
+        }
+        match self.scene.as_deref() {
+            None => {}
+            Some("grid") => cfg.scene.kind = engine::config::SceneKind::Grid,
+            Some("bulge") => {
+                cfg.scene.kind = engine::config::SceneKind::Bulge;
+                cfg.focal_plane.layout = engine::config::Layout::Quad;
+            }
+            Some(file) => {
+                cfg.scene.kind = engine::config::SceneKind::Catalogue;
+                cfg.scene.catalogue = Some(PathBuf::from(file));
+            }
         }
         if let Some(a) = &self.ace {
             cfg.ace.case = AceCase::parse(a)?;

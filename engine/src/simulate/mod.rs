@@ -13,7 +13,8 @@ use crate::optics::PsfBank;
 use crate::optics::psf::PsfTable;
 use crate::photometry;
 use crate::readout::ReadoutTiming;
-use crate::scene::{self, SceneError, Star};
+use crate::scene::{self, PlacementCounts, SceneError, Star};
+use std::borrow::Cow;
 use std::collections::HashMap;
 use std::sync::Arc;
 use std::time::Instant;
@@ -33,6 +34,46 @@ pub enum SimError {
     Memory { need_gib: f64, available_gib: f64 },
     #[error("GPU integration failed: {0}")]
     Gpu(#[from] crate::integrate::gpu::GpuError),
+    #[error(
+        "focal_plane.layout = \"quad\" images four arrays: {0} works on one array (set focal_plane.layout = \
+         \"single\"; `jsim simulate` writes the quad's exposures)"
+    )]
+    NotSingleArray(&'static str),
+}
+
+pub mod focal_plane;
+pub use focal_plane::{FocalPlaneExposure, FocalPlaneSimulator};
+
+/// The array a simulator images: its place in the focal plane, its stars and its own random streams.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ArraySpec {
+    /// 0 for the single array; 0 … 3 in the quad (lower left, lower right, upper left, upper right).
+    pub index: usize,
+    pub stars: Vec<Star>,
+    /// The array's turn on the sky (degrees): the common jitter is turned into its pixel axes.
+    pub rotation_deg: f64,
+    /// Seed of the array's flat and noise streams ([`array_seed`]).
+    pub seed: u64,
+}
+
+/// The seed of array k's flat and noise streams: the master seed for array 0 (so the single array's
+/// images are those of before the focal plane existed), a derived seed for the others.
+pub fn array_seed(master: u64, k: usize) -> u64 {
+    if k == 0 {
+        master
+    } else {
+        crate::rng::derive_seed(master, &[crate::rng::Stream::Array as u64, k as u64])
+    }
+}
+
+/// The J − H whose PSF a star of colour `j_minus_h` uses: rounded to a multiple of
+/// `fidelity.colour_step_mag` (unchanged when it is 0).
+pub fn psf_colour(j_minus_h: f64, step_mag: f64) -> f64 {
+    if step_mag > 0.0 {
+        (j_minus_h / step_mag).round() * step_mag
+    } else {
+        j_minus_h
+    }
 }
 
 /// The true parameters of one star in one exposure.
@@ -116,6 +157,21 @@ pub fn memory_estimate_bytes(cfg: &Config, n_stars: usize) -> f64 {
     frame + series + stamps + tables
 }
 
+/// Fail when a simulation of `n_stars` over `arrays` arrays needs more memory than is available.
+pub fn check_memory(cfg: &Config, n_stars: usize, arrays: usize) -> Result<(), SimError> {
+    if let Some(avail) = available_memory_bytes() {
+        let per_array = memory_estimate_bytes(cfg, 0);
+        let need = per_array * (arrays.max(1) - 1) as f64 + memory_estimate_bytes(cfg, n_stars);
+        if need > avail {
+            return Err(SimError::Memory {
+                need_gib: need / GIB,
+                available_gib: avail / GIB,
+            });
+        }
+    }
+    Ok(())
+}
+
 /// Memory available to this process now (Linux: `MemAvailable` of /proc/meminfo), bytes.
 pub fn available_memory_bytes() -> Option<f64> {
     let text = std::fs::read_to_string("/proc/meminfo").ok()?;
@@ -127,7 +183,12 @@ pub fn available_memory_bytes() -> Option<f64> {
 /// Shared state of a dataset's simulation.
 pub struct Simulator {
     pub cfg: Config,
+    /// The stars this array simulates (for a sky scene, some just off the array for their light).
     pub stars: Vec<Star>,
+    /// Which array, its turn and its streams' seed.
+    pub array: ArraySpec,
+    /// Where a sky scene's stars fell (the whole focal plane's account; `None` for pixel scenes).
+    pub counts: Option<PlacementCounts>,
     pub timing: ReadoutTiming,
     bank: Arc<PsfBank>,
     map: IntraPixelMap,
@@ -137,6 +198,9 @@ pub struct Simulator {
     /// The calibration flat of `analysis.flat_field` (made on first use, once per simulator).
     calibration: std::sync::OnceLock<Arc<Vec<f32>>>,
     integrator: Integrator,
+    /// The bank's PSFs turned into this array's axes (keyed by the bank table's address; the bank table is
+    /// kept with its turn, so the address stays unique).
+    turned: std::sync::Mutex<HashMap<usize, (Arc<PsfTable>, Arc<PsfTable>)>>,
 }
 
 impl Simulator {
@@ -153,7 +217,7 @@ impl Simulator {
     }
 
     /// Build from shared parts: a PSF bank (replaced by a fresh one if it does not serve `cfg`), a kernel
-    /// cache and the integrator.
+    /// cache and the integrator. One array only: the quad is a [`FocalPlaneSimulator`].
     pub fn build(
         cfg: &Config,
         bank: Arc<PsfBank>,
@@ -161,25 +225,42 @@ impl Simulator {
         integrator: Integrator,
     ) -> Result<Self, SimError> {
         cfg.validate()?;
+        if crate::sky::array_count(cfg) != 1 {
+            return Err(SimError::NotSingleArray("a single-array simulator"));
+        }
+        let scene = scene::build(cfg)?;
+        check_memory(cfg, scene.arrays.iter().map(Vec::len).sum(), 1)?;
+        let stars = scene.arrays.into_iter().next().unwrap_or_default();
+        let spec = ArraySpec {
+            index: 0,
+            stars,
+            rotation_deg: 0.0,
+            seed: cfg.seed,
+        };
+        Self::build_array(cfg, spec, scene.counts, bank, kernels, integrator, None)
+    }
+
+    /// Build the simulator of one array from its spec, with the dataset's ACE series when another array
+    /// already made it (the jitter is common to the focal plane), else its own from the master seed.
+    pub fn build_array(
+        cfg: &Config,
+        array: ArraySpec,
+        counts: Option<PlacementCounts>,
+        bank: Arc<PsfBank>,
+        kernels: Arc<KernelCache>,
+        integrator: Integrator,
+        series: Option<Arc<AceSeries>>,
+    ) -> Result<Self, SimError> {
         let bank = if bank.serves(cfg) {
             bank
         } else {
             Arc::new(PsfBank::new(cfg))
         };
-        let stars = scene::build(cfg)?;
-        if let Some(avail) = available_memory_bytes() {
-            let need = memory_estimate_bytes(cfg, stars.len());
-            if need > avail {
-                return Err(SimError::Memory {
-                    need_gib: need / GIB,
-                    available_gib: avail / GIB,
-                });
-            }
-        }
         let timing = ReadoutTiming::new(cfg);
         let map = IntraPixelMap::from_config(&cfg.detector, cfg.fidelity.subpixels)?;
-        let series = match cfg.ace.case {
-            AceCase::Realistic => {
+        let series = match (cfg.ace.case, series) {
+            (AceCase::Realistic, Some(s)) => Some(s),
+            (AceCase::Realistic, None) => {
                 let need = cfg.ace.first_exposure_start_s
                     + (cfg.fidelity.images.saturating_sub(1)) as f64 * timing.cadence_s()
                     + timing.span_s();
@@ -199,19 +280,40 @@ impl Simulator {
             }
             _ => None,
         };
-        let flat = detector::inter_pixel_flat(cfg);
-        Ok(Self {
+        let mut sim = Self {
             cfg: cfg.clone(),
-            stars,
+            stars: array.stars.clone(),
+            array,
+            counts,
             timing,
             bank,
             map,
             kernels,
             series,
-            flat,
+            flat: Vec::new(),
             calibration: std::sync::OnceLock::new(),
             integrator,
-        })
+            turned: Default::default(),
+        };
+        sim.flat = detector::inter_pixel_flat(&sim.detector_cfg());
+        Ok(sim)
+    }
+
+    /// The configuration the detector stages use: `cfg` with this array's seed (the flat and the noise are
+    /// the array's own).
+    pub fn detector_cfg(&self) -> Cow<'_, Config> {
+        if self.array.seed == self.cfg.seed {
+            Cow::Borrowed(&self.cfg)
+        } else {
+            let mut c = self.cfg.clone();
+            c.seed = self.array.seed;
+            Cow::Owned(c)
+        }
+    }
+
+    /// This array's WCS (`sky::array_wcs`).
+    pub fn wcs(&self) -> Option<crate::sky::wcs::ArrayWcs> {
+        crate::sky::array_wcs(&self.cfg, self.array.index).ok()
     }
 
     /// The PSF bank (shareable with other simulators of the same optics).
@@ -249,8 +351,32 @@ impl Simulator {
 
     /// The PSF of a star (from the bank).
     pub fn psf_for(&self, star: &Star) -> Arc<PsfTable> {
-        self.bank
-            .get(star.j_minus_h, &self.bank.field_key(star.x_px, star.y_px))
+        self.in_array_axes(self.bank.get(
+            self.psf_colour(star),
+            &self.bank.field_key(star.x_px, star.y_px),
+        ))
+    }
+
+    /// A bank PSF (focal-plane axes) as this array sees it: turned by the array's rotation (the same
+    /// table on an unturned array).
+    pub fn in_array_axes(&self, table: Arc<PsfTable>) -> Arc<PsfTable> {
+        if self.array.rotation_deg == 0.0 {
+            return table;
+        }
+        let key = Arc::as_ptr(&table) as usize;
+        let mut m = self.turned.lock().unwrap_or_else(|e| e.into_inner());
+        m.entry(key)
+            .or_insert_with(|| {
+                let t = Arc::new(table.turned_into_array(self.array.rotation_deg));
+                (table, t)
+            })
+            .1
+            .clone()
+    }
+
+    /// The colour whose PSF a star uses ([`psf_colour`]).
+    pub fn psf_colour(&self, star: &Star) -> f64 {
+        psf_colour(star.j_minus_h, self.cfg.fidelity.colour_step_mag)
     }
 
     /// The pixel kernel of a PSF with this simulation's blur and intra-pixel map (cached).
@@ -272,9 +398,10 @@ impl Simulator {
     pub fn optical_kernel(&self) -> Result<Arc<PixelKernel>, SimError> {
         let psf = match self.stars.first() {
             Some(s) => self.psf_for(s),
-            None => self
-                .bank
-                .get(self.cfg.scene.j_minus_h, &self.bank.centre_key()),
+            None => self.in_array_axes(
+                self.bank
+                    .get(self.cfg.scene.j_minus_h, &self.bank.centre_key()),
+            ),
         };
         self.kernel_with_blur(&psf, 0.0)
     }
@@ -292,7 +419,7 @@ impl Simulator {
         self.cfg.ace.first_exposure_start_s + index as f64 * self.timing.cadence_s()
     }
 
-    /// The jitter track of exposure `index` (realistic case).
+    /// The jitter track of exposure `index` (realistic case), in this array's pixel axes.
     pub fn track(&self, index: usize) -> Option<Track> {
         self.series.as_ref().map(|s| {
             Track::from_series(
@@ -302,6 +429,7 @@ impl Simulator {
                 self.cfg.fidelity.time_stride,
                 self.cfg.instrument.plate_scale_mas(),
             )
+            .turned_into_array(self.array.rotation_deg)
         })
     }
 
@@ -312,14 +440,19 @@ impl Simulator {
             .map(|s| {
                 let psf = self.psf_for(s);
                 let kernel = self.kernel_for(&psf)?;
+                let rate =
+                    photometry::electrons_per_s(s.mag_hw, self.cfg.photometry.zero_point_e_per_s);
+                let threshold = self.cfg.fidelity.wing_threshold_e;
                 Ok(StarJob {
                     star: StarSpec {
                         x_px: s.x_px,
                         y_px: s.y_px,
-                        rate_e_per_s: photometry::electrons_per_s(
-                            s.mag_hw,
-                            self.cfg.photometry.zero_point_e_per_s,
-                        ),
+                        rate_e_per_s: rate,
+                    },
+                    radius_px: if threshold > 0.0 {
+                        kernel.reach_px(rate * self.cfg.detector.exposure_s, threshold)
+                    } else {
+                        0
                     },
                     kernel,
                     psf,
@@ -357,18 +490,20 @@ impl Simulator {
     }
 
     /// The static PSF halo of every star (`fidelity.halo_radius_px` > 0): the PSF beyond the main table,
-    /// integrated over 2 × 2 subpixels, jitter neglected (it moves the faint halo by ≪ its scale).
+    /// integrated over 2 × 2 subpixels, jitter neglected (it moves the faint halo by ≪ its scale). With
+    /// `fidelity.wing_threshold_e` > 0 only the stars that put more than that in a pixel beyond the main
+    /// table get one, reaching as far as they do.
     pub fn halo_stamps(&self) -> Result<Vec<integrate::Stamp>, SimError> {
         let r = self.cfg.optics.psf_radius_px + self.cfg.fidelity.halo_radius_px;
         let map = IntraPixelMap::uniform(2);
         let mut out = Vec::with_capacity(self.stars.len());
         let mut kernels: HashMap<usize, Arc<PixelKernel>> = HashMap::new();
         for s in &self.stars {
-            let halo = self.bank.halo(
-                s.j_minus_h,
+            let halo = self.in_array_axes(self.bank.halo(
+                self.psf_colour(s),
                 &self.bank.field_key(s.x_px, s.y_px),
                 self.cfg.fidelity.halo_radius_px,
-            );
+            ));
             let key = Arc::as_ptr(&halo) as usize;
             let k = match kernels.get(&key) {
                 Some(k) => k.clone(),
@@ -386,11 +521,24 @@ impl Simulator {
                     self.cfg.photometry.zero_point_e_per_s,
                 ),
             };
+            // with a wing threshold, only the stars bright enough to light pixels beyond the main table
+            // get a halo, as far as they light them
+            let threshold = self.cfg.fidelity.wing_threshold_e;
+            let reach = if threshold > 0.0 {
+                let flux = star.rate_e_per_s * self.cfg.detector.exposure_s;
+                let reach = k.reach_px(flux, threshold);
+                if reach <= self.cfg.optics.psf_radius_px {
+                    continue;
+                }
+                reach
+            } else {
+                r + 1
+            };
             if let Some(b) = integrate::cpu::stamp_bounds(
                 s.x_px,
                 s.y_px,
                 None,
-                r + 1,
+                reach,
                 self.cfg.instrument.detector_px,
             ) {
                 out.push(integrate::cpu::static_stamp(
@@ -415,7 +563,7 @@ impl Simulator {
             + self
                 .bank
                 .halo(
-                    star.j_minus_h,
+                    self.psf_colour(star),
                     &self.bank.field_key(star.x_px, star.y_px),
                     h,
                 )
@@ -432,7 +580,7 @@ impl Simulator {
             self.calibration
                 .get_or_init(|| {
                     Arc::new(detector::calibration_flat_of(
-                        &self.cfg,
+                        &self.detector_cfg(),
                         self.flat.clone(),
                         error,
                     ))
@@ -447,7 +595,13 @@ impl Simulator {
         let t0 = Instant::now();
         let (star_e, track) = self.integrate(index, &jobs)?;
         let t1 = Instant::now();
-        let image = detector::expose(&self.cfg, &self.timing, &star_e, &self.flat, index as u64);
+        let image = detector::expose(
+            &self.detector_cfg(),
+            &self.timing,
+            &star_e,
+            &self.flat,
+            index as u64,
+        );
         let t2 = Instant::now();
         let truth = self.truth(&jobs, track.as_ref());
         let ace = self.ace_stats(index);
@@ -466,12 +620,13 @@ impl Simulator {
         })
     }
 
-    /// Truth rows for the jobs of an exposure.
+    /// Truth rows for the jobs of an exposure: the stars in this array's truth (`Star::in_truth`).
     pub fn truth(&self, jobs: &[StarJob], track: Option<&Track>) -> Vec<TruthRow> {
         let n = self.cfg.instrument.detector_px as i64;
         self.stars
             .iter()
             .zip(jobs)
+            .filter(|(s, _)| s.in_truth)
             .map(|(s, j)| {
                 let (cx, cy) = (
                     s.x_px.round().clamp(0.0, (n - 1) as f64) as usize,

@@ -1,23 +1,60 @@
-//! The stars of a simulation: the paper's 20 × 20 grid (SPEC §6) or a CSV catalogue `x,y,hw,j_h` (pixels).
+//! The stars of a simulation, on each array of the focal plane.
 //!
-//! Grid: `n × n` stars centred on the detector (centre at `(N − 1)/2`, pixel-centre convention), spacing
-//! `grid_spacing_px`, each offset by an independent uniform amount in `±grid_random_px` per axis so the
-//! pixel phases are random. The offsets come from the scene stream of the run seed: every image of a
-//! dataset shows the same field.
+//! * **grid**: the paper's 20 × 20 grid (SPEC §6), in pixels of each array: `n × n` stars centred on the
+//!   detector (centre at `(N − 1)/2`, pixel-centre convention), spacing `grid_spacing_px`, each offset by an
+//!   independent uniform amount in `±grid_random_px` per axis so the pixel phases are random. The offsets
+//!   come from the scene stream of the run seed: every image of a dataset shows the same field.
+//! * **catalogue**: a CSV or FITS table in pixels of the single array or on the sky ([`catalogue`]).
+//! * **bulge**: the mock Galactic-centre field on the sky ([`bulge`]).
+//!
+//! Stars on the sky are placed on the arrays through each array's WCS ([`placement`]): every star is
+//! accounted for — on an array's photosensitive pixels, in its dead border, in a gap between arrays, off
+//! the focal plane, or a duplicate row — and the counts travel with the images.
+
+pub mod bulge;
+pub mod catalogue;
+pub mod placement;
 
 use crate::config::{Config, SceneKind};
 use crate::rng::{self, Stream};
 use rand::RngExt;
 use std::path::Path;
 
-/// A star of the scene.
+pub use placement::PlacementCounts;
+
+/// A star on one array (pixels of that array).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Star {
+    /// The star's number in its scene (a catalogue's row among the rows read, from 0).
     pub id: usize,
     pub x_px: f64,
     pub y_px: f64,
     pub mag_hw: f64,
     pub j_minus_h: f64,
+    /// Whether the star belongs to this array's truth: always for pixel scenes; for sky scenes when it
+    /// falls on the array's photosensitive pixels (a star just off them is simulated for the light its
+    /// wings bring, and counted where it fell).
+    pub in_truth: bool,
+}
+
+/// A star on the sky.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SkyStar {
+    pub id: usize,
+    /// ICRS, degrees.
+    pub ra_deg: f64,
+    pub dec_deg: f64,
+    pub mag_hw: f64,
+    pub j_minus_h: f64,
+}
+
+/// The stars each array simulates, and where a sky scene's stars fell.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct Scene {
+    /// Per array (one for the single layout, four for the quad), in the scene's order.
+    pub arrays: Vec<Vec<Star>>,
+    /// Where the stars of a sky scene fell (`None` for a scene given in pixels).
+    pub counts: Option<PlacementCounts>,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -37,28 +74,44 @@ pub enum SceneError {
     Empty { path: String },
     #[error("star catalogue {path} holds more than {max} stars")]
     TooMany { path: String, max: usize },
+    #[error("scene: {0}")]
+    Invalid(String),
 }
 
-/// Most stars a catalogue may hold (memory and time grow with it: ≈ 1 kB and one stamp per star).
+/// Most stars a scene may hold (memory and time grow with it: ≈ 1 kB and one stamp per star).
 pub const MAX_CATALOGUE_STARS: usize = 10_000_000;
 /// Allowed Hw magnitudes of a catalogue star (`inf` is also accepted: a star that delivers no light).
 pub const HW_RANGE: (f64, f64) = (-5.0, 35.0);
 /// Allowed J − H colours.
 pub const JH_RANGE: (f64, f64) = (-1.0, 10.0);
 
-/// The stars of `cfg.scene`.
-pub fn build(cfg: &Config) -> Result<Vec<Star>, SceneError> {
+/// The stars of `cfg.scene` on the arrays of `cfg.focal_plane`.
+pub fn build(cfg: &Config) -> Result<Scene, SceneError> {
+    let arrays = crate::sky::array_count(cfg);
+    let pixel_scene = |stars: Vec<Star>| Scene {
+        arrays: vec![stars; arrays],
+        counts: None,
+    };
     match cfg.scene.kind {
-        SceneKind::Grid => Ok(grid(cfg)),
+        SceneKind::Grid => Ok(pixel_scene(grid(cfg))),
         SceneKind::Catalogue => {
             let path = cfg.scene.catalogue.as_deref().unwrap_or(Path::new(""));
-            read_catalogue(
+            match catalogue::read(
                 path,
                 cfg.scene.mag_hw,
                 cfg.scene.j_minus_h,
                 cfg.instrument.detector_px as f64,
-            )
+            )? {
+                catalogue::Catalogue::Pixels(stars) if arrays == 1 => Ok(pixel_scene(stars)),
+                catalogue::Catalogue::Pixels(_) => Err(SceneError::Invalid(format!(
+                    "{}: a catalogue in pixels (x, y) describes one array; give ra, dec to fill the \
+                     quad focal plane, or set focal_plane.layout = \"single\"",
+                    path.display()
+                ))),
+                catalogue::Catalogue::Sky(stars) => placement::place(cfg, &stars),
+            }
         }
+        SceneKind::Bulge => placement::place(cfg, &bulge::draw(cfg)?),
     }
 }
 
@@ -79,89 +132,27 @@ pub fn grid(cfg: &Config) -> Vec<Star> {
                 y_px: centre + (iy as f64 - (n as f64 - 1.0) / 2.0) * s.grid_spacing_px + oy,
                 mag_hw: s.mag_hw,
                 j_minus_h: s.j_minus_h,
+                in_truth: true,
             });
         }
     }
     stars
 }
 
-/// Read `x,y[,hw[,j_h]]` rows (pixels; a header line and `#` comments are skipped). Missing magnitudes
-/// and colours take the scene defaults. Every value is range-checked, naming the line and column: x and y
-/// within one detector width (`detector_px`) of the array, Hw in [`HW_RANGE`] or `inf` (a star that
-/// delivers no light: flux exactly 0), J − H in [`JH_RANGE`]; at most [`MAX_CATALOGUE_STARS`] rows.
+/// Read a CSV catalogue in pixels (`x,y[,hw[,j_h]]`; see [`catalogue`]).
 pub fn read_catalogue(
     path: &Path,
     default_mag: f64,
     default_jh: f64,
     detector_px: f64,
 ) -> Result<Vec<Star>, SceneError> {
-    let p = path.display().to_string();
-    let text = std::fs::read_to_string(path).map_err(|source| SceneError::Io {
-        path: p.clone(),
-        source,
-    })?;
-    let mut stars = Vec::new();
-    for (k, line) in text.lines().enumerate() {
-        let l = line.trim();
-        if l.is_empty() || l.starts_with('#') {
-            continue;
-        }
-        let cols: Vec<&str> = l.split(',').map(str::trim).collect();
-        if k == 0 && cols.first().is_some_and(|c| c.parse::<f64>().is_err()) {
-            continue; // header
-        }
-        let num = |i: usize,
-                   name: &str,
-                   default: Option<f64>,
-                   (lo, hi): (f64, f64),
-                   inf_ok: bool|
-         -> Result<f64, SceneError> {
-            match cols.get(i) {
-                Some(v) if !v.is_empty() => {
-                    let x: f64 = v.parse().map_err(|_| SceneError::Parse {
-                        path: p.clone(),
-                        line: k + 1,
-                        message: format!("column {name} = `{v}` is not a number"),
-                    })?;
-                    if (lo..=hi).contains(&x) || (inf_ok && x == f64::INFINITY) {
-                        Ok(x)
-                    } else {
-                        Err(SceneError::Parse {
-                            path: p.clone(),
-                            line: k + 1,
-                            message: format!(
-                                "column {name} = {v}: allowed [{lo}, {hi}]{}",
-                                if inf_ok { " or inf (no light)" } else { "" }
-                            ),
-                        })
-                    }
-                }
-                _ => default.ok_or_else(|| SceneError::Parse {
-                    path: p.clone(),
-                    line: k + 1,
-                    message: format!("missing column {name}"),
-                }),
-            }
-        };
-        if stars.len() >= MAX_CATALOGUE_STARS {
-            return Err(SceneError::TooMany {
-                path: p,
-                max: MAX_CATALOGUE_STARS,
-            });
-        }
-        let xy = (-detector_px, 2.0 * detector_px);
-        stars.push(Star {
-            id: stars.len(),
-            x_px: num(0, "x", None, xy, false)?,
-            y_px: num(1, "y", None, xy, false)?,
-            mag_hw: num(2, "hw", Some(default_mag), HW_RANGE, true)?,
-            j_minus_h: num(3, "j_h", Some(default_jh), JH_RANGE, false)?,
-        });
+    match catalogue::read(path, default_mag, default_jh, detector_px)? {
+        catalogue::Catalogue::Pixels(s) => Ok(s),
+        catalogue::Catalogue::Sky(_) => Err(SceneError::Invalid(format!(
+            "{}: holds ra, dec; expected x, y",
+            path.display()
+        ))),
     }
-    if stars.is_empty() {
-        return Err(SceneError::Empty { path: p });
-    }
-    Ok(stars)
 }
 
 #[cfg(test)]

@@ -1,0 +1,122 @@
+//! Configuration of the sky side: the pointing (`[sky]`), the focal plane (`[focal_plane]`) and the mock
+//! Galactic-bulge field (`[scene.bulge]`).
+
+use serde::{Deserialize, Serialize};
+
+/// Where the telescope points: the images' world coordinate system (`engine::sky`). The default is the
+/// Galactic centre (Sgr A*, ICRS), JASMINE's survey field, with the detector's +y to the north.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Sky {
+    /// Right ascension of the optical axis (ICRS), degrees, 0 ≤ RA < 360.
+    pub ra_deg: f64,
+    /// Declination of the optical axis (ICRS), degrees, −90 … 90.
+    pub dec_deg: f64,
+    /// Position angle of the focal plane's +y axis, degrees east of north.
+    pub pa_deg: f64,
+}
+
+impl Default for Sky {
+    fn default() -> Self {
+        Self {
+            ra_deg: 266.416_8,
+            dec_deg: -29.007_8,
+            pa_deg: 0.0,
+        }
+    }
+}
+
+/// How many arrays the focal plane holds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Hash)]
+#[serde(rename_all = "kebab-case")]
+pub enum Layout {
+    /// One array with the optical axis at its centre (the paper's experiment; the default).
+    Single,
+    /// JASMINE's 2 × 2 arrays around the optical axis, `gap_px` apart, each turned by its rotation.
+    Quad,
+}
+
+/// One SIP coefficient: `value` multiplies u^p v^q (u, v: focal-plane pixels from the optical axis).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SipTerm {
+    pub p: usize,
+    pub q: usize,
+    pub value: f64,
+}
+
+/// The focal plane: layout, gaps, the arrays' rotations and the optical distortion.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct FocalPlaneLayout {
+    pub layout: Layout,
+    /// Gap between neighbouring arrays' full formats, pixels (300 px = 3 mm of 10-µm pixels, the mission's
+    /// design).
+    pub gap_px: f64,
+    /// Each array's rotation on the sky (0, 90, 180 or 270°; array 0 lower left, 1 lower right, 2 upper
+    /// left, 3 upper right): its rows, channels and rolling readout run along a different direction.
+    pub rotations_deg: [f64; 4],
+    /// Forward SIP distortion (Shupe et al. 2005) in focal-plane pixel axes: the true position of a star
+    /// is (u + A(u, v), v + B(u, v)) through the linear WCS. Empty: no distortion (the default);
+    /// `engine/configs/focal_plane_sip.toml` is a documented example. Orders 2 … 9.
+    pub sip_a: Vec<SipTerm>,
+    pub sip_b: Vec<SipTerm>,
+}
+
+impl Default for FocalPlaneLayout {
+    fn default() -> Self {
+        Self {
+            layout: Layout::Single,
+            gap_px: 300.0,
+            rotations_deg: [0.0, 90.0, 180.0, 270.0],
+            sip_a: Vec::new(),
+            sip_b: Vec::new(),
+        }
+    }
+}
+
+/// The built-in mock Galactic-bulge field: stars uniform on the sky over the focal plane, magnitudes from a
+/// power-law luminosity function and colours from a reddening distribution, drawn from the seed.
+///
+/// * Luminosity function dN/dHw ∝ 10^(α·Hw) on [`hw_min`, `hw_max`], α = 0.30: the K-band luminosity
+///   function of the Galactic-centre giants (Schödel et al. 2007, A&A 469, 125: α = 0.30 ± 0.01), taken
+///   over to Hw unchanged.
+/// * Surface density 100 stars per arcmin² with Hw ≤ 17: GALACTICNUCLEUS (Nogueras-Lara et al. 2019,
+///   A&A 631, A20) counts 3.3 × 10⁶ stars in 0.3 deg² (≈ 2000 per arcmin² detected in H, to H ≈ 19.5);
+///   Hw 17 is H ≈ 15.4 at J − H = 2 (SPEC's Hw − H relation), 10^(0.3 × (15.4 − 19.5)) ≈ 0.06 of them:
+///   ≈ 120 per arcmin². An array (236 arcmin² photosensitive) then holds ≈ 2.4 × 10⁴ stars, the focal
+///   plane ≈ 10⁵ — inside the 10⁴–10⁵ per array the mission quotes.
+/// * J − H: a normal distribution of mean 2.2 and σ 0.35 clipped to [1.5, 3.0] — the intrinsic colours of
+///   red giants (≈ 0.7) plus the Galactic-centre reddening E(J − H) ≈ 1–2.3 (Nogueras-Lara et al. 2018,
+///   A&A 610, A83).
+///
+/// Every field is a knob: an astronomer's own field is a catalogue (`scene.kind = "catalogue"`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Bulge {
+    /// Stars per square arcminute with Hw ≤ `hw_max`.
+    pub density_per_arcmin2: f64,
+    pub hw_min: f64,
+    pub hw_max: f64,
+    /// α of dN/dHw ∝ 10^(α·Hw).
+    pub lf_slope: f64,
+    pub jh_mean: f64,
+    pub jh_sigma: f64,
+    pub jh_min: f64,
+    pub jh_max: f64,
+}
+
+impl Default for Bulge {
+    fn default() -> Self {
+        Self {
+            density_per_arcmin2: 100.0,
+            hw_min: 8.0,
+            hw_max: 17.0,
+            lf_slope: 0.30,
+            jh_mean: 2.2,
+            jh_sigma: 0.35,
+            jh_min: 1.5,
+            jh_max: 3.0,
+        }
+    }
+}

@@ -1,0 +1,153 @@
+//! The mock Galactic-bulge field (`scene.kind = "bulge"`): stars uniform on the sky over the focal plane,
+//! Hw from a power-law luminosity function, J − H from a clipped normal reddening distribution, all from
+//! the bulge stream of the run seed. Parameters and their sources: [`crate::config::Bulge`].
+
+use super::{MAX_CATALOGUE_STARS, SceneError, SkyStar};
+use crate::config::{Config, Layout};
+use crate::rng::{self, Stream};
+use rand::RngExt;
+use rand_distr::{Distribution, StandardNormal};
+
+/// The square region of focal-plane pixels (half side, from the optical axis) the field covers: the
+/// arrays' full formats and gaps plus the reach of a star's light ([`super::placement::margin_px`]), so
+/// that stars just off an array still light its edge.
+pub fn half_side_px(cfg: &Config) -> f64 {
+    let n = cfg.instrument.detector_px as f64;
+    let margin = super::placement::margin_px(cfg);
+    match cfg.focal_plane.layout {
+        Layout::Single => n / 2.0 + margin,
+        Layout::Quad => n + cfg.focal_plane.gap_px / 2.0 + margin,
+    }
+}
+
+/// How many stars the field holds: density × area, rounded.
+pub fn star_count(cfg: &Config) -> f64 {
+    let side_arcmin = 2.0 * half_side_px(cfg) * cfg.instrument.plate_scale_mas() / 6.0e4;
+    cfg.scene.bulge.density_per_arcmin2 * side_arcmin * side_arcmin
+}
+
+/// Hw drawn from dN/dHw ∝ 10^(α·Hw) on [lo, hi] by inverting its cumulative distribution (uniform for α = 0).
+pub fn luminosity_function_draw(u: f64, lo: f64, hi: f64, alpha: f64) -> f64 {
+    if alpha.abs() < 1e-12 {
+        return lo + u * (hi - lo);
+    }
+    let (a, b) = (10f64.powf(alpha * lo), 10f64.powf(alpha * hi));
+    (a + u * (b - a)).log10() / alpha
+}
+
+/// Draw the field's stars (ids in drawing order).
+pub fn draw(cfg: &Config) -> Result<Vec<SkyStar>, SceneError> {
+    let b = &cfg.scene.bulge;
+    let count = star_count(cfg).round();
+    if count > MAX_CATALOGUE_STARS as f64 {
+        return Err(SceneError::Invalid(format!(
+            "scene.bulge.density_per_arcmin2 = {} gives {count:.0} stars over the focal plane: at most {} \
+             are allowed",
+            b.density_per_arcmin2, MAX_CATALOGUE_STARS
+        )));
+    }
+    let n = count as usize;
+    let h = half_side_px(cfg);
+    let projection = crate::sky::focal_plane_projection(cfg).map_err(SceneError::Invalid)?;
+    let mut r = rng::stream(cfg.seed, Stream::Bulge, 0);
+    let mut stars = Vec::with_capacity(n);
+    for id in 0..n {
+        let (fx, fy) = (
+            (r.random::<f64>() * 2.0 - 1.0) * h,
+            (r.random::<f64>() * 2.0 - 1.0) * h,
+        );
+        let hw = luminosity_function_draw(r.random::<f64>(), b.hw_min, b.hw_max, b.lf_slope);
+        // the clipped normal by rejection (a bounded number of tries, then the clip)
+        let mut jh = b.jh_mean;
+        for _ in 0..64 {
+            let z: f64 = StandardNormal.sample(&mut r);
+            jh = b.jh_mean + b.jh_sigma * z;
+            if (b.jh_min..=b.jh_max).contains(&jh) {
+                break;
+            }
+        }
+        let jh = jh.clamp(b.jh_min, b.jh_max);
+        let (ra, dec) = projection
+            .pixel_to_sky(fx, fy)
+            .ok_or_else(|| SceneError::Invalid("the bulge field has no sky position".into()))?;
+        stars.push(SkyStar {
+            id,
+            ra_deg: ra,
+            dec_deg: dec,
+            mag_hw: hw,
+            j_minus_h: jh,
+        });
+    }
+    Ok(stars)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::numerics::stats;
+
+    fn bulge_cfg() -> Config {
+        let mut c = Config::default();
+        c.scene.kind = crate::config::SceneKind::Bulge;
+        c.focal_plane.layout = Layout::Quad;
+        c
+    }
+
+    #[test]
+    fn magnitudes_follow_the_luminosity_function() {
+        // the fraction of stars brighter than m is (10^(α m) − 10^(α lo)) / (10^(α hi) − 10^(α lo))
+        let mut c = bulge_cfg();
+        c.scene.bulge.density_per_arcmin2 = 20.0; // ≈ 2.2e4 stars
+        let s = draw(&c).expect("draw");
+        let n = s.len() as f64;
+        assert!((n - star_count(&c)).abs() <= 0.5, "{n}");
+        let (lo, hi, a) = (8.0, 17.0, 0.30);
+        for m in [11.0, 14.0, 16.0] {
+            let expect = (10f64.powf(a * m) - 10f64.powf(a * lo))
+                / (10f64.powf(a * hi) - 10f64.powf(a * lo));
+            let got = s.iter().filter(|t| t.mag_hw < m).count() as f64 / n;
+            let sigma = (expect * (1.0 - expect) / n).sqrt();
+            assert!(
+                (got - expect).abs() < 4.0 * sigma,
+                "m {m}: {got} vs {expect} (σ {sigma})"
+            );
+        }
+        // colours: inside the clip, mean and σ of the clipped normal (mean 2.2, σ 0.35 on [1.5, 3.0]:
+        // the truncation at −2 σ and +2.29 σ moves the mean to 2.2 + 0.35·(φ(−2) − φ(2.29))/Z = 2.209)
+        let jh: Vec<f64> = s.iter().map(|t| t.j_minus_h).collect();
+        assert!(jh.iter().all(|v| (1.5..=3.0).contains(v)));
+        let m = stats::mean(&jh);
+        assert!((m - 2.209).abs() < 4.0 * 0.33 / n.sqrt() + 1e-3, "{m}");
+        assert_eq!(draw(&c).expect("again"), s, "same seed, same field");
+    }
+
+    #[test]
+    fn the_field_is_uniform_over_the_focal_plane() {
+        let mut c = bulge_cfg();
+        c.scene.bulge.density_per_arcmin2 = 10.0;
+        let s = draw(&c).expect("draw");
+        let p = crate::sky::focal_plane_projection(&c).expect("projection");
+        let h = half_side_px(&c);
+        // quadrant counts agree within 4σ of a binomial(n, 1/4)
+        let mut q = [0usize; 4];
+        for t in &s {
+            let (x, y) = p.sky_to_pixel(t.ra_deg, t.dec_deg).expect("on the plane");
+            assert!(x.abs() <= h + 1e-6 && y.abs() <= h + 1e-6);
+            q[(x > 0.0) as usize + 2 * (y > 0.0) as usize] += 1;
+        }
+        let n = s.len() as f64;
+        for k in q {
+            assert!(
+                (k as f64 - n / 4.0).abs() < 4.0 * (n * 0.1875).sqrt(),
+                "{q:?}"
+            );
+        }
+    }
+
+    #[test]
+    fn the_cumulative_inverse_is_exact() {
+        assert_eq!(luminosity_function_draw(0.0, 8.0, 17.0, 0.3), 8.0);
+        assert!((luminosity_function_draw(1.0, 8.0, 17.0, 0.3) - 17.0).abs() < 1e-12);
+        assert!((luminosity_function_draw(0.5, 8.0, 17.0, 0.0) - 12.5).abs() < 1e-12);
+    }
+}

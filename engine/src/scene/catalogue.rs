@@ -1,0 +1,344 @@
+//! Star catalogues: a CSV file or a FITS binary table, with positions in pixels of the single array
+//! (`x, y`) or on the sky (`ra, dec`, ICRS degrees).
+//!
+//! Columns are found by name, case-insensitively: `x, y` or `ra, dec` (also `ra_deg, dec_deg`); `hw`, or
+//! 2MASS `j, h` converted with SPEC §5's Hw − H = 1.08(J−H) − 0.15(J−H)² + 0.01(J−H)³; `j_h` (also `jh`,
+//! `j-h`), or `j − h` when `j, h` are given; optional `a_hw`, an extinction in Hw magnitudes added to each
+//! star's Hw (for catalogues of intrinsic magnitudes). A CSV without a header line is read positionally as
+//! `x, y[, hw[, j_h]]` (the original format). Missing magnitudes and colours take `scene.mag_hw` and
+//! `scene.j_minus_h`. Every value is range-checked, naming the line (CSV) or row (FITS) and the column.
+
+use super::{HW_RANGE, JH_RANGE, MAX_CATALOGUE_STARS, SceneError, SkyStar, Star};
+use crate::photometry;
+use std::path::Path;
+
+/// A catalogue's stars, in the coordinates it gave.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Catalogue {
+    /// Pixels of the single array.
+    Pixels(Vec<Star>),
+    /// Sky positions.
+    Sky(Vec<SkyStar>),
+}
+
+/// Where each value of a row comes from.
+struct Layout {
+    pos: [usize; 2],
+    sky: bool,
+    hw: Option<usize>,
+    jh: Option<usize>,
+    j_h_2mass: Option<[usize; 2]>,
+    a_hw: Option<usize>,
+}
+
+impl Layout {
+    fn from_names(names: &[String], path: &str) -> Result<Self, SceneError> {
+        let find = |alts: &[&str]| {
+            names
+                .iter()
+                .position(|n| alts.iter().any(|a| n.trim().eq_ignore_ascii_case(a)))
+        };
+        let (pos, sky) = match (find(&["ra", "ra_deg"]), find(&["dec", "dec_deg"])) {
+            (Some(a), Some(d)) => ([a, d], true),
+            _ => match (find(&["x", "x_px"]), find(&["y", "y_px"])) {
+                (Some(x), Some(y)) => ([x, y], false),
+                _ => {
+                    return Err(SceneError::Parse {
+                        path: path.into(),
+                        line: 1,
+                        message: format!(
+                            "columns {names:?}: need `ra, dec` (degrees) or `x, y` (pixels)"
+                        ),
+                    });
+                }
+            },
+        };
+        let j_h_2mass = match (find(&["j"]), find(&["h"])) {
+            (Some(j), Some(h)) => Some([j, h]),
+            _ => None,
+        };
+        Ok(Self {
+            pos,
+            sky,
+            hw: find(&["hw", "mag_hw"]),
+            jh: find(&["j_h", "jh", "j-h", "j_minus_h"]),
+            j_h_2mass,
+            a_hw: find(&["a_hw"]),
+        })
+    }
+
+    /// The original header-less layout: `x, y[, hw[, j_h]]`.
+    fn positional() -> Self {
+        Self {
+            pos: [0, 1],
+            sky: false,
+            hw: Some(2),
+            jh: Some(3),
+            j_h_2mass: None,
+            a_hw: None,
+        }
+    }
+}
+
+/// What a row's values are checked against.
+struct Limits {
+    default_mag: f64,
+    default_jh: f64,
+    detector_px: f64,
+}
+
+/// One row → a star (`id` = its index among the stars read).
+fn star_of(
+    get: &dyn Fn(usize) -> Option<f64>,
+    lay: &Layout,
+    lim: &Limits,
+    at: &dyn Fn(String) -> SceneError,
+) -> Result<(f64, f64, f64, f64), SceneError> {
+    let check = |v: Option<f64>, name: &str, (lo, hi): (f64, f64), inf_ok: bool| match v {
+        Some(x) if (lo..=hi).contains(&x) || (inf_ok && x == f64::INFINITY) => Ok(x),
+        Some(x) => Err(at(format!(
+            "column {name} = {x:?}: allowed [{lo}, {hi}]{}",
+            if inf_ok { " or inf (no light)" } else { "" }
+        ))),
+        None => Err(at(format!("missing column {name}"))),
+    };
+    let (p0, p1) = if lay.sky {
+        let ra = check(get(lay.pos[0]), "ra", (0.0, 360.0), false)?;
+        let dec = check(get(lay.pos[1]), "dec", (-90.0, 90.0), false)?;
+        (ra % 360.0, dec)
+    } else {
+        let xy = (-lim.detector_px, 2.0 * lim.detector_px);
+        (
+            check(get(lay.pos[0]), "x", xy, false)?,
+            check(get(lay.pos[1]), "y", xy, false)?,
+        )
+    };
+    let two_mass = match lay.j_h_2mass {
+        Some([j, h]) => Some((
+            check(get(j), "j", (-5.0, 40.0), false)?,
+            check(get(h), "h", (-5.0, 40.0), false)?,
+        )),
+        None => None,
+    };
+    let jh = match (lay.jh.and_then(get), two_mass) {
+        (Some(v), _) => check(Some(v), "j_h", JH_RANGE, false)?,
+        (None, Some((j, h))) => check(Some(j - h), "j - h", JH_RANGE, false)?,
+        (None, None) => lim.default_jh,
+    };
+    let mut hw = match (lay.hw.and_then(get), two_mass) {
+        (Some(v), _) => check(Some(v), "hw", HW_RANGE, true)?,
+        (None, Some((j, h))) => check(
+            Some(photometry::hw_from_2mass(j, h)),
+            "hw (from j, h)",
+            HW_RANGE,
+            false,
+        )?,
+        (None, None) => lim.default_mag,
+    };
+    if let Some(a) = lay.a_hw.and_then(get) {
+        hw += check(Some(a), "a_hw", (0.0, 30.0), false)?;
+    }
+    Ok((p0, p1, hw, jh))
+}
+
+fn collect(
+    rows: Vec<(f64, f64, f64, f64)>,
+    sky: bool,
+    path: &str,
+) -> Result<Catalogue, SceneError> {
+    if rows.is_empty() {
+        return Err(SceneError::Empty { path: path.into() });
+    }
+    Ok(if sky {
+        Catalogue::Sky(
+            rows.into_iter()
+                .enumerate()
+                .map(|(id, (ra, dec, hw, jh))| SkyStar {
+                    id,
+                    ra_deg: ra,
+                    dec_deg: dec,
+                    mag_hw: hw,
+                    j_minus_h: jh,
+                })
+                .collect(),
+        )
+    } else {
+        Catalogue::Pixels(
+            rows.into_iter()
+                .enumerate()
+                .map(|(id, (x, y, hw, jh))| Star {
+                    id,
+                    x_px: x,
+                    y_px: y,
+                    mag_hw: hw,
+                    j_minus_h: jh,
+                    in_truth: true,
+                })
+                .collect(),
+        )
+    })
+}
+
+/// Read a catalogue: a FITS binary table (`.fits`, `.fit`, `.fits.gz`: its first table extension) or CSV.
+/// `detector_px` bounds pixel positions (within one detector width of the array).
+pub fn read(
+    path: &Path,
+    default_mag: f64,
+    default_jh: f64,
+    detector_px: f64,
+) -> Result<Catalogue, SceneError> {
+    let lim = Limits {
+        default_mag,
+        default_jh,
+        detector_px,
+    };
+    let name = path.to_string_lossy().to_ascii_lowercase();
+    if name.ends_with(".fits") || name.ends_with(".fit") || name.ends_with(".fits.gz") {
+        read_fits(path, &lim)
+    } else {
+        read_csv(path, &lim)
+    }
+}
+
+fn read_csv(path: &Path, lim: &Limits) -> Result<Catalogue, SceneError> {
+    let p = path.display().to_string();
+    let text = std::fs::read_to_string(path).map_err(|source| SceneError::Io {
+        path: p.clone(),
+        source,
+    })?;
+    let mut layout: Option<Layout> = None;
+    let mut rows = Vec::new();
+    for (k, line) in text.lines().enumerate() {
+        let l = line.trim();
+        if l.is_empty() || l.starts_with('#') {
+            continue;
+        }
+        let cols: Vec<&str> = l.split(',').map(str::trim).collect();
+        let lay = match &layout {
+            Some(lay) => lay,
+            None => {
+                let header = cols.first().is_some_and(|c| c.parse::<f64>().is_err());
+                let lay = if header {
+                    let names: Vec<String> = cols.iter().map(|c| c.to_string()).collect();
+                    Layout::from_names(&names, &p)?
+                } else {
+                    Layout::positional()
+                };
+                layout = Some(lay);
+                if header {
+                    continue;
+                }
+                layout
+                    .as_ref()
+                    .ok_or(SceneError::Empty { path: p.clone() })?
+            }
+        };
+        if rows.len() >= MAX_CATALOGUE_STARS {
+            return Err(SceneError::TooMany {
+                path: p,
+                max: MAX_CATALOGUE_STARS,
+            });
+        }
+        let at = |message: String| SceneError::Parse {
+            path: p.clone(),
+            line: k + 1,
+            message,
+        };
+        // a value that is present must be a number; an absent or empty one takes the default
+        let mut values = Vec::with_capacity(cols.len());
+        for (i, v) in cols.iter().enumerate() {
+            values.push(if v.is_empty() {
+                None
+            } else {
+                Some(
+                    v.parse::<f64>()
+                        .map_err(|_| at(format!("column {} = `{v}` is not a number", i + 1)))?,
+                )
+            });
+        }
+        let get = |i: usize| values.get(i).copied().flatten();
+        rows.push(star_of(&get, lay, lim, &at)?);
+    }
+    let sky = layout.as_ref().is_some_and(|l| l.sky);
+    collect(rows, sky, &p)
+}
+
+fn read_fits(path: &Path, lim: &Limits) -> Result<Catalogue, SceneError> {
+    use fitsio::hdu::HduInfo;
+    let p = path.display().to_string();
+    let fe = |e: fitsio::errors::Error| SceneError::Parse {
+        path: p.clone(),
+        line: 0,
+        message: e.to_string(),
+    };
+    if !path.exists() {
+        return Err(SceneError::Io {
+            path: p,
+            source: std::io::Error::new(std::io::ErrorKind::NotFound, "no such file"),
+        });
+    }
+    let mut f = fitsio::FitsFile::open(path).map_err(fe)?;
+    let hdu = f.hdu(1).map_err(|e| SceneError::Parse {
+        path: p.clone(),
+        line: 0,
+        message: format!("no table extension: {e}"),
+    })?;
+    let HduInfo::TableInfo {
+        column_descriptions,
+        num_rows,
+    } = &hdu.info
+    else {
+        return Err(SceneError::Parse {
+            path: p,
+            line: 0,
+            message: "the first extension is not a table".into(),
+        });
+    };
+    if *num_rows > MAX_CATALOGUE_STARS {
+        return Err(SceneError::TooMany {
+            path: p,
+            max: MAX_CATALOGUE_STARS,
+        });
+    }
+    let names: Vec<String> = column_descriptions.iter().map(|c| c.name.clone()).collect();
+    let lay = Layout::from_names(&names, &p)?;
+    let mut cols: Vec<Option<Vec<f64>>> = vec![None; names.len()];
+    for i in [
+        Some(lay.pos[0]),
+        Some(lay.pos[1]),
+        lay.hw,
+        lay.jh,
+        lay.a_hw,
+        lay.j_h_2mass.map(|v| v[0]),
+        lay.j_h_2mass.map(|v| v[1]),
+    ]
+    .into_iter()
+    .flatten()
+    {
+        cols[i] = Some(
+            hdu.read_col::<f64>(&mut f, &names[i])
+                .map_err(|e| SceneError::Parse {
+                    path: p.clone(),
+                    line: 0,
+                    message: format!("column {}: {e}", names[i]),
+                })?,
+        );
+    }
+    let mut rows = Vec::with_capacity(*num_rows);
+    for r in 0..*num_rows {
+        let at = |message: String| SceneError::Parse {
+            path: p.clone(),
+            line: r + 1,
+            message: format!("(table row) {message}"),
+        };
+        // NaN in a FITS table means "no value": the default applies
+        let get = |i: usize| {
+            cols.get(i)
+                .and_then(|c| c.as_ref())
+                .map(|c| c[r])
+                .filter(|v| !v.is_nan())
+        };
+        rows.push(star_of(&get, &lay, lim, &at)?);
+    }
+    collect(rows, lay.sky, &p)
+}

@@ -1,0 +1,160 @@
+//! Sky stars onto the arrays: each star through each array's WCS (`sky::array_wcs`, distortion included),
+//! and an account of where every star fell.
+//!
+//! A star is simulated on every array whose pixels its light reaches (its position within
+//! [`margin_px`] of the array's full format), and belongs to that array's truth when it lies on the
+//! photosensitive pixels. Every catalogue row is counted exactly once: duplicate (an exact repeat of an
+//! earlier row: dropped, so its light is not doubled), photosensitive, border (on an array's dead border),
+//! gap (between the arrays of the quad) or off (outside the focal plane, or 90° or more from the axis).
+
+use super::{Scene, SceneError, SkyStar, Star};
+use crate::config::{AceCase, Config, Layout};
+use crate::sky::focal_plane::Placement;
+use rayon::prelude::*;
+use std::collections::HashSet;
+
+/// Where a sky scene's stars fell.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct PlacementCounts {
+    /// Rows of the catalogue (or stars drawn).
+    pub catalogue: usize,
+    /// Exact repeats of an earlier row, dropped.
+    pub duplicates: usize,
+    /// On an array's photosensitive pixels (in the truth).
+    pub photosensitive: usize,
+    /// On an array's dead border.
+    pub border: usize,
+    /// Between the arrays.
+    pub gap: usize,
+    /// Outside the focal plane.
+    pub off: usize,
+}
+
+impl PlacementCounts {
+    /// The FITS header cards' keys, values and comments.
+    pub fn cards(&self) -> [(&'static str, i64, &'static str); 6] {
+        [
+            (
+                "NCATALOG",
+                self.catalogue as i64,
+                "catalogue rows (or stars drawn)",
+            ),
+            (
+                "NDUPLIC",
+                self.duplicates as i64,
+                "exact duplicate rows, dropped",
+            ),
+            (
+                "NPHOTO",
+                self.photosensitive as i64,
+                "stars on photosensitive pixels",
+            ),
+            (
+                "NBORDER",
+                self.border as i64,
+                "stars on an array's dead border",
+            ),
+            ("NGAP", self.gap as i64, "stars in the gaps between arrays"),
+            ("NOFF", self.off as i64, "stars off the focal plane"),
+        ]
+    }
+}
+
+/// How far outside an array a star's light still reaches it, pixels: the PSF table and halo, the kernel's
+/// pixel of support, and 3σ of the ACE.
+pub fn margin_px(cfg: &Config) -> f64 {
+    let jitter = match cfg.ace.case {
+        AceCase::None => 0.0,
+        _ => 3.0 * cfg.ace.sigma_mas / cfg.instrument.plate_scale_mas(),
+    };
+    (cfg.optics.psf_radius_px + cfg.fidelity.halo_radius_px) as f64 + 2.0 + jitter
+}
+
+/// Place sky stars on the arrays of `cfg`.
+pub fn place(cfg: &Config, stars: &[SkyStar]) -> Result<Scene, SceneError> {
+    let arrays = crate::sky::array_count(cfg);
+    let wcs = (0..arrays)
+        .map(|k| crate::sky::array_wcs(cfg, k))
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(SceneError::Invalid)?;
+    let plane = crate::sky::focal_plane(cfg);
+    let projection = crate::sky::focal_plane_projection(cfg).map_err(SceneError::Invalid)?;
+    let n = cfg.instrument.detector_px as f64;
+    let border = (cfg.instrument.detector_px - cfg.instrument.photosensitive_px) as f64 / 2.0;
+    let margin = margin_px(cfg);
+    let mut counts = PlacementCounts {
+        catalogue: stars.len(),
+        ..Default::default()
+    };
+    // duplicates: the first of equal rows is kept
+    let mut seen = HashSet::with_capacity(stars.len());
+    let keep: Vec<bool> = stars
+        .iter()
+        .map(|s| {
+            seen.insert([
+                s.ra_deg.to_bits(),
+                s.dec_deg.to_bits(),
+                s.mag_hw.to_bits(),
+                s.j_minus_h.to_bits(),
+            ])
+        })
+        .collect();
+    counts.duplicates = keep.iter().filter(|k| !**k).count();
+    // each star's pixel position on each array (None: the projection has none)
+    let pixels: Vec<Vec<Option<(f64, f64)>>> = stars
+        .par_iter()
+        .map(|s| {
+            wcs.iter()
+                .map(|w| w.sky_to_pixel(s.ra_deg, s.dec_deg))
+                .collect()
+        })
+        .collect();
+    let inside = |v: f64, lo: f64| v >= lo - 0.5 && v < n - lo - 0.5;
+    let mut out: Vec<Vec<Star>> = vec![Vec::new(); arrays];
+    for ((s, px), keep) in stars.iter().zip(&pixels).zip(&keep) {
+        if !keep {
+            continue;
+        }
+        let mut fell = None;
+        for (k, p) in px.iter().enumerate() {
+            let Some((x, y)) = *p else { continue };
+            let photo = inside(x, border) && inside(y, border);
+            if photo {
+                fell = Some(Placement::Photosensitive { array: k, x, y });
+            } else if inside(x, 0.0) && inside(y, 0.0) && fell.is_none() {
+                fell = Some(Placement::Border { array: k, x, y });
+            }
+            if x > -margin && x < n - 1.0 + margin && y > -margin && y < n - 1.0 + margin {
+                out[k].push(Star {
+                    id: s.id,
+                    x_px: x,
+                    y_px: y,
+                    mag_hw: s.mag_hw,
+                    j_minus_h: s.j_minus_h,
+                    in_truth: photo,
+                });
+            }
+        }
+        match fell {
+            Some(Placement::Photosensitive { .. }) => counts.photosensitive += 1,
+            Some(_) => counts.border += 1,
+            None => {
+                // between the arrays when inside the quad's outer edge (the undistorted layout decides:
+                // a star the distortion moves off an edge counts as in the gap), else off the plane
+                let in_gap = cfg.focal_plane.layout == Layout::Quad
+                    && projection
+                        .sky_to_pixel(s.ra_deg, s.dec_deg)
+                        .is_some_and(|(fx, fy)| !matches!(plane.locate(fx, fy), Placement::Off));
+                if in_gap {
+                    counts.gap += 1;
+                } else {
+                    counts.off += 1;
+                }
+            }
+        }
+    }
+    Ok(Scene {
+        arrays: out,
+        counts: Some(counts),
+    })
+}
