@@ -2,5 +2,6 @@
 //! Carlo sweeps.
 
 pub mod bench;
+pub mod bench_field;
 pub mod experiment;
 pub mod sweep;

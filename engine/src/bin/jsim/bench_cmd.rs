@@ -11,7 +11,8 @@ use std::path::PathBuf;
 pub struct BenchArgs {
     #[command(flatten)]
     pub cfg: ConfigArgs,
-    /// Parts to run (comma separated): methods, knobs, stars, epsf.
+    /// Parts to run (comma separated): methods, knobs, stars, epsf, bulge (the Galactic-centre field's
+    /// knobs and the focal-plane exposure against the number of stars; not in the default set: minutes).
     #[arg(
         long,
         default_value = "methods,knobs,stars,epsf",
@@ -27,6 +28,9 @@ pub struct BenchArgs {
     /// Star counts of the scaling table.
     #[arg(long, default_value = "100,400,4000,40000", value_delimiter = ',')]
     pub stars: Vec<usize>,
+    /// Star counts of the focal-plane rows (part bulge).
+    #[arg(long, default_value = "1000,10000,100000", value_delimiter = ',')]
+    pub bulge_stars: Vec<usize>,
     /// Images for the ePSF-iteration rows.
     #[arg(long, default_value_t = 3)]
     pub epsf_images: usize,
@@ -68,6 +72,21 @@ pub fn bench(a: &BenchArgs) -> Result<()> {
     if has("epsf") {
         eprintln!("bench: ePSF iterations …");
         rows.extend(bench::epsf_iterations(&session, &cfg, a.epsf_images)?);
+        save(&rows)?;
+    }
+    if has("bulge") {
+        use engine::studies::bench_field;
+        for (group, settings, astro) in bench_field::bulge_knobs(&cfg) {
+            eprintln!("bench: {group} …");
+            rows.extend(bench::knob_sweep(&group, &settings, astro)?);
+            save(&rows)?;
+        }
+        eprintln!("bench: focal-plane exposure against the number of stars …");
+        rows.extend(bench_field::focal_plane_scaling(
+            &session,
+            &cfg,
+            &a.bulge_stars,
+        )?);
         save(&rows)?;
     }
     if has("stars") {

@@ -1,0 +1,121 @@
+//! Speed against error on the Galactic-centre field (`jsim bench --parts bulge`): the knobs a crowded,
+//! many-coloured field adds — colour binning of the PSFs and each star's reach — measured like every other
+//! knob ([`super::bench::knob_sweep`], against the exact setting), and the cost of a whole focal-plane
+//! exposure against the number of stars.
+
+use super::bench::{BenchError, BenchRow, bench_config};
+use crate::config::{AceCase, Config, Layout, SceneKind};
+use crate::session::Session;
+use std::time::Instant;
+
+/// A single array of the mock bulge field holding about `stars` stars.
+pub fn bulge_array(base: &Config, stars: f64) -> Config {
+    let mut c = bench_config(base);
+    c.scene.kind = SceneKind::Bulge;
+    c.focal_plane.layout = Layout::Single;
+    c.scene.bulge.density_per_arcmin2 = 1.0;
+    let per_unit = crate::scene::bulge::star_count(&c);
+    c.scene.bulge.density_per_arcmin2 = stars / per_unit;
+    c
+}
+
+/// The bulge knobs: (group, settings with the exact one last, whether to measure positions).
+pub fn bulge_knobs(base: &Config) -> Vec<(String, Vec<(String, Config)>, bool)> {
+    // colour binning: 60 stars of the bulge's colours, Gaussian ACE; the exact setting is one PSF per star
+    let mut colours = bulge_array(base, 60.0);
+    colours.ace.case = AceCase::Gaussian;
+    let colour = |step: f64| {
+        let mut c = colours.clone();
+        c.fidelity.colour_step_mag = step;
+        (
+            if step > 0.0 {
+                format!("{step} mag")
+            } else {
+                "exact (one PSF per colour)".into()
+            },
+            c,
+        )
+    };
+    // each star's reach: 600 stars of the bulge's luminosity function, realistic ACE, rolling readout
+    let reach = bulge_array(base, 600.0);
+    let wing = |t: f64| {
+        let mut c = reach.clone();
+        c.fidelity.wing_threshold_e = t;
+        (
+            if t > 0.0 {
+                format!("{t} e⁻")
+            } else {
+                "kernel reach (exact)".into()
+            },
+            c,
+        )
+    };
+    vec![
+        (
+            "colour step (bulge colours)".into(),
+            [0.5, 0.2, 0.1, 0.05, 0.02, 0.0].map(colour).to_vec(),
+            true,
+        ),
+        (
+            "wing threshold (bulge, realistic ACE)".into(),
+            [10.0, 3.0, 1.0, 0.3, 0.0].map(wing).to_vec(),
+            true,
+        ),
+    ]
+}
+
+/// One exposure of the quad focal plane with about `n` stars of the mock bulge field, for each count:
+/// PSFs and kernels (once), then the exposure (integration and detector on all four arrays) and its
+/// multi-extension FITS, timed apart.
+pub fn focal_plane_scaling(
+    session: &Session,
+    base: &Config,
+    counts: &[usize],
+) -> Result<Vec<BenchRow>, BenchError> {
+    let dir = std::env::temp_dir().join(format!("jsim-bench-fp-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).map_err(|source| BenchError::Io {
+        path: dir.clone(),
+        source,
+    })?;
+    let mut rows = Vec::new();
+    for &n in counts {
+        let mut c = bench_config(base);
+        c.scene.kind = SceneKind::Bulge;
+        c.focal_plane.layout = Layout::Quad;
+        c.scene.bulge.density_per_arcmin2 = 1.0;
+        c.scene.bulge.density_per_arcmin2 = n as f64 / crate::scene::bulge::star_count(&c);
+        let t0 = Instant::now();
+        let fps = session.new_focal_plane(&c)?;
+        for a in &fps.arrays {
+            a.jobs()?;
+        }
+        let setup = t0.elapsed().as_secs_f64();
+        let t1 = Instant::now();
+        let exp = fps.exposure(0)?;
+        let t_exp = t1.elapsed().as_secs_f64();
+        let t2 = Instant::now();
+        crate::io::focal_plane::write_focal_plane_exposure(&dir, &fps, &exp)?;
+        let t_write = t2.elapsed().as_secs_f64();
+        let integrate: f64 = exp.arrays.iter().map(|e| e.times.integrate_s).sum();
+        rows.push(BenchRow::timing(
+            "focal-plane exposure",
+            format!(
+                "{n} stars, {} ACE, wing {} e⁻",
+                c.ace.case.name(),
+                c.fidelity.wing_threshold_e
+            ),
+            fps.arrays
+                .first()
+                .map(|a| a.backend_name())
+                .unwrap_or_default(),
+            fps.star_count(),
+            t_exp + t_write,
+            &format!(
+                "integration {integrate:.2} s, detector {:.2} s, FITS {t_write:.2} s; PSFs + kernels {setup:.1} s (once per dataset)",
+                t_exp - integrate
+            ),
+        ));
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+    Ok(rows)
+}
