@@ -46,7 +46,7 @@ impl PyExposure {
         let truth = convert::table(
             py,
             &files::truth_header(),
-            &files::truth_rows(&exp.truth, wcs.as_ref()),
+            &files::truth_rows(&exp.truth, wcs),
         )?;
         let header = PyDict::new(py);
         for c in files::headers(&sim, &exp) {

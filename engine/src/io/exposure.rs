@@ -159,9 +159,29 @@ pub fn headers(sim: &Simulator, exp: &Exposure) -> Vec<Card> {
         ),
         Card::s("METHOD", c.fidelity.method.name(), "integration method"),
         Card::s("BACKEND", exp.backend.clone(), "integration device"),
+    ];
+    cards.extend(provenance_cards(c));
+    cards.push(Card::s(
+        "COORDS",
+        "0-based, integer = pixel centre",
+        "TRUTH x,y convention (ds9: +1)",
+    ));
+    if let Some(counts) = &sim.counts {
+        cards.extend(counts_cards(counts));
+    }
+    // the world coordinate system (config validated: it always exists)
+    if let Some(w) = sim.wcs() {
+        cards.extend(wcs_cards(w));
+    }
+    cards
+}
+
+/// Which configuration and which engine made a file: `CONFHASH`, `ENGINE`.
+pub fn provenance_cards(cfg: &Config) -> [Card; 2] {
+    [
         Card::s(
             "CONFHASH",
-            c.hash_hex(),
+            cfg.hash_hex(),
             "SHA-256 of the config TOML (16 hex)",
         ),
         Card::s(
@@ -169,20 +189,12 @@ pub fn headers(sim: &Simulator, exp: &Exposure) -> Vec<Card> {
             format!("jsim {}", crate::VERSION),
             "simulator version",
         ),
-        Card::s(
-            "COORDS",
-            "0-based, integer = pixel centre",
-            "TRUTH x,y convention (ds9: +1)",
-        ),
-    ];
-    if let Some(counts) = &sim.counts {
-        cards.extend(counts.cards().map(|(k, v, c)| Card::i(k, v, c)));
-    }
-    // the world coordinate system (config validated: it always exists)
-    if let Some(w) = sim.wcs() {
-        cards.extend(wcs_cards(&w));
-    }
-    cards
+    ]
+}
+
+/// Where a sky scene's stars fell, as cards (`NCATALOG` … `NOFF`).
+pub fn counts_cards(counts: &crate::scene::PlacementCounts) -> impl Iterator<Item = Card> {
+    counts.cards().into_iter().map(|(k, v, c)| Card::i(k, v, c))
 }
 
 /// The FITS cards of a WCS.
@@ -364,7 +376,7 @@ pub fn write_image_file(
             },
             Hdu::Table {
                 name: "TRUTH",
-                columns: truth_columns(&exp.truth, sim.wcs().as_ref()),
+                columns: truth_columns(&exp.truth, sim.wcs()),
                 cards: vec![],
             },
             Hdu::Text {
@@ -389,6 +401,6 @@ pub fn write_exposure(
         None => Pixels::F32(&exp.image.adu),
     };
     write_image_file(&image, sim, exp, pixels, &exp.image.dq)?;
-    write_truth_csv(&truth_csv, &exp.truth, sim.wcs().as_ref())?;
+    write_truth_csv(&truth_csv, &exp.truth, sim.wcs())?;
     Ok(ExposureFiles { image, truth_csv })
 }

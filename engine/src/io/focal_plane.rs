@@ -11,7 +11,7 @@
 //! * `CONFIG`: the TOML the exposure was made with.
 
 use super::IoError;
-use super::exposure::{headers, stored_u16, truth_columns};
+use super::exposure::{counts_cards, headers, provenance_cards, stored_u16, truth_columns};
 use super::fits::{self, Card, Column, Hdu, Pixels};
 use crate::simulate::{FocalPlaneExposure, FocalPlaneSimulator};
 use std::path::{Path, PathBuf};
@@ -40,19 +40,10 @@ fn primary_cards(fps: &FocalPlaneSimulator, exp: &FocalPlaneExposure) -> Vec<Car
             c.sky.pa_deg,
             "[deg] focal plane +y, east of north",
         ),
-        Card::s(
-            "CONFHASH",
-            c.hash_hex(),
-            "SHA-256 of the config TOML (16 hex)",
-        ),
-        Card::s(
-            "ENGINE",
-            format!("jsim {}", crate::VERSION),
-            "simulator version",
-        ),
     ];
+    cards.extend(provenance_cards(c));
     if let Some(counts) = &exp.counts {
-        cards.extend(counts.cards().map(|(k, v, c)| Card::i(k, v, c)));
+        cards.extend(counts_cards(counts));
     }
     cards
 }
@@ -62,7 +53,7 @@ pub fn focal_plane_truth(fps: &FocalPlaneSimulator, exp: &FocalPlaneExposure) ->
     let mut merged: Vec<Column> = Vec::new();
     let mut arrays: Vec<i64> = Vec::new();
     for (sim, e) in fps.arrays.iter().zip(&exp.arrays) {
-        let cols = truth_columns(&e.truth, sim.wcs().as_ref());
+        let cols = truth_columns(&e.truth, sim.wcs());
         arrays.extend(std::iter::repeat_n(
             sim.array.index as i64 + 1,
             e.truth.len(),

@@ -72,6 +72,15 @@ impl PsfBank {
         }
     }
 
+    /// `bank` when it serves `cfg`, else a fresh bank for `cfg`.
+    pub fn serving(bank: Arc<Self>, cfg: &Config) -> Arc<Self> {
+        if bank.serves(cfg) {
+            bank
+        } else {
+            Arc::new(Self::new(cfg))
+        }
+    }
+
     /// Whether this bank's PSFs are valid for `cfg` (same instrument, optics and band).
     pub fn serves(&self, cfg: &Config) -> bool {
         self.instrument == cfg.instrument && self.optics == cfg.optics && self.band == cfg.band

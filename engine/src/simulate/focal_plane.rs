@@ -4,7 +4,7 @@
 //! rolling pattern points a different way on the sky on each array), flat and noise streams
 //! ([`super::array_seed`]).
 
-use super::{ArraySpec, Exposure, SimError, Simulator, array_seed, check_memory};
+use super::{ArrayPlace, ArraySpec, Exposure, SimError, Simulator, array_seed, check_memory};
 use crate::config::Config;
 use crate::integrate::Integrator;
 use crate::integrate::kernel::KernelCache;
@@ -40,11 +40,7 @@ impl FocalPlaneSimulator {
         integrator: Integrator,
     ) -> Result<Self, SimError> {
         cfg.validate()?;
-        let bank = if bank.serves(cfg) {
-            bank
-        } else {
-            Arc::new(PsfBank::new(cfg))
-        };
+        let bank = PsfBank::serving(bank, cfg);
         let scene = scene::build(cfg)?;
         check_memory(
             cfg,
@@ -54,10 +50,12 @@ impl FocalPlaneSimulator {
         let mut arrays: Vec<Simulator> = Vec::with_capacity(scene.arrays.len());
         for (k, stars) in scene.arrays.into_iter().enumerate() {
             let spec = ArraySpec {
-                index: k,
+                place: ArrayPlace {
+                    index: k,
+                    rotation_deg: crate::sky::array_rotation_deg(cfg, k),
+                    seed: array_seed(cfg.seed, k),
+                },
                 stars,
-                rotation_deg: crate::sky::array_rotation_deg(cfg, k),
-                seed: array_seed(cfg.seed, k),
             };
             let series = arrays.first().and_then(|a| a.series_arc());
             arrays.push(Simulator::build_array(

@@ -44,12 +44,18 @@ pub enum SimError {
 pub mod focal_plane;
 pub use focal_plane::{FocalPlaneExposure, FocalPlaneSimulator};
 
-/// The array a simulator images: its place in the focal plane, its stars and its own random streams.
+/// The array a simulator images: its place in the focal plane and its stars.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ArraySpec {
+    pub place: ArrayPlace,
+    pub stars: Vec<Star>,
+}
+
+/// An array's place in the focal plane and its own random streams.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ArrayPlace {
     /// 0 for the single array; 0 … 3 in the quad (lower left, lower right, upper left, upper right).
     pub index: usize,
-    pub stars: Vec<Star>,
     /// The array's turn on the sky (degrees): the common jitter is turned into its pixel axes.
     pub rotation_deg: f64,
     /// Seed of the array's flat and noise streams ([`array_seed`]).
@@ -186,7 +192,9 @@ pub struct Simulator {
     /// The stars this array simulates (for a sky scene, some just off the array for their light).
     pub stars: Vec<Star>,
     /// Which array, its turn and its streams' seed.
-    pub array: ArraySpec,
+    pub array: ArrayPlace,
+    /// This array's WCS (`sky::array_wcs`), made on first use.
+    wcs: std::sync::OnceLock<Option<crate::sky::wcs::ArrayWcs>>,
     /// Where a sky scene's stars fell (the whole focal plane's account; `None` for pixel scenes).
     pub counts: Option<PlacementCounts>,
     pub timing: ReadoutTiming,
@@ -232,10 +240,12 @@ impl Simulator {
         check_memory(cfg, scene.arrays.iter().map(Vec::len).sum(), 1)?;
         let stars = scene.arrays.into_iter().next().unwrap_or_default();
         let spec = ArraySpec {
-            index: 0,
+            place: ArrayPlace {
+                index: 0,
+                rotation_deg: 0.0,
+                seed: cfg.seed,
+            },
             stars,
-            rotation_deg: 0.0,
-            seed: cfg.seed,
         };
         Self::build_array(cfg, spec, scene.counts, bank, kernels, integrator, None)
     }
@@ -251,11 +261,7 @@ impl Simulator {
         integrator: Integrator,
         series: Option<Arc<AceSeries>>,
     ) -> Result<Self, SimError> {
-        let bank = if bank.serves(cfg) {
-            bank
-        } else {
-            Arc::new(PsfBank::new(cfg))
-        };
+        let bank = PsfBank::serving(bank, cfg);
         let timing = ReadoutTiming::new(cfg);
         let map = IntraPixelMap::from_config(&cfg.detector, cfg.fidelity.subpixels)?;
         let series = match (cfg.ace.case, series) {
@@ -282,8 +288,9 @@ impl Simulator {
         };
         let mut sim = Self {
             cfg: cfg.clone(),
-            stars: array.stars.clone(),
-            array,
+            stars: array.stars,
+            array: array.place,
+            wcs: std::sync::OnceLock::new(),
             counts,
             timing,
             bank,
@@ -311,9 +318,11 @@ impl Simulator {
         }
     }
 
-    /// This array's WCS (`sky::array_wcs`).
-    pub fn wcs(&self) -> Option<crate::sky::wcs::ArrayWcs> {
-        crate::sky::array_wcs(&self.cfg, self.array.index).ok()
+    /// This array's WCS (`sky::array_wcs`; made once: with a distortion it fits the inverse).
+    pub fn wcs(&self) -> Option<&crate::sky::wcs::ArrayWcs> {
+        self.wcs
+            .get_or_init(|| crate::sky::array_wcs(&self.cfg, self.array.index).ok())
+            .as_ref()
     }
 
     /// The PSF bank (shareable with other simulators of the same optics).
