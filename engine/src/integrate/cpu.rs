@@ -167,9 +167,99 @@ pub struct Histogram {
     pub nu: usize,
     pub nv: usize,
     pub data: Vec<f64>,
+    /// Star position minus origin (px): sample j lands at node coordinates `(o + track_j)·G`.
+    ox_px: f64,
+    oy_px: f64,
+    g: f64,
+}
+
+/// Every sample where `outer` weighs more than `inner` (a window it contains), with the difference:
+/// the head `outer.first..=inner.first` and the tail `inner.last..=outer.last`, each sample once.
+#[inline]
+fn for_each_extra(
+    outer: &super::track::WindowWeights,
+    inner: &super::track::WindowWeights,
+    mut f: impl FnMut(usize, f64),
+) {
+    let head_end = inner.first.min(outer.last);
+    for j in outer.first..=head_end {
+        let e = outer.weight(j) - inner.weight(j);
+        if e != 0.0 {
+            f(j, e);
+        }
+    }
+    let tail_start = inner.last.max(head_end + 1).max(outer.first);
+    for j in tail_start..=outer.last {
+        let e = outer.weight(j) - inner.weight(j);
+        if e != 0.0 {
+            f(j, e);
+        }
+    }
 }
 
 impl Histogram {
+    /// An empty histogram whose box holds every sample of `span` for a star at `star − origin`, or `None`
+    /// when the box would exceed [`MAX_HISTOGRAM_NODES`].
+    fn empty_for(
+        star: &StarSpec,
+        track: &Track,
+        span: &super::track::WindowWeights,
+        origin: (i64, i64),
+        g: usize,
+    ) -> Option<Self> {
+        let gf = g as f64;
+        let (ox_px, oy_px) = (star.x_px - origin.0 as f64, star.y_px - origin.1 as f64);
+        let (mut umin, mut umax, mut vmin, mut vmax) = (
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+        );
+        for j in span.first..=span.last {
+            let (dx, dy) = (track.dx_px[j], track.dy_px[j]);
+            umin = umin.min(dx);
+            umax = umax.max(dx);
+            vmin = vmin.min(dy);
+            vmax = vmax.max(dy);
+        }
+        if !umin.is_finite() || !vmin.is_finite() {
+            return None;
+        }
+        // the same arithmetic as a sample's node coordinate, so every sample lands inside
+        let node = |o: f64, d: f64| ((o + d) * gf).floor() as i64;
+        let (u0, v0) = (node(ox_px, umin) - 1, node(oy_px, vmin) - 1);
+        let nu = (node(ox_px, umax) - u0 + 3) as usize;
+        let nv = (node(oy_px, vmax) - v0 + 3) as usize;
+        if nu.saturating_mul(nv) > MAX_HISTOGRAM_NODES {
+            return None;
+        }
+        Some(Self {
+            u0,
+            v0,
+            nu,
+            nv,
+            data: vec![0.0; nu * nv],
+            ox_px,
+            oy_px,
+            g: gf,
+        })
+    }
+
+    /// Deposit sample j of the track with weight `w` (cloud in cell).
+    #[inline]
+    fn add_sample(&mut self, track: &Track, j: usize, w: f64) {
+        let u = (self.ox_px + track.dx_px[j]) * self.g;
+        let v = (self.oy_px + track.dy_px[j]) * self.g;
+        let (fu, fv) = (u.floor(), v.floor());
+        let (tu, tv) = (u - fu, v - fv);
+        let i = (fv as i64 - self.v0) as usize * self.nu + (fu as i64 - self.u0) as usize;
+        let d = &mut self.data;
+        d[i] += w * (1.0 - tu) * (1.0 - tv);
+        d[i + 1] += w * tu * (1.0 - tv);
+        d[i + self.nu] += w * (1.0 - tu) * tv;
+        d[i + self.nu + 1] += w * tu * tv;
+    }
+
     /// Deposit positions `q_j = star + track_j − origin` (px) × G with the window's weights.
     pub fn deposit(
         star: &StarSpec,
@@ -178,54 +268,19 @@ impl Histogram {
         origin: (i64, i64),
         g: usize,
     ) -> Option<Self> {
-        let gf = g as f64;
-        let (ox, oy) = (star.x_px - origin.0 as f64, star.y_px - origin.1 as f64);
-        let (mut umin, mut umax, mut vmin, mut vmax) = (
-            f64::INFINITY,
-            f64::NEG_INFINITY,
-            f64::INFINITY,
-            f64::NEG_INFINITY,
-        );
-        for j in w.first..=w.last {
-            let u = (ox + track.dx_px[j]) * gf;
-            let v = (oy + track.dy_px[j]) * gf;
-            umin = umin.min(u);
-            umax = umax.max(u);
-            vmin = vmin.min(v);
-            vmax = vmax.max(v);
-        }
-        if !umin.is_finite() || !vmin.is_finite() {
-            return None;
-        }
-        let (u0, v0) = (umin.floor() as i64, vmin.floor() as i64);
-        let nu = (umax.floor() as i64 - u0 + 2) as usize;
-        let nv = (vmax.floor() as i64 - v0 + 2) as usize;
-        if nu.saturating_mul(nv) > MAX_HISTOGRAM_NODES {
-            return None;
-        }
-        let mut data = vec![0.0; nu * nv];
+        let mut h = Self::empty_for(star, track, w, origin, g)?;
+        h.add_window(track, w);
+        Some(h)
+    }
+
+    /// Add the samples of window `w`.
+    fn add_window(&mut self, track: &Track, w: &super::track::WindowWeights) {
         for j in w.first..=w.last {
             let wj = w.weight(j);
-            if wj == 0.0 {
-                continue;
+            if wj != 0.0 {
+                self.add_sample(track, j, wj);
             }
-            let u = (ox + track.dx_px[j]) * gf;
-            let v = (oy + track.dy_px[j]) * gf;
-            let (fu, fv) = (u.floor(), v.floor());
-            let (tu, tv) = (u - fu, v - fv);
-            let i = (fv as i64 - v0) as usize * nu + (fu as i64 - u0) as usize;
-            data[i] += wj * (1.0 - tu) * (1.0 - tv);
-            data[i + 1] += wj * tu * (1.0 - tv);
-            data[i + nu] += wj * (1.0 - tu) * tv;
-            data[i + nu + 1] += wj * tu * tv;
         }
-        Some(Self {
-            u0,
-            v0,
-            nu,
-            nv,
-            data,
-        })
     }
 
     /// For each row, the first and one-past-last non-zero column (empty rows: start == end).
@@ -282,7 +337,69 @@ impl Histogram {
     }
 }
 
-/// Fast method: shared window by histogram ⊛ K, plus each pixel's own edge samples.
+/// A histogram's non-zero run of each row, stored reversed along u, so that `Σ_u H(u) K(P − u)` walks both
+/// tables forward: a contiguous dot product per row ([`crate::numerics::dot`]).
+struct ReversedRuns {
+    u0: i64,
+    v0: i64,
+    /// (histogram row, first column a, one-past-last column b, offset of the run in `values`)
+    runs: Vec<(usize, usize, usize, usize)>,
+    /// `values[offset + i] = H(row, b − 1 − i)`.
+    values: Vec<f64>,
+}
+
+impl ReversedRuns {
+    fn of(h: &Histogram) -> Self {
+        let mut runs = Vec::new();
+        let mut values = Vec::new();
+        for (r, (a, b)) in h.row_runs().into_iter().enumerate() {
+            if a == b {
+                continue;
+            }
+            runs.push((r, a, b, values.len()));
+            values.extend(h.data[r * h.nu + a..r * h.nu + b].iter().rev());
+        }
+        Self {
+            u0: h.u0,
+            v0: h.v0,
+            runs,
+            values,
+        }
+    }
+
+    /// `Σ_u H(u) K(P − u)` for the pixel at node coordinates P = (pu, pv) relative to the origin (the same
+    /// sum as [`Histogram::convolve_at`]).
+    fn convolve_at(&self, kernel: &PixelKernel, pu: i64, pv: i64) -> f64 {
+        let h = kernel.half_nodes as i64;
+        let n = kernel.n() as i64;
+        let base = pu - self.u0 + h;
+        let mut acc = 0.0;
+        for &(r, a, b, off) in &self.runs {
+            let ky = pv - (self.v0 + r as i64) + h;
+            if ky < 0 || ky >= n {
+                continue;
+            }
+            // K column for histogram column c: base − c, valid in [0, n)
+            let c_lo = (base - (n - 1)).max(a as i64);
+            let c_hi = base.min(b as i64 - 1);
+            if c_hi < c_lo {
+                continue;
+            }
+            let len = (c_hi - c_lo + 1) as usize;
+            let i0 = off + (b as i64 - 1 - c_hi) as usize;
+            let k0 = (ky * n + base - c_hi) as usize;
+            acc += crate::numerics::dot::dot(&self.values[i0..i0 + len], &kernel.data[k0..k0 + len]);
+        }
+        acc
+    }
+}
+
+/// Fast method: shared windows by histogram ⊛ K, plus each pixel's own edge samples.
+///
+/// Two levels of sharing, both exact: the window all pixels of the stamp share is deposited once; each
+/// stamp row adds to a copy of it the samples its pixels share beyond that (under the rolling readout a
+/// row's pixels start within one row time, ≈ 4 samples, of each other, where the whole stamp spans
+/// ≈ 4 samples per row); each pixel then looks up K only for its own few samples beyond its row's window.
 pub fn fast_stamp(
     star: &StarSpec,
     kernel: &PixelKernel,
@@ -297,44 +414,44 @@ pub fn fast_stamp(
         })
         .map(|(x, y)| timing.window_s(x, y))
         .collect();
-    let a_max = windows
-        .iter()
-        .map(|w| w.0)
-        .fold(f64::NEG_INFINITY, f64::max);
-    let b_min = windows.iter().map(|w| w.1).fold(f64::INFINITY, f64::min);
+    let shared = |ws: &[(f64, f64)]| {
+        ws.iter().fold(
+            (f64::NEG_INFINITY, f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY),
+            |(a, b, lo, hi), w| (a.max(w.0), b.min(w.1), lo.min(w.0), hi.max(w.1)),
+        )
+    };
+    let (a_max, b_min, a_min, b_max) = shared(&windows);
     if !(b_min > a_max) {
         return direct_stamp(star, kernel, track, timing, bounds);
     }
     let common = track.window(a_max, b_min);
     let g = kernel.nodes_per_px as i64;
-    let Some(hist) = Histogram::deposit(star, track, &common, (x0, y0), kernel.nodes_per_px) else {
+    let Some(mut base) =
+        Histogram::empty_for(star, track, &track.window(a_min, b_max), (x0, y0), kernel.nodes_per_px)
+    else {
         return direct_stamp(star, kernel, track, timing, bounds);
     };
-    let runs = hist.row_runs();
+    base.add_window(track, &common);
+    let mut hist = base.clone();
     let mut data = vec![0.0; nx * ny];
     for iy in 0..ny {
         let y = y0 + iy as i64;
+        let row_windows = &windows[iy * nx..(iy + 1) * nx];
+        let (ra, rb, _, _) = shared(row_windows);
+        // the row's shared window holds the stamp's (ra ≤ a_max, rb ≥ b_min)
+        let row = track.window(ra, rb);
+        hist.data.copy_from_slice(&base.data);
+        for_each_extra(&row, &common, |j, e| hist.add_sample(track, j, e));
+        let runs = ReversedRuns::of(&hist);
         for ix in 0..nx {
             let x = x0 + ix as i64;
-            let mut acc = hist.convolve_at(kernel, &runs, ix as i64 * g, iy as i64 * g);
-            // this pixel's samples outside the shared window
-            let (a, b) = windows[iy * nx + ix];
-            let own = track.window(a, b);
+            let mut acc = runs.convolve_at(kernel, ix as i64 * g, iy as i64 * g);
+            // this pixel's samples outside its row's window
+            let own = track.window(row_windows[ix].0, row_windows[ix].1);
             let (bx, by) = (x as f64 - star.x_px, y as f64 - star.y_px);
-            let mut edge = |j: usize| {
-                let e = own.weight(j) - common.weight(j);
-                if e != 0.0 {
-                    acc += e * kernel.eval(bx - track.dx_px[j], by - track.dy_px[j]);
-                }
-            };
-            let head_end = common.first.min(own.last);
-            for j in own.first..=head_end {
-                edge(j);
-            }
-            let tail_start = common.last.max(head_end + 1).max(own.first);
-            for j in tail_start..=own.last {
-                edge(j);
-            }
+            for_each_extra(&own, &row, |j, e| {
+                acc += e * kernel.eval(bx - track.dx_px[j], by - track.dy_px[j]);
+            });
             data[iy * nx + ix] = acc * star.rate_e_per_s * track.dt_s;
         }
     }

@@ -1,6 +1,7 @@
-//! Small numerical building blocks shared by the physics modules: a safe dense matrix product, 2-D FFTs,
-//! a dense linear solver, and robust statistics.
+//! Small numerical building blocks shared by the physics modules: a vectorisable dot product, a safe dense
+//! matrix product, 2-D FFTs, a dense linear solver, and robust statistics.
 
+pub mod dot;
 pub mod fft2;
 pub mod gemm;
 pub mod linalg;

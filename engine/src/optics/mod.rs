@@ -58,9 +58,22 @@ pub struct PsfBank {
     /// The field table as a grid (none: one wavefront everywhere).
     grid: Option<field::FieldGrid>,
     cache: Mutex<HashMap<BankKey, Arc<PsfTable>>>,
+    /// The monochromatic sets most recently used, newest last, at most [`PsfBank::MONO_CACHE_BYTES`]
+    /// together (always the newest one): a new colour of a known wavefront costs one weighted sum.
+    mono: Mutex<Vec<(MonoKey, Arc<psf::MonochromaticSet>)>>,
+}
+
+/// Key of a monochromatic set: the wavefront and the table's extent (0 for the main PSF, the halo radius).
+#[derive(Debug, Clone, PartialEq, Eq)]
+struct MonoKey {
+    field: FieldKey,
+    halo_px: usize,
 }
 
 impl PsfBank {
+    /// Memory the kept monochromatic sets may hold (one set of the default optics: 61 × 417² cells, 85 MB).
+    pub const MONO_CACHE_BYTES: usize = 400 << 20;
+
     pub fn new(cfg: &Config) -> Self {
         Self {
             instrument: cfg.instrument.clone(),
@@ -69,6 +82,7 @@ impl PsfBank {
             // a validated configuration's table is a grid; an invalid one falls back to `fringe`
             grid: field::grid_of(&cfg.optics).ok().flatten(),
             cache: Mutex::new(HashMap::new()),
+            mono: Mutex::new(Vec::new()),
         }
     }
 
@@ -169,7 +183,14 @@ impl PsfBank {
             j_minus_h: key.j_minus_h_milli as f64 / 1000.0,
             fringe_um: self.coefficients(&key.field),
         };
-        let mut table = psf::polychromatic(&req);
+        let set = self.monochromatic_set(
+            MonoKey {
+                field: key.field.clone(),
+                halo_px,
+            },
+            &req,
+        );
+        let mut table = psf::polychromatic_from(&set, &self.band, req.j_minus_h);
         if halo_px > 0 {
             // cells inside the main table's square (its bilinear ramp ends one main cell beyond its edge)
             let inner = (self.optics.psf_radius_px * 2) as i64;
@@ -189,6 +210,31 @@ impl PsfBank {
             .unwrap_or_else(|e| e.into_inner())
             .insert(key, table.clone());
         table
+    }
+
+    /// The monochromatic set of a wavefront and extent: kept from an earlier colour, or computed (and kept,
+    /// dropping the oldest sets beyond [`Self::MONO_CACHE_BYTES`]).
+    fn monochromatic_set(&self, key: MonoKey, req: &PsfRequest<'_>) -> Arc<psf::MonochromaticSet> {
+        let lock = || self.mono.lock().unwrap_or_else(|e| e.into_inner());
+        {
+            let mut kept = lock();
+            if let Some(i) = kept.iter().position(|(k, _)| *k == key) {
+                let entry = kept.remove(i);
+                let set = entry.1.clone();
+                kept.push(entry);
+                return set;
+            }
+        }
+        // computed outside the lock (it runs in parallel over wavelengths)
+        let set = Arc::new(psf::monochromatic_set(req));
+        let mut kept = lock();
+        kept.push((key, set.clone()));
+        while kept.len() > 1
+            && kept.iter().map(|(_, s)| s.bytes()).sum::<usize>() > Self::MONO_CACHE_BYTES
+        {
+            kept.remove(0);
+        }
+        set
     }
 
     /// Number of PSFs computed so far.

@@ -387,14 +387,30 @@ pub struct PsfRequest<'a> {
     pub fringe_um: Vec<f64>,
 }
 
-/// The polychromatic PSF: Σ_λ w_λ · PSF_λ with unit-flux PSF_λ and photon-rate weights (parallel over λ).
-pub fn polychromatic(req: &PsfRequest<'_>) -> PsfTable {
+/// The unit-flux monochromatic PSFs of one wavefront at every wavelength of the band's grid: what every
+/// colour's polychromatic PSF is a weighted sum of, so a bank computes them once per wavefront.
+#[derive(Debug, Clone)]
+pub struct MonochromaticSet {
+    pub oversampling: usize,
+    pub half_cells: usize,
+    /// `(λ µm, table)` in wavelength order.
+    pub tables: Vec<(f64, Vec<f64>)>,
+}
+
+impl MonochromaticSet {
+    /// Memory the tables hold, bytes.
+    pub fn bytes(&self) -> usize {
+        self.tables.iter().map(|t| t.1.len() * 8).sum()
+    }
+}
+
+/// The monochromatic PSFs of a request's wavefront (its colour is not used), parallel over λ.
+pub fn monochromatic_set(req: &PsfRequest<'_>) -> MonochromaticSet {
     let os = req.optics.psf_oversampling;
     let half = req.optics.psf_radius_px * os;
     let cell_rad = req.pixel_rad / os as f64;
-    let weights = super::spectrum::weights(req.band, req.j_minus_h);
-    let m = 2 * half + 1;
-    let lambda_max = weights.iter().map(|w| w.0).fold(0.0, f64::max) * 1e-6;
+    let lambdas = req.band.wavelength_grid();
+    let lambda_max = lambdas.iter().cloned().fold(0.0, f64::max) * 1e-6;
     let pupil = (req.optics.psf_method == PsfMethod::Mft)
         .then(|| Pupil::sample(&req.geometry, req.optics.pupil_samples));
     let opd = pupil
@@ -407,31 +423,47 @@ pub fn polychromatic(req: &PsfRequest<'_>) -> PsfTable {
         half,
         req.optics.pupil_samples,
     );
-    // Wavelengths are computed in parallel, a few at a time, and added in wavelength order: the sum is
-    // bit-identical whatever the number of threads (a parallel reduce would round differently).
-    let mut data = vec![0.0; m * m];
-    let group = rayon::current_num_threads().clamp(1, 8);
-    for chunk in weights.chunks(group) {
-        let monos: Vec<Vec<f64>> = chunk
-            .par_iter()
-            .map(|&(lambda_um, w)| {
-                let l = lambda_um * 1e-6;
-                let mono = match (&pupil, &opd) {
-                    (Some(p), Some(o)) => mft_psf(p, o, l, cell_rad, half),
-                    _ => fft_psf(&req.geometry, &req.fringe_um, l, cell_rad, half, n_pad),
-                };
-                mono.into_iter().map(|v| v * w).collect()
-            })
-            .collect();
-        for mono in monos {
-            data.iter_mut().zip(mono).for_each(|(x, y)| *x += y);
-        }
-    }
-    PsfTable {
+    let tables = lambdas
+        .par_iter()
+        .map(|&lambda_um| {
+            let l = lambda_um * 1e-6;
+            let mono = match (&pupil, &opd) {
+                (Some(p), Some(o)) => mft_psf(p, o, l, cell_rad, half),
+                _ => fft_psf(&req.geometry, &req.fringe_um, l, cell_rad, half, n_pad),
+            };
+            (lambda_um, mono)
+        })
+        .collect();
+    MonochromaticSet {
         oversampling: os,
         half_cells: half,
+        tables,
+    }
+}
+
+/// The polychromatic PSF of a colour from its wavefront's monochromatic set: `Σ_λ w_λ · PSF_λ` with the
+/// photon-rate weights, added in wavelength order (bit-identical whatever the number of threads).
+pub fn polychromatic_from(set: &MonochromaticSet, band: &Band, j_minus_h: f64) -> PsfTable {
+    let m = 2 * set.half_cells + 1;
+    let mut data = vec![0.0; m * m];
+    for ((lambda_um, mono), (l, w)) in set
+        .tables
+        .iter()
+        .zip(super::spectrum::weights(band, j_minus_h))
+    {
+        debug_assert_eq!(*lambda_um, l);
+        data.iter_mut().zip(mono).for_each(|(x, y)| *x += y * w);
+    }
+    PsfTable {
+        oversampling: set.oversampling,
+        half_cells: set.half_cells,
         data,
     }
+}
+
+/// The polychromatic PSF: Σ_λ w_λ · PSF_λ with unit-flux PSF_λ and photon-rate weights (parallel over λ).
+pub fn polychromatic(req: &PsfRequest<'_>) -> PsfTable {
+    polychromatic_from(&monochromatic_set(req), req.band, req.j_minus_h)
 }
 
 #[cfg(test)]
