@@ -83,6 +83,7 @@ fn gpu_matches_cpu_for_every_method_and_readout_over_a_full_exposure() {
                 stamp_radius_px: 6,
                 method,
                 map: &map,
+                deposit_phases: 0,
             };
             let c = integrate::integrate_cpu(&stars, Motion::Track(&track), &frame);
             let g = gpu
@@ -99,6 +100,7 @@ fn gpu_matches_cpu_for_every_method_and_readout_over_a_full_exposure() {
         stamp_radius_px: 6,
         method: Method::Direct,
         map: &map,
+        deposit_phases: 0,
     };
     let c = integrate::integrate_cpu(&stars, Motion::Static, &frame);
     let g = gpu

@@ -68,6 +68,19 @@ impl ReadoutTiming {
         }
     }
 
+    /// The window every pixel of an `n × n` detector shares, `[max start, min end)` (empty when
+    /// `end ≤ start`). Windows are monotonic in the read index, whose extremes lie on the channel's first and
+    /// last columns of the first and last rows, so those four pixels decide it.
+    pub fn shared_window_s(&self, n: usize) -> (f64, f64) {
+        let (w, last) = (self.channel_width_px.min(n).max(1) - 1, n.saturating_sub(1));
+        [(0, 0), (w, 0), (0, last), (w, last)]
+            .iter()
+            .map(|&(x, y)| self.window_s(x, y))
+            .fold((f64::NEG_INFINITY, f64::INFINITY), |(a, b), w| {
+                (a.max(w.0), b.min(w.1))
+            })
+    }
+
     /// Length of pixel (x, y)'s integration window, s: exactly T under the rolling and sample-and-hold
     /// orders, T plus the pixel's read delay under a global reset.
     pub fn window_length_s(&self, x: usize, y: usize) -> f64 {
@@ -124,6 +137,29 @@ mod tests {
         assert!((t.frame_sweep_s() - 1.21032).abs() < 1e-9);
         let (a, b) = t.window_s(10, 20);
         assert!((b - a - 12.5).abs() < 1e-12);
+    }
+
+    #[test]
+    fn shared_window_is_every_pixels_intersection() {
+        for order in ReadoutOrder::ALL {
+            for dir in [RowDirection::Up, RowDirection::Down] {
+                let mut cfg = Config::default();
+                cfg.readout.order = order;
+                cfg.readout.row_direction = dir;
+                cfg.instrument.detector_px = 50;
+                cfg.readout.channel_width_px = 7;
+                let t = ReadoutTiming::new(&cfg);
+                let (mut a, mut b) = (f64::NEG_INFINITY, f64::INFINITY);
+                for y in 0..50 {
+                    for x in 0..50 {
+                        let w = t.window_s(x, y);
+                        a = a.max(w.0);
+                        b = b.min(w.1);
+                    }
+                }
+                assert_eq!(t.shared_window_s(50), (a, b), "{order:?} {dir:?}");
+            }
+        }
     }
 
     #[test]

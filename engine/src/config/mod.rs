@@ -754,6 +754,11 @@ pub struct Fidelity {
     /// (bright stars further, into the halo table when `halo_radius_px` > 0; faint ones less); 0 = every
     /// stamp the kernel's full reach. `jsim bench` reports the time and the light it drops.
     pub wing_threshold_e: f64,
+    /// The CPU fast method deposits the part of the exposure every pixel of an array shares once, at this
+    /// many star phases per kernel node, and interpolates each star's histogram of it (exact in the mean,
+    /// smoother by ≤ a 1/(2Q) node in the spread); 0 = every star deposits its whole track (exact). The
+    /// GPU always deposits whole tracks. `jsim bench --parts bulge` reports the time and the error.
+    pub deposit_phases: usize,
 }
 
 impl Default for Fidelity {
@@ -768,6 +773,7 @@ impl Default for Fidelity {
             halo_radius_px: 0,
             colour_step_mag: 0.05,
             wing_threshold_e: 0.0,
+            deposit_phases: 0,
         }
     }
 }

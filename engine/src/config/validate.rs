@@ -439,6 +439,7 @@ impl Config {
         check_range_usize("fidelity.stamp_radius_px", f.stamp_radius_px, 0, 512)?;
         check_range_usize("fidelity.subpixels", f.subpixels, 1, 64)?;
         check_range_usize("fidelity.time_stride", f.time_stride, 1, 1_000_000)?;
+        check_range_usize("fidelity.deposit_phases", f.deposit_phases, 0, 64)?;
         check_range_usize("fidelity.halo_radius_px", f.halo_radius_px, 0, 1024)?;
         check_nonneg("fidelity.colour_step_mag", f.colour_step_mag)?;
         if f.colour_step_mag > 1.0 {

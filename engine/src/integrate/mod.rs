@@ -53,6 +53,23 @@ pub struct FrameSpec<'a> {
     pub stamp_radius_px: usize,
     pub method: Method,
     pub map: &'a IntraPixelMap,
+    /// `fidelity.deposit_phases`: the CPU fast method deposits the part of the exposure every pixel shares
+    /// once, at this many star phases per node, and interpolates ([`cpu::SharedCore`]); 0 = each star its
+    /// whole track (exact). The GPU always deposits each star's whole track.
+    pub deposit_phases: usize,
+}
+
+impl FrameSpec<'_> {
+    /// The shared part of the exposure at `frame.deposit_phases` phases, when the CPU fast method uses one.
+    pub fn shared_core(&self, motion: Motion<'_>, nodes_per_px: usize) -> Option<cpu::SharedCore> {
+        match (motion, self.method) {
+            (Motion::Track(t), Method::Fast) if self.deposit_phases > 0 => {
+                let (a, b) = self.timing.shared_window_s(self.detector_px);
+                cpu::SharedCore::new(t, a, b, nodes_per_px, self.deposit_phases)
+            }
+            _ => None,
+        }
+    }
 }
 
 /// Stamp bounds of a job, or `None` when it misses the detector.
@@ -80,11 +97,12 @@ pub fn bounds_of(
     )
 }
 
-/// Integrate one star on the CPU.
+/// Integrate one star on the CPU (`core`: the frame's shared part for the fast method, or none).
 pub fn integrate_star_cpu(
     job: &StarJob,
     motion: Motion<'_>,
     frame: &FrameSpec<'_>,
+    core: Option<&cpu::SharedCore>,
 ) -> Option<Stamp> {
     let b = bounds_of(job, motion, frame)?;
     Some(match motion {
@@ -94,15 +112,22 @@ pub fn integrate_star_cpu(
                 cpu::reference_stamp(&job.star, &job.psf, frame.map, t, frame.timing, b)
             }
             Method::Direct => cpu::direct_stamp(&job.star, &job.kernel, t, frame.timing, b),
-            Method::Fast => cpu::fast_stamp(&job.star, &job.kernel, t, frame.timing, b),
+            Method::Fast => {
+                // a core deposited on another kernel grid does not apply
+                let core = core.filter(|c| c.nodes_per_px() == job.kernel.nodes_per_px);
+                cpu::fast_stamp(&job.star, &job.kernel, t, frame.timing, b, core)
+            }
         },
     })
 }
 
 /// Integrate all stars on the CPU (parallel over stars).
 pub fn integrate_cpu(jobs: &[StarJob], motion: Motion<'_>, frame: &FrameSpec<'_>) -> Vec<Stamp> {
+    let core = jobs
+        .first()
+        .and_then(|j| frame.shared_core(motion, j.kernel.nodes_per_px));
     jobs.par_iter()
-        .filter_map(|j| integrate_star_cpu(j, motion, frame))
+        .filter_map(|j| integrate_star_cpu(j, motion, frame, core.as_ref()))
         .collect()
 }
 

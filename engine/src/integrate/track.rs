@@ -16,6 +16,9 @@ pub struct Track {
     pub dy_px: Vec<f64>,
     /// Mean and excursion, computed once on first use (every star's stamp needs them).
     summary: std::sync::OnceLock<TrackSummary>,
+    /// Running sums `(Σ_{i<k} dx_i, Σ_{i<k} dy_i)`, k = 0..=len, made on first use: a window's mean in O(1)
+    /// for every star's truth.
+    prefix: std::sync::OnceLock<Vec<(f64, f64)>>,
 }
 
 /// Mean displacement and the largest excursion from it (px).
@@ -24,6 +27,8 @@ pub struct TrackSummary {
     pub mean_x: f64,
     pub mean_y: f64,
     pub excursion: f64,
+    /// [`Track::extent`]: (min_x, max_x, min_y, max_y) over all samples, px.
+    pub extent: (f64, f64, f64, f64),
 }
 
 /// The samples overlapping a window: `first..=last`, with fractional weights at both ends.
@@ -69,6 +74,7 @@ impl Track {
             dx_px,
             dy_px,
             summary: std::sync::OnceLock::new(),
+            prefix: std::sync::OnceLock::new(),
         }
     }
 
@@ -86,6 +92,7 @@ impl Track {
                 mean_x: mx,
                 mean_y: my,
                 excursion: (mx - a).max(b - mx).max(my - c).max(d - my),
+                extent: (a, b, c, d),
             }
         })
     }
@@ -201,20 +208,30 @@ impl Track {
         }
     }
 
-    /// Weighted mean displacement over a window (px).
+    /// Weighted mean displacement over a window (px): the end samples by their weights, the interior from
+    /// running sums.
     pub fn window_mean(&self, w: &WindowWeights) -> (f64, f64) {
-        let (mut sx, mut sy, mut s) = (0.0, 0.0, 0.0);
-        for j in w.first..=w.last {
-            let wj = w.weight(j);
-            sx += wj * self.dx_px[j];
-            sy += wj * self.dy_px[j];
-            s += wj;
+        let total = w.total();
+        if self.is_empty() || !(total > 0.0) {
+            return (0.0, 0.0);
         }
-        if s > 0.0 {
-            (sx / s, sy / s)
-        } else {
-            (0.0, 0.0)
+        let mut sx = w.w_first * self.dx_px[w.first];
+        let mut sy = w.w_first * self.dy_px[w.first];
+        if w.last > w.first {
+            let p = self.prefix.get_or_init(|| {
+                let mut acc = (0.0, 0.0);
+                let mut p = Vec::with_capacity(self.len() + 1);
+                p.push(acc);
+                for (x, y) in self.dx_px.iter().zip(&self.dy_px) {
+                    acc = (acc.0 + x, acc.1 + y);
+                    p.push(acc);
+                }
+                p
+            });
+            sx += p[w.last].0 - p[w.first + 1].0 + w.w_last * self.dx_px[w.last];
+            sy += p[w.last].1 - p[w.first + 1].1 + w.w_last * self.dy_px[w.last];
         }
+        (sx / total, sy / total)
     }
 }
 
@@ -237,6 +254,36 @@ mod tests {
             assert!((total - (b - a)).abs() < 1e-12, "[{a}, {b}): {total}");
             let direct: f64 = (w.first..=w.last).map(|j| w.weight(j)).sum::<f64>() * t.dt_s;
             assert!((direct - (b - a)).abs() < 1e-12);
+        }
+    }
+
+    #[test]
+    fn window_mean_equals_the_weighted_sum() {
+        let n = 50_000;
+        let dx: Vec<f64> = (0..n)
+            .map(|j| (j as f64 * 0.013).sin() * 0.7 + 0.2)
+            .collect();
+        let dy: Vec<f64> = (0..n).map(|j| (j as f64 * 0.007).cos() * 0.4).collect();
+        let t = Track::new(0.15e-3, -0.0001, dx, dy);
+        for (a, b) in [
+            (0.1, 7.1),
+            (0.100_003, 0.100_2),
+            (1.31, 1.3101),
+            (0.0, 7.4),
+            (3.0, 3.0001),
+        ] {
+            let w = t.window(a, b);
+            let (mut sx, mut sy, mut s) = (0.0, 0.0, 0.0);
+            for j in w.first..=w.last {
+                sx += w.weight(j) * t.dx_px[j];
+                sy += w.weight(j) * t.dy_px[j];
+                s += w.weight(j);
+            }
+            let (mx, my) = t.window_mean(&w);
+            assert!(
+                (mx - sx / s).abs() < 1e-11 && (my - sy / s).abs() < 1e-11,
+                "[{a}, {b})"
+            );
         }
     }
 

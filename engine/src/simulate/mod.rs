@@ -488,6 +488,7 @@ impl Simulator {
             stamp_radius_px: self.cfg.fidelity.stamp_radius_px,
             method: self.cfg.fidelity.method,
             map: &self.map,
+            deposit_phases: self.cfg.fidelity.deposit_phases,
         };
         let stamps = self.integrator.integrate(jobs, motion, &frame)?;
         let mut img = vec![0.0; n * n];

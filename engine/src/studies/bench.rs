@@ -178,6 +178,7 @@ pub fn integrate_stamps(
         stamp_radius_px: sim.cfg.fidelity.stamp_radius_px,
         method,
         map: &map,
+        deposit_phases: sim.cfg.fidelity.deposit_phases,
     };
     let t0 = Instant::now();
     let stamps = integrator.integrate(&jobs, motion, &frame)?;

@@ -50,10 +50,29 @@ pub fn bulge_knobs(base: &Config) -> Vec<(String, Vec<(String, Config)>, bool)> 
             c,
         )
     };
+    // the shared core's phases: the same 600 stars, whole frames compared with every star depositing its
+    // whole track
+    let phases = |q: usize| {
+        let mut c = reach.clone();
+        c.fidelity.deposit_phases = q;
+        (
+            if q > 0 {
+                format!("{q} phases")
+            } else {
+                "whole tracks (exact)".into()
+            },
+            c,
+        )
+    };
     vec![
         (
             "colour step (bulge colours)".into(),
             [0.5, 0.2, 0.1, 0.05, 0.02, 0.0].map(colour).to_vec(),
+            true,
+        ),
+        (
+            "deposit phases (bulge, realistic ACE)".into(),
+            [2, 4, 8, 16, 0].map(phases).to_vec(),
             true,
         ),
         (
@@ -64,9 +83,28 @@ pub fn bulge_knobs(base: &Config) -> Vec<(String, Vec<(String, Config)>, bool)> 
     ]
 }
 
-/// One exposure of the quad focal plane with about `n` stars of the mock bulge field, for each count:
-/// PSFs and kernels (once), then the exposure (integration and detector on all four arrays) and its
-/// multi-extension FITS, timed apart.
+/// The settings of the focal-plane rows: the exact one (realistic ACE), the fast knobs one at a time and
+/// together, and Gaussian ACE.
+pub fn focal_plane_settings() -> Vec<(&'static str, fn(&mut Config))> {
+    vec![
+        ("realistic ACE, exact", |c| c.ace.case = AceCase::Realistic),
+        ("realistic ACE, deposit phases 8", |c| {
+            c.ace.case = AceCase::Realistic;
+            c.fidelity.deposit_phases = 8;
+        }),
+        ("realistic ACE, deposit phases 8, wing 1 e⁻", |c| {
+            c.ace.case = AceCase::Realistic;
+            c.fidelity.deposit_phases = 8;
+            c.fidelity.wing_threshold_e = 1.0;
+        }),
+        ("Gaussian ACE", |c| c.ace.case = AceCase::Gaussian),
+    ]
+}
+
+/// One exposure of the quad focal plane with about `n` stars of the mock bulge field, for each count and
+/// each of [`focal_plane_settings`] (the Gaussian row only at the largest count): PSFs and kernels (once),
+/// then the exposure (integration and detector on all four arrays) and its multi-extension FITS, timed
+/// apart.
 pub fn focal_plane_scaling(
     session: &Session,
     base: &Config,
@@ -78,10 +116,18 @@ pub fn focal_plane_scaling(
         source,
     })?;
     let mut rows = Vec::new();
-    for &n in counts {
+    let largest = counts.iter().copied().max().unwrap_or(0);
+    let runs = focal_plane_settings().into_iter().flat_map(|(label, set)| {
+        counts
+            .iter()
+            .filter(move |&&n| !label.starts_with("Gaussian") || n == largest)
+            .map(move |&n| (label, set, n))
+    });
+    for (label, set, n) in runs {
         let mut c = bench_config(base);
         c.scene.kind = SceneKind::Bulge;
         c.focal_plane.layout = Layout::Quad;
+        set(&mut c);
         c.scene.bulge.density_per_arcmin2 = 1.0;
         c.scene.bulge.density_per_arcmin2 = n as f64 / crate::scene::bulge::star_count(&c);
         let t0 = Instant::now();
@@ -99,11 +145,7 @@ pub fn focal_plane_scaling(
         let integrate: f64 = exp.arrays.iter().map(|e| e.times.integrate_s).sum();
         rows.push(BenchRow::timing(
             "focal-plane exposure",
-            format!(
-                "{n} stars, {} ACE, wing {} e⁻",
-                c.ace.case.name(),
-                c.fidelity.wing_threshold_e
-            ),
+            format!("{n} stars, {label}"),
             fps.arrays
                 .first()
                 .map(|a| a.backend_name())
