@@ -187,6 +187,10 @@ impl ExplorerApp {
                     results.twin = Some(*t);
                     results.twin_serial += 1;
                 }
+                Msg::FocalPlane(f) => {
+                    results.focal_plane = Some(*f);
+                    results.focal_plane_serial += 1;
+                }
                 Msg::Curve(c) => results.merge_curve(*c),
                 Msg::Done { elapsed_s, .. } => {
                     status.busy = false;

@@ -3,7 +3,9 @@
 //! these; the panels take them by reference.
 
 use crate::settings::{Settings, ViewSettings};
-use crate::worker::{CurvePoint, FrameResult, Prediction, SeriesView, Stage, TwinResult};
+use crate::worker::{
+    CurvePoint, FocalPlaneResult, FrameResult, Prediction, SeriesView, Stage, TwinResult,
+};
 use engine::analysis::countermeasures::Countermeasure;
 use engine::config::Config;
 
@@ -43,12 +45,15 @@ pub struct Results {
     pub series: Option<SeriesView>,
     pub frame: Option<FrameResult>,
     pub twin: Option<TwinResult>,
+    /// The quad focal plane's exposure (shown instead of the frame when the layout is quad).
+    pub focal_plane: Option<FocalPlaneResult>,
     /// Accuracy curve, by magnitude, and the request key it belongs to.
     pub curve: Vec<CurvePoint>,
     pub curve_key: Option<String>,
     /// Counters that change whenever a new frame / twin arrives (texture keys).
     pub frame_serial: u64,
     pub twin_serial: u64,
+    pub focal_plane_serial: u64,
 }
 
 impl Results {

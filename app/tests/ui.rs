@@ -340,6 +340,58 @@ fn config_files_errors_and_copy_as_cli() {
     std::fs::remove_dir_all(&dir).ok();
 }
 
+/// Choosing the mock bulge in the controls lays out the quad; the frame cell then shows the four arrays,
+/// every star on the array the engine's placement put it on, and the cursor line names the array (or the
+/// gap) and the RA, Dec under it.
+#[test]
+fn the_bulge_scene_shows_the_focal_plane_with_sky_positions() {
+    let mut cfg = small_config();
+    cfg.ace.case = engine::config::AceCase::Gaussian;
+    cfg.scene.bulge.density_per_arcmin2 = 20.0;
+    let mut h = harness(ExplorerApp::new(cfg), false);
+    wait_idle(&mut h, "the single-array frame");
+    h.get_by_label("mock bulge").click();
+    h.step();
+    assert_eq!(
+        h.state().settings.cfg.focal_plane.layout,
+        engine::config::Layout::Quad,
+        "the bulge comes on the quad"
+    );
+    wait_idle(&mut h, "the focal plane");
+    h.get_by_label_contains("Focal plane #0 — 4 arrays");
+    let app = h.state();
+    let f = app
+        .rt
+        .results
+        .focal_plane
+        .as_ref()
+        .expect("a focal-plane exposure");
+    assert_eq!(f.cfg_hash, app.settings.cfg.hash_hex());
+    assert_eq!(f.arrays.len(), 4);
+    let mut stars = 0;
+    for (k, a) in f.arrays.iter().enumerate() {
+        for &(fx, fy) in &a.stars_fp {
+            match f.plane.locate(fx, fy) {
+                engine::sky::focal_plane::Placement::Photosensitive { array, .. } => {
+                    assert_eq!(array, k, "a star of array {k} drawn at ({fx}, {fy})")
+                }
+                other => panic!("a star of array {k} drawn at ({fx}, {fy}): {other:?}"),
+            }
+            stars += 1;
+        }
+        let (cx, cy) = f.plane.centre(k);
+        let line = app::panels::focal::describe(f, cx, cy);
+        assert!(
+            line.starts_with(&format!("array {} pixel", k + 1)) && line.contains("Dec"),
+            "{line}"
+        );
+    }
+    assert!(stars > 100, "{stars} stars");
+    assert!(app::panels::focal::describe(f, 0.0, 0.0).contains("gap"));
+    let far = 3.0 * f.plane.array_px as f64;
+    assert!(app::panels::focal::describe(f, far, 0.0).contains("off the focal plane"));
+}
+
 #[test]
 fn main_window_snapshot() {
     let mut h = harness(small_app(), true);

@@ -4,7 +4,7 @@
 use crate::settings::ViewSettings;
 use egui::{DragValue, Slider};
 use engine::analysis::countermeasures::Countermeasure;
-use engine::config::{AceCase, Config, Mode, ReadoutOrder, RowDirection};
+use engine::config::{AceCase, Config, Layout, Mode, ReadoutOrder, RowDirection, SceneKind};
 
 fn section(ui: &mut egui::Ui, title: &str) {
     ui.add_space(6.0);
@@ -66,6 +66,8 @@ pub fn controls_ui(
             ui.radio_value(&mut cfg.readout.row_direction, RowDirection::Down, "downwards");
         });
 
+        scene_ui(ui, cfg);
+
         section(ui, "Stars and exposure");
         ui.add(Slider::new(&mut cfg.scene.mag_hw, 8.0..=16.0).step_by(0.1).text("magnitude Hw"));
         ui.add(Slider::new(&mut cfg.scene.j_minus_h, -0.5..=4.0).step_by(0.05).text("colour J−H"))
@@ -122,6 +124,67 @@ pub fn controls_ui(
         }
         ui.checkbox(&mut view.auto_curve, "run the curve after every change")
             .on_hover_text("the curve simulates images × magnitudes: minutes at the reference setting");
+    });
+}
+
+/// The scene (the paper's grid, the mock bulge field, a catalogue file) and the focal plane (one array or
+/// the 2 × 2 of four). Choosing the bulge also chooses the quad, as `jsim simulate --scene bulge` does.
+fn scene_ui(ui: &mut egui::Ui, cfg: &mut Config) {
+    section(ui, "Scene and focal plane");
+    ui.horizontal(|ui| {
+        ui.radio_value(&mut cfg.scene.kind, SceneKind::Grid, "paper grid")
+            .on_hover_text("the paper's 20 × 20 grid of equal stars on one array");
+        if ui
+            .radio_value(&mut cfg.scene.kind, SceneKind::Bulge, "mock bulge")
+            .on_hover_text("the Galactic-centre field: stars from Hw 8 to 17, reddened, on the sky")
+            .clicked()
+        {
+            cfg.focal_plane.layout = Layout::Quad;
+        }
+        ui.radio_value(&mut cfg.scene.kind, SceneKind::Catalogue, "catalogue")
+            .on_hover_text("a CSV or FITS table: x, y (pixels) or ra, dec; hw, j_h or j, h");
+    });
+    match cfg.scene.kind {
+        SceneKind::Catalogue => {
+            let mut path = cfg
+                .scene
+                .catalogue
+                .as_ref()
+                .map(|p| p.display().to_string())
+                .unwrap_or_default();
+            ui.horizontal(|ui| {
+                let l = ui.label("file");
+                if ui
+                    .add(egui::TextEdit::singleline(&mut path).desired_width(220.0))
+                    .labelled_by(l.id)
+                    .changed()
+                {
+                    cfg.scene.catalogue = (!path.trim().is_empty()).then(|| path.trim().into());
+                }
+            });
+        }
+        SceneKind::Bulge => {
+            ui.add(
+                Slider::new(&mut cfg.scene.bulge.density_per_arcmin2, 1.0..=300.0)
+                    .logarithmic(true)
+                    .text("stars per arcmin²"),
+            )
+            .on_hover_text(
+                "100 is the Galactic-centre field to Hw 17 (about 1e5 stars on the four arrays: about a \
+                 minute per exposure with the realistic ACE on 2 cores)",
+            );
+        }
+        SceneKind::Grid => {}
+    }
+    ui.horizontal(|ui| {
+        ui.label("focal plane");
+        ui.radio_value(&mut cfg.focal_plane.layout, Layout::Single, "one array")
+            .on_hover_text("one 1968² array in its pixel axes: every analysis panel");
+        ui.radio_value(&mut cfg.focal_plane.layout, Layout::Quad, "2 × 2 arrays")
+            .on_hover_text(
+                "four arrays turned 0/90/180/270° on the sky with gaps: the frame view shows them \
+                 in their sky layout (the analysis panels are those of one array)",
+            );
     });
 }
 

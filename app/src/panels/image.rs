@@ -15,6 +15,8 @@ pub struct Textures {
     frame: Option<((u64, Stretch, Colormap), TextureHandle)>,
     close: Option<(CloseKey, [TextureHandle; 3])>,
     epsf: Option<(u64, TextureHandle)>,
+    /// The quad focal plane's arrays ([`super::focal`]).
+    pub focal: super::focal::FocalTextures,
 }
 
 type CloseKey = (u64, u64, usize, usize, Stretch);

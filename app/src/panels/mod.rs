@@ -3,13 +3,15 @@
 //! sees the app itself.
 //!
 //! * [`toolbar`], [`controls`], [`summary`] — the edges of the window;
-//! * [`image`] — the frame, the close-up beside the Gaussian twin, the ePSF;
+//! * [`image`] — the frame, the close-up beside the Gaussian twin, the ePSF; [`focal`] — the quad focal
+//!   plane in its sky layout, shown instead of the frame when the layout is quad;
 //! * [`psd`], [`series`], [`vectors`], [`curve`] — the four plots; [`axes`] — what the plots share;
 //! * [`widgets`] — the framed cells and their titles.
 
 pub mod axes;
 pub mod controls;
 pub mod curve;
+pub mod focal;
 pub mod image;
 pub mod psd;
 pub mod series;
@@ -57,7 +59,11 @@ pub fn central_ui(
     };
 
     cell(ui, frame_rect, |ui| {
-        image::frame_ui(ui, screen, view, results, textures)
+        if engine::sky::array_count(&screen.cfg) > 1 {
+            focal::focal_plane_ui(ui, screen, view, results, &mut textures.focal)
+        } else {
+            image::frame_ui(ui, screen, view, results, textures)
+        }
     });
     cell(ui, close_rect, |ui| {
         image::closeup_ui(ui, view, results, textures)

@@ -26,6 +26,7 @@ pub mod thread;
 pub mod views;
 
 pub use protocol::{
-    CurvePoint, FrameResult, Job, Msg, Prediction, Request, SeriesView, Stage, Stages, TwinResult,
+    CurvePoint, FocalPlaneArray, FocalPlaneResult, FrameResult, Job, Msg, Prediction, Request,
+    SeriesView, Stage, Stages, TwinResult,
 };
 pub use thread::Worker;

@@ -8,6 +8,7 @@ use engine::analysis::vectors::{Arrow, VectorMap};
 use engine::analysis::{Report, StarResult};
 use engine::config::Config;
 use engine::studies::experiment::Row;
+use std::sync::Arc;
 
 /// What the UI wants computed: everything the results depend on.
 #[derive(Debug, Clone, PartialEq)]
@@ -177,6 +178,40 @@ pub struct FrameResult {
     pub analyse_s: f64,
 }
 
+/// One exposure of the quad focal plane, for the focal-plane view: each array's image turned into
+/// focal-plane axes (so the view lays the four side by side as they sit on the sky), its WCS and its stars.
+#[derive(Debug, Clone)]
+pub struct FocalPlaneResult {
+    pub generation: u64,
+    pub cfg: Config,
+    pub cfg_hash: String,
+    pub image_index: usize,
+    /// The layout (array size, gap, turns): where each array sits; `locate` says what is under the cursor.
+    pub plane: engine::sky::focal_plane::FocalPlane,
+    pub arrays: Vec<FocalPlaneArray>,
+    /// Where the scene's stars fell (photosensitive, border, gap, off, duplicates).
+    pub counts: Option<engine::scene::PlacementCounts>,
+    /// Display limits shared by the arrays: low quantile, maximum and sky noise, ADU.
+    pub lo_adu: f32,
+    pub hi_adu: f32,
+    pub noise_adu: f32,
+    pub backend: String,
+    pub simulate_s: f64,
+}
+
+/// One array of a [`FocalPlaneResult`].
+#[derive(Debug, Clone)]
+pub struct FocalPlaneArray {
+    /// ADU in the array's own pixel axes (what the cursor reads) and turned into focal-plane axes (what is
+    /// drawn), row-major, `plane.array_px` square.
+    pub adu: Vec<f32>,
+    pub adu_fp: Vec<f32>,
+    /// Its WCS (pixel → RA, Dec); `None` if the engine could not make it.
+    pub wcs: Option<Arc<engine::sky::wcs::ArrayWcs>>,
+    /// Its stars on photosensitive pixels, in focal-plane pixels.
+    pub stars_fp: Vec<(f64, f64)>,
+}
+
 /// The Gaussian-ACE twin of the displayed frame (same configuration, `ace.case = gaussian`).
 #[derive(Debug, Clone)]
 pub struct TwinResult {
@@ -214,6 +249,7 @@ pub enum Msg {
     Prediction(Box<Prediction>),
     Series(Box<SeriesView>),
     Frame(Box<FrameResult>),
+    FocalPlane(Box<FocalPlaneResult>),
     Twin(Box<TwinResult>),
     Curve(Box<CurvePoint>),
     /// The job ran to the end.
@@ -243,6 +279,7 @@ impl Msg {
             Msg::Prediction(p) => p.generation,
             Msg::Series(s) => s.generation,
             Msg::Frame(f) => f.generation,
+            Msg::FocalPlane(f) => f.generation,
             Msg::Twin(t) => t.generation,
             Msg::Curve(c) => c.generation,
         }

@@ -4,7 +4,10 @@
 //! state adds only the results the UI may ask for again (the shown exposures and the curve's rows).
 
 use super::out::{Out, StageResult, Stop, failed};
-use super::protocol::{FrameResult, Job, Msg, Prediction, Request, Stage, TwinResult};
+use super::protocol::{
+    FocalPlaneArray, FocalPlaneResult, FrameResult, Job, Msg, Prediction, Request, Stage,
+    TwinResult,
+};
 use super::views;
 use engine::analysis::countermeasures::{Countermeasure, Plan};
 use engine::analysis::predict::Predictor;
@@ -12,7 +15,7 @@ use engine::analysis::vectors::VectorMap;
 use engine::analysis::{AnalysisImage, Source, analyse_image};
 use engine::config::{AceCase, Config};
 use engine::session::{Session, simulation_key};
-use engine::simulate::{Exposure, Simulator};
+use engine::simulate::{Exposure, FocalPlaneSimulator, Simulator};
 use engine::studies::experiment::Row;
 use std::collections::HashMap;
 use std::sync::Arc;
@@ -31,6 +34,8 @@ pub struct EngineState {
     psd: Option<(String, views::PsdEstimate)>,
     /// What the session said about the backend (e.g. why the CPU stands in for the GPU).
     notes: Vec<String>,
+    /// The focal plane on display, by simulation key (building it draws the scene and the PSFs).
+    focal_plane: Option<(String, Arc<FocalPlaneSimulator>)>,
 }
 
 /// The Gaussian-ACE twin of a configuration.
@@ -52,6 +57,15 @@ impl EngineState {
                     r.image_index, r.cfg.fidelity.images
                 ),
             ));
+        }
+        if engine::sky::array_count(&r.cfg) > 1 {
+            // the quad focal plane: its exposure for the focal-plane view (the prediction, the Gaussian
+            // twin, the single-array analysis and the curve are those of one array: not run here)
+            if job.stages.image {
+                out.check()?;
+                self.focal_plane(r, out)?;
+            }
+            return Ok(());
         }
         if job.stages.predict {
             out.check()?;
@@ -213,6 +227,95 @@ impl EngineState {
             backend_note: (!self.notes.is_empty()).then(|| self.notes.join("; ")),
             simulate_s,
             analyse_s,
+        })));
+        Ok(())
+    }
+
+    /// One exposure of the quad focal plane: every array simulated (the jitter common to all, each its own
+    /// readout, flat and noise), turned into focal-plane axes for the view, with its WCS and stars.
+    fn focal_plane(&mut self, r: &Request, out: &Out) -> StageResult<()> {
+        let cfg = &r.cfg;
+        out.progress(
+            Stage::Image,
+            0,
+            2,
+            "simulating the focal plane (four arrays)",
+        );
+        let t0 = Instant::now();
+        let key = simulation_key(cfg);
+        let fps = match &self.focal_plane {
+            Some((k, f)) if *k == key => f.clone(),
+            _ => {
+                let f = Arc::new(
+                    self.session
+                        .new_focal_plane(cfg)
+                        .map_err(failed(Stage::Image))?,
+                );
+                self.notes.extend(self.session.take_notes());
+                self.focal_plane = Some((key.clone(), f.clone()));
+                f
+            }
+        };
+        out.check()?;
+        let exp = fps.exposure(r.image_index).map_err(failed(Stage::Image))?;
+        let simulate_s = t0.elapsed().as_secs_f64();
+        out.check()?;
+        out.progress(Stage::Image, 1, 2, "laying out the arrays");
+        if let Some(sim) = fps.arrays.first() {
+            let psd = match &self.psd {
+                Some((k, p)) if *k == key => p.clone(),
+                _ => {
+                    let p = views::psd_estimate(sim);
+                    self.psd = Some((key.clone(), p.clone()));
+                    p
+                }
+            };
+            out.send(Msg::Series(Box::new(views::series_view(
+                sim,
+                cfg,
+                r.image_index,
+                psd,
+                out.generation,
+            ))));
+        }
+        let plane = engine::sky::focal_plane(cfg);
+        let limits: Vec<(f32, f32, f32)> = exp
+            .arrays
+            .iter()
+            .map(|e| views::display_limits(&e.image.adu, &e.image.dq))
+            .collect();
+        let arrays = exp
+            .arrays
+            .iter()
+            .enumerate()
+            .map(|(k, e)| FocalPlaneArray {
+                adu_fp: plane.in_focal_plane_axes(k, &e.image.adu),
+                adu: e.image.adu.clone(),
+                wcs: engine::sky::array_wcs(cfg, k).ok().map(Arc::new),
+                stars_fp: e
+                    .truth
+                    .iter()
+                    .map(|t| plane.to_focal_plane(k, t.x_px, t.y_px))
+                    .collect(),
+            })
+            .collect();
+        out.send(Msg::FocalPlane(Box::new(FocalPlaneResult {
+            generation: out.generation,
+            cfg: cfg.clone(),
+            cfg_hash: cfg.hash_hex(),
+            image_index: r.image_index,
+            plane,
+            arrays,
+            counts: exp.counts,
+            lo_adu: limits.iter().map(|l| l.0).fold(f32::INFINITY, f32::min),
+            hi_adu: limits.iter().map(|l| l.1).fold(f32::NEG_INFINITY, f32::max),
+            noise_adu: limits.iter().map(|l| l.2).sum::<f32>() / limits.len().max(1) as f32,
+            backend: exp
+                .arrays
+                .first()
+                .map(|e| e.backend.clone())
+                .unwrap_or_default(),
+            simulate_s,
         })));
         Ok(())
     }

@@ -88,6 +88,23 @@ impl FocalPlane {
         (cx + c * dx - s * dy, cy + s * dx + c * dy)
     }
 
+    /// Array k's image (row-major, `array_px` square) turned into focal-plane axes: element `v·N + u` is the
+    /// array pixel at focal-plane position `(c_x − h + u, c_y − h + v)` (c the array's centre, h = (N − 1)/2),
+    /// an exact permutation for turns of 90°. What a display of the focal plane draws.
+    pub fn in_focal_plane_axes<T: Copy>(&self, k: usize, image: &[T]) -> Vec<T> {
+        let n = self.array_px;
+        let (cx, cy) = self.centre(k);
+        let h = self.half();
+        (0..n * n)
+            .map(|i| {
+                let (u, v) = ((i % n) as f64, (i / n) as f64);
+                let (x, y) = self.to_array(k, cx - h + u, cy - h + v);
+                let (x, y) = (x.round() as usize, y.round() as usize);
+                image[y.min(n - 1) * n + x.min(n - 1)]
+            })
+            .collect()
+    }
+
     /// Which array, border, gap or outside a focal-plane position falls on.
     pub fn locate(&self, fx: f64, fy: f64) -> Placement {
         let n = self.array_px as f64;
@@ -136,6 +153,31 @@ impl FocalPlane {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn an_image_turned_into_focal_plane_axes_puts_each_pixel_where_to_focal_plane_says() {
+        let plane = FocalPlane {
+            array_px: 6,
+            photosensitive_px: 6,
+            gap_px: 2.0,
+            rotations_deg: [0.0, 90.0, 180.0, 270.0],
+        };
+        let image: Vec<usize> = (0..36).collect();
+        for k in 0..4 {
+            let turned = plane.in_focal_plane_axes(k, &image);
+            let (cx, cy) = plane.centre(k);
+            for (i, &v) in turned.iter().enumerate() {
+                // the array pixel shown at display position (u, v) sits there on the focal plane
+                let (x, y) = (v % 6, v / 6);
+                let (fx, fy) = plane.to_focal_plane(k, x as f64, y as f64);
+                let (u, w) = (fx - (cx - 2.5), fy - (cy - 2.5));
+                assert!((u - (i % 6) as f64).abs() < 1e-9 && (w - (i / 6) as f64).abs() < 1e-9);
+            }
+            let mut sorted = turned.clone();
+            sorted.sort();
+            assert_eq!(sorted, image, "array {k}: a permutation");
+        }
+    }
 
     fn jasmine() -> FocalPlane {
         // 1968-px arrays of 10-µm pixels, 3 mm apart, turned so that no two read along the same direction
