@@ -686,21 +686,7 @@ mod tests {
             let r = reference_stamp(&star, &psf, &map, &track, &t, b);
             let d = direct_stamp(&star, &k, &track, &t, b);
             let f = fast_stamp(&star, &k, &track, &t, b, None);
-            let peak = r.data.iter().cloned().fold(0.0, f64::max);
-            let e_dr = r
-                .data
-                .iter()
-                .zip(&d.data)
-                .map(|(a, b)| (a - b).abs())
-                .fold(0.0, f64::max)
-                / peak;
-            let e_fd = d
-                .data
-                .iter()
-                .zip(&f.data)
-                .map(|(a, b)| (a - b).abs())
-                .fold(0.0, f64::max)
-                / peak;
+            let (e_dr, e_fd) = (max_error(&d, &r), max_error(&f, &d));
             assert!(e_dr < 1e-12, "{order:?}: direct vs reference {e_dr:e}");
             assert!(e_fd < 1e-12, "{order:?}: fast vs direct {e_fd:e}");
         }
@@ -719,6 +705,17 @@ mod tests {
         (sx / t, sy / t)
     }
 
+    /// Largest |a − b| over a stamp, relative to b's peak.
+    fn max_error(a: &Stamp, b: &Stamp) -> f64 {
+        let peak = b.data.iter().cloned().fold(0.0, f64::max);
+        a.data
+            .iter()
+            .zip(&b.data)
+            .map(|(x, y)| (x - y).abs())
+            .fold(0.0, f64::max)
+            / peak
+    }
+
     /// The shared core against the direct method (independent: no histogram at all): exact on its grid of
     /// phases; between them its error falls as Q⁻² and the centroid (linear in the phase) stays within 1e-6 px.
     #[test]
@@ -730,53 +727,30 @@ mod tests {
         let t = timing(ReadoutOrder::Rolling, 2.5);
         let (a, b) = t.shared_window_s(200);
         assert!(b > a);
-        // on the grid: a star at a whole number of 1/Q nodes
-        let q = 4;
-        let core = SharedCore::new(&track, a, b, k.nodes_per_px, q).expect("core");
-        let on_grid = StarSpec {
-            x_px: 40.0 + 3.0 / (q as f64 * g),
-            y_px: 61.0 + 7.0 / (q as f64 * g) + 5.0 / g,
+        // a star at (whole nodes + i/Q, whole nodes + j/Q) of a node
+        let star = |q: usize, i: f64, j: f64| StarSpec {
+            x_px: 40.0 + i / (q as f64 * g),
+            y_px: 61.0 + 5.0 / g + j / (q as f64 * g),
             rate_e_per_s: 1000.0,
         };
-        let bnd = stamp_bounds(on_grid.x_px, on_grid.y_px, Some(&track), 6, 200).expect("on");
-        let d = direct_stamp(&on_grid, &k, &track, &t, bnd);
-        let f = fast_stamp(&on_grid, &k, &track, &t, bnd, Some(&core));
-        let peak = d.data.iter().cloned().fold(0.0, f64::max);
-        let err = |x: &Stamp| {
-            x.data
-                .iter()
-                .zip(&d.data)
-                .map(|(p, r)| (p - r).abs())
-                .fold(0.0, f64::max)
-                / peak
+        let run = |q: usize, s: &StarSpec| {
+            let core = SharedCore::new(&track, a, b, k.nodes_per_px, q).expect("core");
+            let bnd = stamp_bounds(s.x_px, s.y_px, Some(&track), 6, 200).expect("on");
+            let d = direct_stamp(s, &k, &track, &t, bnd);
+            (fast_stamp(s, &k, &track, &t, bnd, Some(&core)), d)
         };
-        assert!(err(&f) < 1e-12, "on the phase grid: {:e}", err(&f));
-        // between grid phases (worst: half way)
-        let off = StarSpec {
-            x_px: 40.0 + 0.5 / (q as f64 * g),
-            y_px: 61.0 + 0.5 / (q as f64 * g),
-            rate_e_per_s: 1000.0,
-        };
-        let bnd = stamp_bounds(off.x_px, off.y_px, Some(&track), 6, 200).expect("on");
-        let d = direct_stamp(&off, &k, &track, &t, bnd);
-        let peak = d.data.iter().cloned().fold(0.0, f64::max);
+        // on the grid of phases
+        let (f, d) = run(4, &star(4, 3.0, 7.0));
+        assert!(
+            max_error(&f, &d) < 1e-12,
+            "on the phase grid: {:e}",
+            max_error(&f, &d)
+        );
+        // half way between grid phases: the worst place
         let mut errs = Vec::new();
         for q in [2, 4, 8, 16] {
-            let core = SharedCore::new(&track, a, b, k.nodes_per_px, q).expect("core");
-            let off = StarSpec {
-                x_px: 40.0 + 0.5 / (q as f64 * g),
-                y_px: 61.0 + 0.5 / (q as f64 * g),
-                rate_e_per_s: 1000.0,
-            };
-            let d = direct_stamp(&off, &k, &track, &t, bnd);
-            let f = fast_stamp(&off, &k, &track, &t, bnd, Some(&core));
-            let e = f
-                .data
-                .iter()
-                .zip(&d.data)
-                .map(|(p, r)| (p - r).abs())
-                .fold(0.0, f64::max)
-                / peak;
+            let (f, d) = run(q, &star(q, 0.5, 0.5));
+            let e = max_error(&f, &d);
             let (cf, cd) = (centroid(&f), centroid(&d));
             let dc = (cf.0 - cd.0).hypot(cf.1 - cd.1);
             println!("Q {q}: max error / peak {e:.2e}, centroid {dc:.2e} px");
