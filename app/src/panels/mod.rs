@@ -58,26 +58,42 @@ pub fn central_ui(
         )
     };
 
-    cell(ui, frame_rect, |ui| {
-        if engine::sky::array_count(&screen.cfg) > 1 {
-            focal::focal_plane_ui(ui, screen, view, results, &mut textures.focal)
-        } else {
-            image::frame_ui(ui, screen, view, results, textures)
-        }
-    });
-    cell(ui, close_rect, |ui| {
-        image::closeup_ui(ui, view, results, textures)
-    });
-    cell(ui, epsf_rect, |ui| {
-        image::epsf_ui(ui, screen, results, textures)
-    });
     cell(ui, at(0, 0), |ui| psd::psd_ui(ui, screen, results));
     cell(ui, at(1, 0), |ui| series::ace_ui(ui, screen, view, results));
-    cell(ui, at(0, 1), |ui| {
-        vectors::vector_ui(ui, screen, view, results)
-    });
-    cell(ui, at(1, 1), |ui| {
-        curve::curve_ui(ui, screen, view, results, actions)
-    });
+    if engine::sky::array_count(&screen.cfg) > 1 {
+        // the quad: the focal plane and the common jitter; the analysis panels are a single array's
+        cell(ui, frame_rect, |ui| {
+            focal::focal_plane_ui(ui, screen, view, results, &mut textures.focal)
+        });
+        for (rect, what) in [
+            (close_rect, "Star close-up"),
+            (epsf_rect, "ePSF"),
+            (at(0, 1), "Deviation vector map"),
+            (at(1, 1), "Accuracy vs magnitude"),
+        ] {
+            cell(ui, rect, |ui| {
+                widgets::title(ui, what, false);
+                ui.weak(
+                    "a single array's analysis: choose \"one array\" under Scene and focal plane",
+                );
+            });
+        }
+    } else {
+        cell(ui, frame_rect, |ui| {
+            image::frame_ui(ui, screen, view, results, textures)
+        });
+        cell(ui, close_rect, |ui| {
+            image::closeup_ui(ui, view, results, textures)
+        });
+        cell(ui, epsf_rect, |ui| {
+            image::epsf_ui(ui, screen, results, textures)
+        });
+        cell(ui, at(0, 1), |ui| {
+            vectors::vector_ui(ui, screen, view, results)
+        });
+        cell(ui, at(1, 1), |ui| {
+            curve::curve_ui(ui, screen, view, results, actions)
+        });
+    }
     ui.advance_cursor_after_rect(r);
 }
