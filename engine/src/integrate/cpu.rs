@@ -329,43 +329,6 @@ impl Histogram {
             })
             .collect()
     }
-
-    /// `Σ_u H(u) K(P − u)` for the pixel at node coordinates P = (pu, pv) relative to the origin.
-    pub fn convolve_at(
-        &self,
-        kernel: &PixelKernel,
-        runs: &[(usize, usize)],
-        pu: i64,
-        pv: i64,
-    ) -> f64 {
-        let h = kernel.half_nodes as i64;
-        let n = kernel.n() as i64;
-        let mut acc = 0.0;
-        for (r, &(a, b)) in runs.iter().enumerate() {
-            if a == b {
-                continue;
-            }
-            let ky = pv - (self.v0 + r as i64) + h;
-            if ky < 0 || ky >= n {
-                continue;
-            }
-            // K column index for histogram column c: kx = pu − (u0 + c) + h, valid in [0, n)
-            let c_lo = (pu - self.u0 + h - (n - 1)).max(a as i64);
-            let c_hi = (pu - self.u0 + h).min(b as i64 - 1);
-            if c_hi < c_lo {
-                continue;
-            }
-            let krow = &kernel.data[(ky * n) as usize..((ky + 1) * n) as usize];
-            let hrow = &self.data[r * self.nu..(r + 1) * self.nu];
-            let base = pu - self.u0 + h;
-            let mut s = 0.0;
-            for c in c_lo..=c_hi {
-                s += hrow[c as usize] * krow[(base - c) as usize];
-            }
-            acc += s;
-        }
-        acc
-    }
 }
 
 /// A histogram's non-zero run of each row, stored reversed along u, so that `Σ_u H(u) K(P − u)` walks both
@@ -398,8 +361,7 @@ impl ReversedRuns {
         }
     }
 
-    /// `Σ_u H(u) K(P − u)` for the pixel at node coordinates P = (pu, pv) relative to the origin (the same
-    /// sum as [`Histogram::convolve_at`]).
+    /// `Σ_u H(u) K(P − u)` for the pixel at node coordinates P = (pu, pv) relative to the stamp origin.
     fn convolve_at(&self, kernel: &PixelKernel, pu: i64, pv: i64) -> f64 {
         let h = kernel.half_nodes as i64;
         let n = kernel.n() as i64;
@@ -507,8 +469,8 @@ impl SharedCore {
 
     /// The shared window's histogram for a star at `(ox, oy)` px from a stamp origin: the four phase tables
     /// around its phase, interpolated, in a box that holds every sample of the track.
-    fn histogram_at(&self, ox_px: f64, oy_px: f64, g: usize) -> Histogram {
-        let gf = g as f64;
+    fn histogram_at(&self, ox_px: f64, oy_px: f64) -> Histogram {
+        let gf = self.g as f64;
         let (xu, xv) = (ox_px * gf, oy_px * gf);
         let (nu_s, nv_s) = (xu.floor(), xv.floor());
         let qf = self.q as f64;
@@ -580,7 +542,7 @@ pub fn fast_stamp(
     let base = match core {
         // the frame's shared part interpolated, then the rest of the stamp's window exactly
         Some(c) if c.window.first >= common.first && c.window.last <= common.last => {
-            let mut h = c.histogram_at(ox, oy, g);
+            let mut h = c.histogram_at(ox, oy);
             for_each_extra(&common, &c.window, |j, e| h.add_sample(track, j, e));
             h
         }
