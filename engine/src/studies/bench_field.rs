@@ -24,63 +24,71 @@ pub fn bulge_knobs(base: &Config) -> Vec<(String, Vec<(String, Config)>, bool)> 
     // colour binning: 60 stars of the bulge's colours, Gaussian ACE; the exact setting is one PSF per star
     let mut colours = bulge_array(base, 60.0);
     colours.ace.case = AceCase::Gaussian;
-    let colour = |step: f64| {
-        let mut c = colours.clone();
-        c.fidelity.colour_step_mag = step;
-        (
-            if step > 0.0 {
-                format!("{step} mag")
-            } else {
-                "exact (one PSF per colour)".into()
-            },
-            c,
-        )
-    };
-    // each star's reach: 600 stars of the bulge's luminosity function, realistic ACE, rolling readout
+    // each star's reach: 600 stars of the bulge's luminosity function, realistic ACE, rolling readout; the
+    // shared core's phases on the same stars (whole frames compared with every star depositing its whole
+    // track)
     let reach = bulge_array(base, 600.0);
-    let wing = |t: f64| {
-        let mut c = reach.clone();
-        c.fidelity.wing_threshold_e = t;
-        (
-            if t > 0.0 {
-                format!("{t} e⁻")
-            } else {
-                "kernel reach (exact)".into()
-            },
-            c,
-        )
-    };
-    // the shared core's phases: the same 600 stars, whole frames compared with every star depositing its
-    // whole track
-    let phases = |q: usize| {
-        let mut c = reach.clone();
-        c.fidelity.deposit_phases = q;
-        (
-            if q > 0 {
-                format!("{q} phases")
-            } else {
-                "whole tracks (exact)".into()
-            },
-            c,
-        )
-    };
     vec![
         (
             "colour step (bulge colours)".into(),
-            [0.5, 0.2, 0.1, 0.05, 0.02, 0.0].map(colour).to_vec(),
+            settings(
+                &colours,
+                &[0.5, 0.2, 0.1, 0.05, 0.02, 0.0],
+                "exact (one PSF per colour)",
+                |c, v| {
+                    c.fidelity.colour_step_mag = v;
+                    format!("{v} mag")
+                },
+            ),
             true,
         ),
         (
             "deposit phases (bulge, realistic ACE)".into(),
-            [2, 4, 8, 16, 0].map(phases).to_vec(),
+            settings(&reach, &[2, 4, 8, 16, 0], "whole tracks (exact)", |c, q| {
+                c.fidelity.deposit_phases = q;
+                format!("{q} phases")
+            }),
             true,
         ),
         (
             "wing threshold (bulge, realistic ACE)".into(),
-            [10.0, 3.0, 1.0, 0.3, 0.0].map(wing).to_vec(),
+            settings(
+                &reach,
+                &[10.0, 3.0, 1.0, 0.3, 0.0],
+                "kernel reach (exact)",
+                |c, t| {
+                    c.fidelity.wing_threshold_e = t;
+                    format!("{t} e⁻")
+                },
+            ),
             true,
         ),
     ]
+}
+
+/// One knob's settings on `base`: `set` applies a value and names it; the value 0 (the exact setting) is
+/// named `exact`.
+fn settings<T: Copy + PartialEq + Default>(
+    base: &Config,
+    values: &[T],
+    exact: &str,
+    set: impl Fn(&mut Config, T) -> String,
+) -> Vec<(String, Config)> {
+    values
+        .iter()
+        .map(|&v| {
+            let mut c = base.clone();
+            let label = set(&mut c, v);
+            (
+                if v == T::default() {
+                    exact.into()
+                } else {
+                    label
+                },
+                c,
+            )
+        })
+        .collect()
 }
 
 /// The settings of the focal-plane rows: the exact one (realistic ACE), the fast knobs one at a time and
