@@ -219,23 +219,6 @@ fn sample_extent(
 }
 
 impl Histogram {
-    /// An empty histogram whose box holds every sample of `span` for a star at `star − origin`, or `None`
-    /// when the box would exceed [`MAX_HISTOGRAM_NODES`].
-    fn empty_for(
-        star: &StarSpec,
-        track: &Track,
-        span: &super::track::WindowWeights,
-        origin: (i64, i64),
-        g: usize,
-    ) -> Option<Self> {
-        Self::empty_in(
-            star,
-            sample_extent(track, [span.first..=span.last]),
-            origin,
-            g,
-        )
-    }
-
     /// An empty histogram whose box holds the displacements of `extent` (min_x, max_x, min_y, max_y; px) for
     /// a star at `star − origin`, or `None` when the box would exceed [`MAX_HISTOGRAM_NODES`] or the extent
     /// is empty.
@@ -298,7 +281,7 @@ impl Histogram {
         origin: (i64, i64),
         g: usize,
     ) -> Option<Self> {
-        let mut h = Self::empty_for(star, track, w, origin, g)?;
+        let mut h = Self::empty_in(star, sample_extent(track, [w.first..=w.last]), origin, g)?;
         h.add_window(track, w);
         Some(h)
     }
