@@ -170,22 +170,7 @@ impl EngineState {
         let exp = self.exposure(&sim, index, Stage::Image)?;
         let simulate_s = t0.elapsed().as_secs_f64();
         out.check()?;
-        let key = simulation_key(cfg);
-        let psd = match &self.psd {
-            Some((k, p)) if *k == key => p.clone(),
-            _ => {
-                let p = views::psd_estimate(&sim);
-                self.psd = Some((key, p.clone()));
-                p
-            }
-        };
-        out.send(Msg::Series(Box::new(views::series_view(
-            &sim,
-            cfg,
-            index,
-            psd,
-            out.generation,
-        ))));
+        self.send_series(&sim, cfg, index, out);
         out.progress(Stage::Image, 1, 2, "ePSF analysis");
         let t1 = Instant::now();
         let plan = r.plan().map_err(failed(Stage::Image))?;
@@ -231,6 +216,27 @@ impl EngineState {
         Ok(())
     }
 
+    /// The ACE series view of exposure `index`, with the PSD estimate of `sim`'s series (made once per
+    /// simulation key: it costs an FFT of the whole series).
+    fn send_series(&mut self, sim: &Simulator, cfg: &Config, index: usize, out: &Out) {
+        let key = simulation_key(cfg);
+        let psd = match &self.psd {
+            Some((k, p)) if *k == key => p.clone(),
+            _ => {
+                let p = views::psd_estimate(sim);
+                self.psd = Some((key, p.clone()));
+                p
+            }
+        };
+        out.send(Msg::Series(Box::new(views::series_view(
+            sim,
+            cfg,
+            index,
+            psd,
+            out.generation,
+        ))));
+    }
+
     /// One exposure of the quad focal plane: every array simulated (the jitter common to all, each its own
     /// readout, flat and noise), turned into focal-plane axes for the view, with its WCS and stars.
     fn focal_plane(&mut self, r: &Request, out: &Out) -> StageResult<()> {
@@ -262,21 +268,8 @@ impl EngineState {
         out.check()?;
         out.progress(Stage::Image, 1, 2, "laying out the arrays");
         if let Some(sim) = fps.arrays.first() {
-            let psd = match &self.psd {
-                Some((k, p)) if *k == key => p.clone(),
-                _ => {
-                    let p = views::psd_estimate(sim);
-                    self.psd = Some((key.clone(), p.clone()));
-                    p
-                }
-            };
-            out.send(Msg::Series(Box::new(views::series_view(
-                sim,
-                cfg,
-                r.image_index,
-                psd,
-                out.generation,
-            ))));
+            // the jitter is common to the arrays: the first one's series
+            self.send_series(sim, cfg, r.image_index, out);
         }
         let plane = engine::sky::focal_plane(cfg);
         let limits: Vec<(f32, f32, f32)> = exp
