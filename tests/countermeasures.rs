@@ -61,6 +61,7 @@ fn telemetry_predicts_the_measured_errors_of_a_noise_free_image() {
             sim.timing,
             sim.exposure_start_s(0),
             scale,
+            0.0,
             &q,
             c.seed,
             &kernel,

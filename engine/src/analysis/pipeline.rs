@@ -283,6 +283,7 @@ impl Source<'_> {
             sim.timing,
             sim.exposure_start_s(self.index),
             sim.cfg.instrument.plate_scale_mas(),
+            sim.array.rotation_deg,
             quality,
             sim.cfg.seed,
             &*sim.optical_kernel()?,

@@ -271,6 +271,7 @@ impl Predictor {
                     self.timing,
                     im.start_s,
                     self.cfg.instrument.plate_scale_mas(),
+                    0.0,
                     q,
                     self.cfg.seed,
                     &self.kernel,

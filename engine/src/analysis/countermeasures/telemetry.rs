@@ -30,6 +30,7 @@ impl Telemetry {
         timing: ReadoutTiming,
         exposure_start_s: f64,
         plate_scale_mas: f64,
+        rotation_deg: f64,
         quality: &TelemetryQuality,
         seed: u64,
         kernel: &PixelKernel,
@@ -112,6 +113,8 @@ impl Telemetry {
                 .map(|j| lin(exposure_start_s + j as f64 * step, &ys) / plate_scale_mas)
                 .collect(),
         );
+        // the attitude is the telescope's: turned into this array's pixel axes, as the simulated jitter is
+        let track = track.turned_into_array(rotation_deg);
         let nominal = track.window(timing.t_overhead_s, timing.t_overhead_s + timing.exposure_s);
         let response = FitResponse::build(kernel, &track, &nominal, noise);
         Ok(Self {
@@ -167,7 +170,7 @@ mod tests {
             ..TelemetryQuality::IDEAL
         };
         let empty = AceSeries::still(1e-3, 0);
-        let e = Telemetry::from_series(&empty, timing, 0.0, 472.0, &q(1.0, 10.0), 1, &k, &nm)
+        let e = Telemetry::from_series(&empty, timing, 0.0, 472.0, 0.0, &q(1.0, 10.0), 1, &k, &nm)
             .expect_err("empty");
         assert!(e.to_string().contains("zero-length"));
         let s = AceSeries::still(1e-3, 20_000);
@@ -176,8 +179,8 @@ mod tests {
             (q(1.0, 0.0), "rate"),
             (q(1.0, 1e7), "rate"),
         ] {
-            let e =
-                Telemetry::from_series(&s, timing, 0.0, 472.0, &bad, 1, &k, &nm).expect_err(what);
+            let e = Telemetry::from_series(&s, timing, 0.0, 472.0, 0.0, &bad, 1, &k, &nm)
+                .expect_err(what);
             assert!(e.to_string().contains(what), "{e}");
         }
     }
