@@ -11,16 +11,7 @@ use rayon::prelude::*;
 /// Local maxima (5 × 5) above `nsigma` × the image's robust noise over its median; brightest first, closer
 /// than 3 px to a brighter one dropped.
 pub fn detect(img: &AnalysisImage, nsigma: f64) -> Vec<(f64, f64)> {
-    let good: Vec<f64> = img
-        .e
-        .iter()
-        .zip(&img.bad)
-        .filter(|(_, b)| !**b)
-        .map(|(v, _)| *v)
-        .step_by(7)
-        .collect();
-    let sky = stats::median(&good);
-    let noise = stats::mad_sigma(&good).max(1e-9);
+    let (sky, noise) = sky_and_noise(img);
     let thr = sky + nsigma * noise;
     let (nx, ny) = (img.nx, img.ny);
     let rows: Vec<Vec<(f64, f64, f64)>> = (0..ny)
@@ -78,9 +69,23 @@ pub fn detect(img: &AnalysisImage, nsigma: f64) -> Vec<(f64, f64)> {
     kept
 }
 
+/// The image's sky level and pixel noise: median and MAD-σ of every 7th unmasked pixel (robust to the
+/// stars as long as they cover less than half of the image).
+pub fn sky_and_noise(img: &AnalysisImage) -> (f64, f64) {
+    let good: Vec<f64> = img
+        .e
+        .iter()
+        .zip(&img.bad)
+        .filter(|(_, b)| !**b)
+        .map(|(v, _)| *v)
+        .step_by(7)
+        .collect();
+    (stats::median(&good), stats::mad_sigma(&good).max(1e-9))
+}
+
 /// Centroid (unweighted) of the 4-connected region of masked pixels containing (x, y), within 40 px: the
 /// centre of a saturated core.
-fn plateau_centre(img: &AnalysisImage, x: usize, y: usize) -> (f64, f64) {
+pub(crate) fn plateau_centre(img: &AnalysisImage, x: usize, y: usize) -> (f64, f64) {
     const REACH: usize = 40;
     let (nx, ny) = (img.nx, img.ny);
     let mut seen = std::collections::HashSet::new();

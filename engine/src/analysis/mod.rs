@@ -3,6 +3,7 @@
 //! one per-image [`pipeline`] that runs them in order.
 
 pub mod countermeasures;
+pub mod crowded;
 pub mod detection;
 pub mod epsf;
 pub mod image;
@@ -30,4 +31,9 @@ pub enum AnalysisError {
         "{countermeasure} does not apply to this image (exact-epsf needs a static-ACE image simulated by jsim)"
     )]
     NotApplicable { countermeasure: String },
+    #[error(
+        "{countermeasure} is not offered for a crowded field (it refits single stars; use none, telemetry or \
+         plate-*@catalogue)"
+    )]
+    NotInCrowdedField { countermeasure: String },
 }

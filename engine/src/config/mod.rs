@@ -810,6 +810,9 @@ pub struct Analysis {
     pub epsf_zones: usize,
     /// Detection threshold (peak above sky) in units of the sky noise.
     pub detect_sigma: f64,
+    /// Detection threshold of the crowded-field analysis ([`crate::analysis::crowded`]): S/N of a peak in
+    /// the matched-filtered (3 × 3 binomial) image, and of a residual peak against its local noise.
+    pub crowded_detect_sigma: f64,
     /// Maximum Gauss–Newton iterations per star fit.
     pub fit_max_iter: usize,
     /// Sigma-clipping threshold for the ePSF stacking.
@@ -848,6 +851,7 @@ impl Default for Analysis {
             smoothing: Smoothing::Quadratic,
             epsf_zones: 4,
             detect_sigma: 10.0,
+            crowded_detect_sigma: 3.0,
             fit_max_iter: 30,
             clip_sigma: 3.0,
             flat_field: FlatField::Calibrated {

@@ -484,6 +484,7 @@ impl Config {
         }
         check_range_usize("analysis.epsf_zones", an.epsf_zones, 1, 64)?;
         check_pos("analysis.detect_sigma", an.detect_sigma)?;
+        check_pos("analysis.crowded_detect_sigma", an.crowded_detect_sigma)?;
         check_range_usize("analysis.fit_max_iter", an.fit_max_iter, 1, 10_000)?;
         check_pos("analysis.clip_sigma", an.clip_sigma)?;
         Ok(())

@@ -158,6 +158,40 @@ fn samples(img: &PixelData<'_>, epsf: &Epsf, fit: &StarFit, x: f64, y: f64) -> V
     out
 }
 
+/// One step of the builder (steps 3–4 above): each node moves by the sigma-clipped mean of the residual
+/// samples binned to it (`per_star`: (node, residual) of each star), then ψ is smoothed, re-centred (when
+/// `opts.recentre`) and normalised. Returns the new ψ and the largest correction.
+pub fn update(psi: &Epsf, per_star: Vec<Vec<(usize, f64)>>, opts: &BuildOptions) -> (Epsf, f64) {
+    let n = psi.n();
+    let mut buckets: Vec<Vec<f64>> = vec![Vec::new(); n * n];
+    for v in per_star {
+        for (node, r) in v {
+            buckets[node].push(r);
+        }
+    }
+    let delta: Vec<f64> = buckets
+        .par_iter()
+        .map(|b| {
+            if b.is_empty() {
+                0.0
+            } else {
+                stats::clipped_mean(b, opts.clip_sigma).0
+            }
+        })
+        .collect();
+    let max_delta = delta.iter().fold(0.0f64, |m, d| m.max(d.abs()));
+    let mut next = psi.clone();
+    for (p, d) in next.data.iter_mut().zip(&delta) {
+        *p += d;
+    }
+    next = smooth::smooth(&next, opts.smoothing);
+    if opts.recentre {
+        next = next.recentred();
+    }
+    next.normalise();
+    (next, max_delta)
+}
+
 /// Flux and sky-free linear fit at fixed position: f = Σ w ψ (d − s) / Σ w ψ².
 fn fit_flux_at(
     img: &PixelData<'_>,
@@ -233,7 +267,6 @@ pub fn build(
             opts.half_px,
         ),
     };
-    let n = psi.n();
     let max_iter = if opts.iterations == 0 {
         30
     } else {
@@ -290,32 +323,9 @@ pub fn build(
                 _ => Vec::new(),
             })
             .collect();
-        let mut buckets: Vec<Vec<f64>> = vec![Vec::new(); n * n];
-        for v in per_star {
-            for (node, r) in v {
-                buckets[node].push(r);
-            }
-        }
-        let delta: Vec<f64> = buckets
-            .par_iter()
-            .map(|b| {
-                if b.is_empty() {
-                    0.0
-                } else {
-                    stats::clipped_mean(b, opts.clip_sigma).0
-                }
-            })
-            .collect();
         let peak = psi.data.iter().cloned().fold(0.0, f64::max).max(1e-300);
-        let max_delta = delta.iter().fold(0.0f64, |m, d| m.max(d.abs()));
-        for (p, d) in psi.data.iter_mut().zip(&delta) {
-            *p += d;
-        }
-        psi = smooth::smooth(&psi, opts.smoothing);
-        if opts.recentre {
-            psi = psi.recentred();
-        }
-        psi.normalise();
+        let (next, max_delta) = update(&psi, per_star, opts);
+        psi = next;
         if opts.iterations == 0 && max_delta < 1e-4 * peak {
             break;
         }

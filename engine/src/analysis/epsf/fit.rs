@@ -46,6 +46,10 @@ pub mod flags {
     /// Another detected star lies within [`blend_radius_px`] of this one: its light is in this star's fit
     /// pixels (reported, not rejected: a crowded-field analysis reports such stars separately).
     pub const BLENDED: u32 = 256;
+    /// Fitted simultaneously with overlapping neighbours (the crowded-field analysis' groups).
+    pub const GROUPED: u32 = 512;
+    /// Found in the residual image after the first fits (a companion the first detection merged).
+    pub const RESIDUAL_FOUND: u32 = 1024;
     /// Anything that makes a fit unusable for the accuracy statistics.
     pub const REJECT: u32 =
         NOT_CONVERGED | MOVED | SINGULAR | NONPOSITIVE_FLUX | FEW_PIXELS | POOR_FIT;
@@ -177,7 +181,7 @@ pub fn annulus_sky(img: &PixelData<'_>, x: f64, y: f64, r_in: f64, r_out: f64) -
 /// [`MAX_RADIUS_GROWTH_PX`]) while masked pixels (a saturated core) leave fewer good pixels than the
 /// unmasked disc would hold, so a saturated star is fitted from its unsaturated wings. Returns the pixels
 /// and whether the disc met the image edge or masked pixels.
-fn select(
+pub(crate) fn select(
     img: &PixelData<'_>,
     x: f64,
     y: f64,
