@@ -3,5 +3,6 @@
 
 pub mod bench;
 pub mod bench_field;
+pub mod crowded;
 pub mod experiment;
 pub mod sweep;

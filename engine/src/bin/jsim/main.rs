@@ -11,6 +11,7 @@ use std::path::PathBuf;
 
 mod bench_cmd;
 mod cmd;
+mod crowded_cmd;
 mod outputs;
 mod sweep_cmd;
 
@@ -196,6 +197,8 @@ enum Command {
         #[arg(long, default_value = "out/experiment")]
         out: PathBuf,
     },
+    /// Accuracy against magnitude from one crowded exposure of the focal plane (default: the mock bulge).
+    Crowded(crowded_cmd::CrowdedArgs),
     /// Monte Carlo sweep over a parameter grid (resumable, shardable; --emit-slurm for a cluster).
     Sweep(sweep_cmd::SweepArgs),
     /// Merge the shards of a sweep.
@@ -246,7 +249,7 @@ pub struct TelemetryArgs {
 impl TelemetryArgs {
     /// The plan of these countermeasure names with this telemetry quality and reference error, validated
     /// by the engine (the one place a plan is checked).
-    fn plan<S: AsRef<str>>(&self, names: &[S]) -> Result<Plan> {
+    pub fn plan<S: AsRef<str>>(&self, names: &[S]) -> Result<Plan> {
         let q = TelemetryQuality {
             noise_mas: self.noise_mas,
             rate_hz: self.rate_hz,
@@ -360,6 +363,7 @@ fn run(cli: Cli) -> Result<()> {
                 },
             )
         }
+        Command::Crowded(a) => crowded_cmd::crowded(&a),
         Command::Sweep(a) => sweep_cmd::sweep(&a),
         Command::Merge(a) => sweep_cmd::merge(&a),
         Command::Report(a) => sweep_cmd::report(&a),

@@ -1,0 +1,233 @@
+//! The products of the crowded-field study (`jsim crowded`):
+//!
+//! * `crowded_bins.csv` — per ACE case, countermeasure and bin of true Hw: truth stars, found,
+//!   completeness, fractions flagged blended and saturated, and per class (isolated, crowded, merged) the
+//!   number of stars, accuracy and median Cramér–Rao bound (mas);
+//! * `crowded_arrays.csv` — per case and array: detections (first pass, residual), ePSF stars and
+//!   iterations, the fallback if any, groups and the largest, analysis time;
+//! * `accuracy_vs_mag.png` — isolated-star accuracy against Hw per case and countermeasure, with the bound
+//!   and the 4-mas line;
+//! * `vectors_<case>_<countermeasure>.png` — the four arrays in their sky layout (focal-plane axes), an
+//!   arrow per cell of [`VECTOR_CELLS`]² per array: the mean fitted − true of its used stars, each array's
+//!   own median offset removed.
+
+use super::IoError;
+use super::csv::{self, Cell};
+use super::plot::{self, Scale, Series};
+use crate::analysis::crowded::report::{ClassStats, MagBin};
+use crate::numerics::stats;
+use crate::sky::focal_plane::FocalPlane;
+use crate::studies::crowded::{ArrayAnalysis, FocalPlaneAnalysis};
+use std::path::Path;
+
+/// Cells per array side of the vector maps.
+pub const VECTOR_CELLS: usize = 12;
+
+/// Columns of `crowded_bins.csv`.
+pub const BINS_HEADER: [&str; 19] = [
+    "case",
+    "countermeasure",
+    "hw_lo",
+    "hw_hi",
+    "n_true",
+    "n_found",
+    "completeness",
+    "frac_blended",
+    "frac_saturated",
+    "isolated_n",
+    "isolated_mas",
+    "isolated_crlb_mas",
+    "isolated_over_crlb",
+    "crowded_n",
+    "crowded_mas",
+    "crowded_crlb_mas",
+    "merged_n",
+    "merged_mas",
+    "merged_crlb_mas",
+];
+
+fn class_cells(c: &ClassStats, ratio: bool) -> Vec<Cell> {
+    let mut v = vec![
+        Cell::I(c.n as i64),
+        Cell::F(c.accuracy_mas),
+        Cell::F(c.crlb_mas),
+    ];
+    if ratio {
+        v.push(Cell::F(c.ratio()));
+    }
+    v
+}
+
+/// The rows of one case and countermeasure.
+pub fn bin_rows(case: &str, countermeasure: &str, bins: &[MagBin]) -> Vec<Vec<Cell>> {
+    bins.iter()
+        .map(|b| {
+            let mut r = vec![
+                Cell::S(case.into()),
+                Cell::S(countermeasure.into()),
+                Cell::F(b.hw_lo),
+                Cell::F(b.hw_hi),
+                Cell::I(b.n_true as i64),
+                Cell::I(b.n_found as i64),
+                Cell::F(b.completeness),
+                Cell::F(b.frac_blended),
+                Cell::F(b.frac_saturated),
+            ];
+            r.extend(class_cells(&b.isolated, true));
+            r.extend(class_cells(&b.crowded, false));
+            r.extend(class_cells(&b.merged, false));
+            r
+        })
+        .collect()
+}
+
+/// Columns of `crowded_arrays.csv`.
+pub const ARRAYS_HEADER: [&str; 10] = [
+    "case",
+    "array",
+    "n_first",
+    "n_residual",
+    "epsf_stars",
+    "epsf_iterations",
+    "n_groups",
+    "largest_group",
+    "analyse_s",
+    "fallback",
+];
+
+/// The rows of one case's arrays.
+pub fn array_rows(case: &str, arrays: &[ArrayAnalysis]) -> Vec<Vec<Cell>> {
+    arrays
+        .iter()
+        .map(|a| {
+            let s = &a.summary;
+            vec![
+                Cell::S(case.into()),
+                Cell::I(a.index as i64 + 1),
+                Cell::I(s.n_first as i64),
+                Cell::I(s.n_residual as i64),
+                Cell::I(s.epsf_stars as i64),
+                Cell::I(s.epsf_iterations as i64),
+                Cell::I(s.n_groups as i64),
+                Cell::I(s.largest_group as i64),
+                Cell::F(s.analyse_s),
+                Cell::S(s.fallback.clone()),
+            ]
+        })
+        .collect()
+}
+
+/// Write a table.
+pub fn write_table(path: &Path, header: &[&str], rows: &[Vec<Cell>]) -> Result<(), IoError> {
+    csv::write(path, header, rows)
+}
+
+/// Isolated-star accuracy against Hw, each `(label, bins)` a curve; the first one's bound dashed-in as a
+/// curve of its own; the 4-mas line.
+pub fn plot_accuracy(path: &Path, runs: &[(String, &[MagBin])]) -> Result<(), IoError> {
+    let centre = |b: &MagBin| 0.5 * (b.hw_lo + b.hw_hi);
+    let mut series: Vec<Series> = runs
+        .iter()
+        .map(|(label, bins)| Series {
+            label: format!("{label}: isolated"),
+            x: bins.iter().map(centre).collect(),
+            y: bins.iter().map(|b| b.isolated.accuracy_mas).collect(),
+            yerr: None,
+        })
+        .collect();
+    if let Some((label, bins)) = runs.first() {
+        series.push(Series {
+            label: format!("Cramér–Rao bound ({label})"),
+            x: bins.iter().map(centre).collect(),
+            y: bins.iter().map(|b| b.isolated.crlb_mas).collect(),
+            yerr: None,
+        });
+    }
+    plot::line_plot(
+        path,
+        "One crowded exposure: accuracy of isolated stars against magnitude",
+        "Hw [mag]",
+        "position accuracy per axis [mas]",
+        &series,
+        &[(4.0, "4 mas".into())],
+        Scale::Linear,
+        Scale::Log,
+    )?;
+    Ok(())
+}
+
+/// The binned vectors of one array in focal-plane axes: (f_x, f_y, dx_mas, dy_mas) per cell with ≥ 3
+/// stars, shifted by `origin` so the plot's axes start at 0.
+pub fn array_vectors(
+    plane: &FocalPlane,
+    a: &ArrayAnalysis,
+    scale_mas: f64,
+    origin: f64,
+) -> Vec<(f64, f64, f64, f64)> {
+    let used: Vec<_> = a.stars.iter().filter(|s| s.is_used()).collect();
+    let ox = stats::median(&used.iter().map(|s| s.dx_px).collect::<Vec<_>>());
+    let oy = stats::median(&used.iter().map(|s| s.dy_px).collect::<Vec<_>>());
+    let cell = a.n_px as f64 / VECTOR_CELLS as f64;
+    let mut acc = vec![(0.0, 0.0, 0usize); VECTOR_CELLS * VECTOR_CELLS];
+    for s in &used {
+        let (cx, cy) = (
+            ((s.x / cell) as usize).min(VECTOR_CELLS - 1),
+            ((s.y / cell) as usize).min(VECTOR_CELLS - 1),
+        );
+        let e = &mut acc[cy * VECTOR_CELLS + cx];
+        e.0 += s.dx_px - ox;
+        e.1 += s.dy_px - oy;
+        e.2 += 1;
+    }
+    acc.iter()
+        .enumerate()
+        .filter(|(_, e)| e.2 >= 3)
+        .map(|(i, e)| {
+            let (x, y) = (
+                ((i % VECTOR_CELLS) as f64 + 0.5) * cell,
+                ((i / VECTOR_CELLS) as f64 + 0.5) * cell,
+            );
+            let (dx, dy) = (e.0 / e.2 as f64, e.1 / e.2 as f64);
+            let (fx, fy) = plane.to_focal_plane(a.index, x, y);
+            // the vector turned with the array: difference of the mapped end points (exact: the map is affine)
+            let (gx, gy) = plane.to_focal_plane(a.index, x + dx, y + dy);
+            (
+                fx + origin,
+                fy + origin,
+                (gx - fx) * scale_mas,
+                (gy - fy) * scale_mas,
+            )
+        })
+        .collect()
+}
+
+/// The vector map of the four arrays in their sky layout.
+pub fn plot_vectors(
+    path: &Path,
+    title: &str,
+    plane: &FocalPlane,
+    run: &FocalPlaneAnalysis,
+    scale_mas: f64,
+) -> Result<(), IoError> {
+    let n = plane.array_px as f64;
+    let origin = n + plane.gap_px / 2.0;
+    let sets: Vec<(String, Vec<(f64, f64, f64, f64)>)> = run
+        .arrays
+        .iter()
+        .map(|a| {
+            (
+                format!("array {}", a.index + 1),
+                array_vectors(plane, a, scale_mas, origin),
+            )
+        })
+        .collect();
+    plot::vector_map(
+        path,
+        title,
+        &sets,
+        2.0 * origin,
+        f64::NAN,
+        3.0 * n / VECTOR_CELLS as f64 / 4.0,
+    )?;
+    Ok(())
+}
