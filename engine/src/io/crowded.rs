@@ -3,8 +3,12 @@
 //! * `crowded_bins.csv` — per ACE case, countermeasure and bin of true Hw: truth stars, found,
 //!   completeness, fractions flagged blended and saturated, and per class (isolated, crowded, merged) the
 //!   number of stars, accuracy and median Cramér–Rao bound (mas);
-//! * `crowded_arrays.csv` — per case and array: detections (first pass, residual), ePSF stars and
+//! * `crowded_arrays.csv` — per case and array: detections (first pass, residual, matched to no truth
+//!   star), ePSF stars and
 //!   iterations, the fallback if any, groups and the largest, analysis time;
+//! * `stars_<case>.csv` — every reported star of the case without countermeasure: array, position, flux,
+//!   bound, flags (bits of `analysis::epsf::fit::flags`), class, and where matched the truth's id, Hw and
+//!   fitted − true (mas);
 //! * `accuracy_vs_mag.png` — isolated-star accuracy against Hw per case and countermeasure, with the bound
 //!   and the 4-mas line;
 //! * `vectors_<case>_<countermeasure>.png` — the four arrays in their sky layout (focal-plane axes), an
@@ -82,11 +86,12 @@ pub fn bin_rows(case: &str, countermeasure: &str, bins: &[MagBin]) -> Vec<Vec<Ce
 }
 
 /// Columns of `crowded_arrays.csv`.
-pub const ARRAYS_HEADER: [&str; 10] = [
+pub const ARRAYS_HEADER: [&str; 11] = [
     "case",
     "array",
     "n_first",
     "n_residual",
+    "n_unmatched",
     "epsf_stars",
     "epsf_iterations",
     "n_groups",
@@ -106,6 +111,7 @@ pub fn array_rows(case: &str, arrays: &[ArrayAnalysis]) -> Vec<Vec<Cell>> {
                 Cell::I(a.index as i64 + 1),
                 Cell::I(s.n_first as i64),
                 Cell::I(s.n_residual as i64),
+                Cell::I(s.n_unmatched.map(|v| v as i64).unwrap_or(-1)),
                 Cell::I(s.epsf_stars as i64),
                 Cell::I(s.epsf_iterations as i64),
                 Cell::I(s.n_groups as i64),
@@ -115,6 +121,53 @@ pub fn array_rows(case: &str, arrays: &[ArrayAnalysis]) -> Vec<Vec<Cell>> {
             ]
         })
         .collect()
+}
+
+/// Columns of `stars_<case>.csv`.
+pub const STARS_HEADER: [&str; 12] = [
+    "array",
+    "x_px",
+    "y_px",
+    "flux_e",
+    "crlb_x_px",
+    "crlb_y_px",
+    "flags",
+    "class",
+    "truth_id",
+    "hw",
+    "dx_mas",
+    "dy_mas",
+];
+
+/// One row per reported star of every array.
+pub fn star_rows(arrays: &[ArrayAnalysis], scale_mas: f64) -> Vec<Vec<Cell>> {
+    use crate::analysis::crowded::report;
+    let mut rows = Vec::new();
+    for a in arrays {
+        let merged = report::merged(&a.stars, &a.truth);
+        for (s, m) in a.stars.iter().zip(merged) {
+            let t = s.truth.map(|k| &a.truth[k]);
+            let class = serde_json::to_value(report::class(s, m))
+                .ok()
+                .and_then(|v| v.as_str().map(String::from))
+                .unwrap_or_default();
+            rows.push(vec![
+                Cell::I(a.index as i64 + 1),
+                Cell::F(s.x),
+                Cell::F(s.y),
+                Cell::F(s.flux_e),
+                Cell::F(s.crlb_x_px),
+                Cell::F(s.crlb_y_px),
+                Cell::I(s.flags as i64),
+                Cell::S(class),
+                Cell::I(t.map(|t| t.id as i64).unwrap_or(-1)),
+                Cell::F(t.map(|t| t.mag_hw).unwrap_or(f64::NAN)),
+                Cell::F(s.dx_px * scale_mas),
+                Cell::F(s.dy_px * scale_mas),
+            ]);
+        }
+    }
+    rows
 }
 
 /// Write a table.

@@ -40,12 +40,15 @@ pub struct CrowdedSummary {
     pub fallback: String,
     pub n_groups: usize,
     pub largest_group: usize,
+    /// Reported stars matched to no truth star: noise peaks, light from stars off the array's edge, or
+    /// duplicates (`None` without a truth).
+    pub n_unmatched: Option<usize>,
     /// Wall-clock seconds of the array's crowded analysis (detection, ePSF, grouped fits).
     pub analyse_s: f64,
 }
 
 impl CrowdedSummary {
-    fn of(c: &Crowded, analyse_s: f64) -> Self {
+    fn of(c: &Crowded, stars: &[StarResult], analyse_s: f64) -> Self {
         Self {
             n_first: c.n_first,
             n_residual: c.n_residual,
@@ -54,6 +57,7 @@ impl CrowdedSummary {
             fallback: c.fallback.clone(),
             n_groups: c.n_groups,
             largest_group: c.largest_group,
+            n_unmatched: Some(stars.iter().filter(|s| s.truth.is_none()).count()),
             analyse_s,
         }
     }
@@ -109,6 +113,7 @@ pub fn analyse_focal_plane(
         let t = Instant::now();
         let mut arrays = Vec::with_capacity(fps.arrays.len());
         for ((sim, e), (img, c, stars, s)) in fps.arrays.iter().zip(&exp.arrays).zip(&plain) {
+            let summary = CrowdedSummary::of(c, stars, *s);
             let mut stars = stars.clone();
             let source = Source {
                 sim,
@@ -136,7 +141,7 @@ pub fn analyse_focal_plane(
                 stars,
                 truth: e.truth.clone(),
                 n_px: e.image.n,
-                summary: CrowdedSummary::of(c, *s),
+                summary: summary.clone(),
             });
         }
         let views: Vec<report::ArrayStars<'_>> = arrays

@@ -180,7 +180,8 @@ pub fn detect_smoothed(img: &AnalysisImage, nsigma: f64, sky: f64, noise: f64) -
 
 /// Residual detection: peaks of the smoothed residual `img − sky − model` above `nsigma` × its local noise
 /// (the sky's, the model's Poisson and [`MODEL_ERROR`] of the model), at least `min_sep_px` from every
-/// star already found (`found`), not within [`MASK_CLEARANCE_PX`] of a masked pixel. Positions in pixels, brightest first.
+/// star already found (`found`), not within [`MASK_CLEARANCE_PX`] of a masked pixel. Positions in pixels,
+/// brightest first.
 pub fn detect_residual(
     img: &AnalysisImage,
     model: &[f64],

@@ -36,6 +36,9 @@ pub struct Member {
     pub flux: f64,
     /// A saturated star: its model, extrapolated from its wings, carries [`SATURATED_MODEL_ERROR`].
     pub saturated: bool,
+    /// Held at these values: subtracted from its neighbours' pixels, never fitted (a bright star's wing
+    /// feature, see [`super::WING_VETO_RATIO`]).
+    pub fixed: bool,
 }
 
 impl Member {
@@ -45,6 +48,7 @@ impl Member {
             y,
             flux,
             saturated: false,
+            fixed: false,
         }
     }
 }

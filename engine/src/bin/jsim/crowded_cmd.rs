@@ -101,6 +101,13 @@ pub fn crowded(a: &CrowdedArgs) -> Result<()> {
         );
         if let Some(first) = analyses.first() {
             array_rows.extend(out::array_rows(&case, &first.arrays));
+            let name = format!("stars_{}.csv", ace.name());
+            outputs.add(&a.out.join(&name));
+            out::write_table(
+                &a.out.join(&name),
+                &out::STARS_HEADER,
+                &out::star_rows(&first.arrays, scale),
+            )?;
         }
         for r in analyses {
             let cm = r.countermeasure.to_string();
@@ -166,10 +173,11 @@ fn print_bins(case: &str, cm: &str, r: &FocalPlaneAnalysis) {
     for a in &r.arrays {
         let s = &a.summary;
         println!(
-            "  array {}: {} found + {} from the residual, ePSF from {} stars{}, {} groups (largest {}), {:.1} s",
+            "  array {}: {} found + {} from the residual ({} matched to no truth star), ePSF from {} stars{}, {} groups (largest {}), {:.1} s",
             a.index + 1,
             s.n_first,
             s.n_residual,
+            s.n_unmatched.unwrap_or(0),
             s.epsf_stars,
             if s.fallback.is_empty() {
                 String::new()
