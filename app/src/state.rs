@@ -4,7 +4,8 @@
 
 use crate::settings::{Settings, ViewSettings};
 use crate::worker::{
-    CurvePoint, FocalPlaneResult, FrameResult, Prediction, SeriesView, Stage, TwinResult,
+    CrowdedResult, CurvePoint, FocalPlaneResult, FrameResult, Prediction, SeriesView, Stage,
+    TwinResult,
 };
 use engine::analysis::countermeasures::Countermeasure;
 use engine::config::Config;
@@ -47,6 +48,8 @@ pub struct Results {
     pub twin: Option<TwinResult>,
     /// The quad focal plane's exposure (shown instead of the frame when the layout is quad).
     pub focal_plane: Option<FocalPlaneResult>,
+    /// Its crowded-field analysis (the quad's vector maps and magnitude curve).
+    pub crowded: Option<CrowdedResult>,
     /// Accuracy curve, by magnitude, and the request key it belongs to.
     pub curve: Vec<CurvePoint>,
     pub curve_key: Option<String>,

@@ -387,6 +387,22 @@ fn the_bulge_scene_shows_the_focal_plane_with_sky_positions() {
         );
     }
     assert!(stars > 100, "{stars} stars");
+    // the analysis cells show the engine's crowded-field analysis of this exposure: a map per array and
+    // the magnitude bins over all four
+    h.get_by_label_contains("Deviations per array");
+    h.get_by_label_contains("One crowded exposure");
+    let c = app
+        .rt
+        .results
+        .crowded
+        .as_ref()
+        .expect("a crowded-field analysis");
+    assert_eq!(c.cfg_hash, app.settings.cfg.hash_hex());
+    assert_eq!(c.vectors.len(), 4);
+    assert_eq!(c.summaries.len(), 4);
+    let found: usize = c.bins.iter().map(|b| b.n_found).sum();
+    let truth: usize = c.bins.iter().map(|b| b.n_true).sum();
+    assert!(found > 50 && found <= truth, "{found} of {truth} found");
     assert!(app::panels::focal::describe(f, 0.0, 0.0).contains("gap"));
     let far = 3.0 * f.plane.array_px as f64;
     assert!(app::panels::focal::describe(f, far, 0.0).contains("off the focal plane"));

@@ -5,11 +5,13 @@
 //! * [`toolbar`], [`controls`], [`summary`] — the edges of the window;
 //! * [`image`] — the frame, the close-up beside the Gaussian twin, the ePSF; [`focal`] — the quad focal
 //!   plane in its sky layout, shown instead of the frame when the layout is quad;
-//! * [`psd`], [`series`], [`vectors`], [`curve`] — the four plots; [`axes`] — what the plots share;
+//! * [`psd`], [`series`], [`vectors`], [`curve`] — the four plots; [`crowded`] — the quad's vector maps
+//!   and magnitude curve from its crowded-field analysis; [`axes`] — what the plots share;
 //! * [`widgets`] — the framed cells and their titles.
 
 pub mod axes;
 pub mod controls;
+pub mod crowded;
 pub mod curve;
 pub mod focal;
 pub mod image;
@@ -65,19 +67,14 @@ pub fn central_ui(
         cell(ui, frame_rect, |ui| {
             focal::focal_plane_ui(ui, screen, view, results, &mut textures.focal)
         });
-        for (rect, what) in [
-            (close_rect, "Star close-up"),
-            (epsf_rect, "ePSF"),
-            (at(0, 1), "Deviation vector map"),
-            (at(1, 1), "Accuracy vs magnitude"),
-        ] {
+        for (rect, what) in [(close_rect, "Star close-up"), (epsf_rect, "ePSF")] {
             cell(ui, rect, |ui| {
                 widgets::title(ui, what, false);
-                ui.weak(
-                    "a single array's analysis: choose \"one array\" under Scene and focal plane",
-                );
+                ui.weak("a single array's view: choose \"one array\" under Scene and focal plane");
             });
         }
+        cell(ui, at(0, 1), |ui| crowded::vectors_ui(ui, screen, results));
+        cell(ui, at(1, 1), |ui| crowded::curve_ui(ui, screen, results));
     } else {
         cell(ui, frame_rect, |ui| {
             image::frame_ui(ui, screen, view, results, textures)

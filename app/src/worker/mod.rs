@@ -26,7 +26,7 @@ pub mod thread;
 pub mod views;
 
 pub use protocol::{
-    CurvePoint, FocalPlaneArray, FocalPlaneResult, FrameResult, Job, Msg, Prediction, Request,
-    SeriesView, Stage, Stages, TwinResult,
+    CrowdedResult, CurvePoint, FocalPlaneArray, FocalPlaneResult, FrameResult, Job, Msg,
+    Prediction, Request, SeriesView, Stage, Stages, TwinResult,
 };
 pub use thread::Worker;

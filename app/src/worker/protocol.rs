@@ -212,6 +212,25 @@ pub struct FocalPlaneArray {
     pub stars_fp: Vec<(f64, f64)>,
 }
 
+/// The crowded-field analysis of the focal plane's exposure ([`engine::studies::crowded`]): every array
+/// analysed with its own ePSF and the chosen countermeasure, binned by true Hw over the arrays, with each
+/// array's deviation map in focal-plane axes.
+#[derive(Debug, Clone)]
+pub struct CrowdedResult {
+    pub generation: u64,
+    pub cfg_hash: String,
+    pub image_index: usize,
+    /// The countermeasure shown, and why it is not the one chosen (one that refits single stars).
+    pub countermeasure: String,
+    pub note: Option<String>,
+    pub plane: engine::sky::focal_plane::FocalPlane,
+    pub bins: Vec<engine::analysis::crowded::report::MagBin>,
+    /// Per array: (f_x, f_y, dx_mas, dy_mas) per cell ([`engine::studies::crowded::ArrayAnalysis::binned_vectors`]).
+    pub vectors: Vec<Vec<(f64, f64, f64, f64)>>,
+    pub summaries: Vec<engine::studies::crowded::CrowdedSummary>,
+    pub analyse_s: f64,
+}
+
 /// The Gaussian-ACE twin of the displayed frame (same configuration, `ace.case = gaussian`).
 #[derive(Debug, Clone)]
 pub struct TwinResult {
@@ -250,6 +269,7 @@ pub enum Msg {
     Series(Box<SeriesView>),
     Frame(Box<FrameResult>),
     FocalPlane(Box<FocalPlaneResult>),
+    Crowded(Box<CrowdedResult>),
     Twin(Box<TwinResult>),
     Curve(Box<CurvePoint>),
     /// The job ran to the end.
@@ -280,6 +300,7 @@ impl Msg {
             Msg::Series(s) => s.generation,
             Msg::Frame(f) => f.generation,
             Msg::FocalPlane(f) => f.generation,
+            Msg::Crowded(c) => c.generation,
             Msg::Twin(t) => t.generation,
             Msg::Curve(c) => c.generation,
         }

@@ -5,8 +5,8 @@
 
 use super::out::{Out, StageResult, Stop, failed};
 use super::protocol::{
-    FocalPlaneArray, FocalPlaneResult, FrameResult, Job, Msg, Prediction, Request, Stage,
-    TwinResult,
+    CrowdedResult, FocalPlaneArray, FocalPlaneResult, FrameResult, Job, Msg, Prediction, Request,
+    Stage, TwinResult,
 };
 use super::views;
 use engine::analysis::countermeasures::{Countermeasure, Plan};
@@ -34,8 +34,10 @@ pub struct EngineState {
     psd: Option<(String, views::PsdEstimate)>,
     /// What the session said about the backend (e.g. why the CPU stands in for the GPU).
     notes: Vec<String>,
-    /// The focal plane on display, by simulation key (building it draws the scene and the PSFs).
+    /// The focal plane on display, by simulation key (building it draws the scene and the PSFs), and its
+    /// exposure on display by index (a change of countermeasure re-analyses it without simulating again).
     focal_plane: Option<(String, Arc<FocalPlaneSimulator>)>,
+    focal_plane_exposure: Option<(String, usize, Arc<engine::simulate::FocalPlaneExposure>)>,
 }
 
 /// The Gaussian-ACE twin of a configuration.
@@ -59,11 +61,14 @@ impl EngineState {
             ));
         }
         if engine::sky::array_count(&r.cfg) > 1 {
-            // the quad focal plane: its exposure for the focal-plane view (the prediction, the Gaussian
-            // twin, the single-array analysis and the curve are those of one array: not run here)
+            // the quad focal plane: its exposure for the focal-plane view and its crowded-field analysis
+            // (the prediction, the Gaussian twin, the single-array analysis and the curve are those of one
+            // array: not run here)
             if job.stages.image {
                 out.check()?;
-                self.focal_plane(r, out)?;
+                let (fps, exp) = self.focal_plane(r, out)?;
+                out.check()?;
+                self.crowded(r, &fps, &exp, out)?;
             }
             return Ok(());
         }
@@ -239,7 +244,14 @@ impl EngineState {
 
     /// One exposure of the quad focal plane: every array simulated (the jitter common to all, each its own
     /// readout, flat and noise), turned into focal-plane axes for the view, with its WCS and stars.
-    fn focal_plane(&mut self, r: &Request, out: &Out) -> StageResult<()> {
+    fn focal_plane(
+        &mut self,
+        r: &Request,
+        out: &Out,
+    ) -> StageResult<(
+        Arc<FocalPlaneSimulator>,
+        Arc<engine::simulate::FocalPlaneExposure>,
+    )> {
         let cfg = &r.cfg;
         out.progress(
             Stage::Image,
@@ -263,7 +275,14 @@ impl EngineState {
             }
         };
         out.check()?;
-        let exp = fps.exposure(r.image_index).map_err(failed(Stage::Image))?;
+        let exp = match &self.focal_plane_exposure {
+            Some((k, i, e)) if *k == key && *i == r.image_index => e.clone(),
+            _ => {
+                let e = Arc::new(fps.exposure(r.image_index).map_err(failed(Stage::Image))?);
+                self.focal_plane_exposure = Some((key.clone(), r.image_index, e.clone()));
+                e
+            }
+        };
         let simulate_s = t0.elapsed().as_secs_f64();
         out.check()?;
         out.progress(Stage::Image, 1, 2, "laying out the arrays");
@@ -309,6 +328,58 @@ impl EngineState {
                 .map(|e| e.backend.clone())
                 .unwrap_or_default(),
             simulate_s,
+        })));
+        Ok((fps, exp))
+    }
+
+    /// The crowded-field analysis of the focal plane's exposure under the chosen countermeasure (`none`
+    /// instead, with a note, for one that refits single stars).
+    fn crowded(
+        &mut self,
+        r: &Request,
+        fps: &FocalPlaneSimulator,
+        exp: &engine::simulate::FocalPlaneExposure,
+        out: &Out,
+    ) -> StageResult<()> {
+        use engine::studies::crowded;
+        out.progress(
+            Stage::Image,
+            1,
+            2,
+            "crowded-field analysis of the four arrays",
+        );
+        let t0 = Instant::now();
+        let chosen = Plan::new(vec![r.countermeasure]).map_err(failed(Stage::Image))?;
+        let (plan, note) = match crowded::check_plan(&chosen) {
+            Ok(()) => (chosen, None),
+            Err(e) => (
+                Plan::new(vec![Countermeasure::None]).map_err(failed(Stage::Image))?,
+                Some(format!("{e}: shown without countermeasure")),
+            ),
+        };
+        let b = &r.cfg.scene.bulge;
+        let edges = engine::analysis::crowded::report::edges(b.hw_min, b.hw_max, 0.5);
+        let run = crowded::analyse_focal_plane(fps, exp, &plan, &edges)
+            .map_err(failed(Stage::Image))?
+            .pop()
+            .ok_or_else(|| Stop::Failed(Stage::Image, "no analysis".into()))?;
+        let plane = engine::sky::focal_plane(&r.cfg);
+        let scale = r.cfg.instrument.plate_scale_mas();
+        out.send(Msg::Crowded(Box::new(CrowdedResult {
+            generation: out.generation,
+            cfg_hash: r.cfg.hash_hex(),
+            image_index: r.image_index,
+            countermeasure: run.countermeasure.to_string(),
+            note,
+            vectors: run
+                .arrays
+                .iter()
+                .map(|a| a.binned_vectors(&plane, scale))
+                .collect(),
+            summaries: run.arrays.iter().map(|a| a.summary.clone()).collect(),
+            bins: run.bins,
+            plane,
+            analyse_s: t0.elapsed().as_secs_f64(),
         })));
         Ok(())
     }

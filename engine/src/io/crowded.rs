@@ -12,20 +12,15 @@
 //! * `accuracy_vs_mag.png` — isolated-star accuracy against Hw per case and countermeasure, with the bound
 //!   and the 4-mas line;
 //! * `vectors_<case>_<countermeasure>.png` — the four arrays in their sky layout (focal-plane axes), an
-//!   arrow per cell of [`VECTOR_CELLS`]² per array: the mean fitted − true of its used stars, each array's
-//!   own median offset removed.
+//!   arrow per cell ([`ArrayAnalysis::binned_vectors`]).
 
 use super::IoError;
 use super::csv::{self, Cell};
 use super::plot::{self, Scale, Series};
 use crate::analysis::crowded::report::{ClassStats, MagBin};
-use crate::numerics::stats;
 use crate::sky::focal_plane::FocalPlane;
 use crate::studies::crowded::{ArrayAnalysis, FocalPlaneAnalysis};
 use std::path::Path;
-
-/// Cells per array side of the vector maps.
-pub const VECTOR_CELLS: usize = 12;
 
 /// Columns of `crowded_bins.csv`.
 pub const BINS_HEADER: [&str; 19] = [
@@ -209,51 +204,6 @@ pub fn plot_accuracy(path: &Path, runs: &[(String, &[MagBin])]) -> Result<(), Io
     Ok(())
 }
 
-/// The binned vectors of one array in focal-plane axes: (f_x, f_y, dx_mas, dy_mas) per cell with ≥ 3
-/// stars, shifted by `origin` so the plot's axes start at 0.
-pub fn array_vectors(
-    plane: &FocalPlane,
-    a: &ArrayAnalysis,
-    scale_mas: f64,
-    origin: f64,
-) -> Vec<(f64, f64, f64, f64)> {
-    let used: Vec<_> = a.stars.iter().filter(|s| s.is_used()).collect();
-    let ox = stats::median(&used.iter().map(|s| s.dx_px).collect::<Vec<_>>());
-    let oy = stats::median(&used.iter().map(|s| s.dy_px).collect::<Vec<_>>());
-    let cell = a.n_px as f64 / VECTOR_CELLS as f64;
-    let mut acc = vec![(0.0, 0.0, 0usize); VECTOR_CELLS * VECTOR_CELLS];
-    for s in &used {
-        let (cx, cy) = (
-            ((s.x / cell) as usize).min(VECTOR_CELLS - 1),
-            ((s.y / cell) as usize).min(VECTOR_CELLS - 1),
-        );
-        let e = &mut acc[cy * VECTOR_CELLS + cx];
-        e.0 += s.dx_px - ox;
-        e.1 += s.dy_px - oy;
-        e.2 += 1;
-    }
-    acc.iter()
-        .enumerate()
-        .filter(|(_, e)| e.2 >= 3)
-        .map(|(i, e)| {
-            let (x, y) = (
-                ((i % VECTOR_CELLS) as f64 + 0.5) * cell,
-                ((i / VECTOR_CELLS) as f64 + 0.5) * cell,
-            );
-            let (dx, dy) = (e.0 / e.2 as f64, e.1 / e.2 as f64);
-            let (fx, fy) = plane.to_focal_plane(a.index, x, y);
-            // the vector turned with the array: difference of the mapped end points (exact: the map is affine)
-            let (gx, gy) = plane.to_focal_plane(a.index, x + dx, y + dy);
-            (
-                fx + origin,
-                fy + origin,
-                (gx - fx) * scale_mas,
-                (gy - fy) * scale_mas,
-            )
-        })
-        .collect()
-}
-
 /// The vector map of the four arrays in their sky layout.
 pub fn plot_vectors(
     path: &Path,
@@ -263,15 +213,18 @@ pub fn plot_vectors(
     scale_mas: f64,
 ) -> Result<(), IoError> {
     let n = plane.array_px as f64;
+    // the plot's axes start at 0: shift the focal plane's lower-left corner there
     let origin = n + plane.gap_px / 2.0;
     let sets: Vec<(String, Vec<(f64, f64, f64, f64)>)> = run
         .arrays
         .iter()
         .map(|a| {
-            (
-                format!("array {}", a.index + 1),
-                array_vectors(plane, a, scale_mas, origin),
-            )
+            let v = a
+                .binned_vectors(plane, scale_mas)
+                .into_iter()
+                .map(|(x, y, dx, dy)| (x + origin, y + origin, dx, dy))
+                .collect();
+            (format!("array {}", a.index + 1), v)
         })
         .collect();
     plot::vector_map(
@@ -280,7 +233,7 @@ pub fn plot_vectors(
         &sets,
         2.0 * origin,
         f64::NAN,
-        3.0 * n / VECTOR_CELLS as f64 / 4.0,
+        0.75 * n / crate::studies::crowded::VECTOR_CELLS as f64,
     )?;
     Ok(())
 }
