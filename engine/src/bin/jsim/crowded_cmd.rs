@@ -117,9 +117,7 @@ pub fn crowded(a: &CrowdedArgs) -> Result<()> {
             outputs.add(&a.out.join(&name));
             out::plot_vectors(
                 &a.out.join(&name),
-                &format!(
-                    "{case}, {cm}: weighted mean fitted − true per cell, each array's offset removed"
-                ),
+                &format!("{case}, {cm}: fitted − true per cell"),
                 &plane,
                 &r,
                 scale,
