@@ -117,6 +117,18 @@ pub(crate) fn plateau_centre(img: &AnalysisImage, x: usize, y: usize) -> (f64, f
     (sx / n.max(1.0), sy / n.max(1.0))
 }
 
+/// Whether the box of half-width `r_px` around (x, y) lies inside the image and holds no masked pixel
+/// (the pixels a star's ePSF samples come from).
+pub fn clear_box(img: &AnalysisImage, x: f64, y: f64, r_px: f64) -> bool {
+    let inside =
+        x - r_px >= 0.0 && y - r_px >= 0.0 && x + r_px < img.nx as f64 && y + r_px < img.ny as f64;
+    inside
+        && ((y - r_px).floor() as usize..=((y + r_px).ceil() as usize).min(img.ny - 1)).all(|py| {
+            ((x - r_px).floor() as usize..=((x + r_px).ceil() as usize).min(img.nx - 1))
+                .all(|px| !img.bad[py * img.nx + px])
+        })
+}
+
 /// Sky annulus used for every star (just outside the ePSF table).
 pub fn sky_annulus(cfg: &AnalysisCfg) -> (f64, f64) {
     let r = cfg.epsf_radius_px as f64;
@@ -212,26 +224,7 @@ pub fn starts(
         .iter()
         .enumerate()
         .map(|(k, st)| {
-            let inside = st.x - r >= 0.0
-                && st.y - r >= 0.0
-                && st.x + r < img.nx as f64
-                && st.y + r < img.ny as f64;
-            let clean = inside && {
-                let mut ok = true;
-                'p: for py in
-                    (st.y - r).floor() as usize..=((st.y + r).ceil() as usize).min(img.ny - 1)
-                {
-                    for px in
-                        (st.x - r).floor() as usize..=((st.x + r).ceil() as usize).min(img.nx - 1)
-                    {
-                        if img.bad[py * img.nx + px] {
-                            ok = false;
-                            break 'p;
-                        }
-                    }
-                }
-                ok
-            };
+            let clean = clear_box(img, st.x, st.y, r);
             let isolated = s
                 .iter()
                 .enumerate()

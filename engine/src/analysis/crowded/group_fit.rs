@@ -370,6 +370,17 @@ mod tests {
         e
     }
 
+    fn pixels<'a>(img: &'a [f64], bad: &'a [bool], n: usize, flat_sigma: f64) -> PixelData<'a> {
+        PixelData {
+            nx: n,
+            ny: n,
+            e: img,
+            bad,
+            var_floor_e2: 100.0,
+            flat_sigma,
+        }
+    }
+
     fn image(e: &Epsf, n: usize, stars: &[(f64, f64, f64)], sky: f64) -> Vec<f64> {
         (0..n * n)
             .map(|i| {
@@ -393,14 +404,7 @@ mod tests {
             *v += 30.0 * (((k * 7919) % 101) as f64 / 101.0 - 0.5);
         }
         let bad = vec![false; n * n];
-        let pd = PixelData {
-            nx: n,
-            ny: n,
-            e: &img,
-            bad: &bad,
-            var_floor_e2: 100.0,
-            flat_sigma: 0.001,
-        };
+        let pd = pixels(&img, &bad, n, 0.001);
         let opt = FitOptions {
             radius_px: 2.5,
             max_iter: 50,
@@ -429,14 +433,7 @@ mod tests {
         ];
         let img = image(&e, n, &truth, 300.0);
         let bad = vec![false; n * n];
-        let pd = PixelData {
-            nx: n,
-            ny: n,
-            e: &img,
-            bad: &bad,
-            var_floor_e2: 100.0,
-            flat_sigma: 0.0,
-        };
+        let pd = pixels(&img, &bad, n, 0.0);
         let opt = FitOptions {
             radius_px: 2.5,
             max_iter: 100,

@@ -283,19 +283,11 @@ pub fn epsf_candidates(
         .par_iter()
         .enumerate()
         .map(|(k, s)| {
-            let inside = s.x - r >= 0.0
-                && s.y - r >= 0.0
-                && s.x + r < img.nx as f64
-                && s.y + r < img.ny as f64;
             let snr = s.flux / (s.flux.max(0.0) + area * noise * noise).sqrt();
-            if !inside || !(s.flux > 0.0) || snr < MIN_EPSF_SNR {
+            if !(s.flux > 0.0) || snr < MIN_EPSF_SNR {
                 return false;
             }
-            let clean = ((s.y - r).floor() as usize..=((s.y + r).ceil() as usize).min(img.ny - 1))
-                .all(|py| {
-                    ((s.x - r).floor() as usize..=((s.x + r).ceil() as usize).min(img.nx - 1))
-                        .all(|px| !img.bad[py * img.nx + px])
-                });
+            let clean = crate::analysis::detection::clear_box(img, s.x, s.y, r);
             clean
                 && nb.within(s.x, s.y, r - 1.0).into_iter().all(|j| {
                     j == k
