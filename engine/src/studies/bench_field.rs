@@ -1,7 +1,8 @@
 //! Speed against error on the Galactic-centre field (`jsim bench --parts bulge`): the knobs a crowded,
 //! many-coloured field adds — colour binning of the PSFs and each star's reach — measured like every other
-//! knob ([`super::bench::knob_sweep`], against the exact setting), and the cost of a whole focal-plane
-//! exposure against the number of stars.
+//! knob ([`super::bench::knob_sweep`], against the exact setting), the cost of a whole focal-plane
+//! exposure against the number of stars, and the crowded-field analysis' cost and accuracy
+//! ([`crowded_analysis`], `--parts crowded`).
 
 use super::bench::{BenchError, BenchRow, bench_config};
 use crate::config::{AceCase, Config, Layout, SceneKind};
@@ -167,5 +168,64 @@ pub fn focal_plane_scaling(
         ));
     }
     let _ = std::fs::remove_dir_all(&dir);
+    Ok(rows)
+}
+
+/// The crowded-field analysis (`jsim bench --parts crowded`): its time on one Gaussian-ACE focal-plane
+/// exposure against the number of stars (≈ `counts` drawn on the focal plane), and its one knob,
+/// `analysis.crowded_detect_sigma`, on the largest field — each row's error is the isolated Hw 12–14 stars'
+/// accuracy and its ratio to their Cramér–Rao bound (the independent reference: the bound, not a setting),
+/// with the completeness at Hw 16–17 in the note.
+pub fn crowded_analysis(
+    session: &Session,
+    base: &Config,
+    counts: &[usize],
+    sigmas: &[f64],
+) -> Result<Vec<BenchRow>, BenchError> {
+    use crate::analysis::countermeasures::{Countermeasure, Plan};
+    let plan =
+        Plan::new(vec![Countermeasure::None]).map_err(crate::analysis::AnalysisError::from)?;
+    let largest = counts.iter().copied().max().unwrap_or(0);
+    let default_sigma = base.analysis.crowded_detect_sigma;
+    let runs = counts.iter().map(|&n| (n, default_sigma)).chain(
+        sigmas
+            .iter()
+            .filter(|&&s| s != default_sigma)
+            .map(|&s| (largest, s)),
+    );
+    let mut rows = Vec::new();
+    for (n, sigma) in runs {
+        let mut c = bench_config(base);
+        c.scene.kind = SceneKind::Bulge;
+        c.focal_plane.layout = Layout::Quad;
+        c.ace.case = AceCase::Gaussian;
+        c.analysis.crowded_detect_sigma = sigma;
+        c.scene.bulge.density_per_arcmin2 = 1.0;
+        c.scene.bulge.density_per_arcmin2 = n as f64 / crate::scene::bulge::star_count(&c);
+        let fps = session.new_focal_plane(&c)?;
+        let exp = fps.exposure(0)?;
+        let t0 = Instant::now();
+        let run =
+            super::crowded::analyse_focal_plane(&fps, &exp, &plan, &[12.0, 14.0, 16.0, 17.0])?;
+        let t = t0.elapsed().as_secs_f64();
+        let r = &run[0];
+        let (bright, faint) = (&r.bins[0], &r.bins[2]);
+        let reported: usize = r.arrays.iter().map(|a| a.stars.len()).sum();
+        let mut row = BenchRow::timing(
+            "crowded analysis",
+            format!("{n} stars, crowded_detect_sigma={sigma}"),
+            "cpu".into(),
+            fps.star_count(),
+            t,
+            &format!(
+                "isolated Hw 12-14: {:.2} x the bound ({} stars); completeness Hw 16-17 {:.1} %; {reported} stars reported",
+                bright.isolated.ratio(),
+                bright.isolated.n,
+                100.0 * faint.completeness
+            ),
+        );
+        row.astro_mas = bright.isolated.accuracy_mas;
+        rows.push(row);
+    }
     Ok(rows)
 }

@@ -12,7 +12,9 @@ pub struct BenchArgs {
     #[command(flatten)]
     pub cfg: ConfigArgs,
     /// Parts to run (comma separated): methods, knobs, stars, epsf, bulge (the Galactic-centre field's
-    /// knobs and the focal-plane exposure against the number of stars; not in the default set: minutes).
+    /// knobs and the focal-plane exposure against the number of stars), crowded (the crowded-field
+    /// analysis against the number of stars and its detection threshold); the last two are not in the
+    /// default set: minutes.
     #[arg(
         long,
         default_value = "methods,knobs,stars,epsf",
@@ -31,6 +33,9 @@ pub struct BenchArgs {
     /// Star counts of the focal-plane rows (part bulge).
     #[arg(long, default_value = "1000,10000,100000", value_delimiter = ',')]
     pub bulge_stars: Vec<usize>,
+    /// Detection thresholds of the crowded-analysis rows (part crowded), on the largest field.
+    #[arg(long, default_value = "3,5,10", value_delimiter = ',')]
+    pub crowded_sigmas: Vec<f64>,
     /// Images for the ePSF-iteration rows.
     #[arg(long, default_value_t = 3)]
     pub epsf_images: usize,
@@ -86,6 +91,23 @@ pub fn bench(a: &BenchArgs) -> Result<()> {
             &session,
             &cfg,
             &a.bulge_stars,
+        )?);
+        save(&rows)?;
+    }
+    if has("crowded") {
+        use engine::studies::bench_field;
+        if a.crowded_sigmas
+            .iter()
+            .any(|s| !(*s > 0.0 && s.is_finite()))
+        {
+            anyhow::bail!("--crowded-sigmas: give positive thresholds, e.g. 3,5,10");
+        }
+        eprintln!("bench: crowded-field analysis against the number of stars and its threshold …");
+        rows.extend(bench_field::crowded_analysis(
+            &session,
+            &cfg,
+            &a.bulge_stars,
+            &a.crowded_sigmas,
         )?);
         save(&rows)?;
     }
