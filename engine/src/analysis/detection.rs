@@ -153,18 +153,23 @@ pub fn match_positions(
     search_px: f64,
     radius_px: f64,
 ) -> Vec<Option<usize>> {
+    nearest_within(pos, refs, radius_px, common_offset(pos, refs, search_px))
+}
+
+/// The common offset of positions from reference positions: the median displacement of each position to
+/// its nearest reference within `search_px`, when at least 3 such pairs exist; else none.
+pub fn common_offset(pos: &[(f64, f64)], refs: &[(f64, f64)], search_px: f64) -> (f64, f64) {
     let coarse = nearest_within(pos, refs, search_px, (0.0, 0.0));
     let (dx, dy): (Vec<f64>, Vec<f64>) = pos
         .iter()
         .zip(&coarse)
         .filter_map(|(&(x, y), m)| m.map(|k| (x - refs[k].0, y - refs[k].1)))
         .unzip();
-    let offset = if dx.len() >= 3 {
+    if dx.len() >= 3 {
         (stats::median(&dx), stats::median(&dy))
     } else {
         (0.0, 0.0)
-    };
-    nearest_within(pos, refs, radius_px, offset)
+    }
 }
 
 /// For each position, the index of the nearest reference position within `radius_px` of the position minus

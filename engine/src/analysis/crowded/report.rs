@@ -39,17 +39,7 @@ pub fn match_catalogue(fits: &[StarFit], truth: &[TruthRow]) -> Vec<Option<usize
     bright.sort_by(|&a, &b| fits[b].flux.total_cmp(&fits[a].flux));
     bright.truncate(500);
     let bpos: Vec<(f64, f64)> = bright.iter().map(|&k| pos[k]).collect();
-    let near = crate::analysis::detection::nearest_within(&bpos, &refs, 20.0, (0.0, 0.0));
-    let (dx, dy): (Vec<f64>, Vec<f64>) = bpos
-        .iter()
-        .zip(&near)
-        .filter_map(|(&(x, y), m)| m.map(|k| (x - refs[k].0, y - refs[k].1)))
-        .unzip();
-    let off = if dx.len() >= 3 {
-        (stats::median(&dx), stats::median(&dy))
-    } else {
-        (0.0, 0.0)
-    };
+    let off = crate::analysis::detection::common_offset(&bpos, &refs, 20.0);
     let nb = Neighbours::new(&refs);
     let mut pairs: Vec<(f64, usize, usize)> = Vec::new();
     for (k, f) in fits.iter().enumerate() {
