@@ -373,7 +373,7 @@ fn a_star_in_the_gap_is_neither_found_nor_missed_and_empty_arrays_say_so() {
 /// and the countermeasures that refit single stars refused by name.
 #[test]
 fn the_focal_plane_study_corrects_each_array_and_refuses_single_star_countermeasures() {
-    use engine::analysis::countermeasures::{Countermeasure, Plan, TelemetryQuality};
+    use engine::analysis::countermeasures::{Plan, TelemetryQuality};
     let mut c = quad();
     c.scene.kind = engine::config::SceneKind::Bulge;
     c.scene.bulge.density_per_arcmin2 = 25.0;
@@ -426,5 +426,4 @@ fn the_focal_plane_study_corrects_each_array_and_refuses_single_star_countermeas
             .expect_err("refused");
         assert!(e.to_string().contains(name), "{e}");
     }
-    let _ = Countermeasure::None;
 }

@@ -810,7 +810,7 @@ pub struct Analysis {
     pub epsf_zones: usize,
     /// Detection threshold (peak above sky) in units of the sky noise.
     pub detect_sigma: f64,
-    /// Detection threshold of the crowded-field analysis ([`crate::analysis::crowded`]): S/N of a peak in
+    /// Detection threshold of the crowded-field analysis (`analysis::crowded`): S/N of a peak in
     /// the matched-filtered (3 × 3 binomial) image, and of a residual peak against its local noise.
     pub crowded_detect_sigma: f64,
     /// Maximum Gauss–Newton iterations per star fit.

@@ -17,9 +17,9 @@
 use super::IoError;
 use super::csv::{self, Cell};
 use super::plot::{self, Scale, Series};
+use crate::analysis::crowded::focal_plane::{ArrayAnalysis, FocalPlaneAnalysis, VECTOR_CELLS};
 use crate::analysis::crowded::report::{ClassStats, MagBin};
 use crate::sky::focal_plane::FocalPlane;
-use crate::studies::crowded::{ArrayAnalysis, FocalPlaneAnalysis};
 use std::path::Path;
 
 /// Columns of `crowded_bins.csv`.
@@ -233,7 +233,7 @@ pub fn plot_vectors(
         &sets,
         2.0 * origin,
         f64::NAN,
-        0.75 * n / crate::studies::crowded::VECTOR_CELLS as f64,
+        0.75 * n / VECTOR_CELLS as f64,
     )?;
     Ok(())
 }

@@ -19,6 +19,7 @@
 
 pub mod detect;
 pub mod epsf;
+pub mod focal_plane;
 pub mod group_fit;
 pub mod neighbours;
 pub mod pass;

@@ -1,0 +1,116 @@
+//! The crowded-field analysis of a whole focal-plane exposure, as its results are kept and shown: each
+//! array's star results with its truth and a summary of how it was analysed ([`ArrayAnalysis`]), its
+//! deviation map in the focal plane's sky layout ([`ArrayAnalysis::binned_vectors`]), and the focal plane
+//! under one countermeasure with its magnitude bins ([`FocalPlaneAnalysis`]). The study that fills them is
+//! `studies::crowded`.
+
+use super::Crowded;
+use super::report::MagBin;
+use crate::analysis::countermeasures::Countermeasure;
+use crate::analysis::report::StarResult;
+use crate::numerics::stats;
+use crate::simulate::TruthRow;
+use crate::sky::focal_plane::FocalPlane;
+
+/// One array's crowded analysis under one countermeasure.
+#[derive(Debug, Clone)]
+pub struct ArrayAnalysis {
+    /// The array's index (0 … 3).
+    pub index: usize,
+    pub stars: Vec<StarResult>,
+    pub truth: Vec<TruthRow>,
+    pub n_px: usize,
+    /// What the crowded analysis found and how (the fits are in `stars`).
+    pub summary: CrowdedSummary,
+}
+
+/// Cells per array side of the binned vector maps.
+pub const VECTOR_CELLS: usize = 12;
+
+impl ArrayAnalysis {
+    /// The array's deviation map in focal-plane axes (its sky layout): per cell of [`VECTOR_CELLS`]² with
+    /// at least 3 used stars, the cell's centre and the inverse-variance (bound⁻²) weighted mean fitted −
+    /// true of its stars (mas), the array's own median offset removed and the vector turned with the array.
+    pub fn binned_vectors(&self, plane: &FocalPlane, scale_mas: f64) -> Vec<(f64, f64, f64, f64)> {
+        let used: Vec<_> = self.stars.iter().filter(|s| s.is_used()).collect();
+        let ox = stats::median(&used.iter().map(|s| s.dx_px).collect::<Vec<_>>());
+        let oy = stats::median(&used.iter().map(|s| s.dy_px).collect::<Vec<_>>());
+        let cell = self.n_px as f64 / VECTOR_CELLS as f64;
+        // (Σ w dx, Σ w dy, Σ w, n) per cell
+        let mut acc = vec![(0.0, 0.0, 0.0, 0usize); VECTOR_CELLS * VECTOR_CELLS];
+        for s in &used {
+            let var = (s.crlb_x_px.powi(2) + s.crlb_y_px.powi(2)) / 2.0;
+            if !(var > 0.0 && var.is_finite()) {
+                continue;
+            }
+            let (cx, cy) = (
+                ((s.x / cell).max(0.0) as usize).min(VECTOR_CELLS - 1),
+                ((s.y / cell).max(0.0) as usize).min(VECTOR_CELLS - 1),
+            );
+            let e = &mut acc[cy * VECTOR_CELLS + cx];
+            e.0 += (s.dx_px - ox) / var;
+            e.1 += (s.dy_px - oy) / var;
+            e.2 += 1.0 / var;
+            e.3 += 1;
+        }
+        acc.iter()
+            .enumerate()
+            .filter(|(_, e)| e.3 >= 3)
+            .map(|(i, e)| {
+                let (x, y) = (
+                    ((i % VECTOR_CELLS) as f64 + 0.5) * cell,
+                    ((i / VECTOR_CELLS) as f64 + 0.5) * cell,
+                );
+                let (dx, dy) = (e.0 / e.2, e.1 / e.2);
+                let (fx, fy) = plane.to_focal_plane(self.index, x, y);
+                // turned with the array: the difference of the mapped end points (the map is affine)
+                let (gx, gy) = plane.to_focal_plane(self.index, x + dx, y + dy);
+                (fx, fy, (gx - fx) * scale_mas, (gy - fy) * scale_mas)
+            })
+            .collect()
+    }
+}
+
+/// The crowded analysis of an array without its fits.
+#[derive(Debug, Clone, Default, serde::Serialize)]
+pub struct CrowdedSummary {
+    pub n_first: usize,
+    pub n_residual: usize,
+    pub epsf_stars: usize,
+    pub epsf_iterations: usize,
+    pub fallback: String,
+    pub n_groups: usize,
+    pub largest_group: usize,
+    /// Reported stars matched to no truth star: noise peaks, light from stars off the array's edge, or
+    /// duplicates (`None` without a truth).
+    pub n_unmatched: Option<usize>,
+    /// Wall-clock seconds of the array's crowded analysis (detection, ePSF, grouped fits).
+    pub analyse_s: f64,
+}
+
+impl CrowdedSummary {
+    /// The summary of `c`, whose fits became `stars` (matched to the truth where known).
+    pub fn of(c: &Crowded, stars: &[StarResult], analyse_s: f64) -> Self {
+        Self {
+            n_first: c.n_first,
+            n_residual: c.n_residual,
+            epsf_stars: c.epsf_stars,
+            epsf_iterations: c.epsf_iterations,
+            fallback: c.fallback.clone(),
+            n_groups: c.n_groups,
+            largest_group: c.largest_group,
+            n_unmatched: Some(stars.iter().filter(|s| s.truth.is_none()).count()),
+            analyse_s,
+        }
+    }
+}
+
+/// The focal plane under one countermeasure.
+#[derive(Debug, Clone)]
+pub struct FocalPlaneAnalysis {
+    pub countermeasure: Countermeasure,
+    pub arrays: Vec<ArrayAnalysis>,
+    pub bins: Vec<MagBin>,
+    /// Wall-clock seconds of the whole analysis (all arrays, this countermeasure included).
+    pub analyse_s: f64,
+}
