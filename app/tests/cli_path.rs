@@ -12,6 +12,7 @@
 use app::worker::{FrameResult, Job, Msg, Request, Stages, Worker};
 use engine::analysis::Report;
 use engine::analysis::countermeasures::Countermeasure;
+use engine::analysis::crowding::Crowding;
 use engine::config::Config;
 use engine::io::{analysis_input, exposure, fits};
 use engine::session::Session;
@@ -36,7 +37,7 @@ fn cli_report(image: &Path, cm: Countermeasure) -> Report {
     );
     let (img_cfg, _) = input.provenance.clone().expect("a jsim image");
     Session::new()
-        .analyze_input(&img_cfg, &input, None, cm)
+        .analyze_input(&img_cfg, &input, None, cm, Crowding::Auto)
         .expect("the analysis")
         .report
 }

@@ -12,8 +12,10 @@
 //! image        simulate: one dataset's exposures (image + truth)
 //! analysis     image, detection, epsf, countermeasures, response, predict, report, vectors, and the one
 //!              per-image pipeline
+//! scoring      the only step that reads the truth: measured positions matched to true ones by position,
+//!              completeness, accuracy and false detections per magnitude bin
 //! io           fits, csv, plot (figures), exposure (image files), analysis_input (reading an image for
-//!              analysis), products (the schema of every output)
+//!              analysis), products (the schema of every output), score (`jsim score`'s files)
 //! session      the engine session: PSF banks, kernels, the integrator, simulators (what front ends hold)
 //! studies      experiment, bench, sweep (spec, record, shard, run, merge, report, slurm)
 //! error        engine::Error, joining every module's error
@@ -48,6 +50,7 @@ pub mod photometry;
 pub mod readout;
 pub mod rng;
 pub mod scene;
+pub mod scoring;
 pub mod session;
 pub mod simulate;
 pub mod sky;

@@ -7,6 +7,8 @@
 //! built alone ([`Simulator::new`]).
 
 use crate::analysis::countermeasures::{Countermeasure, Plan};
+use crate::analysis::crowding::{self, Crowding};
+use crate::analysis::pipeline::analyze_crowded;
 use crate::analysis::{Analysis, AnalysisError, Source, analyse_image};
 use crate::config::{Backend, Config};
 use crate::integrate::Integrator;
@@ -159,11 +161,25 @@ impl Session {
         input: &AnalysisInput,
         epsf_zones: Option<usize>,
         countermeasure: Countermeasure,
+        crowding: Crowding,
     ) -> crate::Result<Analysis> {
         let img_cfg = input.provenance.as_ref().map(|(c, _)| c).unwrap_or(cfg);
         let mut analysis_cfg = cfg.analysis.clone();
         if let Some(z) = epsf_zones {
             analysis_cfg.epsf_zones = z;
+        }
+        if crowding::is_crowded(&input.img, &analysis_cfg, crowding).0 {
+            if countermeasure != Countermeasure::None {
+                return Err(crate::Error::Analysis(AnalysisError::NotInCrowdedField {
+                    countermeasure: countermeasure.to_string(),
+                }));
+            }
+            return Ok(analyze_crowded(
+                &input.img,
+                input.truth.as_deref(),
+                &analysis_cfg,
+                None,
+            )?);
         }
         let sim = match &input.provenance {
             Some((c, index)) => {

@@ -9,6 +9,7 @@ use engine::analysis::Analysis;
 use engine::analysis::countermeasures::{
     Countermeasure, DEFAULT_CATALOGUE_ERROR_MAS, Plan, TelemetryQuality,
 };
+use engine::analysis::crowding::Crowding;
 use engine::analysis::predict::Predictor;
 use engine::io::analysis_input::{AnalysisInput, ImageParts};
 use engine::io::exposure::{TRUTH_HEADER, truth_from_columns};
@@ -229,8 +230,10 @@ impl PySession {
     /// keys are assumed and listed in `assumptions`), optionally its `dq` (uint8, same shape), its
     /// `truth` (a dict with the columns of `Exposure.truth`: without it no accuracy is measured) and the
     /// `config` it was simulated with (with the header's IMAGEIDX: the simulation context the telemetry
-    /// and exact-epsf need). `countermeasure`: one of `jsim.COUNTERMEASURES`.
-    #[pyo3(signature = (image, header = None, *, dq = None, truth = None, config = None, countermeasure = "none", epsf_zones = None))]
+    /// and exact-epsf need). `countermeasure`: one of `jsim.COUNTERMEASURES`. `crowding`: `"auto"` (from
+    /// the measured source density), `"on"` (the crowded-field analysis) or `"off"` (isolated stars), as
+    /// `jsim analyze --crowding`.
+    #[pyo3(signature = (image, header = None, *, dq = None, truth = None, config = None, countermeasure = "none", epsf_zones = None, crowding = "auto"))]
     fn analyze(
         &self,
         py: Python<'_>,
@@ -241,8 +244,10 @@ impl PySession {
         config: Option<PyConfig>,
         countermeasure: &str,
         epsf_zones: Option<usize>,
+        crowding: &str,
     ) -> PyResult<PyAnalysis> {
         let cm: Countermeasure = countermeasure.parse().or_py()?;
+        let crowding = Crowding::parse(crowding).map_err(PyValueError::new_err)?;
         let input = if let Ok(exp) = image.cast::<PyExposure>() {
             if header.is_some() || dq.is_some() || truth.is_some() || config.is_some() {
                 return Err(PyTypeError::new_err(
@@ -256,7 +261,7 @@ impl PySession {
         let analysis = py
             .detach(|| {
                 self.session
-                    .analyze_input(&self.cfg, &input, epsf_zones, cm)
+                    .analyze_input(&self.cfg, &input, epsf_zones, cm, crowding)
             })
             .or_py()?;
         PyAnalysis::new(py, analysis, &input)

@@ -4,6 +4,7 @@
 
 pub mod countermeasures;
 pub mod crowded;
+pub mod crowding;
 pub mod detection;
 pub mod epsf;
 pub mod image;

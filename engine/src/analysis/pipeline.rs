@@ -245,6 +245,41 @@ pub fn with_countermeasure(
     })
 }
 
+/// The crowded-field analysis of one image ([`crate::analysis::crowded::analyse`]) as an [`Analysis`] of the
+/// pipeline (no countermeasure): its stars, its ePSF and a report (the accuracy only with a truth given).
+pub fn analyze_crowded(
+    img: &AnalysisImage,
+    truth: Option<&[TruthRow]>,
+    cfg: &AnalysisCfg,
+    model_epsf: Option<&Epsf>,
+) -> Result<Analysis, AnalysisError> {
+    let c = crate::analysis::crowded::analyse(img, cfg, model_epsf);
+    if c.fits.is_empty() {
+        return Err(AnalysisError::NoStars(cfg.crowded_detect_sigma));
+    }
+    let pos: Vec<(f64, f64)> = c.fits.iter().map(|f| (f.x, f.y)).collect();
+    let matches = match truth {
+        Some(t) => match_truth(&pos, t),
+        None => vec![None; pos.len()],
+    };
+    let stars = star_results(&c.fits, &matches, truth);
+    let mut report = Report {
+        n_detected: c.fits.len(),
+        epsf_iterations: c.epsf_iterations,
+        epsf_stars: c.epsf_stars,
+        epsf_fallback: c.fallback,
+        countermeasure: Countermeasure::None.to_string(),
+        crowded: true,
+        ..Default::default()
+    };
+    summarise(&stars, truth, img.plate_scale_mas, &mut report);
+    Ok(Analysis {
+        report,
+        stars,
+        epsf: c.epsf,
+    })
+}
+
 /// The exact ePSF of a static simulation: its pixel kernel (PSF ⊛ Gaussian ACE ⊛ pixel) sampled at 8 nodes
 /// per pixel. Only meaningful when every star shares one kernel and the ACE is static.
 pub fn exact_epsf(kernel: &PixelKernel, half_px: usize) -> Epsf {

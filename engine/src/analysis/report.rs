@@ -78,12 +78,17 @@ pub struct Report {
     /// Empty when the ePSF was built from the image; else what stood in for it and why (too few stars).
     pub epsf_fallback: String,
     pub countermeasure: String,
+    /// Whether the crowded-field analysis measured the image ([`crate::analysis::crowding`]).
+    pub crowded: bool,
     /// Parameters a countermeasure fitted per exposure (degrees of freedom absorbed).
     pub dof_absorbed: usize,
     /// Exposures of the stare whose stack referenced a plate model (1: the image alone, nothing to
     /// correct; 0: no stack reference).
     pub stare_exposures: usize,
 }
+
+/// Fewest scored stars (matched to the truth, not rejected) for an accuracy: a standard deviation needs two.
+pub const MIN_SCORED_STARS: usize = 2;
 
 /// Largest |mean(d) − overall mean| over five bins of sub-pixel phase.
 pub fn phase_bias(d: &[f64], phase: &[f64]) -> f64 {
@@ -115,7 +120,19 @@ pub fn summarise(
     report.n_matched = stars.iter().filter(|s| s.truth.is_some()).count();
     report.n_used = used.len();
     report.n_rejected = stars.len() - used.len();
-    if used.len() < 2 {
+    if used.len() < MIN_SCORED_STARS {
+        // no accuracy without at least two scored stars (or without a truth to score against): absent
+        // (NaN, `null` in JSON), never 0, so nothing downstream can count it as meeting a threshold
+        for v in [
+            &mut report.accuracy_x_mas,
+            &mut report.accuracy_y_mas,
+            &mut report.accuracy_mas,
+            &mut report.bias_x_mas,
+            &mut report.bias_y_mas,
+            &mut report.accuracy_over_crlb,
+        ] {
+            *v = f64::NAN;
+        }
         return;
     }
     let dx: Vec<f64> = used.iter().map(|s| s.dx_px * scale).collect();

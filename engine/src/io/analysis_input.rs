@@ -43,8 +43,13 @@ pub fn analysis_image(
     let g = facts.gain_e_per_adu;
     let sat = facts.saturation_adu.unwrap_or(f64::INFINITY);
     let bad_bits = dq::BORDER | dq::SATURATED | dq::ADC_HIGH;
+    // a non-finite pixel is masked whether or not a DQ plane flags it
     let bad = match dq {
-        Some(d) => d.iter().map(|q| q & bad_bits != 0).collect(),
+        Some(d) => d
+            .iter()
+            .zip(data)
+            .map(|(q, v)| q & bad_bits != 0 || !v.is_finite())
+            .collect(),
         None => data
             .iter()
             .map(|v| *v as f64 >= sat || !v.is_finite())
@@ -70,6 +75,11 @@ pub fn analysis_image(
     })
 }
 
+/// The number of NaN or infinite pixel values (masked by [`analysis_image`], counted in the report).
+pub fn non_finite_pixels(data: &[f32]) -> usize {
+    data.iter().filter(|v| !v.is_finite()).count()
+}
+
 /// Read an image file for analysis ([`analysis_image`] of its primary HDU and DQ extension). Headers that
 /// are missing are assumed (listed in the second value); impossible ones are refused, naming them.
 pub fn read_analysis_image(
@@ -89,7 +99,14 @@ pub fn read_analysis_image(
         path: path.to_path_buf(),
         message,
     })?;
-    Ok((img, r.facts.assumed))
+    let mut assumed = r.facts.assumed;
+    let non_finite = non_finite_pixels(&r.data);
+    if non_finite > 0 {
+        assumed.push(format!(
+            "{non_finite} non-finite (NaN or infinite) pixel(s) masked"
+        ));
+    }
+    Ok((img, assumed))
 }
 
 /// An image file read for analysis, with what it says about itself.
@@ -186,6 +203,12 @@ impl AnalysisInput {
         }
         let mut img = analysis_image(nx, ny, data, dq, &facts, plate_scale_mas)?;
         assumptions.extend(facts.assumed);
+        let non_finite = non_finite_pixels(data);
+        if non_finite > 0 {
+            assumptions.push(format!(
+                "{non_finite} non-finite (NaN or infinite) pixel(s) masked"
+            ));
+        }
         let mode = fallback.analysis.flat_field;
         match &provenance {
             Some((c, _)) => img.flat_field(c, mode),

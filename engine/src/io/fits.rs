@@ -325,23 +325,51 @@ impl ImageFacts {
         mut number: impl FnMut(&str) -> Option<f64>,
         mut text: impl FnMut(&str) -> Option<String>,
     ) -> Result<Self, String> {
-        let sampling = text("SAMPLING").and_then(|s| crate::config::Sampling::from_header(&s));
-        let per_read = number("RNREAD");
+        // a card that is present but not a number is an error naming it, never a default
+        let mut values = std::collections::HashMap::new();
+        for k in NUMERIC_KEYS {
+            match (number(k), text(k)) {
+                (Some(v), _) => {
+                    values.insert(k, v);
+                }
+                (None, Some(raw)) => {
+                    return Err(format!(
+                        "header {k} = '{}': not a number (expected {})",
+                        raw.trim(),
+                        numeric_key_meaning(k)
+                    ));
+                }
+                (None, None) => {}
+            }
+        }
+        let sampling = match text("SAMPLING") {
+            Some(s) => Some(crate::config::Sampling::from_header(&s).ok_or_else(|| {
+                format!(
+                    "header SAMPLING = '{}': not a sampling mode (expected CDS or FOWLER-<pairs>)",
+                    s.trim()
+                )
+            })?),
+            None => None,
+        };
+        let per_read = values.get("RNREAD").copied();
         let mut assumed = Vec::new();
-        let mut key = |name: &str, default: f64, what: &str| -> f64 {
-            number(name).unwrap_or_else(|| {
-                assumed.push(format!("no {name} header: {what} {default} assumed"));
+        let mut key = |name: &str, default: f64| -> f64 {
+            values.get(name).copied().unwrap_or_else(|| {
+                assumed.push(format!(
+                    "no {name} header: {} {default} assumed",
+                    numeric_key_meaning(name)
+                ));
                 default
             })
         };
-        let gain = key("GAIN", 1.0, "gain [e-/ADU]");
+        let gain = key("GAIN", 1.0);
         let rn = match (per_read, sampling) {
             (Some(per_read), Some(s)) => s.image_read_noise_e(per_read),
-            _ => key("RDNOISE", 0.0, "read noise [e-]"),
+            _ => key("RDNOISE", 0.0),
         };
-        let bias = key("BIASADU", 0.0, "bias [ADU]");
-        let exposure_s = key("EXPTIME", 1.0, "exposure [s]");
-        let saturation_adu = number("SATURATE");
+        let bias = key("BIASADU", 0.0);
+        let exposure_s = key("EXPTIME", 1.0);
+        let saturation_adu = values.get("SATURATE").copied();
         let bad = |k: &str, v: f64, allowed: &str| Err(format!("header {k} = {v}: {allowed}"));
         if !(gain > 0.0 && gain.is_finite()) {
             return bad("GAIN", gain, "must be a finite number > 0 [e-/ADU]");
@@ -352,6 +380,14 @@ impl ImageFacts {
         if !bias.is_finite() {
             return bad("BIASADU", bias, "must be finite [ADU]");
         }
+        if !(exposure_s > 0.0 && exposure_s.is_finite()) {
+            return bad("EXPTIME", exposure_s, "must be a finite number > 0 [s]");
+        }
+        if let Some(s) = saturation_adu
+            && !(s > 0.0)
+        {
+            return bad("SATURATE", s, "must be > 0 [ADU]");
+        }
         Ok(Self {
             gain_e_per_adu: gain,
             read_noise_e: rn,
@@ -360,6 +396,24 @@ impl ImageFacts {
             saturation_adu,
             assumed,
         })
+    }
+}
+
+/// The numeric header cards the analysis reads ([`ImageFacts::from_keys`]).
+pub const NUMERIC_KEYS: [&str; 6] = [
+    "RNREAD", "GAIN", "RDNOISE", "BIASADU", "EXPTIME", "SATURATE",
+];
+
+/// What a numeric card of [`NUMERIC_KEYS`] holds, for messages.
+fn numeric_key_meaning(key: &str) -> &'static str {
+    match key {
+        "RNREAD" => "read noise of one read [e-]",
+        "GAIN" => "gain [e-/ADU]",
+        "RDNOISE" => "read noise [e-]",
+        "BIASADU" => "bias [ADU]",
+        "EXPTIME" => "exposure [s]",
+        "SATURATE" => "saturation level [ADU]",
+        _ => "a number",
     }
 }
 
@@ -390,21 +444,22 @@ pub fn read_image(path: &Path) -> Result<ImageRead, IoError> {
         _ => return Err(IoError::fits(path, "the primary HDU is not a 2-D image")),
     };
     let data: Vec<f32> = hdu.read_image(&mut f).map_err(fe)?;
-    let numbers: std::collections::HashMap<&str, f64> = [
-        "RNREAD", "GAIN", "RDNOISE", "BIASADU", "EXPTIME", "SATURATE",
-    ]
-    .into_iter()
-    .filter_map(|k| hdu.read_key::<f64>(&mut f, k).ok().map(|v| (k, v)))
-    .collect();
-    let sampling = hdu.read_key::<String>(&mut f, "SAMPLING").ok();
-    let facts = ImageFacts::from_keys(
-        |k| numbers.get(k).copied(),
-        |k| (k == "SAMPLING").then(|| sampling.clone()).flatten(),
-    )
-    .map_err(|message| IoError::Format {
-        path: path.to_path_buf(),
-        message,
-    })?;
+    let numbers: std::collections::HashMap<&str, f64> = NUMERIC_KEYS
+        .into_iter()
+        .filter_map(|k| hdu.read_key::<f64>(&mut f, k).ok().map(|v| (k, v)))
+        .collect();
+    // the text of every card the analysis reads: SAMPLING, and a numeric card that did not read as a number
+    let texts: std::collections::HashMap<&str, String> = NUMERIC_KEYS
+        .into_iter()
+        .filter(|k| !numbers.contains_key(k))
+        .chain(["SAMPLING"])
+        .filter_map(|k| hdu.read_key::<String>(&mut f, k).ok().map(|v| (k, v)))
+        .collect();
+    let facts = ImageFacts::from_keys(|k| numbers.get(k).copied(), |k| texts.get(k).cloned())
+        .map_err(|message| IoError::Format {
+            path: path.to_path_buf(),
+            message,
+        })?;
     let dq = match f.hdu("DQ") {
         Ok(h) => h
             .read_image::<Vec<u8>>(&mut f)

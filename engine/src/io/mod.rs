@@ -10,16 +10,18 @@ pub mod fits;
 pub mod focal_plane;
 pub mod plot;
 pub mod products;
+pub mod score;
 
 use std::path::{Path, PathBuf};
 
 /// An output or input problem, naming the file.
 #[derive(Debug, thiserror::Error)]
 pub enum IoError {
-    #[error("{path}: {source}")]
+    /// The reason is part of the message and not a `source` too, so a chain of causes says it once.
+    #[error("{path}: {reason}")]
     Io {
         path: PathBuf,
-        source: std::io::Error,
+        reason: std::io::Error,
     },
     #[error("FITS file {path}: {message}")]
     Fits { path: PathBuf, message: String },
@@ -33,7 +35,7 @@ impl IoError {
     pub fn io(path: &Path, source: std::io::Error) -> Self {
         IoError::Io {
             path: path.to_path_buf(),
-            source,
+            reason: source,
         }
     }
     pub fn fits(path: &Path, e: impl std::fmt::Display) -> Self {

@@ -38,7 +38,23 @@ impl Layout {
                 .iter()
                 .position(|n| alts.iter().any(|a| n.trim().eq_ignore_ascii_case(a)))
         };
-        let (pos, sky) = match (find(&["ra", "ra_deg"]), find(&["dec", "dec_deg"])) {
+        let sky_cols = (find(&["ra", "ra_deg"]), find(&["dec", "dec_deg"]));
+        let pixel_cols = (find(&["x", "x_px"]), find(&["y", "y_px"]));
+        if sky_cols.0.is_some()
+            && sky_cols.1.is_some()
+            && pixel_cols.0.is_some()
+            && pixel_cols.1.is_some()
+        {
+            return Err(SceneError::Parse {
+                path: path.into(),
+                line: 1,
+                message: format!(
+                    "columns {names:?}: both `ra, dec` and `x, y` given — which places the stars is \
+                     ambiguous; keep one pair"
+                ),
+            });
+        }
+        let (pos, sky) = match sky_cols {
             (Some(a), Some(d)) => ([a, d], true),
             _ => match (find(&["x", "x_px"]), find(&["y", "y_px"])) {
                 (Some(x), Some(y)) => ([x, y], false),

@@ -236,6 +236,7 @@ pub struct AnalyzeArgs {
     pub truth: Option<PathBuf>,
     pub zones: Option<usize>,
     pub countermeasure: Countermeasure,
+    pub crowding: engine::analysis::crowding::Crowding,
     pub out: PathBuf,
 }
 
@@ -248,7 +249,7 @@ pub fn analyze(session: &Session, cfg: &Config, a: &AnalyzeArgs) -> Result<()> {
     for s in &input.assumptions {
         eprintln!("jsim: {}: {s}", a.image.display());
     }
-    let an = session.analyze_input(cfg, &input, a.zones, a.countermeasure)?;
+    let an = session.analyze_input(cfg, &input, a.zones, a.countermeasure, a.crowding)?;
     let analysis_input::AnalysisInput {
         img,
         truth,
@@ -291,6 +292,30 @@ pub fn analyze(session: &Session, cfg: &Config, a: &AnalyzeArgs) -> Result<()> {
     )?;
     outputs.keep();
     let r = &an.report;
+    if !r.accuracy_mas.is_finite() {
+        let why = if truth.is_none() {
+            "no truth to score against (score catalogue.csv with `jsim score`)".to_string()
+        } else {
+            format!(
+                "{} star(s) matched to the truth and used, fewer than {}",
+                r.n_used,
+                engine::analysis::report::MIN_SCORED_STARS
+            )
+        };
+        println!(
+            "{}: {} stars detected and fitted ({} analysis); no accuracy: {why} [{}] in {:.2} s",
+            a.image.display(),
+            r.n_detected,
+            if r.crowded {
+                "crowded-field"
+            } else {
+                "isolated-star"
+            },
+            r.countermeasure,
+            t0.elapsed().as_secs_f64()
+        );
+        return Ok(());
+    }
     println!(
         "{}: {} stars detected, {} used; accuracy {:.2} mas (x {:.2}, y {:.2}), median CRLB {:.2} mas (ratio {:.2}), phase bias {:.2}/{:.2} mas [{}] in {:.2} s",
         a.image.display(),
@@ -417,5 +442,102 @@ pub fn predict(session: &Session, cfg: &Config, plan: &Plan) -> Result<()> {
         t1.elapsed().as_secs_f64() * 1e3,
         setup
     );
+    Ok(())
+}
+
+/// Options of `jsim score`.
+#[derive(clap::Args, Clone, Debug)]
+pub struct ScoreArgs {
+    /// Measured catalogue: a CSV with x, y in pixels (e.g. `catalogue.csv` of `jsim analyze`; rows flagged
+    /// as rejected are left out).
+    #[arg(long, value_name = "CSV")]
+    pub catalogue: PathBuf,
+    /// Truth: a CSV with x, y and mag (or mag_hw, hw), or a jsim image whose TRUTH extension gives them.
+    #[arg(long, value_name = "CSV|FITS")]
+    pub truth: PathBuf,
+    /// Plate scale [mas/px] for the accuracies (default: `plate_scale_mas` of the summary.json beside the
+    /// catalogue).
+    #[arg(long)]
+    pub plate_scale_mas: Option<f64>,
+    /// Match radius [px] after the common offset is removed.
+    #[arg(long, default_value_t = engine::scoring::DEFAULT_MATCH_RADIUS_PX)]
+    pub match_radius_px: f64,
+    /// Search radius [px] of the common offset (median displacement to the nearest true star).
+    #[arg(long, default_value_t = engine::scoring::DEFAULT_OFFSET_SEARCH_PX)]
+    pub offset_search_px: f64,
+    /// Width of the magnitude bins.
+    #[arg(long, default_value_t = 1.0)]
+    pub bin_mag: f64,
+    /// Output directory (score.csv, score.json).
+    #[arg(long, default_value = "out/score")]
+    pub out: PathBuf,
+}
+
+/// The plate scale recorded in the `summary.json` beside a catalogue, if any.
+fn summary_plate_scale(catalogue: &Path) -> Option<f64> {
+    let dir = catalogue.parent()?;
+    let text = std::fs::read_to_string(dir.join("summary.json")).ok()?;
+    let v: serde_json::Value = serde_json::from_str(&text).ok()?;
+    v.get("plate_scale_mas")?.as_f64()
+}
+
+/// `jsim score`
+pub fn score(a: &ScoreArgs) -> Result<()> {
+    let scale = match a
+        .plate_scale_mas
+        .or_else(|| summary_plate_scale(&a.catalogue))
+    {
+        Some(s) => s,
+        None => anyhow::bail!(
+            "--plate-scale-mas: not given, and no summary.json with plate_scale_mas beside {}",
+            a.catalogue.display()
+        ),
+    };
+    let opts = engine::scoring::ScoreOptions {
+        match_radius_px: a.match_radius_px,
+        offset_search_px: a.offset_search_px,
+        bin_mag: a.bin_mag,
+        plate_scale_mas: scale,
+    };
+    opts.validate()
+        .map_err(|e| anyhow::anyhow!("--{}", e.replace('_', "-")))?;
+    let measured = engine::io::score::read_measured(&a.catalogue)?;
+    let truth = engine::io::score::read_truth_list(&a.truth)?;
+    let s = engine::scoring::score(&measured, &truth, &opts).map_err(anyhow::Error::msg)?;
+    let mut outputs = Outputs::in_dir(&a.out)?;
+    for name in ["score.csv", "score.json"] {
+        outputs.path(name);
+    }
+    engine::io::score::write_score(&a.out, &s, &a.catalogue, &a.truth)?;
+    outputs.keep();
+    let acc = |v: f64| {
+        if v.is_finite() {
+            format!("{v:8.2}")
+        } else {
+            format!("{:>8}", "–")
+        }
+    };
+    println!(
+        "{} measured, {} true stars; {} matched, {} false detections; common offset ({:.3}, {:.3}) px",
+        s.n_measured,
+        s.all.n_true,
+        s.all.n_matched,
+        s.false_detections,
+        s.offset_x_px,
+        s.offset_y_px
+    );
+    println!("  mag bin      true  matched  complete  accuracy [mas]");
+    for b in s.bins.iter().chain(std::iter::once(&s.all)) {
+        println!(
+            "  {:5.1}–{:<5.1} {:6} {:8} {:9.3} {}",
+            b.mag_lo,
+            b.mag_hi,
+            b.n_true,
+            b.n_matched,
+            b.completeness,
+            acc(b.accuracy_mas)
+        );
+    }
+    println!("wrote {}/score.csv, score.json", a.out.display());
     Ok(())
 }

@@ -172,9 +172,16 @@ enum Command {
         epsf_zones: Option<usize>,
         #[command(flatten)]
         cm: CountermeasureArgs,
+        /// auto (crowded when the measured source density puts more than 5 % of the stars within the
+        /// grouped fits' link radius of a neighbour), on (crowded-field analysis) or off (isolated stars).
+        #[arg(long, default_value = "auto", value_parser = parse_crowding)]
+        crowding: engine::analysis::crowding::Crowding,
         #[arg(long, default_value = "out/analyze")]
         out: PathBuf,
     },
+    /// Score a measured catalogue against a truth list (the only command that reads the truth): match by
+    /// position, then completeness, accuracy and false detections per magnitude bin.
+    Score(cmd::ScoreArgs),
     /// The paper's experiment: accuracy vs magnitude for each ACE case, readout order and countermeasure.
     Experiment {
         #[command(flatten)]
@@ -308,6 +315,7 @@ fn run(cli: Cli) -> Result<()> {
             truth,
             epsf_zones,
             cm,
+            crowding,
             out,
         } => {
             let c = cfg.load()?;
@@ -325,6 +333,7 @@ fn run(cli: Cli) -> Result<()> {
                     truth,
                     zones: epsf_zones,
                     countermeasure: plan.countermeasures[0],
+                    crowding,
                     out,
                 },
             )
@@ -363,6 +372,7 @@ fn run(cli: Cli) -> Result<()> {
                 },
             )
         }
+        Command::Score(a) => cmd::score(&a),
         Command::Crowded(a) => crowded_cmd::crowded(&a),
         Command::Sweep(a) => sweep_cmd::sweep(&a),
         Command::Merge(a) => sweep_cmd::merge(&a),
@@ -378,6 +388,11 @@ fn run(cli: Cli) -> Result<()> {
             cmd::predict(&Session::new(), &c, &plan)
         }
     }
+}
+
+/// `--crowding`: one of [`engine::analysis::crowding::Crowding::NAMES`].
+fn parse_crowding(s: &str) -> Result<engine::analysis::crowding::Crowding, String> {
+    engine::analysis::crowding::Crowding::parse(s)
 }
 
 /// Mesa's Vulkan loader prints "XDG_RUNTIME_DIR is invalid or not set" when probing for a GPU without a

@@ -44,7 +44,7 @@ impl From<IoError> for PlotError {
     fn from(e: IoError) -> Self {
         match e {
             IoError::Plot(p) => p,
-            IoError::Io { path, source } => draw_error(&path, source),
+            IoError::Io { path, reason } => draw_error(&path, reason),
             IoError::Fits { path, message } | IoError::Format { path, message } => {
                 draw_error(&path, message)
             }

@@ -84,8 +84,9 @@
 //! axis, `accuracy_mas = √((σx² + σy²)/2)` (per axis), `bias_*` their means, `crlb_mas` the median Cramér–Rao
 //! bound, `predicted_mas` the instant predictor's expectation for this exposure ([`crate::analysis::predict`]),
 //! `ace_sigma_mas`/`ace_drift_mas` the exposure's jitter σ and drift, `seed` the unit's master seed.
-//! `status` is `ok`, `not applicable` (e.g. `exact-epsf` with a realistic ACE) or `error: …` (the analysis
-//! failed for that exposure; its accuracy is NaN and counts as *not* meeting the threshold).
+//! `status` is `ok`, `not applicable` (e.g. `exact-epsf` with a realistic ACE), `failed: …` (fewer than
+//! [`MIN_SWEEP_STARS`] stars scored, with the count) or `error: …` (the analysis failed for that exposure);
+//! a failed or erroneous exposure's accuracy is NaN and counts as *not* meeting the threshold.
 //!
 //! # Resuming and corruption
 //!
@@ -156,7 +157,7 @@ pub use record::{
     UnitRows, parse_line, read_record, render_line, without_timing,
 };
 pub use report::{METRICS, ReportOptions, ReportRow, ReportSummary, Z95, render_report, report};
-pub use run::{Event, RunOptions, RunSummary, compute_unit, run_shard};
+pub use run::{Event, MIN_SWEEP_STARS, RunOptions, RunSummary, compute_unit, run_shard};
 pub use shard::{
     ParsedRows, SHARD_FORMAT, Shard, ShardFile, Sidecar, list_shards, parse_shard_text, read_shard,
     shard_paths, write_shard,

@@ -70,6 +70,16 @@ pub struct RunSummary {
     pub file: PathBuf,
 }
 
+/// Fewest scored stars (matched to the truth, not rejected) an exposure's analysis needs to count in a
+/// sweep: the accuracy is a standard deviation over the stars, whose relative error is ≈ 1/√(2(n − 1)), so
+/// below 10 stars it is uncertain by more than 24 % and the exposure is recorded as failed, with its reason.
+pub const MIN_SWEEP_STARS: usize = 10;
+
+/// Whether an analysis has an accuracy a sweep can count ([`MIN_SWEEP_STARS`] scored stars, finite).
+fn scored(r: &crate::analysis::Report) -> bool {
+    r.n_used >= MIN_SWEEP_STARS && r.accuracy_mas.is_finite()
+}
+
 /// Compute one unit: simulate its stare, analyse every exposure with every countermeasure (the stack of the
 /// stare as the stack-referenced plate models' reference), predict. Configuration and simulator errors are
 /// returned; an analysis failure is recorded in the rows (`status`) of every exposure of the stare.
@@ -123,6 +133,17 @@ pub fn compute_unit(sweep: &Sweep, unit: usize, session: &Session) -> Result<Uni
             match analysed.as_ref().map(|v| &v[i]) {
                 Ok(im) => {
                     match im.measured.iter().find(|m| &m.countermeasure == cm) {
+                        Some(m) if !scored(&m.report) => {
+                            // too few scored stars: a failed exposure with its reason, never a pass
+                            r.push(format!(
+                                "failed: {} star(s) scored, fewer than {MIN_SWEEP_STARS}",
+                                m.report.n_used
+                            ));
+                            for v in [nan, nan, nan, nan, nan, nan, predicted[i][k]] {
+                                r.push(float_cell(v));
+                            }
+                            r.push(m.report.n_used.to_string());
+                        }
                         Some(m) => {
                             let rep = &m.report;
                             r.push("ok".into());

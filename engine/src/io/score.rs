@@ -1,0 +1,155 @@
+//! The files of `jsim score`: the measured catalogue and the truth it reads, and `score.csv` / `score.json`
+//! it writes ([`crate::scoring`] does the matching and the statistics).
+//!
+//! * **Measured catalogue**: a CSV with columns `x, y` (pixels, 0-based: integer values are pixel centres)
+//!   — `catalogue.csv` of `jsim analyze`, or any tool's list. With a `flags` column (jsim's), rows with a
+//!   rejection flag (`flags & REJECT`) are not measurements and are left out, as the analysis' own report
+//!   does. Other columns are ignored.
+//! * **Truth**: a CSV with `x, y` and a magnitude column (`mag`, `mag_hw` or `hw`, the first found), or a jsim
+//!   image (FITS) whose TRUTH extension gives `x, y, mag_hw`. Both with one convention of pixels.
+
+use super::IoError;
+use super::csv::{self, Cell};
+use crate::analysis::epsf::fit::flags;
+use crate::scoring::{Measured, Score, TrueStar};
+use std::path::Path;
+
+/// Magnitude columns of a truth CSV, in the order looked for.
+pub const MAG_COLUMNS: [&str; 3] = ["mag", "mag_hw", "hw"];
+
+fn format_err(path: &Path, message: String) -> IoError {
+    IoError::Format {
+        path: path.to_path_buf(),
+        message,
+    }
+}
+
+/// Read a measured catalogue (see the module's documentation).
+pub fn read_measured(path: &Path) -> Result<Vec<Measured>, IoError> {
+    let (h, rows) = csv::read(path)?;
+    if !(h.iter().any(|c| c == "x") && h.iter().any(|c| c == "y")) {
+        return Err(format_err(
+            path,
+            format!("columns {h:?}: a measured catalogue needs `x, y` (pixels)"),
+        ));
+    }
+    let x = csv::column_f64(path, &h, &rows, "x")?;
+    let y = csv::column_f64(path, &h, &rows, "y")?;
+    let f = if h.iter().any(|c| c == "flags") {
+        Some(csv::column_f64(path, &h, &rows, "flags")?)
+    } else {
+        None
+    };
+    Ok((0..x.len())
+        .filter(|&k| {
+            f.as_ref()
+                .is_none_or(|f| (f[k] as u32) & flags::REJECT == 0)
+        })
+        .map(|k| Measured {
+            x_px: x[k],
+            y_px: y[k],
+        })
+        .collect())
+}
+
+/// Read a truth list (see the module's documentation).
+pub fn read_truth_list(path: &Path) -> Result<Vec<TrueStar>, IoError> {
+    let is_fits = path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("fits") || e.eq_ignore_ascii_case("fit"));
+    let cols = if is_fits {
+        super::fits::read_table(path, "TRUTH", &["x", "y", "mag_hw"])?
+    } else {
+        let (h, rows) = csv::read(path)?;
+        let mag = MAG_COLUMNS
+            .iter()
+            .find(|m| h.iter().any(|c| c == *m))
+            .ok_or_else(|| {
+                format_err(
+                    path,
+                    format!(
+                        "columns {h:?}: a truth list needs `x, y` and a magnitude ({})",
+                        MAG_COLUMNS.join(" or ")
+                    ),
+                )
+            })?;
+        ["x", "y", mag]
+            .iter()
+            .map(|c| csv::column_f64(path, &h, &rows, c))
+            .collect::<Result<Vec<_>, _>>()?
+    };
+    Ok((0..cols[0].len())
+        .map(|k| TrueStar {
+            x_px: cols[0][k],
+            y_px: cols[1][k],
+            mag: cols[2][k],
+        })
+        .collect())
+}
+
+/// Columns of `score.csv`: one row per magnitude bin, then the row `all`.
+pub const SCORE_HEADER: [&str; 11] = [
+    "bin",
+    "mag_lo",
+    "mag_hi",
+    "n_true",
+    "n_matched",
+    "completeness",
+    "accuracy_x_mas",
+    "accuracy_y_mas",
+    "accuracy_mas",
+    "bias_x_mas",
+    "bias_y_mas",
+];
+
+/// Rows of `score.csv` (an absent accuracy is an empty cell).
+pub fn score_rows(s: &Score) -> Vec<Vec<Cell>> {
+    let cell = |v: f64| {
+        if v.is_finite() {
+            Cell::F(v)
+        } else {
+            Cell::S(String::new())
+        }
+    };
+    s.bins
+        .iter()
+        .enumerate()
+        .map(|(k, b)| (k.to_string(), b))
+        .chain(std::iter::once(("all".to_string(), &s.all)))
+        .map(|(name, b)| {
+            vec![
+                Cell::S(name),
+                cell(b.mag_lo),
+                cell(b.mag_hi),
+                Cell::I(b.n_true as i64),
+                Cell::I(b.n_matched as i64),
+                cell(b.completeness),
+                cell(b.accuracy_x_mas),
+                cell(b.accuracy_y_mas),
+                cell(b.accuracy_mas),
+                cell(b.bias_x_mas),
+                cell(b.bias_y_mas),
+            ]
+        })
+        .collect()
+}
+
+/// Write `score.csv` and `score.json` (the bins, the totals, the false detections, the offset and the
+/// options; the pairs are left out) into `dir`.
+pub fn write_score(dir: &Path, s: &Score, measured: &Path, truth: &Path) -> Result<(), IoError> {
+    csv::write(&dir.join("score.csv"), &SCORE_HEADER, &score_rows(s))?;
+    let json = serde_json::json!({
+        "measured": measured.display().to_string(),
+        "truth": truth.display().to_string(),
+        "n_measured": s.n_measured,
+        "false_detections": s.false_detections,
+        "offset_x_px": s.offset_x_px,
+        "offset_y_px": s.offset_y_px,
+        "options": s.options,
+        "all": s.all,
+        "bins": s.bins,
+    });
+    let text = serde_json::to_string_pretty(&json)
+        .map_err(|e| format_err(&dir.join("score.json"), e.to_string()))?;
+    super::write_atomic(&dir.join("score.json"), text.as_bytes())
+}
