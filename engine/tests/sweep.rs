@@ -839,3 +839,46 @@ fn a_sweep_of_stares_references_the_plate_to_each_stare_stack() {
     assert!(e.to_string().contains("stare_exposures"), "{e}");
     let _ = std::fs::remove_dir_all(&d);
 }
+
+/// Every sweep shipped in `engine/sweeps/` loads, and one unit of each runs — on a reduced scene (16 stars,
+/// coarse optics), with every countermeasure giving a row whose status is `ok` or `not applicable`.
+#[test]
+fn every_shipped_sweep_loads_and_runs_a_unit() {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("sweeps");
+    let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
+        .expect("engine/sweeps")
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|x| x == "toml"))
+        .collect();
+    files.sort();
+    assert!(files.len() >= 3, "{files:?}");
+    let session = Session::new();
+    for f in files {
+        let mut sw = Sweep::load(&f).unwrap_or_else(|e| panic!("{}: {e}", f.display()));
+        for p in &mut sw.points {
+            let c = &mut p.config;
+            c.scene.grid_n = 4;
+            c.optics.pupil_samples = 64;
+            c.optics.psf_radius_px = 8;
+            c.band.wavelength_step_um = 0.1;
+            c.fidelity.backend = engine::config::Backend::Cpu;
+            c.validate().expect("the reduced configuration is valid");
+        }
+        let rows = sweep::compute_unit(&sw, 0, &session)
+            .unwrap_or_else(|e| panic!("{}: unit 0: {e}", f.display()));
+        assert_eq!(
+            rows.len(),
+            sw.stare_exposures * sw.countermeasures.len(),
+            "{}",
+            f.display()
+        );
+        let status = 3 + sw.params.len() + 1;
+        for r in &rows {
+            assert!(
+                r[status] == "ok" || r[status] == "not applicable",
+                "{}: {r:?}",
+                f.display()
+            );
+        }
+    }
+}
