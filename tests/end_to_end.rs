@@ -223,3 +223,108 @@ fn the_image_holds_the_light_the_truth_and_the_predictor_count() {
         image / truth
     );
 }
+
+/// The analysis reads only what an instrument delivers: a copy of a jsim image with its TRUTH and CONFIG
+/// extensions removed (primary image and DQ only, the same header cards), analysed with the calibration
+/// flat product beside it, gives the same catalogue as the original — and the same as the analysis in
+/// memory with the simulator's own calibration flat. Without the flat product the analysis says so.
+#[test]
+fn the_analysis_reads_no_truth_or_config_only_the_products() {
+    use engine::analysis::countermeasures::Countermeasure;
+    use engine::analysis::crowding::Crowding;
+    use engine::io::fits::{Hdu, Pixels};
+    use engine::io::instrument;
+    use engine::session::Session;
+    let mut cfg = small_config();
+    cfg.ace.case = AceCase::Gaussian;
+    let sim = Simulator::new(&cfg).expect("simulator");
+    let exp = sim.exposure(0).expect("exposure");
+    let full = temp_dir("products-full");
+    let files = exposure::write_exposure(&full, &sim, &exp).expect("write");
+    let flat = instrument::write_calibration_flat(&full, &sim)
+        .expect("flat")
+        .expect("the default analysis is calibrated");
+    // the flat product is the simulator's calibration flat, with its error in the header
+    let read = instrument::read_calibration_flat(&flat, None).expect("read flat");
+    assert_eq!(
+        read.data,
+        *sim.calibration_flat().expect("calibrated").as_ref()
+    );
+    assert_eq!(read.error, 0.002);
+    // the stripped copy: the image's own header, image and DQ; no TRUTH, no CONFIG
+    let bare = temp_dir("products-bare");
+    let image = bare.join("image.fits");
+    let stored = fits::read_image(&files.image).expect("read");
+    fits::write(
+        &image,
+        &[
+            Hdu::Image {
+                name: "",
+                nx: stored.nx,
+                ny: stored.ny,
+                pixels: Pixels::F32(&stored.data),
+                cards: exposure::headers(&sim, &exp),
+            },
+            Hdu::U8Image {
+                name: "DQ",
+                nx: stored.nx,
+                ny: stored.ny,
+                data: &exp.image.dq,
+            },
+        ],
+    )
+    .expect("write the bare copy");
+    std::fs::copy(&flat, bare.join(instrument::FLAT_NAME)).expect("copy flat");
+    let session = Session::new();
+    let analyse = |path: &std::path::Path| {
+        let input = analysis_input::AnalysisInput::read(path, Some(&files.truth_csv), None, &cfg)
+            .expect("input");
+        let a = session
+            .analyze_input(&cfg, &input, None, Countermeasure::None, Crowding::Auto)
+            .expect("analysis");
+        (a, input.assumptions)
+    };
+    let (a_full, _) = analyse(&files.image);
+    let (a_bare, assumed) = analyse(&image);
+    assert!(
+        assumed.iter().all(|a| a.contains("CONFIG")),
+        "only the missing simulation context is said: {assumed:?}"
+    );
+    assert_eq!(a_full.stars.len(), a_bare.stars.len());
+    for (p, q) in a_full.stars.iter().zip(&a_bare.stars) {
+        assert_eq!((p.x, p.y, p.flux_e, p.flags), (q.x, q.y, q.flux_e, q.flags));
+    }
+    let (x, y) = (a_full.report.accuracy_mas, a_bare.report.accuracy_mas);
+    assert!((x - y).abs() <= 1e-9 * x, "{x} vs {y}");
+    // in memory, with the simulator's calibration flat: the same fits
+    let mem = AnalysisImage::of_exposure(&sim, &exp.image);
+    let m = astrometry::analyze(&mem, Some(&exp.truth), &Options::new(&cfg.analysis))
+        .expect("analysis");
+    for (p, q) in m.stars.iter().zip(&a_full.stars) {
+        assert_eq!((p.x, p.y), (q.x, q.y));
+    }
+    // without the product: not flat-fielded, and said
+    std::fs::remove_file(bare.join(instrument::FLAT_NAME)).expect("remove");
+    let (_, assumed) = analyse(&image);
+    assert!(
+        assumed.iter().any(|a| a.contains("no calibration flat")),
+        "{assumed:?}"
+    );
+    // a flat of another detector size is refused, naming the product
+    let small = temp_dir("products-small");
+    let mut other = cfg.clone();
+    other.instrument.detector_px = 256;
+    other.instrument.photosensitive_px = 240;
+    other.readout.channels = 2;
+    other.readout.channel_width_px = 128;
+    let osim = Simulator::new(&other).expect("simulator");
+    let oflat = instrument::write_calibration_flat(&small, &osim)
+        .expect("flat")
+        .expect("calibrated");
+    let e = analysis_input::AnalysisInput::read(&image, None, Some(&oflat), &cfg)
+        .expect_err("another detector's flat");
+    assert!(e.to_string().contains("calibration flat"), "{e}");
+    for d in [full, bare, small] {
+        let _ = std::fs::remove_dir_all(d);
+    }
+}

@@ -28,8 +28,8 @@ fn image_config(image: &Path) -> Config {
 
 /// `jsim analyze --image IMAGE --countermeasure CM` with the image's own configuration, up to its report.
 fn cli_report(image: &Path, cm: Countermeasure) -> Report {
-    let input =
-        analysis_input::AnalysisInput::read(image, None, &Config::default()).expect("the image");
+    let input = analysis_input::AnalysisInput::read(image, None, None, &Config::default())
+        .expect("the image");
     assert!(
         input.assumptions.is_empty(),
         "nothing assumed of a simulated image: {:?}",
@@ -87,6 +87,8 @@ fn written_image(name: &str) -> (Config, std::path::PathBuf, std::path::PathBuf)
     let sim = Session::new().new_simulator(&cfg).expect("a simulator");
     let exp = sim.exposure(INDEX).expect("the exposure");
     let files = exposure::write_exposure(&dir, &sim, &exp).expect("written");
+    // the calibration flat product beside it, as `jsim simulate` writes it
+    engine::io::instrument::write_calibration_flat(&dir, &sim).expect("the flat");
     assert_eq!(
         image_config(&files.image),
         cfg,

@@ -3,6 +3,7 @@
 //! per magnitude bin the completeness, the position accuracy and the false detections.
 //!
 //! **Matching** (documented defaults, both options of `jsim score`):
+//! 0. Stars carry an array number (focal-plane files); each array is matched on its own.
 //! 1. The common offset (the exposure's pointing error, a tool's centring convention) is the median
 //!    displacement of each measured star to its nearest true star within `offset_search_px` (20 px), when at
 //!    least three such pairs exist; else none ([`crate::analysis::detection::common_offset`]).
@@ -32,19 +33,23 @@ pub const DEFAULT_MATCH_RADIUS_PX: f64 = 1.0;
 /// Default search radius of the common offset [px].
 pub const DEFAULT_OFFSET_SEARCH_PX: f64 = 20.0;
 
-/// A measured position (pixels of the image).
+/// A measured position (pixels of its array).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Measured {
     pub x_px: f64,
     pub y_px: f64,
+    /// The array it was measured on (focal-plane files: 1 … 4; 0 for a single image).
+    pub array: u32,
 }
 
-/// A true star: position (pixels) and magnitude.
+/// A true star: position (pixels of its array), magnitude and array.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TrueStar {
     pub x_px: f64,
     pub y_px: f64,
     pub mag: f64,
+    /// As [`Measured::array`].
+    pub array: u32,
 }
 
 /// How to score.
@@ -123,7 +128,7 @@ pub struct Score {
     pub n_measured: usize,
     /// Measured stars matched to no true star.
     pub false_detections: usize,
-    /// The common offset removed before matching [px].
+    /// The common offset removed before matching [px] (the mean of the arrays' when there are several).
     pub offset_x_px: f64,
     pub offset_y_px: f64,
     pub pairs: Vec<Pair>,
@@ -198,22 +203,48 @@ pub fn score(
     opts: &ScoreOptions,
 ) -> Result<Score, String> {
     opts.validate()?;
-    let pos: Vec<(f64, f64)> = measured.iter().map(|m| (m.x_px, m.y_px)).collect();
-    let refs: Vec<(f64, f64)> = truth.iter().map(|t| (t.x_px, t.y_px)).collect();
-    let offset = common_offset(&pos, &refs, opts.offset_search_px);
-    let m = one_to_one(&pos, &refs, opts.match_radius_px, offset);
-    let pairs: Vec<Pair> = m
+    // each array on its own: its own common offset, matches only within it
+    let mut arrays: Vec<u32> = measured
         .iter()
-        .enumerate()
-        .filter_map(|(i, k)| {
+        .map(|m| m.array)
+        .chain(truth.iter().map(|t| t.array))
+        .collect();
+    arrays.sort_unstable();
+    arrays.dedup();
+    let mut pairs: Vec<Pair> = Vec::new();
+    let mut offsets = Vec::new();
+    for a in arrays {
+        let mi: Vec<usize> = (0..measured.len())
+            .filter(|&i| measured[i].array == a)
+            .collect();
+        let ti: Vec<usize> = (0..truth.len()).filter(|&k| truth[k].array == a).collect();
+        let pos: Vec<(f64, f64)> = mi
+            .iter()
+            .map(|&i| (measured[i].x_px, measured[i].y_px))
+            .collect();
+        let refs: Vec<(f64, f64)> = ti.iter().map(|&k| (truth[k].x_px, truth[k].y_px)).collect();
+        let offset = common_offset(&pos, &refs, opts.offset_search_px);
+        offsets.push(offset);
+        let m = one_to_one(&pos, &refs, opts.match_radius_px, offset);
+        pairs.extend(m.iter().enumerate().filter_map(|(i, k)| {
             k.map(|k| Pair {
-                measured: i,
-                truth: k,
+                measured: mi[i],
+                truth: ti[k],
                 dx_px: pos[i].0 - offset.0 - refs[k].0,
                 dy_px: pos[i].1 - offset.1 - refs[k].1,
             })
-        })
-        .collect();
+        }));
+    }
+    pairs.sort_by_key(|p| p.measured);
+    // the offset reported: the mean over the arrays (one array: its own)
+    let offset = if offsets.is_empty() {
+        (0.0, 0.0)
+    } else {
+        (
+            offsets.iter().map(|o| o.0).sum::<f64>() / offsets.len() as f64,
+            offsets.iter().map(|o| o.1).sum::<f64>() / offsets.len() as f64,
+        )
+    };
     let mut matched_d: Vec<Option<(f64, f64)>> = vec![None; truth.len()];
     for p in &pairs {
         matched_d[p.truth] = Some((p.dx_px, p.dy_px));
@@ -295,6 +326,7 @@ mod tests {
                 x_px: 10.0 + 9.0 * (k % 45) as f64 + 0.37 * (k / 45) as f64,
                 y_px: 10.0 + 9.0 * (k / 45) as f64,
                 mag: if k % 2 == 0 { 12.3 } else { 13.6 },
+                array: 0,
             })
             .collect();
         let mut measured: Vec<Measured> = truth
@@ -305,6 +337,7 @@ mod tests {
             .map(|(_, t)| Measured {
                 x_px: t.x_px + 0.3 + noise.sample(&mut rng),
                 y_px: t.y_px - 0.2 + noise.sample(&mut rng),
+                array: 0,
             })
             .collect();
         // five spurious detections far from every star, and a second detection next to star 0 (a duplicate)
@@ -312,11 +345,13 @@ mod tests {
             measured.push(Measured {
                 x_px: 10.0 + 4.5 + 0.3 + 9.0 * k as f64,
                 y_px: 10.0 + 4.5 - 0.2,
+                array: 0,
             });
         }
         measured.push(Measured {
             x_px: truth[0].x_px + 0.3 + 0.6,
             y_px: truth[0].y_px - 0.2,
+            array: 0,
         });
         let s = score(&measured, &truth, &opts()).expect("score");
         assert!((s.offset_x_px - 0.3).abs() < 0.005 && (s.offset_y_px + 0.2).abs() < 0.005);
@@ -336,16 +371,52 @@ mod tests {
         }
     }
 
+    /// Two arrays with the same pixel positions: a star is matched only on its own array, each with its
+    /// own offset.
+    #[test]
+    fn arrays_are_matched_apart() {
+        let t = |x: f64, a: u32| TrueStar {
+            x_px: x,
+            y_px: 50.0,
+            mag: 12.5,
+            array: a,
+        };
+        let m = |x: f64, a: u32| Measured {
+            x_px: x,
+            y_px: 50.0,
+            array: a,
+        };
+        let truth = [
+            t(10.0, 1),
+            t(30.0, 1),
+            t(50.0, 1),
+            t(10.0, 2),
+            t(30.0, 2),
+            t(50.0, 2),
+        ];
+        // array 1 measured 0.3 px off, array 2 exactly; array 2 misses its star at 50
+        let measured = [m(10.3, 1), m(30.3, 1), m(50.3, 1), m(10.0, 2), m(30.0, 2)];
+        let s = score(&measured, &truth, &opts()).expect("score");
+        assert_eq!(s.all.n_matched, 5);
+        assert_eq!(s.false_detections, 0);
+        for p in &s.pairs {
+            assert_eq!(measured[p.measured].array, truth[p.truth].array);
+            assert!(p.dx_px.abs() < 1e-12);
+        }
+    }
+
     #[test]
     fn fewer_than_two_matches_or_no_truth_leave_the_accuracy_absent() {
         let truth = [TrueStar {
             x_px: 5.0,
             y_px: 5.0,
             mag: 12.0,
+            array: 0,
         }];
         let one = [Measured {
             x_px: 5.01,
             y_px: 5.0,
+            array: 0,
         }];
         let s = score(&one, &truth, &opts()).expect("score");
         assert_eq!(s.all.n_matched, 1);

@@ -156,7 +156,10 @@ fn an_outside_image_is_analysed_without_truth_and_scored_apart() {
         "no truth: the accuracy is absent, not 0: {}",
         summary["report"]
     );
-    assert_eq!(summary["report"]["crowded"], false, "a sparse grid is not crowded");
+    assert_eq!(
+        summary["report"]["crowded"], false,
+        "a sparse grid is not crowded"
+    );
 
     let sc = dir.join("score");
     let out = jsim()
@@ -205,9 +208,13 @@ fn a_dense_outside_image_is_analysed_as_a_crowded_field() {
     let mut k = 0u64;
     let stars: Vec<(f64, f64, f64)> = (0..400)
         .map(|_| {
-            k = k.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            k = k
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
             let u = (k >> 11) as f64 / (1u64 << 53) as f64;
-            k = k.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            k = k
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
             let v = (k >> 11) as f64 / (1u64 << 53) as f64;
             (
                 3.0 + u * (n as f64 - 6.0),
@@ -329,16 +336,14 @@ fn nan_pixels_are_masked_and_counted_with_or_without_a_dq_plane() {
             },
             None,
             None,
+            None,
             &engine::Config::default(),
         )
         .expect("input");
         assert!(input.img.bad[5 * n + 7] && input.img.bad[9 * n + 2]);
         assert_eq!(input.img.bad.iter().filter(|b| **b).count(), 2);
         assert!(
-            input
-                .assumptions
-                .iter()
-                .any(|a| a.contains("2 non-finite")),
+            input.assumptions.iter().any(|a| a.contains("2 non-finite")),
             "{:?}",
             input.assumptions
         );

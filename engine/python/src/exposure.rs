@@ -3,9 +3,11 @@
 use crate::config::PyConfig;
 use crate::{OrPy, convert};
 use engine::Config;
+use engine::config::FlatField;
 use engine::io::analysis_input::{AnalysisInput, ImageParts};
 use engine::io::exposure as files;
 use engine::io::fits::{ImageFacts, Pixels, Value};
+use engine::io::instrument::CalibrationFlat;
 use engine::simulate::{Exposure, Simulator};
 use numpy::PyReadonlyArray2;
 use pyo3::exceptions::PyValueError;
@@ -135,9 +137,28 @@ impl PyExposure {
                 },
                 Some(self.exp.truth.clone()),
                 Some((self.sim.cfg.clone(), self.exp.index)),
+                self.calibration_flat_product(),
                 fallback,
             )
             .map_err(PyValueError::new_err)
+        })
+    }
+}
+
+impl PyExposure {
+    /// The calibration flat product of this exposure's detector (what `write_fits` writes beside the
+    /// image as `flat_cal.fits`), when the analysis is calibrated.
+    fn calibration_flat_product(&self) -> Option<CalibrationFlat> {
+        let FlatField::Calibrated { error } = self.sim.cfg.analysis.flat_field else {
+            return None;
+        };
+        let n = self.exp.image.n;
+        self.sim.calibration_flat().map(|f| CalibrationFlat {
+            nx: n,
+            ny: n,
+            data: f.to_vec(),
+            error,
+            source: "the exposure's calibration flat".into(),
         })
     }
 }
@@ -224,11 +245,29 @@ impl PyExposure {
     }
 
     /// Write the FITS file `jsim simulate` writes for this exposure (image, DQ, TRUTH, CONFIG), atomically,
-    /// with the `image` and `dq` arrays as they are now.
+    /// with the `image` and `dq` arrays as they are now, and beside it the calibration flat product
+    /// (`flat_cal.fits`, when the analysis is calibrated) that `jsim analyze` reads.
     fn write_fits(&self, py: Python<'_>, path: std::path::PathBuf) -> PyResult<()> {
         self.with_planes(py, |pixels, dq| {
             files::write_image_file(&path, &self.sim, &self.exp, pixels, dq).or_py()
-        })
+        })?;
+        let dir = path.parent().unwrap_or(std::path::Path::new("."));
+        engine::io::instrument::write_calibration_flat(dir, &self.sim).or_py()?;
+        Ok(())
+    }
+
+    /// The calibration flat product `(flat, relative_error)` of the exposure's detector (the true flat
+    /// with its calibration error), or `None` when the analysis is uncalibrated: pass it to
+    /// `Session.analyze(..., flat=, flat_error=)` with a bare array.
+    #[getter]
+    fn calibration_flat<'py>(&self, py: Python<'py>) -> PyResult<Option<(Bound<'py, PyAny>, f64)>> {
+        match self.calibration_flat_product() {
+            None => Ok(None),
+            Some(f) => Ok(Some((
+                crate::convert::plane(py, f.data.iter().map(|v| *v as f64).collect(), f.nx, f.ny)?,
+                f.error,
+            ))),
+        }
     }
 
     fn __repr__(&self) -> String {

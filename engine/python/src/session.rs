@@ -13,6 +13,7 @@ use engine::analysis::crowding::Crowding;
 use engine::analysis::predict::Predictor;
 use engine::io::analysis_input::{AnalysisInput, ImageParts};
 use engine::io::exposure::{TRUTH_HEADER, truth_from_columns};
+use engine::io::instrument::CalibrationFlat;
 use engine::io::products;
 use engine::session::Session;
 use engine::simulate::Simulator;
@@ -232,8 +233,10 @@ impl PySession {
     /// `config` it was simulated with (with the header's IMAGEIDX: the simulation context the telemetry
     /// and exact-epsf need). `countermeasure`: one of `jsim.COUNTERMEASURES`. `crowding`: `"auto"` (from
     /// the measured source density), `"on"` (the crowded-field analysis) or `"off"` (isolated stars), as
-    /// `jsim analyze --crowding`.
-    #[pyo3(signature = (image, header = None, *, dq = None, truth = None, config = None, countermeasure = "none", epsf_zones = None, crowding = "auto"))]
+    /// `jsim analyze --crowding`. `flat`: the calibration flat product (a 2-D array of the image's shape,
+    /// e.g. `Exposure.calibration_flat[0]` or `flat_cal.fits`) with its relative error `flat_error`;
+    /// without it a bare array is not flat-fielded (said in `assumptions`).
+    #[pyo3(signature = (image, header = None, *, dq = None, truth = None, config = None, countermeasure = "none", epsf_zones = None, crowding = "auto", flat = None, flat_error = None))]
     fn analyze(
         &self,
         py: Python<'_>,
@@ -245,18 +248,52 @@ impl PySession {
         countermeasure: &str,
         epsf_zones: Option<usize>,
         crowding: &str,
+        flat: Option<&Bound<'_, PyAny>>,
+        flat_error: Option<f64>,
     ) -> PyResult<PyAnalysis> {
         let cm: Countermeasure = countermeasure.parse().or_py()?;
         let crowding = Crowding::parse(crowding).map_err(PyValueError::new_err)?;
         let input = if let Ok(exp) = image.cast::<PyExposure>() {
-            if header.is_some() || dq.is_some() || truth.is_some() || config.is_some() {
+            if header.is_some()
+                || dq.is_some()
+                || truth.is_some()
+                || config.is_some()
+                || flat.is_some()
+                || flat_error.is_some()
+            {
                 return Err(PyTypeError::new_err(
-                    "an Exposure brings its own header, dq, truth and config: pass none of them",
+                    "an Exposure brings its own header, dq, truth, config and flat: pass none of them",
                 ));
             }
             exp.borrow().analysis_input(py, &self.cfg)?
         } else {
-            self.array_input(py, image, header, dq, truth, config)?
+            let flat = match (flat, flat_error) {
+                (None, None) => None,
+                (Some(f), Some(e)) => {
+                    if !(0.0..1.0).contains(&e) {
+                        return Err(PyValueError::new_err(format!(
+                            "flat_error = {e}: allowed [0, 1) (relative 1σ error)"
+                        )));
+                    }
+                    let (data, nx, ny) = image_f32(f)?;
+                    Some(CalibrationFlat {
+                        nx,
+                        ny,
+                        data,
+                        error: e,
+                        source: "flat=".into(),
+                    })
+                }
+                (Some(_), None) => {
+                    return Err(PyValueError::new_err(
+                        "flat= needs flat_error= (its relative 1σ error, e.g. FLATERR of flat_cal.fits)",
+                    ));
+                }
+                (None, Some(_)) => {
+                    return Err(PyValueError::new_err("flat_error= without flat="));
+                }
+            };
+            self.array_input(py, image, header, dq, truth, config, flat)?
         };
         let analysis = py
             .detach(|| {
@@ -314,6 +351,7 @@ impl PySession {
         dq: Option<&Bound<'_, PyAny>>,
         truth: Option<&Bound<'_, PyDict>>,
         config: Option<PyConfig>,
+        flat: Option<CalibrationFlat>,
     ) -> PyResult<AnalysisInput> {
         let (data, nx, ny) = image_f32(image)?;
         let empty = PyDict::new(py);
@@ -374,6 +412,7 @@ impl PySession {
             },
             truth,
             provenance,
+            flat,
             &self.cfg,
         )
         .map_err(PyValueError::new_err)

@@ -103,6 +103,8 @@ def test_an_array_with_its_header_analyses_as_the_exposure(session, exposure):
         dq=exposure.dq,
         truth=exposure.truth,
         config=exposure.config,
+        flat=exposure.calibration_flat[0],
+        flat_error=exposure.calibration_flat[1],
     )
     for name, col in by_exposure.catalogue.items():
         np.testing.assert_array_equal(by_array.catalogue[name], col, err_msg=name)

@@ -11,9 +11,9 @@
 //! pixel the fraction is `1 − exp(−ρπr²)` (Poisson; reported beside it): the paper's 400-star grid has
 //! none within r, the mock bulge (≈ 2.5·10⁴ stars an array, ρπr² ≈ 0.5) about 40 %.
 
+use crate::analysis::crowded::neighbours::Neighbours;
 use crate::analysis::detection::sky_and_noise;
 use crate::analysis::image::AnalysisImage;
-use crate::analysis::crowded::neighbours::Neighbours;
 use crate::config::Analysis as AnalysisCfg;
 use rayon::prelude::*;
 

@@ -72,7 +72,7 @@ impl AnalysisImage {
     }
 
     /// Divide by a calibration flat of relative error `error`, counted as noise in the fit.
-    fn divide_by(&mut self, flat: &[f32], error: f64) {
+    pub fn divide_by(&mut self, flat: &[f32], error: f64) {
         if flat.len() == self.e.len() {
             for (v, f) in self.e.iter_mut().zip(flat) {
                 *v /= *f as f64;

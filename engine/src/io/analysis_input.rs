@@ -5,6 +5,7 @@
 use super::IoError;
 use super::exposure::read_truth;
 use super::fits::{self, ImageFacts};
+use super::instrument::{self, CalibrationFlat};
 use crate::analysis::AnalysisImage;
 use crate::config::Config;
 use crate::detector::dq;
@@ -125,13 +126,20 @@ pub struct AnalysisInput {
 }
 
 impl AnalysisInput {
-    /// Read `path` (and `truth_path`, if given) as `jsim analyze` does. The image's own configuration,
-    /// when it has one, gives the exact plate scale (a header float keeps only 15 digits).
+    /// Read `path` (and `truth_path`, if given) as `jsim analyze` does, with the calibration flat
+    /// `flat_path` (default: `flat_cal.fits` beside the image, if there is one). The image's own
+    /// configuration, when it has one, gives the exact plate scale (a header float keeps only 15 digits)
+    /// and the simulation context; never the calibration.
     pub fn read(
         path: &Path,
         truth_path: Option<&Path>,
+        flat_path: Option<&Path>,
         fallback: &Config,
     ) -> Result<Self, IoError> {
+        let flat = match instrument::find_flat(path, flat_path) {
+            Some(p) => Some(instrument::read_calibration_flat(&p, None)?),
+            None => None,
+        };
         let provenance = fits::read_text(path, "CONFIG")
             .ok()
             .and_then(|t| Config::from_toml_str(&t).ok())
@@ -155,6 +163,7 @@ impl AnalysisInput {
             },
             truth,
             provenance,
+            flat,
             fallback,
         )
         .map_err(|message| IoError::Format {
@@ -165,12 +174,15 @@ impl AnalysisInput {
 
     /// The analysis input of an image held in memory (what [`AnalysisInput::read`] makes of a file, and
     /// what the Python module makes of an array and its header): `provenance` is the configuration and
-    /// exposure index it was simulated with, when known; `fallback` gives the analysis knobs and, where
-    /// the image says nothing, the plate scale.
+    /// exposure index it was simulated with, when known; `flat` the calibration flat product, when there
+    /// is one (the image is divided by it and its error counted as noise, unless `analysis.flat_field` is
+    /// `uncalibrated`); `fallback` gives the analysis knobs and, where the image says nothing, the plate
+    /// scale.
     pub fn from_parts(
         parts: ImageParts<'_>,
         truth: Option<Vec<TruthRow>>,
         provenance: Option<(Config, usize)>,
+        flat: Option<CalibrationFlat>,
         fallback: &Config,
     ) -> Result<Self, String> {
         let ImageParts {
@@ -209,15 +221,21 @@ impl AnalysisInput {
                 "{non_finite} non-finite (NaN or infinite) pixel(s) masked"
             ));
         }
-        let mode = fallback.analysis.flat_field;
-        match &provenance {
-            Some((c, _)) => img.flat_field(c, mode),
-            None if mode != crate::config::FlatField::Uncalibrated => assumptions.push(
-                "analysis.flat_field is calibrated, but a non-jsim image has no calibration flat here: \
-                 analysed without flat-fielding"
-                    .to_string(),
-            ),
-            None => {}
+        match (fallback.analysis.flat_field, flat) {
+            (crate::config::FlatField::Uncalibrated, _) => {}
+            (_, Some(f)) => {
+                if (f.nx, f.ny) != (nx, ny) {
+                    return Err(format!(
+                        "calibration flat {}: {}×{} px, the image {nx}×{ny}: not this detector's flat",
+                        f.source, f.nx, f.ny
+                    ));
+                }
+                img.divide_by(&f.data, f.error);
+            }
+            (_, None) => assumptions.push(format!(
+                "no calibration flat ({} beside the image, or --flat): analysed without flat-fielding",
+                instrument::FLAT_NAME
+            )),
         }
         Ok(Self {
             img,
@@ -241,4 +259,72 @@ pub struct ImageParts<'a> {
     pub facts: ImageFacts,
     /// The PLTSCALE header [mas/px], when there is one.
     pub plate_scale_header_mas: Option<f64>,
+}
+
+/// The array extensions of a focal-plane file (`ARRAY1` … in order), or none for a single image.
+pub fn focal_plane_arrays(path: &Path) -> Result<Vec<String>, IoError> {
+    let names = fits::extension_names(path)?;
+    Ok((1..)
+        .map(|k| format!("ARRAY{k}"))
+        .take_while(|n| names.iter().any(|e| e == n))
+        .collect())
+}
+
+impl AnalysisInput {
+    /// Read array `k` (0-based: extension `ARRAY{k+1}`, its `DQ{k+1}`) of a focal-plane file for analysis,
+    /// with the calibration flat's extension `FLAT{k+1}` (from `flat_path`, else `flat_cal.fits` beside
+    /// the file) and, when a truth is wanted for the report, the rows of array k+1 of the file's TRUTH
+    /// table (or of `truth_path`, a table with an `array` column). The file's CONFIG describes the whole
+    /// focal plane, not one array's simulation: no simulation context is taken from it.
+    pub fn read_array(
+        path: &Path,
+        k: usize,
+        truth_path: Option<&Path>,
+        flat_path: Option<&Path>,
+        fallback: &Config,
+    ) -> Result<Self, IoError> {
+        let ext = format!("ARRAY{}", k + 1);
+        let r = fits::read_image_in(path, Some(&ext), &format!("DQ{}", k + 1))?;
+        let flat = match instrument::find_flat(path, flat_path) {
+            Some(p) => Some(instrument::read_calibration_flat(
+                &p,
+                Some(&instrument::flat_extension(k)),
+            )?),
+            None => None,
+        };
+        let truth = array_truth(truth_path.unwrap_or(path), k + 1).ok();
+        Self::from_parts(
+            ImageParts {
+                nx: r.nx,
+                ny: r.ny,
+                data: &r.data,
+                dq: r.dq.as_deref(),
+                facts: r.facts,
+                plate_scale_header_mas: fits::read_f64_key_in(path, Some(&ext), "PLTSCALE").ok(),
+            },
+            truth,
+            None,
+            flat,
+            fallback,
+        )
+        .map_err(|message| IoError::Format {
+            path: path.to_path_buf(),
+            message: format!("{ext}: {message}"),
+        })
+    }
+}
+
+/// The truth rows of one array (1-based `array` column) of a focal-plane TRUTH table.
+fn array_truth(path: &Path, array: usize) -> Result<Vec<TruthRow>, IoError> {
+    let mut names: Vec<&str> = crate::io::exposure::TRUTH_HEADER.to_vec();
+    names.push("array");
+    let cols = fits::read_table(path, "TRUTH", &names)?;
+    let keep: Vec<usize> = (0..cols[0].len())
+        .filter(|&i| cols[names.len() - 1][i] as usize == array)
+        .collect();
+    let sel: Vec<Vec<f64>> = cols[..names.len() - 1]
+        .iter()
+        .map(|c| keep.iter().map(|&i| c[i]).collect())
+        .collect();
+    Ok(crate::io::exposure::truth_from_columns(&sel))
 }

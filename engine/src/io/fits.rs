@@ -430,18 +430,94 @@ pub struct ImageRead {
 
 /// Read the primary image (and DQ extension, if any) of a file.
 pub fn read_image(path: &Path) -> Result<ImageRead, IoError> {
+    read_image_in(path, None, "DQ")
+}
+
+/// Open a file for reading, a missing one an error that says so once.
+fn open(path: &Path) -> Result<FitsFile, IoError> {
     if !path.exists() {
         return Err(IoError::io(
             path,
             std::io::Error::new(std::io::ErrorKind::NotFound, "no such file"),
         ));
     }
+    FitsFile::open(path).map_err(|e| IoError::fits(path, e))
+}
+
+/// The extension names of a file (its HDUs after the primary; unnamed ones as empty strings).
+pub fn extension_names(path: &Path) -> Result<Vec<String>, IoError> {
+    let mut f = open(path)?;
+    let mut names = Vec::new();
+    for i in 1.. {
+        let Ok(h) = f.hdu(i) else { break };
+        names.push(h.read_key::<String>(&mut f, "EXTNAME").unwrap_or_default());
+    }
+    Ok(names)
+}
+
+/// Read a 2-D image HDU (`ext`: an EXTNAME, or `None` for the primary) as f32, with its shape.
+pub fn read_plane(path: &Path, ext: Option<&str>) -> Result<(usize, usize, Vec<f32>), IoError> {
+    let mut f = open(path)?;
     let fe = |e: fitsio::errors::Error| IoError::fits(path, e);
-    let mut f = FitsFile::open(path).map_err(fe)?;
-    let hdu = f.primary_hdu().map_err(fe)?;
+    let hdu = match ext {
+        None => f.primary_hdu().map_err(fe)?,
+        Some(name) => f
+            .hdu(name)
+            .map_err(|e| IoError::fits(path, format!("extension {name}: {e}")))?,
+    };
+    let what = ext.unwrap_or("the primary HDU");
     let (nx, ny) = match &hdu.info {
         fitsio::hdu::HduInfo::ImageInfo { shape, .. } if shape.len() == 2 => (shape[1], shape[0]),
-        _ => return Err(IoError::fits(path, "the primary HDU is not a 2-D image")),
+        _ => return Err(IoError::fits(path, format!("{what} is not a 2-D image"))),
+    };
+    let data: Vec<f32> = hdu.read_image(&mut f).map_err(fe)?;
+    Ok((nx, ny, data))
+}
+
+/// Read a numeric header of an HDU (`ext`: an EXTNAME, or `None` for the primary).
+pub fn read_f64_key_in(path: &Path, ext: Option<&str>, key: &str) -> Result<f64, IoError> {
+    let mut f = open(path)?;
+    let fe = |e: fitsio::errors::Error| IoError::fits(path, e);
+    let hdu = match ext {
+        None => f.primary_hdu().map_err(fe)?,
+        Some(name) => f
+            .hdu(name)
+            .map_err(|e| IoError::fits(path, format!("extension {name}: {e}")))?,
+    };
+    hdu.read_key::<f64>(&mut f, key)
+        .map_err(|e| IoError::fits(path, format!("header {key}: {e}")))
+}
+
+/// Read an image HDU (`image_ext`: an EXTNAME, or `None` for the primary) and its DQ extension `dq_ext`
+/// (if the file has one of the image's size) with what the image's header says.
+pub fn read_image_in(
+    path: &Path,
+    image_ext: Option<&str>,
+    dq_ext: &str,
+) -> Result<ImageRead, IoError> {
+    let mut f = open(path)?;
+    let fe = |e: fitsio::errors::Error| IoError::fits(path, e);
+    let hdu = match image_ext {
+        None => f.primary_hdu().map_err(fe)?,
+        Some(name) => f
+            .hdu(name)
+            .map_err(|e| IoError::fits(path, format!("extension {name}: {e}")))?,
+    };
+    let (nx, ny) = match &hdu.info {
+        fitsio::hdu::HduInfo::ImageInfo { shape, .. } if shape.len() == 2 => (shape[1], shape[0]),
+        _ => {
+            return Err(IoError::fits(
+                path,
+                match image_ext {
+                    Some(name) => format!("extension {name} is not a 2-D image"),
+                    None => {
+                        "the primary HDU is not a 2-D image (a focal-plane file? its arrays are \
+                             analysed one by one by EXTNAME)"
+                            .to_string()
+                    }
+                },
+            ));
+        }
     };
     let data: Vec<f32> = hdu.read_image(&mut f).map_err(fe)?;
     let numbers: std::collections::HashMap<&str, f64> = NUMERIC_KEYS
@@ -460,7 +536,7 @@ pub fn read_image(path: &Path) -> Result<ImageRead, IoError> {
             path: path.to_path_buf(),
             message,
         })?;
-    let dq = match f.hdu("DQ") {
+    let dq = match f.hdu(dq_ext) {
         Ok(h) => h
             .read_image::<Vec<u8>>(&mut f)
             .ok()

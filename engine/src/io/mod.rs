@@ -8,6 +8,7 @@ pub mod csv;
 pub mod exposure;
 pub mod fits;
 pub mod focal_plane;
+pub mod instrument;
 pub mod plot;
 pub mod products;
 pub mod score;

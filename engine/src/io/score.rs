@@ -1,6 +1,8 @@
 //! The files of `jsim score`: the measured catalogue and the truth it reads, and `score.csv` / `score.json`
 //! it writes ([`crate::scoring`] does the matching and the statistics).
 //!
+//! * Both may carry an `array` column (the focal-plane arrays, 1 … 4): stars are then matched within
+//!   their array only.
 //! * **Measured catalogue**: a CSV with columns `x, y` (pixels, 0-based: integer values are pixel centres)
 //!   — `catalogue.csv` of `jsim analyze`, or any tool's list. With a `flags` column (jsim's), rows with a
 //!   rejection flag (`flags & REJECT`) are not measurements and are left out, as the analysis' own report
@@ -40,6 +42,7 @@ pub fn read_measured(path: &Path) -> Result<Vec<Measured>, IoError> {
     } else {
         None
     };
+    let a = array_column(path, &h, &rows)?;
     Ok((0..x.len())
         .filter(|&k| {
             f.as_ref()
@@ -48,6 +51,7 @@ pub fn read_measured(path: &Path) -> Result<Vec<Measured>, IoError> {
         .map(|k| Measured {
             x_px: x[k],
             y_px: y[k],
+            array: a.as_ref().map(|a| a[k]).unwrap_or(0),
         })
         .collect())
 }
@@ -57,8 +61,12 @@ pub fn read_truth_list(path: &Path) -> Result<Vec<TrueStar>, IoError> {
     let is_fits = path
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("fits") || e.eq_ignore_ascii_case("fit"));
-    let cols = if is_fits {
-        super::fits::read_table(path, "TRUTH", &["x", "y", "mag_hw"])?
+    let (cols, arrays) = if is_fits {
+        let cols = super::fits::read_table(path, "TRUTH", &["x", "y", "mag_hw"])?;
+        let arrays = super::fits::read_table(path, "TRUTH", &["array"])
+            .ok()
+            .map(|a| a[0].iter().map(|v| *v as u32).collect::<Vec<u32>>());
+        (cols, arrays)
     } else {
         let (h, rows) = csv::read(path)?;
         let mag = MAG_COLUMNS
@@ -73,18 +81,42 @@ pub fn read_truth_list(path: &Path) -> Result<Vec<TrueStar>, IoError> {
                     ),
                 )
             })?;
-        ["x", "y", mag]
+        let cols = ["x", "y", mag]
             .iter()
             .map(|c| csv::column_f64(path, &h, &rows, c))
-            .collect::<Result<Vec<_>, _>>()?
+            .collect::<Result<Vec<_>, _>>()?;
+        (cols, array_column(path, &h, &rows)?)
     };
     Ok((0..cols[0].len())
         .map(|k| TrueStar {
             x_px: cols[0][k],
             y_px: cols[1][k],
             mag: cols[2][k],
+            array: arrays.as_ref().map(|a| a[k]).unwrap_or(0),
         })
         .collect())
+}
+
+/// The optional `array` column (a focal-plane file's 1 … 4), checked to be a whole number ≥ 0.
+fn array_column(
+    path: &Path,
+    h: &[String],
+    rows: &[Vec<String>],
+) -> Result<Option<Vec<u32>>, IoError> {
+    if !h.iter().any(|c| c == "array") {
+        return Ok(None);
+    }
+    let a = csv::column_f64(path, h, rows, "array")?;
+    if let Some(bad) = a
+        .iter()
+        .find(|v| !(**v >= 0.0 && v.fract() == 0.0 && **v < 1e6))
+    {
+        return Err(format_err(
+            path,
+            format!("column array = {bad}: a whole number ≥ 0 (the array, 1 … 4)"),
+        ));
+    }
+    Ok(Some(a.iter().map(|v| *v as u32).collect()))
 }
 
 /// Columns of `score.csv`: one row per magnitude bin, then the row `all`.

@@ -103,6 +103,8 @@ pub fn simulate(session: &Session, cfg: &Config, out: &Path) -> Result<()> {
     let setup_s = t0.elapsed().as_secs_f64();
     let mut outputs = Outputs::in_dir(out)?;
     engine::io::write_atomic(&outputs.path("config.toml"), cfg.to_toml().as_bytes())?;
+    outputs.path(engine::io::instrument::FLAT_NAME);
+    engine::io::instrument::write_calibration_flat(out, &sim)?;
     let pb = progress(cfg.fidelity.images as u64, "simulate");
     let mut summary = Vec::new();
     for i in 0..cfg.fidelity.images {
@@ -163,6 +165,8 @@ fn simulate_focal_plane(session: &Session, cfg: &Config, out: &Path) -> Result<(
     let setup_s = t0.elapsed().as_secs_f64();
     let mut outputs = Outputs::in_dir(out)?;
     engine::io::write_atomic(&outputs.path("config.toml"), cfg.to_toml().as_bytes())?;
+    outputs.path(engine::io::instrument::FLAT_NAME);
+    engine::io::instrument::write_focal_plane_flats(out, &fps)?;
     let pb = progress(cfg.fidelity.images as u64, "simulate");
     let mut summary = Vec::new();
     for i in 0..cfg.fidelity.images {
@@ -234,6 +238,7 @@ fn simulate_focal_plane(session: &Session, cfg: &Config, out: &Path) -> Result<(
 pub struct AnalyzeArgs {
     pub image: PathBuf,
     pub truth: Option<PathBuf>,
+    pub flat: Option<PathBuf>,
     pub zones: Option<usize>,
     pub countermeasure: Countermeasure,
     pub crowding: engine::analysis::crowding::Crowding,
@@ -244,8 +249,13 @@ pub struct AnalyzeArgs {
 /// configuration (its CONFIG extension) gives what only its simulation knows (the ACE series for the
 /// telemetry and the ACE prediction, the exact ePSF of the control).
 pub fn analyze(session: &Session, cfg: &Config, a: &AnalyzeArgs) -> Result<()> {
+    let arrays = analysis_input::focal_plane_arrays(&a.image)?;
+    if !arrays.is_empty() {
+        return analyze_focal_plane(session, cfg, a, &arrays);
+    }
     let t0 = Instant::now();
-    let input = analysis_input::AnalysisInput::read(&a.image, a.truth.as_deref(), cfg)?;
+    let input =
+        analysis_input::AnalysisInput::read(&a.image, a.truth.as_deref(), a.flat.as_deref(), cfg)?;
     for s in &input.assumptions {
         eprintln!("jsim: {}: {s}", a.image.display());
     }
@@ -293,26 +303,11 @@ pub fn analyze(session: &Session, cfg: &Config, a: &AnalyzeArgs) -> Result<()> {
     outputs.keep();
     let r = &an.report;
     if !r.accuracy_mas.is_finite() {
-        let why = if truth.is_none() {
-            "no truth to score against (score catalogue.csv with `jsim score`)".to_string()
-        } else {
-            format!(
-                "{} star(s) matched to the truth and used, fewer than {}",
-                r.n_used,
-                engine::analysis::report::MIN_SCORED_STARS
-            )
-        };
-        println!(
-            "{}: {} stars detected and fitted ({} analysis); no accuracy: {why} [{}] in {:.2} s",
-            a.image.display(),
-            r.n_detected,
-            if r.crowded {
-                "crowded-field"
-            } else {
-                "isolated-star"
-            },
-            r.countermeasure,
-            t0.elapsed().as_secs_f64()
+        print_report(
+            &a.image.display().to_string(),
+            r,
+            truth.is_some(),
+            t0.elapsed().as_secs_f64(),
         );
         return Ok(());
     }
@@ -540,4 +535,134 @@ pub fn score(a: &ScoreArgs) -> Result<()> {
     }
     println!("wrote {}/score.csv, score.json", a.out.display());
     Ok(())
+}
+
+/// `jsim analyze` on a focal-plane file: each array (`ARRAY1` …) analysed alone with its own flat
+/// (`FLAT1` … of the flat product), written to `OUT/ARRAYk/`, and the arrays together: `OUT/catalogue.csv`
+/// (every array's stars with an `array` column) and `OUT/summary.json` (each array's report and the
+/// combined one).
+fn analyze_focal_plane(
+    session: &Session,
+    cfg: &Config,
+    a: &AnalyzeArgs,
+    arrays: &[String],
+) -> Result<()> {
+    let t0 = Instant::now();
+    let mut outputs = Outputs::in_dir(&a.out)?;
+    outputs.path("catalogue.csv");
+    outputs.path("summary.json");
+    let mut per_array = Vec::new();
+    let mut rows = Vec::new();
+    let mut all_stars = Vec::new();
+    let mut scale = f64::NAN;
+    for (k, name) in arrays.iter().enumerate() {
+        let t = Instant::now();
+        let input = analysis_input::AnalysisInput::read_array(
+            &a.image,
+            k,
+            a.truth.as_deref(),
+            a.flat.as_deref(),
+            cfg,
+        )?;
+        for s in &input.assumptions {
+            eprintln!("jsim: {}[{name}]: {s}", a.image.display());
+        }
+        let an = session
+            .analyze_input(cfg, &input, a.zones, a.countermeasure, a.crowding)
+            .with_context(|| format!("{}[{name}]", a.image.display()))?;
+        scale = input.plate_scale_mas;
+        let dir = a.out.join(name);
+        for f in ["catalogue.csv", "epsf.fits", "summary.json"] {
+            outputs.add(&dir.join(f));
+        }
+        std::fs::create_dir_all(&dir).with_context(|| dir.display().to_string())?;
+        let summary = products::Summary {
+            image: format!("{}[{name}]", a.image.display()),
+            plate_scale_mas: scale,
+            countermeasure: &an.report.countermeasure,
+            report: &an.report,
+            assumptions: input.assumptions.clone(),
+            seconds: t.elapsed().as_secs_f64(),
+        };
+        products::write_analysis(&dir, &an, &summary, None)?;
+        for mut r in products::catalogue_rows(&an.stars, scale) {
+            r.insert(0, csv::Cell::I(k as i64 + 1));
+            rows.push(r);
+        }
+        print_report(
+            &summary.image,
+            &an.report,
+            input.truth.is_some(),
+            t.elapsed().as_secs_f64(),
+        );
+        all_stars.extend(an.stars.iter().copied());
+        per_array.push(serde_json::json!({
+            "array": name,
+            "report": an.report,
+            "assumptions": input.assumptions,
+        }));
+    }
+    let mut combined = engine::analysis::Report {
+        n_detected: all_stars.len(),
+        countermeasure: a.countermeasure.to_string(),
+        ..Default::default()
+    };
+    engine::analysis::report::summarise(&all_stars, None, scale, &mut combined);
+    let mut header = vec!["array"];
+    header.extend(products::CATALOGUE_HEADER);
+    csv::write(&a.out.join("catalogue.csv"), &header, &rows)?;
+    let json = serde_json::json!({
+        "image": a.image.display().to_string(),
+        "plate_scale_mas": scale,
+        "arrays": per_array,
+        "combined": combined,
+        "seconds": t0.elapsed().as_secs_f64(),
+    });
+    engine::io::write_atomic(
+        &a.out.join("summary.json"),
+        serde_json::to_string_pretty(&json)?.as_bytes(),
+    )?;
+    outputs.keep();
+    print_report(
+        &format!("{} (all {} arrays)", a.image.display(), arrays.len()),
+        &combined,
+        combined.n_matched > 0,
+        t0.elapsed().as_secs_f64(),
+    );
+    Ok(())
+}
+
+/// One line for an analysis report: the accuracy when it was scored, else why not.
+fn print_report(what: &str, r: &engine::analysis::Report, has_truth: bool, seconds: f64) {
+    let mode = if r.crowded {
+        "crowded-field"
+    } else {
+        "isolated-star"
+    };
+    if r.accuracy_mas.is_finite() {
+        println!(
+            "{what}: {} stars ({mode}), {} used; accuracy {:.2} mas (x {:.2}, y {:.2}), median CRLB {:.2} mas [{}] in {seconds:.2} s",
+            r.n_detected,
+            r.n_used,
+            r.accuracy_mas,
+            r.accuracy_x_mas,
+            r.accuracy_y_mas,
+            r.crlb_median_mas,
+            r.countermeasure,
+        );
+    } else {
+        let why = if has_truth {
+            format!(
+                "{} star(s) matched to the truth and used, fewer than {}",
+                r.n_used,
+                engine::analysis::report::MIN_SCORED_STARS
+            )
+        } else {
+            "no truth to score against (score catalogue.csv with `jsim score`)".to_string()
+        };
+        println!(
+            "{what}: {} stars detected and fitted ({mode}); no accuracy: {why} [{}] in {seconds:.2} s",
+            r.n_detected, r.countermeasure
+        );
+    }
 }

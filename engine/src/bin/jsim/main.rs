@@ -164,9 +164,14 @@ enum Command {
         /// Image to analyse (FITS from `jsim simulate`, or any image with GAIN/RDNOISE headers).
         #[arg(long)]
         image: PathBuf,
-        /// Truth catalogue (CSV or FITS TRUTH table; default: the image's TRUTH extension).
+        /// Truth catalogue (CSV or FITS TRUTH table; default: the image's TRUTH extension). Only the
+        /// report's accuracy reads it; `jsim score` scores a catalogue apart.
         #[arg(long)]
         truth: Option<PathBuf>,
+        /// Calibration flat (FITS; default: flat_cal.fits beside the image, if any; without one the image
+        /// is not flat-fielded and the output says so).
+        #[arg(long, value_name = "FITS")]
+        flat: Option<PathBuf>,
         /// Y zones of the position-dependent ePSF (with --countermeasure yzones|yzones-shared).
         #[arg(long = "epsf-zones")]
         epsf_zones: Option<usize>,
@@ -313,6 +318,7 @@ fn run(cli: Cli) -> Result<()> {
             cfg,
             image,
             truth,
+            flat,
             epsf_zones,
             cm,
             crowding,
@@ -331,6 +337,7 @@ fn run(cli: Cli) -> Result<()> {
                 &cmd::AnalyzeArgs {
                     image,
                     truth,
+                    flat,
                     zones: epsf_zones,
                     countermeasure: plan.countermeasures[0],
                     crowding,
