@@ -17,8 +17,10 @@
 //! **absent** (NaN; `null` in JSON, empty in CSV) with fewer than [`MIN_SCORED`] matched stars or with no
 //! truth — never 0.
 //!
-//! **Completeness** of a bin: matched true stars / true stars in the bin. **False detections**: measured stars
-//! matched to no true star (over the whole image: a false detection has no true magnitude).
+//! **Completeness** of a bin: matched true stars / true stars in the bin, whether or not the measurement is
+//! usable (a detection its tool flagged — saturated, poorly fitted — still found the star); the accuracy
+//! is over the usable ones (`n_scored`). **False detections**: measured stars matched to no true star (over
+//! the whole image: a false detection has no true magnitude).
 
 use crate::analysis::detection::{common_offset, nearest_within};
 use crate::numerics::stats;
@@ -40,6 +42,9 @@ pub struct Measured {
     pub y_px: f64,
     /// The array it was measured on (focal-plane files: 1 … 4; 0 for a single image).
     pub array: u32,
+    /// Whether its position counts in the accuracy (false: a fit its tool flagged as unusable — it is
+    /// still a detection for the completeness).
+    pub usable: bool,
 }
 
 /// A true star: position (pixels of its array), magnitude and array.
@@ -99,6 +104,8 @@ pub struct BinScore {
     pub n_true: usize,
     /// Of them, matched to a measured star.
     pub n_matched: usize,
+    /// Of those, with a usable position: the stars the accuracy is over.
+    pub n_scored: usize,
     /// n_matched / n_true (NaN for an empty bin).
     pub completeness: f64,
     pub accuracy_x_mas: f64,
@@ -172,8 +179,15 @@ fn one_to_one(
     m
 }
 
-/// Accuracy statistics of pairs (NaN below [`MIN_SCORED`]).
-fn bin_score(mag_lo: f64, mag_hi: f64, n_true: usize, d: &[(f64, f64)], scale: f64) -> BinScore {
+/// Accuracy statistics of the usable pairs `d` of a bin with `n_matched` matches (NaN below [`MIN_SCORED`]).
+fn bin_score(
+    mag_lo: f64,
+    mag_hi: f64,
+    n_true: usize,
+    n_matched: usize,
+    d: &[(f64, f64)],
+    scale: f64,
+) -> BinScore {
     let (dx, dy): (Vec<f64>, Vec<f64>) = d.iter().map(|p| (p.0 * scale, p.1 * scale)).unzip();
     let enough = d.len() >= MIN_SCORED;
     let or_nan = |v: f64| if enough { v } else { f64::NAN };
@@ -182,9 +196,10 @@ fn bin_score(mag_lo: f64, mag_hi: f64, n_true: usize, d: &[(f64, f64)], scale: f
         mag_lo,
         mag_hi,
         n_true,
-        n_matched: d.len(),
+        n_matched,
+        n_scored: d.len(),
         completeness: if n_true > 0 {
-            d.len() as f64 / n_true as f64
+            n_matched as f64 / n_true as f64
         } else {
             f64::NAN
         },
@@ -245,9 +260,14 @@ pub fn score(
             offsets.iter().map(|o| o.1).sum::<f64>() / offsets.len() as f64,
         )
     };
+    // per true star: matched, and its displacement when the measurement is usable
+    let mut matched = vec![false; truth.len()];
     let mut matched_d: Vec<Option<(f64, f64)>> = vec![None; truth.len()];
     for p in &pairs {
-        matched_d[p.truth] = Some((p.dx_px, p.dy_px));
+        matched[p.truth] = true;
+        if measured[p.measured].usable {
+            matched_d[p.truth] = Some((p.dx_px, p.dy_px));
+        }
     }
     let mags: Vec<f64> = truth
         .iter()
@@ -268,7 +288,8 @@ pub fn score(
                 .filter(|&k| truth[k].mag >= a && truth[k].mag < z)
                 .collect();
             let d: Vec<(f64, f64)> = inside.iter().filter_map(|&k| matched_d[k]).collect();
-            bins.push(bin_score(a, z, inside.len(), &d, scale));
+            let n_matched = inside.iter().filter(|&&k| matched[k]).count();
+            bins.push(bin_score(a, z, inside.len(), n_matched, &d, scale));
         }
     }
     let finite: Vec<usize> = (0..truth.len())
@@ -279,6 +300,7 @@ pub fn score(
         mags.iter().copied().reduce(f64::min).unwrap_or(f64::NAN),
         mags.iter().copied().reduce(f64::max).unwrap_or(f64::NAN),
         finite.len(),
+        finite.iter().filter(|&&k| matched[k]).count(),
         &d_all,
         scale,
     );
@@ -338,6 +360,7 @@ mod tests {
                 x_px: t.x_px + 0.3 + noise.sample(&mut rng),
                 y_px: t.y_px - 0.2 + noise.sample(&mut rng),
                 array: 0,
+                usable: true,
             })
             .collect();
         // five spurious detections far from every star, and a second detection next to star 0 (a duplicate)
@@ -346,12 +369,14 @@ mod tests {
                 x_px: 10.0 + 4.5 + 0.3 + 9.0 * k as f64,
                 y_px: 10.0 + 4.5 - 0.2,
                 array: 0,
+                usable: true,
             });
         }
         measured.push(Measured {
             x_px: truth[0].x_px + 0.3 + 0.6,
             y_px: truth[0].y_px - 0.2,
             array: 0,
+            usable: true,
         });
         let s = score(&measured, &truth, &opts()).expect("score");
         assert!((s.offset_x_px - 0.3).abs() < 0.005 && (s.offset_y_px + 0.2).abs() < 0.005);
@@ -385,6 +410,7 @@ mod tests {
             x_px: x,
             y_px: 50.0,
             array: a,
+            usable: true,
         };
         let truth = [
             t(10.0, 1),
@@ -405,6 +431,35 @@ mod tests {
         }
     }
 
+    /// A match whose measurement is flagged unusable counts for the completeness, not the accuracy.
+    #[test]
+    fn unusable_measurements_count_as_found_but_not_in_the_accuracy() {
+        let truth: Vec<TrueStar> = (0..4)
+            .map(|k| TrueStar {
+                x_px: 10.0 + 10.0 * k as f64,
+                y_px: 10.0,
+                mag: 12.5,
+                array: 0,
+            })
+            .collect();
+        let measured: Vec<Measured> = truth
+            .iter()
+            .enumerate()
+            .map(|(k, t)| Measured {
+                // the unusable one is 0.5 px off: it would dominate the accuracy
+                x_px: t.x_px + if k == 3 { 0.5 } else { 0.01 * k as f64 },
+                y_px: t.y_px,
+                array: 0,
+                usable: k != 3,
+            })
+            .collect();
+        let s = score(&measured, &truth, &opts()).expect("score");
+        assert_eq!((s.all.n_matched, s.all.n_scored), (4, 3));
+        assert_eq!(s.all.completeness, 1.0);
+        // std of (0, 0.01, 0.02) px = 0.01 px = 1 mas at 100 mas/px
+        assert!((s.all.accuracy_x_mas - 1.0).abs() < 1e-9, "{:?}", s.all);
+    }
+
     #[test]
     fn fewer_than_two_matches_or_no_truth_leave_the_accuracy_absent() {
         let truth = [TrueStar {
@@ -417,6 +472,7 @@ mod tests {
             x_px: 5.01,
             y_px: 5.0,
             array: 0,
+            usable: true,
         }];
         let s = score(&one, &truth, &opts()).expect("score");
         assert_eq!(s.all.n_matched, 1);

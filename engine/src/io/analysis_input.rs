@@ -307,6 +307,16 @@ impl AnalysisInput {
             flat,
             fallback,
         )
+        .map(|mut input| {
+            for a in input.assumptions.iter_mut() {
+                if a.starts_with("no CONFIG extension") {
+                    *a = "a focal-plane array: no single-array simulation context (the telemetry \
+                          correction and exact-epsf need one; none is taken from the file's CONFIG)"
+                        .to_string();
+                }
+            }
+            input
+        })
         .map_err(|message| IoError::Format {
             path: path.to_path_buf(),
             message: format!("{ext}: {message}"),

@@ -5,8 +5,8 @@
 //!   their array only.
 //! * **Measured catalogue**: a CSV with columns `x, y` (pixels, 0-based: integer values are pixel centres)
 //!   — `catalogue.csv` of `jsim analyze`, or any tool's list. With a `flags` column (jsim's), rows with a
-//!   rejection flag (`flags & REJECT`) are not measurements and are left out, as the analysis' own report
-//!   does. Other columns are ignored.
+//!   rejection flag (`flags & REJECT`) count as detections (completeness) but not in the accuracy, as the
+//!   analysis' own report does. Other columns are ignored.
 //! * **Truth**: a CSV with `x, y` and a magnitude column (`mag`, `mag_hw` or `hw`, the first found), or a jsim
 //!   image (FITS) whose TRUTH extension gives `x, y, mag_hw`. Both with one convention of pixels.
 
@@ -44,14 +44,13 @@ pub fn read_measured(path: &Path) -> Result<Vec<Measured>, IoError> {
     };
     let a = array_column(path, &h, &rows)?;
     Ok((0..x.len())
-        .filter(|&k| {
-            f.as_ref()
-                .is_none_or(|f| (f[k] as u32) & flags::REJECT == 0)
-        })
         .map(|k| Measured {
             x_px: x[k],
             y_px: y[k],
             array: a.as_ref().map(|a| a[k]).unwrap_or(0),
+            usable: f
+                .as_ref()
+                .is_none_or(|f| (f[k] as u32) & flags::REJECT == 0),
         })
         .collect())
 }
@@ -120,12 +119,13 @@ fn array_column(
 }
 
 /// Columns of `score.csv`: one row per magnitude bin, then the row `all`.
-pub const SCORE_HEADER: [&str; 11] = [
+pub const SCORE_HEADER: [&str; 12] = [
     "bin",
     "mag_lo",
     "mag_hi",
     "n_true",
     "n_matched",
+    "n_scored",
     "completeness",
     "accuracy_x_mas",
     "accuracy_y_mas",
@@ -155,6 +155,7 @@ pub fn score_rows(s: &Score) -> Vec<Vec<Cell>> {
                 cell(b.mag_hi),
                 Cell::I(b.n_true as i64),
                 Cell::I(b.n_matched as i64),
+                Cell::I(b.n_scored as i64),
                 cell(b.completeness),
                 cell(b.accuracy_x_mas),
                 cell(b.accuracy_y_mas),

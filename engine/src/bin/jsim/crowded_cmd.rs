@@ -90,6 +90,9 @@ pub fn crowded(a: &CrowdedArgs) -> Result<()> {
             engine::io::ensure_dir(&dir)?;
             outputs.add(&dir.join(engine::io::focal_plane::focal_plane_name(0)));
             engine::io::focal_plane::write_focal_plane_exposure(&dir, &fps, &exp)?;
+            // the instrument's calibration flat beside it, so that `jsim analyze` can read the exposure
+            outputs.add(&dir.join(engine::io::instrument::FLAT_NAME));
+            engine::io::instrument::write_focal_plane_flats(&dir, &fps)?;
         }
         crate::outputs::interrupted()?;
         let analyses = crowded::analyse_focal_plane(&fps, &exp, &plan, &edges)?;
