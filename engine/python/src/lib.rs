@@ -14,6 +14,7 @@ mod config;
 mod convert;
 mod experiment;
 mod exposure;
+mod scoring;
 mod session;
 
 /// The engine's error as the Python exception a user expects: a bad configuration or argument is a
@@ -58,6 +59,7 @@ fn _jsim(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<exposure::PyExposure>()?;
     m.add_class::<session::PyAnalysis>()?;
     m.add_function(wrap_pyfunction!(experiment::experiment, m)?)?;
+    m.add_function(wrap_pyfunction!(scoring::score, m)?)?;
     m.add("__version__", engine::VERSION)?;
     m.add("COUNTERMEASURES", engine::analysis::countermeasures::NAMES)?;
     Ok(())

@@ -32,6 +32,7 @@ from ._jsim import (  # noqa: F401, E402
     Exposure,
     Session,
     __version__,
+    score,
 )
 from ._jsim import experiment as _experiment  # noqa: E402
 
@@ -42,6 +43,7 @@ __all__ = [
     "Exposure",
     "Session",
     "experiment",
+    "score",
     "__version__",
 ]
 

@@ -63,6 +63,9 @@ class Exposure:
     def index(self) -> int: ...
     @property
     def config(self) -> Config: ...
+    @property
+    def calibration_flat(self) -> Optional[Tuple[npt.NDArray[np.float64], float]]:
+        """The calibration flat product (flat, relative error), or None when uncalibrated."""
     def write_fits(self, path: Union[str, PathLike[str]]) -> None:
         """Write the FITS file ``jsim simulate`` writes (image, DQ, TRUTH, CONFIG)."""
 
@@ -106,13 +109,29 @@ class Session:
         config: Optional[Config] = None,
         countermeasure: str = "none",
         epsf_zones: Optional[int] = None,
+        crowding: str = "auto",
+        flat: Optional[npt.ArrayLike] = None,
+        flat_error: Optional[float] = None,
     ) -> Analysis:
         """ePSF astrometry of one image (``jsim analyze``): an Exposure, or a 2-D ADU array with its
-        header (GAIN, RDNOISE or RNREAD+SAMPLING, BIASADU, SATURATE, PLTSCALE, IMAGEIDX), dq, truth
-        and the config it was simulated with. TypeError for a non-numeric dtype, ValueError for a
-        shape that is not 2-D."""
+        header (GAIN, RDNOISE or RNREAD+SAMPLING, BIASADU, SATURATE, PLTSCALE, IMAGEIDX), dq, truth,
+        the config it was simulated with and the calibration flat product (``flat``, ``flat_error``).
+        ``crowding``: auto, on or off. TypeError for a non-numeric dtype, ValueError for a shape that
+        is not 2-D."""
     def predict(self, countermeasures: Union[str, Sequence[str], None] = None) -> Dict[str, float]:
         """The instant predictor: expected accuracy [mas] per countermeasure."""
+
+def score(
+    measured: Dict[str, npt.ArrayLike],
+    truth: Dict[str, npt.ArrayLike],
+    *,
+    plate_scale_mas: float,
+    match_radius_px: float = 1.0,
+    offset_search_px: float = 20.0,
+    bin_mag: float = 1.0,
+) -> Dict[str, Any]:
+    """The scoring step (``jsim score``): completeness, accuracy and false detections per magnitude bin
+    of measured x, y (optional flags, array) against a truth x, y, mag (optional array)."""
 
 def experiment(
     config: Optional[Config] = None,
