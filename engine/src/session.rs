@@ -162,7 +162,7 @@ impl Session {
         epsf_zones: Option<usize>,
         countermeasure: Countermeasure,
         crowding: Crowding,
-    ) -> crate::Result<Analysis> {
+    ) -> Result<Analysis, AnalysisError> {
         let img_cfg = input.provenance.as_ref().map(|(c, _)| c).unwrap_or(cfg);
         let mut analysis_cfg = cfg.analysis.clone();
         if let Some(z) = epsf_zones {
@@ -170,16 +170,11 @@ impl Session {
         }
         if crowding::is_crowded(&input.img, &analysis_cfg, crowding).0 {
             if countermeasure != Countermeasure::None {
-                return Err(crate::Error::Analysis(AnalysisError::NotInCrowdedField {
+                return Err(AnalysisError::NotInCrowdedField {
                     countermeasure: countermeasure.to_string(),
-                }));
+                });
             }
-            return Ok(analyze_crowded(
-                &input.img,
-                input.truth.as_deref(),
-                &analysis_cfg,
-                None,
-            )?);
+            return analyze_crowded(&input.img, input.truth.as_deref(), &analysis_cfg, None);
         }
         let sim = match &input.provenance {
             Some((c, index)) => {
@@ -204,9 +199,9 @@ impl Session {
             img_cfg.seed,
         )?;
         res.into_of(&countermeasure)
-            .ok_or(crate::Error::Analysis(AnalysisError::NotApplicable {
+            .ok_or(AnalysisError::NotApplicable {
                 countermeasure: countermeasure.to_string(),
-            }))
+            })
     }
 }
 

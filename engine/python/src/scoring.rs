@@ -46,7 +46,10 @@ pub fn score<'py>(
             PyValueError::new_err(format!("{what}: needs a column {}", names.join(" or ")))
         })
     };
-    let (mx, my) = (need(measured, "measured", &["x"])?, need(measured, "measured", &["y"])?);
+    let (mx, my) = (
+        need(measured, "measured", &["x"])?,
+        need(measured, "measured", &["y"])?,
+    );
     let mf = get(measured, "measured", &["flags"])?;
     let ma = get(measured, "measured", &["array"])?;
     let (tx, ty) = (need(truth, "truth", &["x"])?, need(truth, "truth", &["y"])?);
