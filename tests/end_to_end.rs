@@ -275,6 +275,10 @@ fn the_analysis_reads_no_truth_or_config_only_the_products() {
     )
     .expect("write the bare copy");
     std::fs::copy(&flat, bare.join(instrument::FLAT_NAME)).expect("copy flat");
+    let refcat =
+        instrument::write_reference_catalogue(&full, &sim, &instrument::SurveyModel::default())
+            .expect("refcat");
+    std::fs::copy(&refcat, bare.join(instrument::REFCAT_NAME)).expect("copy refcat");
     let session = Session::new();
     let analyse = |path: &std::path::Path| {
         let input = analysis_input::AnalysisInput::read(path, Some(&files.truth_csv), None, &cfg)

@@ -352,14 +352,15 @@ fn too_few_stars_for_an_epsf_fall_back_to_a_stated_psf() {
         &c.analysis,
         &plan,
         c.seed,
+        None,
     )
     .expect("analysis");
     let r = &with_model.global.report;
     assert_eq!((r.epsf_stars, r.n_used), (4, 4), "{r:?}");
     assert!(r.epsf_fallback.contains("model PSF"), "{r:?}");
     assert!(r.accuracy_mas.is_finite() && r.accuracy_mas > 0.0);
-    let without =
-        analyse_image(&img, Some(&e.truth), None, &c.analysis, &plan, c.seed).expect("analysis");
+    let without = analyse_image(&img, Some(&e.truth), None, &c.analysis, &plan, c.seed, None)
+        .expect("analysis");
     assert!(
         without.global.report.epsf_fallback.contains("Gaussian"),
         "{:?}",

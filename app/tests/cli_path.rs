@@ -89,6 +89,12 @@ fn written_image(name: &str) -> (Config, std::path::PathBuf, std::path::PathBuf)
     let files = exposure::write_exposure(&dir, &sim, &exp).expect("written");
     // the calibration flat product beside it, as `jsim simulate` writes it
     engine::io::instrument::write_calibration_flat(&dir, &sim).expect("the flat");
+    engine::io::instrument::write_reference_catalogue(
+        &dir,
+        &sim,
+        &engine::io::instrument::SurveyModel::default(),
+    )
+    .expect("the reference catalogue");
     assert_eq!(
         image_config(&files.image),
         cfg,

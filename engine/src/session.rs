@@ -169,12 +169,15 @@ impl Session {
             analysis_cfg.epsf_zones = z;
         }
         if crowding::is_crowded(&input.img, &analysis_cfg, crowding).0 {
-            if countermeasure != Countermeasure::None {
-                return Err(AnalysisError::NotInCrowdedField {
-                    countermeasure: countermeasure.to_string(),
-                });
-            }
-            return analyze_crowded(&input.img, input.truth.as_deref(), &analysis_cfg, None);
+            return analyze_crowded(
+                &input.img,
+                input.truth.as_deref(),
+                &analysis_cfg,
+                None,
+                &countermeasure,
+                input.reference.as_deref(),
+                img_cfg.seed,
+            );
         }
         let sim = match &input.provenance {
             Some((c, index)) => {
@@ -197,6 +200,7 @@ impl Session {
             &analysis_cfg,
             &plan,
             img_cfg.seed,
+            input.reference.as_deref(),
         )?;
         res.into_of(&countermeasure)
             .ok_or(AnalysisError::NotApplicable {

@@ -274,6 +274,24 @@ fn a_dense_outside_image_is_analysed_as_a_crowded_field() {
         .expect("run");
     assert!(out.status.success());
     assert_eq!(json(&iso.join("summary.json"))["report"]["crowded"], false);
+    // in crowded mode a countermeasure that refits single stars, or needs a simulation, is refused by name
+    for cm in ["yzones", "telemetry", "plate-poly:3@oracle"] {
+        let bad = dir.join(format!("bad-{}", cm.replace([':', '@'], "_")));
+        let out = jsim()
+            .args(["analyze", "--countermeasure", cm, "--image"])
+            .arg(&image)
+            .arg("--out")
+            .arg(&bad)
+            .output()
+            .expect("run");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{cm}: {err}");
+        assert!(
+            err.contains(cm.split('@').next().unwrap_or(cm)),
+            "{cm}: {err}"
+        );
+        assert!(!bad.exists(), "{cm}: the output directory was created");
+    }
     let _ = std::fs::remove_dir_all(&dir);
 }
 
@@ -407,6 +425,84 @@ fn bad_score_options_are_named_and_write_nothing() {
         .output()
         .expect("run");
     assert!(String::from_utf8_lossy(&out.stderr).contains("magnitude"));
+    assert!(!out_dir.exists());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The reference catalogue product has the survey's statistics: per-axis errors of σ(Hw) (within 3 × the
+/// statistical error of a standard deviation), the completeness (within 3 binomial σ), nothing beyond the
+/// limit; written and read back unchanged; `jsim simulate` writes it and refuses a bad survey knob by name.
+#[test]
+fn the_reference_catalogue_has_the_survey_errors_completeness_and_limit() {
+    use engine::io::instrument::{self, SurveyModel};
+    let mut cfg = engine::Config::default();
+    cfg.instrument.detector_px = 512;
+    cfg.instrument.photosensitive_px = 496;
+    cfg.readout.channels = 4;
+    cfg.readout.channel_width_px = 128;
+    cfg.optics.pupil_samples = 64;
+    cfg.optics.psf_radius_px = 8;
+    cfg.band.wavelength_step_um = 0.1;
+    cfg.fidelity.backend = engine::config::Backend::Cpu;
+    cfg.scene.grid_n = 30;
+    cfg.scene.grid_spacing_px = 16.0;
+    cfg.scene.mag_hw = 15.0;
+    let sim = engine::simulate::Simulator::new(&cfg).expect("simulator");
+    let survey = SurveyModel::default();
+    let refs = instrument::reference_catalogue(&sim, &survey, 0);
+    let n = sim.stars.iter().filter(|s| s.in_truth).count();
+    let scale = cfg.instrument.plate_scale_mas();
+    let f = refs.len() as f64 / n as f64;
+    let sf = (survey.completeness * (1.0 - survey.completeness) / n as f64).sqrt();
+    assert!(
+        (f - survey.completeness).abs() < 3.0 * sf + 1e-9,
+        "completeness {f}"
+    );
+    let by_id: std::collections::HashMap<usize, (f64, f64)> =
+        sim.stars.iter().map(|s| (s.id, (s.x_px, s.y_px))).collect();
+    let (dx, dy): (Vec<f64>, Vec<f64>) = refs
+        .iter()
+        .map(|r| {
+            let t = by_id[&r.id];
+            ((r.x_px - t.0) * scale, (r.y_px - t.1) * scale)
+        })
+        .unzip();
+    let sigma = survey.sigma_mas(15.0);
+    assert!((sigma - 2.0 * 10f64.powf(0.2)).abs() < 1e-12);
+    for d in [&dx, &dy] {
+        let m = d.iter().sum::<f64>() / d.len() as f64;
+        let s = (d.iter().map(|v| (v - m).powi(2)).sum::<f64>() / (d.len() - 1) as f64).sqrt();
+        let tol = 3.0 * sigma / (2.0 * (d.len() as f64 - 1.0)).sqrt();
+        assert!((s - sigma).abs() < tol, "σ {s} against {sigma} ± {tol}");
+    }
+    assert!(
+        refs.iter()
+            .all(|r| r.ra_deg.is_finite() && r.dec_deg.is_finite())
+    );
+    // beyond the limit: none
+    let faint = SurveyModel {
+        limit_hw: 14.9,
+        ..survey
+    };
+    assert!(instrument::reference_catalogue(&sim, &faint, 0).is_empty());
+    // written and read back
+    let dir = temp("refcat");
+    let p = instrument::write_reference_catalogue(&dir, &sim, &survey).expect("write");
+    let back = instrument::read_reference_catalogue(&p, 0).expect("read");
+    assert_eq!(back.len(), refs.len());
+    for (a, b) in back.iter().zip(&refs) {
+        assert!((a.x_px - b.x_px).abs() < 1e-9 && (a.sigma_mas - b.sigma_mas).abs() < 1e-9);
+    }
+    // the CLI: a bad survey knob is named, nothing written
+    let out_dir = dir.join("sim");
+    let out = jsim()
+        .args(["simulate", "--refcat-completeness", "1.5", "--out"])
+        .arg(&out_dir)
+        .output()
+        .expect("run");
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(1), "{err}");
+    assert!(err.contains("--refcat-completeness"), "{err}");
     assert!(!out_dir.exists());
     let _ = std::fs::remove_dir_all(&dir);
 }

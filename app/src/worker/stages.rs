@@ -187,6 +187,7 @@ impl EngineState {
             &cfg.analysis,
             &plan,
             cfg.seed,
+            None,
         )
         .map_err(failed(Stage::Image))?;
         let analyse_s = t1.elapsed().as_secs_f64();
@@ -399,6 +400,7 @@ impl EngineState {
             &tcfg.analysis,
             &Plan::default(),
             tcfg.seed,
+            None,
         )
         .ok()
         .map(|a| a.global.report);

@@ -7,7 +7,7 @@ use engine::config::FlatField;
 use engine::io::analysis_input::{AnalysisInput, ImageParts};
 use engine::io::exposure as files;
 use engine::io::fits::{ImageFacts, Pixels, Value};
-use engine::io::instrument::CalibrationFlat;
+use engine::io::instrument::{CalibrationFlat, SurveyModel, reference_catalogue};
 use engine::simulate::{Exposure, Simulator};
 use numpy::PyReadonlyArray2;
 use pyo3::exceptions::PyValueError;
@@ -140,6 +140,16 @@ impl PyExposure {
                 self.calibration_flat_product(),
                 fallback,
             )
+            .map(|mut input| {
+                // the reference catalogue product, as `write_fits` writes it beside the image
+                input.reference = Some(
+                    reference_catalogue(&self.sim, &SurveyModel::default(), 0)
+                        .iter()
+                        .map(|s| (s.x_px, s.y_px))
+                        .collect(),
+                );
+                input
+            })
             .map_err(PyValueError::new_err)
         })
     }
@@ -245,14 +255,17 @@ impl PyExposure {
     }
 
     /// Write the FITS file `jsim simulate` writes for this exposure (image, DQ, TRUTH, CONFIG), atomically,
-    /// with the `image` and `dq` arrays as they are now, and beside it the calibration flat product
-    /// (`flat_cal.fits`, when the analysis is calibrated) that `jsim analyze` reads.
+    /// with the `image` and `dq` arrays as they are now, and beside it the instrument products that
+    /// `jsim analyze` reads: the calibration flat (`flat_cal.fits`, when the analysis is calibrated) and the
+    /// reference catalogue (`refcat.csv`, the default survey model).
     fn write_fits(&self, py: Python<'_>, path: std::path::PathBuf) -> PyResult<()> {
         self.with_planes(py, |pixels, dq| {
             files::write_image_file(&path, &self.sim, &self.exp, pixels, dq).or_py()
         })?;
         let dir = path.parent().unwrap_or(std::path::Path::new("."));
         engine::io::instrument::write_calibration_flat(dir, &self.sim).or_py()?;
+        engine::io::instrument::write_reference_catalogue(dir, &self.sim, &SurveyModel::default())
+            .or_py()?;
         Ok(())
     }
 

@@ -36,6 +36,9 @@ pub struct Options {
     pub telemetry: Option<Arc<Telemetry>>,
     /// Seed of the reference catalogue's error draws (the simulation's seed).
     pub seed: u64,
+    /// The reference catalogue product's positions (pixels of this image) for `plate-*@catalogue`; without
+    /// one the reference is drawn from the truth with the plan's error (a simulation's).
+    pub reference: Option<Vec<(f64, f64)>>,
     /// Fit with this ePSF instead of building one (e.g. the exact ePSF from the simulator).
     pub fixed_epsf: Option<Epsf>,
     /// The instrument's model PSF (pixel-integrated, from calibration), used when the image holds fewer
@@ -56,6 +59,7 @@ impl Options {
             countermeasure: Countermeasure::None,
             telemetry: None,
             seed: 0,
+            reference: None,
             fixed_epsf: None,
             model_epsf: None,
         }
@@ -108,6 +112,7 @@ pub fn analyze(
         &prepared,
         &opts.countermeasure,
         opts.telemetry.as_deref(),
+        opts.reference.as_deref(),
         opts.seed,
     )
 }
@@ -217,6 +222,7 @@ pub fn with_countermeasure(
     prepared: &Prepared,
     cm: &Countermeasure,
     telemetry: Option<&Telemetry>,
+    reference: Option<&[(f64, f64)]>,
     seed: u64,
 ) -> Result<Analysis, AnalysisError> {
     let mut stars = plain.stars.clone();
@@ -230,6 +236,7 @@ pub fn with_countermeasure(
         truth,
         default_zones: prepared.default_zones,
         telemetry,
+        reference,
         seed,
     };
     report.dof_absorbed = countermeasures::apply(cm, &ctx, &mut stars)?;
@@ -246,13 +253,37 @@ pub fn with_countermeasure(
 }
 
 /// The crowded-field analysis of one image ([`crate::analysis::crowded::analyse`]) as an [`Analysis`] of the
-/// pipeline (no countermeasure): its stars, its ePSF and a report (the accuracy only with a truth given).
+/// pipeline: its stars, its ePSF and a report (the accuracy only with a truth given), corrected by `cm` when
+/// it is one that acts on the fitted positions alone — a plate model referenced to the reference catalogue
+/// product (`reference`) or, `@oracle`, to the truth. The others are refused by name: those that refit
+/// single stars (`yzones`, `exact-epsf`), the telemetry correction (it needs the simulation context of a
+/// single-array jsim image: `jsim crowded` applies it) and a stack reference (a stare's).
 pub fn analyze_crowded(
     img: &AnalysisImage,
     truth: Option<&[TruthRow]>,
     cfg: &AnalysisCfg,
     model_epsf: Option<&Epsf>,
+    cm: &Countermeasure,
+    reference: Option<&[(f64, f64)]>,
+    seed: u64,
 ) -> Result<Analysis, AnalysisError> {
+    let applies = match cm {
+        Countermeasure::None => true,
+        Countermeasure::Plate {
+            reference: countermeasures::Reference::Catalogue { .. },
+            ..
+        } => reference.is_some() || truth.is_some(),
+        Countermeasure::Plate {
+            reference: countermeasures::Reference::Oracle,
+            ..
+        } => truth.is_some(),
+        _ => false,
+    };
+    if !applies {
+        return Err(AnalysisError::NotInCrowdedField {
+            countermeasure: cm.to_string(),
+        });
+    }
     let c = crate::analysis::crowded::analyse(img, cfg, model_epsf);
     if c.fits.is_empty() {
         return Err(AnalysisError::NoStars(cfg.crowded_detect_sigma));
@@ -262,16 +293,32 @@ pub fn analyze_crowded(
         Some(t) => match_truth(&pos, t),
         None => vec![None; pos.len()],
     };
-    let stars = star_results(&c.fits, &matches, truth);
+    let mut stars = star_results(&c.fits, &matches, truth);
     let mut report = Report {
         n_detected: c.fits.len(),
         epsf_iterations: c.epsf_iterations,
         epsf_stars: c.epsf_stars,
         epsf_fallback: c.fallback,
-        countermeasure: Countermeasure::None.to_string(),
+        countermeasure: cm.to_string(),
         crowded: true,
         ..Default::default()
     };
+    if *cm != Countermeasure::None {
+        let build = build_options(cfg);
+        let ctx = Context {
+            img,
+            starts: &[],
+            usable: &[],
+            build: &build,
+            global: &c.epsf,
+            truth,
+            default_zones: cfg.epsf_zones.max(2),
+            telemetry: None,
+            reference,
+            seed,
+        };
+        report.dof_absorbed = countermeasures::apply(cm, &ctx, &mut stars)?;
+    }
     summarise(&stars, truth, img.plate_scale_mas, &mut report);
     Ok(Analysis {
         report,
@@ -394,6 +441,7 @@ pub fn analyse_image(
     cfg: &AnalysisCfg,
     plan: &Plan,
     seed: u64,
+    reference: Option<&[(f64, f64)]>,
 ) -> Result<ImageAnalysis, AnalysisError> {
     let base = Options::new(cfg);
     let model = || -> Result<Option<Epsf>, AnalysisError> {
@@ -428,12 +476,21 @@ pub fn analyse_image(
                 match source.map(|s| s.telemetry(q, cfg)).transpose()?.flatten() {
                     // a static ACE (or an image without its simulation) has nothing to correct
                     None => global.clone(),
-                    Some(tel) => {
-                        with_countermeasure(img, truth, &plain, &prepared, cm, Some(&tel), seed)?
-                    }
+                    Some(tel) => with_countermeasure(
+                        img,
+                        truth,
+                        &plain,
+                        &prepared,
+                        cm,
+                        Some(&tel),
+                        reference,
+                        seed,
+                    )?,
                 }
             }
-            other => with_countermeasure(img, truth, &plain, &prepared, other, None, seed)?,
+            other => {
+                with_countermeasure(img, truth, &plain, &prepared, other, None, reference, seed)?
+            }
         };
         measured.push((*cm, analysis));
     }

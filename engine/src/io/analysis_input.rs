@@ -123,6 +123,8 @@ pub struct AnalysisInput {
     pub plate_scale_mas: f64,
     /// What was assumed because the image did not say.
     pub assumptions: Vec<String>,
+    /// The reference catalogue product's positions in this image's pixels (`refcat.csv`), when there is one.
+    pub reference: Option<Vec<(f64, f64)>>,
 }
 
 impl AnalysisInput {
@@ -134,6 +136,18 @@ impl AnalysisInput {
         path: &Path,
         truth_path: Option<&Path>,
         flat_path: Option<&Path>,
+        fallback: &Config,
+    ) -> Result<Self, IoError> {
+        Self::read_with(path, truth_path, flat_path, None, fallback)
+    }
+
+    /// [`AnalysisInput::read`] with the reference catalogue product `refcat_path` (default: `refcat.csv`
+    /// beside the image, if there is one).
+    pub fn read_with(
+        path: &Path,
+        truth_path: Option<&Path>,
+        flat_path: Option<&Path>,
+        refcat_path: Option<&Path>,
         fallback: &Config,
     ) -> Result<Self, IoError> {
         let flat = match instrument::find_flat(path, flat_path) {
@@ -169,6 +183,10 @@ impl AnalysisInput {
         .map_err(|message| IoError::Format {
             path: path.to_path_buf(),
             message,
+        })
+        .and_then(|mut input| {
+            input.reference = read_reference(path, refcat_path, 0, &mut input.assumptions)?;
+            Ok(input)
         })
     }
 
@@ -243,6 +261,7 @@ impl AnalysisInput {
             provenance,
             plate_scale_mas,
             assumptions,
+            reference: None,
         })
     }
 }
@@ -281,6 +300,7 @@ impl AnalysisInput {
         k: usize,
         truth_path: Option<&Path>,
         flat_path: Option<&Path>,
+        refcat_path: Option<&Path>,
         fallback: &Config,
     ) -> Result<Self, IoError> {
         let ext = format!("ARRAY{}", k + 1);
@@ -321,6 +341,11 @@ impl AnalysisInput {
             path: path.to_path_buf(),
             message: format!("{ext}: {message}"),
         })
+        .and_then(|mut input| {
+            input.reference =
+                read_reference(path, refcat_path, k as u32 + 1, &mut input.assumptions)?;
+            Ok(input)
+        })
     }
 }
 
@@ -337,4 +362,30 @@ fn array_truth(path: &Path, array: usize) -> Result<Vec<TruthRow>, IoError> {
         .map(|c| keep.iter().map(|&i| c[i]).collect())
         .collect();
     Ok(crate::io::exposure::truth_from_columns(&sel))
+}
+
+/// The reference catalogue product for an image (array `array`, 0 for a single one): the positions of its
+/// stars in the image's pixels, or `None` (said in `assumptions`) when there is none.
+fn read_reference(
+    image: &Path,
+    given: Option<&Path>,
+    array: u32,
+    assumptions: &mut Vec<String>,
+) -> Result<Option<Vec<(f64, f64)>>, IoError> {
+    match instrument::find_reference_catalogue(image, given) {
+        Some(p) => Ok(Some(
+            instrument::read_reference_catalogue(&p, array)?
+                .iter()
+                .map(|s| (s.x_px, s.y_px))
+                .collect(),
+        )),
+        None => {
+            assumptions.push(format!(
+                "no reference catalogue ({} beside the image, or --refcat): plate-*@catalogue would draw its \
+                 reference from the truth with the stated error, as a simulation does",
+                instrument::REFCAT_NAME
+            ));
+            Ok(None)
+        }
+    }
 }

@@ -8,6 +8,10 @@
 //!   array, `FLAT1` … `FLAT4`, matching `ARRAY1` … `ARRAY4` of the exposures. Header: `FLATERR`, `SEED`,
 //!   `CONFHASH`, `ORIGIN`, `CONTENT`. Written only when the configuration's analysis is calibrated
 //!   (`analysis.flat_field = { calibrated = … }`, the default).
+//! * **Reference astrometric catalogue** (`refcat.csv`): what a survey gives of the field ([`SurveyModel`]:
+//!   magnitude-dependent errors, a limiting magnitude, incompleteness), with each star's position on the sky
+//!   and in the pixels of its array through the array's design WCS. The `plate-*@catalogue` countermeasures
+//!   of `jsim analyze` fit to it, cross-matched by position.
 
 use super::IoError;
 use super::fits::{self, Card, Hdu, Pixels};
@@ -149,6 +153,236 @@ pub fn find_flat(image: &Path, given: Option<&Path>) -> Option<PathBuf> {
         Some(p) => Some(p.to_path_buf()),
         None => {
             let p = image.parent().unwrap_or(Path::new(".")).join(FLAT_NAME);
+            p.exists().then_some(p)
+        }
+    }
+}
+
+/// File name of the reference astrometric catalogue beside the images.
+pub const REFCAT_NAME: &str = "refcat.csv";
+
+/// Columns of `refcat.csv`.
+pub const REFCAT_HEADER: [&str; 8] = [
+    "id",
+    "array",
+    "ra_deg",
+    "dec_deg",
+    "x_px",
+    "y_px",
+    "hw",
+    "sigma_mas",
+];
+
+/// The survey a reference catalogue comes from: its position error against magnitude, its limiting
+/// magnitude and its completeness (the knobs of `jsim simulate --refcat-*`).
+///
+/// Position error per axis `σ(Hw) = floor_mas · max(1, 10^{0.2 (Hw − knee_hw)})`: a systematic floor for
+/// bright stars, photon-limited (∝ flux^{−1/2}) fainter than the knee. Defaults — chosen, not fitted to a
+/// survey: a 2-mas floor (the plate model's `DEFAULT_CATALOGUE_ERROR_MAS`, a Gaia-DR3-like star of
+/// G ≈ 17–18 propagated to the epoch), the knee at Hw 14, a limit of Hw 16.5 (the JASMINE pilot
+/// catalogue's completeness in Hw, from 2MASS + SIRIUS + VVV: JASMINE-Mission/pilot_catalog) and 98 %
+/// completeness above it. The catalogue is at the observation epoch (jsim's stars do not move yet): no
+/// proper motions, no epoch propagation.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SurveyModel {
+    pub floor_mas: f64,
+    pub knee_hw: f64,
+    pub limit_hw: f64,
+    pub completeness: f64,
+}
+
+impl Default for SurveyModel {
+    fn default() -> Self {
+        Self {
+            floor_mas: crate::analysis::countermeasures::DEFAULT_CATALOGUE_ERROR_MAS,
+            knee_hw: 14.0,
+            limit_hw: 16.5,
+            completeness: 0.98,
+        }
+    }
+}
+
+impl SurveyModel {
+    /// Check every knob, naming it and its allowed range.
+    pub fn validate(&self) -> Result<(), String> {
+        if !(self.floor_mas > 0.0 && self.floor_mas <= 1e5) {
+            return Err(format!(
+                "--refcat-floor-mas {}: allowed (0, 100000] mas",
+                self.floor_mas
+            ));
+        }
+        for (name, v) in [("knee-hw", self.knee_hw), ("limit-hw", self.limit_hw)] {
+            if !(-5.0..=40.0).contains(&v) {
+                return Err(format!("--refcat-{name} {v}: allowed [-5, 40]"));
+            }
+        }
+        if !(self.completeness > 0.0 && self.completeness <= 1.0) {
+            return Err(format!(
+                "--refcat-completeness {}: allowed (0, 1]",
+                self.completeness
+            ));
+        }
+        Ok(())
+    }
+
+    /// Position error per axis of a star of magnitude `hw` [mas].
+    pub fn sigma_mas(&self, hw: f64) -> f64 {
+        self.floor_mas * 10f64.powf(0.2 * (hw - self.knee_hw)).max(1.0)
+    }
+}
+
+/// One star of a reference catalogue, in the pixels of its array (through the array's design WCS).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct RefStar {
+    pub id: usize,
+    /// 1 … 4 on the focal plane, 0 for a single array.
+    pub array: u32,
+    pub ra_deg: f64,
+    pub dec_deg: f64,
+    pub x_px: f64,
+    pub y_px: f64,
+    pub hw: f64,
+    pub sigma_mas: f64,
+}
+
+/// The reference catalogue a survey would give of a simulator's stars (seeded: its own stream of the run
+/// seed, per star): those brighter than the limit, each kept with the survey's completeness, at its true
+/// position plus a Gaussian error of σ(Hw) per axis.
+pub fn reference_catalogue(sim: &Simulator, survey: &SurveyModel, array: u32) -> Vec<RefStar> {
+    use crate::rng::{self, Stream};
+    use rand::RngExt;
+    use rand_distr::{Distribution, StandardNormal};
+    let scale = sim.cfg.instrument.plate_scale_mas();
+    sim.stars
+        .iter()
+        .filter(|s| s.in_truth && s.mag_hw.is_finite() && s.mag_hw <= survey.limit_hw)
+        .filter_map(|s| {
+            let mut r = rng::stream(sim.cfg.seed, Stream::ReferenceCatalogue, s.id as u64);
+            let sigma = survey.sigma_mas(s.mag_hw);
+            let (zx, zy): (f64, f64) =
+                (StandardNormal.sample(&mut r), StandardNormal.sample(&mut r));
+            let kept = r.random::<f64>() < survey.completeness;
+            kept.then(|| {
+                let (x, y) = (s.x_px + zx * sigma / scale, s.y_px + zy * sigma / scale);
+                let (ra, dec) = sim
+                    .wcs()
+                    .and_then(|w| w.pixel_to_sky(x, y))
+                    .unwrap_or((f64::NAN, f64::NAN));
+                RefStar {
+                    id: s.id,
+                    array,
+                    ra_deg: ra,
+                    dec_deg: dec,
+                    x_px: x,
+                    y_px: y,
+                    hw: s.mag_hw,
+                    sigma_mas: sigma,
+                }
+            })
+        })
+        .collect()
+}
+
+fn refcat_rows(stars: &[RefStar]) -> Vec<Vec<super::csv::Cell>> {
+    use super::csv::Cell;
+    stars
+        .iter()
+        .map(|s| {
+            vec![
+                Cell::I(s.id as i64),
+                Cell::I(s.array as i64),
+                Cell::F(s.ra_deg),
+                Cell::F(s.dec_deg),
+                Cell::F(s.x_px),
+                Cell::F(s.y_px),
+                Cell::F(s.hw),
+                Cell::F(s.sigma_mas),
+            ]
+        })
+        .collect()
+}
+
+/// Write the reference catalogue of a single array (`refcat.csv`, `array` = 0) into `dir`.
+pub fn write_reference_catalogue(
+    dir: &Path,
+    sim: &Simulator,
+    survey: &SurveyModel,
+) -> Result<PathBuf, IoError> {
+    let path = dir.join(REFCAT_NAME);
+    super::csv::write(
+        &path,
+        &REFCAT_HEADER,
+        &refcat_rows(&reference_catalogue(sim, survey, 0)),
+    )?;
+    Ok(path)
+}
+
+/// Write the reference catalogue of the focal plane (`refcat.csv`, `array` = 1 … 4) into `dir`.
+pub fn write_focal_plane_reference_catalogue(
+    dir: &Path,
+    fps: &FocalPlaneSimulator,
+    survey: &SurveyModel,
+) -> Result<PathBuf, IoError> {
+    let stars: Vec<RefStar> = fps
+        .arrays
+        .iter()
+        .flat_map(|s| reference_catalogue(s, survey, s.array.index as u32 + 1))
+        .collect();
+    let path = dir.join(REFCAT_NAME);
+    super::csv::write(&path, &REFCAT_HEADER, &refcat_rows(&stars))?;
+    Ok(path)
+}
+
+/// Read a reference catalogue (`refcat.csv`: the columns of [`REFCAT_HEADER`]; `array` optional), keeping
+/// the stars of `array` (0: every star of a single-array catalogue).
+pub fn read_reference_catalogue(path: &Path, array: u32) -> Result<Vec<RefStar>, IoError> {
+    let (h, rows) = super::csv::read(path)?;
+    let col = |name: &str| super::csv::column_f64(path, &h, &rows, name);
+    let (x, y, sigma) = (col("x_px")?, col("y_px")?, col("sigma_mas")?);
+    let opt = |name: &str| {
+        if h.iter().any(|c| c == name) {
+            col(name).map(Some)
+        } else {
+            Ok(None)
+        }
+    };
+    let (id, arr, ra, dec, hw) = (
+        opt("id")?,
+        opt("array")?,
+        opt("ra_deg"),
+        opt("dec_deg"),
+        opt("hw")?,
+    );
+    if let Some(bad) = sigma.iter().find(|s| !(**s > 0.0)) {
+        return Err(IoError::Format {
+            path: path.to_path_buf(),
+            message: format!("sigma_mas = {bad}: every error must be > 0 mas"),
+        });
+    }
+    // ra/dec may hold NaN (a catalogue without a WCS): read them leniently
+    let ra = ra.ok().flatten();
+    let dec = dec.ok().flatten();
+    Ok((0..x.len())
+        .filter(|&k| array == 0 || arr.as_ref().is_none_or(|a| a[k] as u32 == array))
+        .map(|k| RefStar {
+            id: id.as_ref().map(|v| v[k] as usize).unwrap_or(k),
+            array: arr.as_ref().map(|a| a[k] as u32).unwrap_or(0),
+            ra_deg: ra.as_ref().map(|v| v[k]).unwrap_or(f64::NAN),
+            dec_deg: dec.as_ref().map(|v| v[k]).unwrap_or(f64::NAN),
+            x_px: x[k],
+            y_px: y[k],
+            hw: hw.as_ref().map(|v| v[k]).unwrap_or(f64::NAN),
+            sigma_mas: sigma[k],
+        })
+        .collect())
+}
+
+/// The reference catalogue to use for an image: the one given, else `refcat.csv` beside the image.
+pub fn find_reference_catalogue(image: &Path, given: Option<&Path>) -> Option<PathBuf> {
+    match given {
+        Some(p) => Some(p.to_path_buf()),
+        None => {
+            let p = image.parent().unwrap_or(Path::new(".")).join(REFCAT_NAME);
             p.exists().then_some(p)
         }
     }

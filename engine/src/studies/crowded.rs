@@ -82,6 +82,7 @@ pub fn analyse_focal_plane(
                 truth: Some(&e.truth),
                 default_zones: cfg.epsf_zones.max(2),
                 telemetry: telemetry.as_ref(),
+                reference: None,
                 seed: fps.cfg.seed ^ sim.array.index as u64,
             };
             countermeasures::apply(cm, &ctx, &mut stars)?;

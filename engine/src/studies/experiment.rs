@@ -63,6 +63,7 @@ pub fn analyse_in_stare(
         &sim.cfg.analysis,
         plan,
         sim.cfg.seed,
+        None,
     )?;
     Ok(StareImage {
         analysis,

@@ -462,6 +462,9 @@ pub struct Context<'a> {
     pub default_zones: usize,
     /// The exposure's telemetry; `None` when the ACE is static (nothing to correct).
     pub telemetry: Option<&'a Telemetry>,
+    /// The reference catalogue product (positions in this image's pixels) for `plate-*@catalogue`; `None`:
+    /// the reference is the truth with the plan's error, as a simulation draws it.
+    pub reference: Option<&'a [(f64, f64)]>,
     /// Seed of the reference catalogue's error draws.
     pub seed: u64,
 }
@@ -524,6 +527,15 @@ pub fn apply(
             reference: Reference::Stack,
             ..
         } => Ok(0),
+        Countermeasure::Plate {
+            model,
+            reference: Reference::Catalogue { .. },
+        } if ctx.reference.is_some() => plate::plate_fit_to_catalogue(
+            stars,
+            ctx.reference.unwrap_or(&[]),
+            model,
+            &cm.to_string(),
+        ),
         Countermeasure::Plate { model, reference } => {
             let t = ctx
                 .truth

@@ -176,6 +176,35 @@ pub fn fit_correction(
     Ok(Correction { model, cx, cy })
 }
 
+/// Fit the plate model onto a reference catalogue product (positions in the image's pixels): every usable
+/// fit (no rejection flag) is cross-matched to the catalogue by position — the common offset (median
+/// displacement to the nearest reference star within 20 px), then the nearest within 1 px — and the model is
+/// fitted over the matched pairs, subtracted from every star; returns the parameters absorbed. No truth.
+pub fn plate_fit_to_catalogue(
+    stars: &mut [StarResult],
+    reference: &[(f64, f64)],
+    model: PlateModel,
+    what: &str,
+) -> Result<usize, CountermeasureError> {
+    let usable: Vec<usize> = (0..stars.len())
+        .filter(|&k| {
+            stars[k].flags & crate::analysis::epsf::fit::flags::REJECT == 0
+                && stars[k].x.is_finite()
+                && stars[k].y.is_finite()
+        })
+        .collect();
+    let pos: Vec<(f64, f64)> = usable.iter().map(|&k| (stars[k].x, stars[k].y)).collect();
+    let m = crate::analysis::detection::match_positions(&pos, reference, 20.0, 1.0);
+    let (p, target): (Vec<(f64, f64)>, Vec<(f64, f64)>) = pos
+        .iter()
+        .zip(&m)
+        .filter_map(|(p, k)| k.map(|k| (*p, reference[k])))
+        .unzip();
+    let c = fit_correction(model, &p, &target, what)?;
+    c.apply(stars);
+    Ok(2 * model.n_params())
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -201,6 +230,78 @@ mod tests {
                 jitter_dy_px: 0.0,
             })
             .collect()
+    }
+
+    /// The fit onto a catalogue product (matched by position, no truth) equals the fit onto the truth when the
+    /// catalogue holds the true positions — another way to the same result — and leaves unmatched and
+    /// rejected stars out of the fit but corrects them.
+    #[test]
+    fn the_catalogue_product_fit_equals_the_truth_fit_on_true_positions() {
+        let pos: Vec<(f64, f64)> = (0..120)
+            .map(|k| {
+                (
+                    50.0 + (k % 12) as f64 * 160.0 + 0.3 * (k / 12) as f64,
+                    40.0 + (k / 12) as f64 * 190.0,
+                )
+            })
+            .collect();
+        let truth = truth_at(&pos);
+        let field = |x: f64, y: f64| {
+            let yn = y / 1000.0 - 1.0;
+            (
+                0.04 + 0.02 * (x / 1000.0 - 1.0) - 0.03 * yn.powi(3),
+                -0.02 + 0.05 * yn * yn,
+            )
+        };
+        let make = || -> Vec<StarResult> {
+            pos.iter()
+                .enumerate()
+                .map(|(k, &(x, y))| {
+                    let (dx, dy) = field(x, y);
+                    // a small per-star error so the fit has residuals
+                    let e = 0.003 * (((k * 37) % 11) as f64 - 5.0) / 5.0;
+                    star(x, y, dx + e, dy - e, k)
+                })
+                .collect()
+        };
+        let mut by_truth = make();
+        plate_fit(
+            &mut by_truth,
+            &truth,
+            PlateModel::PolyY(3),
+            "plate-poly:3",
+            0.0,
+            0,
+        )
+        .expect("truth fit");
+        let mut by_catalogue = make();
+        for s in &mut by_catalogue {
+            s.truth = None; // the catalogue fit needs no truth
+        }
+        plate_fit_to_catalogue(
+            &mut by_catalogue,
+            &pos,
+            PlateModel::PolyY(3),
+            "plate-poly:3",
+        )
+        .expect("catalogue fit");
+        for (a, b) in by_truth.iter().zip(&by_catalogue) {
+            assert!(
+                (a.x - b.x).abs() < 1e-9 && (a.y - b.y).abs() < 1e-9,
+                "{a:?} {b:?}"
+            );
+        }
+        // a catalogue missing a third of the stars, with one rejected fit: still a good correction
+        let partial: Vec<(f64, f64)> = pos.iter().step_by(3).copied().collect();
+        let mut stars = make();
+        stars[1].flags = crate::analysis::epsf::fit::flags::NOT_CONVERGED;
+        plate_fit_to_catalogue(&mut stars, &partial, PlateModel::PolyY(3), "plate-poly:3")
+            .expect("partial catalogue");
+        let worst = stars
+            .iter()
+            .map(|s| s.dx_px.abs().max(s.dy_px.abs()))
+            .fold(0.0, f64::max);
+        assert!(worst < 0.01, "residual {worst} px");
     }
 
     #[test]

@@ -92,9 +92,14 @@ pub fn ace(cfg: &Config, out: &Path, every: usize) -> Result<()> {
 }
 
 /// `jsim simulate`
-pub fn simulate(session: &Session, cfg: &Config, out: &Path) -> Result<()> {
+pub fn simulate(
+    session: &Session,
+    cfg: &Config,
+    out: &Path,
+    survey: &engine::io::instrument::SurveyModel,
+) -> Result<()> {
     if engine::sky::array_count(cfg) > 1 {
-        return simulate_focal_plane(session, cfg, out);
+        return simulate_focal_plane(session, cfg, out, survey);
     }
     let t0 = Instant::now();
     let sim = session.new_simulator(cfg)?;
@@ -105,6 +110,8 @@ pub fn simulate(session: &Session, cfg: &Config, out: &Path) -> Result<()> {
     engine::io::write_atomic(&outputs.path("config.toml"), cfg.to_toml().as_bytes())?;
     outputs.path(engine::io::instrument::FLAT_NAME);
     engine::io::instrument::write_calibration_flat(out, &sim)?;
+    outputs.path(engine::io::instrument::REFCAT_NAME);
+    engine::io::instrument::write_reference_catalogue(out, &sim, survey)?;
     let pb = progress(cfg.fidelity.images as u64, "simulate");
     let mut summary = Vec::new();
     for i in 0..cfg.fidelity.images {
@@ -155,7 +162,12 @@ pub fn simulate(session: &Session, cfg: &Config, out: &Path) -> Result<()> {
 }
 
 /// `jsim simulate` on the quad focal plane: one multi-extension FITS per exposure (`fp_NNN.fits`).
-fn simulate_focal_plane(session: &Session, cfg: &Config, out: &Path) -> Result<()> {
+fn simulate_focal_plane(
+    session: &Session,
+    cfg: &Config,
+    out: &Path,
+    survey: &engine::io::instrument::SurveyModel,
+) -> Result<()> {
     let t0 = Instant::now();
     let fps = session.new_focal_plane(cfg)?;
     say_notes(session);
@@ -167,6 +179,8 @@ fn simulate_focal_plane(session: &Session, cfg: &Config, out: &Path) -> Result<(
     engine::io::write_atomic(&outputs.path("config.toml"), cfg.to_toml().as_bytes())?;
     outputs.path(engine::io::instrument::FLAT_NAME);
     engine::io::instrument::write_focal_plane_flats(out, &fps)?;
+    outputs.path(engine::io::instrument::REFCAT_NAME);
+    engine::io::instrument::write_focal_plane_reference_catalogue(out, &fps, survey)?;
     let pb = progress(cfg.fidelity.images as u64, "simulate");
     let mut summary = Vec::new();
     for i in 0..cfg.fidelity.images {
@@ -239,6 +253,7 @@ pub struct AnalyzeArgs {
     pub image: PathBuf,
     pub truth: Option<PathBuf>,
     pub flat: Option<PathBuf>,
+    pub refcat: Option<PathBuf>,
     pub zones: Option<usize>,
     pub countermeasure: Countermeasure,
     pub crowding: engine::analysis::crowding::Crowding,
@@ -254,8 +269,13 @@ pub fn analyze(session: &Session, cfg: &Config, a: &AnalyzeArgs) -> Result<()> {
         return analyze_focal_plane(session, cfg, a, &arrays);
     }
     let t0 = Instant::now();
-    let input =
-        analysis_input::AnalysisInput::read(&a.image, a.truth.as_deref(), a.flat.as_deref(), cfg)?;
+    let input = analysis_input::AnalysisInput::read_with(
+        &a.image,
+        a.truth.as_deref(),
+        a.flat.as_deref(),
+        a.refcat.as_deref(),
+        cfg,
+    )?;
     for s in &input.assumptions {
         eprintln!("jsim: {}: {s}", a.image.display());
     }
@@ -563,6 +583,7 @@ fn analyze_focal_plane(
             k,
             a.truth.as_deref(),
             a.flat.as_deref(),
+            a.refcat.as_deref(),
             cfg,
         )?;
         for s in &input.assumptions {

@@ -93,6 +93,12 @@ pub fn crowded(a: &CrowdedArgs) -> Result<()> {
             // the instrument's calibration flat beside it, so that `jsim analyze` can read the exposure
             outputs.add(&dir.join(engine::io::instrument::FLAT_NAME));
             engine::io::instrument::write_focal_plane_flats(&dir, &fps)?;
+            outputs.add(&dir.join(engine::io::instrument::REFCAT_NAME));
+            engine::io::instrument::write_focal_plane_reference_catalogue(
+                &dir,
+                &fps,
+                &engine::io::instrument::SurveyModel::default(),
+            )?;
         }
         crate::outputs::interrupted()?;
         let analyses = crowded::analyse_focal_plane(&fps, &exp, &plan, &edges)?;

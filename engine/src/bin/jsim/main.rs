@@ -150,10 +150,13 @@ enum Command {
         #[arg(long, default_value_t = 1)]
         every: usize,
     },
-    /// Simulate images (FITS + truth catalogues).
+    /// Simulate images (FITS + truth catalogues) and the instrument products (calibration flat, reference
+    /// catalogue).
     Simulate {
         #[command(flatten)]
         cfg: ConfigArgs,
+        #[command(flatten)]
+        survey: SurveyArgs,
         #[arg(long, default_value = "out/simulate")]
         out: PathBuf,
     },
@@ -172,6 +175,10 @@ enum Command {
         /// is not flat-fielded and the output says so).
         #[arg(long, value_name = "FITS")]
         flat: Option<PathBuf>,
+        /// Reference astrometric catalogue for plate-*@catalogue (CSV with x_px, y_px, sigma_mas; default:
+        /// refcat.csv beside the image, if any).
+        #[arg(long, value_name = "CSV")]
+        refcat: Option<PathBuf>,
         /// Y zones of the position-dependent ePSF (with --countermeasure yzones|yzones-shared).
         #[arg(long = "epsf-zones")]
         epsf_zones: Option<usize>,
@@ -273,6 +280,37 @@ impl TelemetryArgs {
     }
 }
 
+/// The survey the reference catalogue product comes from (`engine::io::instrument::SurveyModel`).
+#[derive(Args, Clone, Debug)]
+pub struct SurveyArgs {
+    /// Reference catalogue: position error floor per axis, mas (bright stars).
+    #[arg(long = "refcat-floor-mas", default_value_t = engine::io::instrument::SurveyModel::default().floor_mas)]
+    pub floor_mas: f64,
+    /// Reference catalogue: magnitude from which the error grows as flux^-1/2.
+    #[arg(long = "refcat-knee-hw", default_value_t = engine::io::instrument::SurveyModel::default().knee_hw)]
+    pub knee_hw: f64,
+    /// Reference catalogue: limiting magnitude (Hw).
+    #[arg(long = "refcat-limit-hw", default_value_t = engine::io::instrument::SurveyModel::default().limit_hw)]
+    pub limit_hw: f64,
+    /// Reference catalogue: completeness above the limit, (0, 1].
+    #[arg(long = "refcat-completeness", default_value_t = engine::io::instrument::SurveyModel::default().completeness)]
+    pub completeness: f64,
+}
+
+impl SurveyArgs {
+    /// The survey model, validated (the error names the option and its range).
+    pub fn model(&self) -> Result<engine::io::instrument::SurveyModel> {
+        let m = engine::io::instrument::SurveyModel {
+            floor_mas: self.floor_mas,
+            knee_hw: self.knee_hw,
+            limit_hw: self.limit_hw,
+            completeness: self.completeness,
+        };
+        m.validate().map_err(anyhow::Error::msg)?;
+        Ok(m)
+    }
+}
+
 /// The countermeasure of `jsim analyze`.
 #[derive(Args, Clone, Debug)]
 pub struct CountermeasureArgs {
@@ -313,12 +351,17 @@ fn run(cli: Cli) -> Result<()> {
         }
         Command::Psf { cfg, out } => cmd::psf(&Session::new(), &cfg.load()?, &out),
         Command::Ace { cfg, out, every } => cmd::ace(&cfg.load()?, &out, every),
-        Command::Simulate { cfg, out } => cmd::simulate(&Session::new(), &cfg.load()?, &out),
+        Command::Simulate { cfg, survey, out } => {
+            let c = cfg.load()?;
+            let s = survey.model()?;
+            cmd::simulate(&Session::new(), &c, &out, &s)
+        }
         Command::Analyze {
             cfg,
             image,
             truth,
             flat,
+            refcat,
             epsf_zones,
             cm,
             crowding,
@@ -338,6 +381,7 @@ fn run(cli: Cli) -> Result<()> {
                     image,
                     truth,
                     flat,
+                    refcat,
                     zones: epsf_zones,
                     countermeasure: plan.countermeasures[0],
                     crowding,
