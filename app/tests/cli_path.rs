@@ -95,6 +95,7 @@ fn written_image(name: &str) -> (Config, std::path::PathBuf, std::path::PathBuf)
         &engine::io::instrument::SurveyModel::default(),
     )
     .expect("the reference catalogue");
+    engine::io::instrument::write_model_psf(&dir, &sim).expect("the model PSF");
     assert_eq!(
         image_config(&files.image),
         cfg,

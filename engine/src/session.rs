@@ -8,7 +8,7 @@
 
 use crate::analysis::countermeasures::{Countermeasure, Plan};
 use crate::analysis::crowding::{self, Crowding};
-use crate::analysis::pipeline::analyze_crowded;
+use crate::analysis::pipeline::{Supplied, analyze_crowded};
 use crate::analysis::{Analysis, AnalysisError, Source, analyse_image};
 use crate::config::{Backend, Config};
 use crate::integrate::Integrator;
@@ -173,7 +173,7 @@ impl Session {
                 &input.img,
                 input.truth.as_deref(),
                 &analysis_cfg,
-                None,
+                input.model_psf.as_ref(),
                 &countermeasure,
                 input.reference.as_deref(),
                 img_cfg.seed,
@@ -200,7 +200,10 @@ impl Session {
             &analysis_cfg,
             &plan,
             img_cfg.seed,
-            input.reference.as_deref(),
+            &Supplied {
+                reference: input.reference.as_deref(),
+                model_psf: input.model_psf.as_ref(),
+            },
         )?;
         res.into_of(&countermeasure)
             .ok_or(AnalysisError::NotApplicable {

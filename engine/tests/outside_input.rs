@@ -506,3 +506,65 @@ fn the_reference_catalogue_has_the_survey_errors_completeness_and_limit() {
     assert!(!out_dir.exists());
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// The design model PSF product: written and read back as the same ePSF table (to float precision), unit
+/// normalised (a star's pixels sum to 1: the table's nodes sum to oversampling²), peaked at its origin.
+#[test]
+fn the_model_psf_product_round_trips_and_is_normalised() {
+    use engine::io::instrument;
+    let mut cfg = engine::Config::default();
+    cfg.instrument.detector_px = 256;
+    cfg.instrument.photosensitive_px = 240;
+    cfg.readout.channels = 2;
+    cfg.readout.channel_width_px = 128;
+    cfg.scene.grid_n = 2;
+    cfg.optics.pupil_samples = 64;
+    cfg.optics.psf_radius_px = 8;
+    cfg.band.wavelength_step_um = 0.1;
+    cfg.fidelity.backend = engine::config::Backend::Cpu;
+    let sim = engine::simulate::Simulator::new(&cfg).expect("simulator");
+    let model = instrument::model_psf(&sim).expect("model");
+    let dir = temp("model-psf");
+    let p = instrument::write_model_psf(&dir, &sim).expect("write");
+    let back = instrument::read_model_psf(&p, None).expect("read");
+    assert_eq!(
+        (back.oversampling, back.half_nodes),
+        (model.oversampling, model.half_nodes)
+    );
+    for (a, b) in back.data.iter().zip(&model.data) {
+        assert!((a - b).abs() <= 1e-6 * b.abs().max(1e-6), "{a} vs {b}");
+    }
+    let sum: f64 = model.data.iter().sum();
+    let os2 = (model.oversampling * model.oversampling) as f64;
+    assert!((sum / os2 - 1.0).abs() < 1e-6, "sum {sum}");
+    let n = model.n();
+    let peak = model
+        .data
+        .iter()
+        .enumerate()
+        .max_by(|a, b| a.1.total_cmp(b.1))
+        .map(|(i, _)| i)
+        .expect("peak");
+    let (px, py) = (peak % n, peak / n);
+    let c = model.half_nodes;
+    assert!(
+        px.abs_diff(c) <= 1 && py.abs_diff(c) <= 1,
+        "peak at ({px}, {py}), origin {c}"
+    );
+    // a table that is not square is refused by name
+    let bad = dir.join("bad.fits");
+    engine::io::fits::write(
+        &bad,
+        &[engine::io::fits::Hdu::Image {
+            name: "",
+            nx: 5,
+            ny: 7,
+            pixels: engine::io::fits::Pixels::F64(&[0.0; 35]),
+            cards: vec![engine::io::fits::Card::i("OVERSAMP", 4, "")],
+        }],
+    )
+    .expect("write bad");
+    let e = instrument::read_model_psf(&bad, None).expect_err("not square");
+    assert!(e.to_string().contains("square"), "{e}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

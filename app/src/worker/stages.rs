@@ -187,7 +187,7 @@ impl EngineState {
             &cfg.analysis,
             &plan,
             cfg.seed,
-            None,
+            &Default::default(),
         )
         .map_err(failed(Stage::Image))?;
         let analyse_s = t1.elapsed().as_secs_f64();
@@ -400,7 +400,7 @@ impl EngineState {
             &tcfg.analysis,
             &Plan::default(),
             tcfg.seed,
-            None,
+            &Default::default(),
         )
         .ok()
         .map(|a| a.global.report);

@@ -148,6 +148,15 @@ impl PyExposure {
                         .map(|s| (s.x_px, s.y_px))
                         .collect(),
                 );
+                // the design model PSF, as `write_fits` writes it (f32 in the file, as read back there)
+                input.model_psf = engine::io::instrument::model_psf(&self.sim)
+                    .ok()
+                    .map(|mut e| {
+                        for v in e.data.iter_mut() {
+                            *v = *v as f32 as f64;
+                        }
+                        e
+                    });
                 input
             })
             .map_err(PyValueError::new_err)
@@ -266,6 +275,7 @@ impl PyExposure {
         engine::io::instrument::write_calibration_flat(dir, &self.sim).or_py()?;
         engine::io::instrument::write_reference_catalogue(dir, &self.sim, &SurveyModel::default())
             .or_py()?;
+        engine::io::instrument::write_model_psf(dir, &self.sim).or_py()?;
         Ok(())
     }
 

@@ -335,6 +335,15 @@ pub fn exact_epsf(kernel: &PixelKernel, half_px: usize) -> Epsf {
     e
 }
 
+/// What the instrument supplied beside an image (its products), for the analysis: the reference catalogue's
+/// positions in the image's pixels (`plate-*@catalogue`) and the design model PSF (the fallback below
+/// [`MIN_EPSF_STARS`] ePSF stars).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Supplied<'a> {
+    pub reference: Option<&'a [(f64, f64)]>,
+    pub model_psf: Option<&'a Epsf>,
+}
+
 /// The simulated exposure an image came from: what only a simulation knows (the ACE series behind the
 /// telemetry and the ACE prediction, the exact ePSF of the control).
 #[derive(Clone, Copy)]
@@ -441,10 +450,15 @@ pub fn analyse_image(
     cfg: &AnalysisCfg,
     plan: &Plan,
     seed: u64,
-    reference: Option<&[(f64, f64)]>,
+    supplied: &Supplied<'_>,
 ) -> Result<ImageAnalysis, AnalysisError> {
+    let reference = supplied.reference;
     let base = Options::new(cfg);
     let model = || -> Result<Option<Epsf>, AnalysisError> {
+        if let Some(m) = supplied.model_psf {
+            return Ok(Some(m.clone()));
+        }
+        // without the model PSF product: the simulation's own (its true optics), when there is one
         match source {
             Some(src) => Ok(Some(exact_epsf(
                 &*src.sim.optical_kernel()?,

@@ -125,6 +125,8 @@ pub struct AnalysisInput {
     pub assumptions: Vec<String>,
     /// The reference catalogue product's positions in this image's pixels (`refcat.csv`), when there is one.
     pub reference: Option<Vec<(f64, f64)>>,
+    /// The design model PSF product (`psf_model.fits`), when there is one.
+    pub model_psf: Option<crate::analysis::epsf::Epsf>,
 }
 
 impl AnalysisInput {
@@ -186,6 +188,10 @@ impl AnalysisInput {
         })
         .and_then(|mut input| {
             input.reference = read_reference(path, refcat_path, 0, &mut input.assumptions)?;
+            input.model_psf = match instrument::find_model_psf(path, None) {
+                Some(p) => Some(instrument::read_model_psf(&p, None)?),
+                None => None,
+            };
             Ok(input)
         })
     }
@@ -262,6 +268,7 @@ impl AnalysisInput {
             plate_scale_mas,
             assumptions,
             reference: None,
+            model_psf: None,
         })
     }
 }
@@ -344,6 +351,13 @@ impl AnalysisInput {
         .and_then(|mut input| {
             input.reference =
                 read_reference(path, refcat_path, k as u32 + 1, &mut input.assumptions)?;
+            input.model_psf = match instrument::find_model_psf(path, None) {
+                Some(p) => Some(instrument::read_model_psf(
+                    &p,
+                    Some(&instrument::model_psf_extension(k)),
+                )?),
+                None => None,
+            };
             Ok(input)
         })
     }

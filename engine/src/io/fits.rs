@@ -444,6 +444,20 @@ fn open(path: &Path) -> Result<FitsFile, IoError> {
     FitsFile::open(path).map_err(|e| IoError::fits(path, e))
 }
 
+/// An HDU of an open file: extension `ext` by EXTNAME, or the primary for `None`.
+fn select(
+    f: &mut FitsFile,
+    path: &Path,
+    ext: Option<&str>,
+) -> Result<fitsio::hdu::FitsHdu, IoError> {
+    match ext {
+        None => f.primary_hdu().map_err(|e| IoError::fits(path, e)),
+        Some(name) => f
+            .hdu(name)
+            .map_err(|e| IoError::fits(path, format!("extension {name}: {e}"))),
+    }
+}
+
 /// The extension names of a file (its HDUs after the primary; unnamed ones as empty strings).
 pub fn extension_names(path: &Path) -> Result<Vec<String>, IoError> {
     let mut f = open(path)?;
@@ -459,12 +473,7 @@ pub fn extension_names(path: &Path) -> Result<Vec<String>, IoError> {
 pub fn read_plane(path: &Path, ext: Option<&str>) -> Result<(usize, usize, Vec<f32>), IoError> {
     let mut f = open(path)?;
     let fe = |e: fitsio::errors::Error| IoError::fits(path, e);
-    let hdu = match ext {
-        None => f.primary_hdu().map_err(fe)?,
-        Some(name) => f
-            .hdu(name)
-            .map_err(|e| IoError::fits(path, format!("extension {name}: {e}")))?,
-    };
+    let hdu = select(&mut f, path, ext)?;
     let what = ext.unwrap_or("the primary HDU");
     let (nx, ny) = match &hdu.info {
         fitsio::hdu::HduInfo::ImageInfo { shape, .. } if shape.len() == 2 => (shape[1], shape[0]),
@@ -477,13 +486,7 @@ pub fn read_plane(path: &Path, ext: Option<&str>) -> Result<(usize, usize, Vec<f
 /// Read a numeric header of an HDU (`ext`: an EXTNAME, or `None` for the primary).
 pub fn read_f64_key_in(path: &Path, ext: Option<&str>, key: &str) -> Result<f64, IoError> {
     let mut f = open(path)?;
-    let fe = |e: fitsio::errors::Error| IoError::fits(path, e);
-    let hdu = match ext {
-        None => f.primary_hdu().map_err(fe)?,
-        Some(name) => f
-            .hdu(name)
-            .map_err(|e| IoError::fits(path, format!("extension {name}: {e}")))?,
-    };
+    let hdu = select(&mut f, path, ext)?;
     hdu.read_key::<f64>(&mut f, key)
         .map_err(|e| IoError::fits(path, format!("header {key}: {e}")))
 }
@@ -497,12 +500,7 @@ pub fn read_image_in(
 ) -> Result<ImageRead, IoError> {
     let mut f = open(path)?;
     let fe = |e: fitsio::errors::Error| IoError::fits(path, e);
-    let hdu = match image_ext {
-        None => f.primary_hdu().map_err(fe)?,
-        Some(name) => f
-            .hdu(name)
-            .map_err(|e| IoError::fits(path, format!("extension {name}: {e}")))?,
-    };
+    let hdu = select(&mut f, path, image_ext)?;
     let (nx, ny) = match &hdu.info {
         fitsio::hdu::HduInfo::ImageInfo { shape, .. } if shape.len() == 2 => (shape[1], shape[0]),
         _ => {

@@ -8,6 +8,11 @@
 //!   array, `FLAT1` … `FLAT4`, matching `ARRAY1` … `ARRAY4` of the exposures. Header: `FLATERR`, `SEED`,
 //!   `CONFHASH`, `ORIGIN`, `CONTENT`. Written only when the configuration's analysis is calibrated
 //!   (`analysis.flat_field = { calibrated = … }`, the default).
+//! * **Design model PSF** (`psf_model.fits`): the PSF of the design wavefront at the field centre for the
+//!   scene's colour, integrated over the pixel response and sampled as an ePSF table (the `epsf.fits` format:
+//!   `OVERSAMP` nodes per pixel, origin at `CRPIX1/2`, a star's pixels sum to 1). The analysis falls back to it
+//!   when an image has too few stars to build its own ePSF. One array: the primary HDU; the focal plane:
+//!   `PSF1` … `PSF4` (each array's axes).
 //! * **Reference astrometric catalogue** (`refcat.csv`): what a survey gives of the field ([`SurveyModel`]:
 //!   magnitude-dependent errors, a limiting magnitude, incompleteness), with each star's position on the sky
 //!   and in the pixels of its array through the array's design WCS. The `plate-*@catalogue` countermeasures
@@ -383,6 +388,141 @@ pub fn find_reference_catalogue(image: &Path, given: Option<&Path>) -> Option<Pa
         Some(p) => Some(p.to_path_buf()),
         None => {
             let p = image.parent().unwrap_or(Path::new(".")).join(REFCAT_NAME);
+            p.exists().then_some(p)
+        }
+    }
+}
+
+/// File name of the design model PSF beside the images.
+pub const MODEL_PSF_NAME: &str = "psf_model.fits";
+
+/// The design model PSF of a simulation as an ePSF table (8 nodes per pixel, `analysis.epsf_radius_px`).
+pub fn model_psf(
+    sim: &Simulator,
+) -> Result<crate::analysis::epsf::Epsf, crate::simulate::SimError> {
+    Ok(crate::analysis::pipeline::exact_epsf(
+        &*sim.design_kernel()?,
+        sim.cfg.analysis.epsf_radius_px,
+    ))
+}
+
+fn model_psf_hdu<'a>(
+    name: &'a str,
+    e: &'a crate::analysis::epsf::Epsf,
+    sim: &Simulator,
+) -> Hdu<'a> {
+    let n = e.n();
+    Hdu::Image {
+        name,
+        nx: n,
+        ny: n,
+        pixels: Pixels::F64(&e.data),
+        cards: vec![
+            Card::i("OVERSAMP", e.oversampling as i64, "ePSF nodes per pixel"),
+            Card::f("CRPIX1", e.half_nodes as f64 + 1.0, "origin (1-based)"),
+            Card::f("CRPIX2", e.half_nodes as f64 + 1.0, "origin (1-based)"),
+            Card::s("NORM", "sum = oversampling^2", "a star's pixels sum to 1"),
+            Card::s(
+                "CONTENT",
+                "design model PSF",
+                "design wavefront, field centre",
+            ),
+            Card::s("CONFHASH", sim.cfg.hash_hex(), "configuration hash"),
+            Card::s("ORIGIN", "jsim", "JASMINE image simulator"),
+        ],
+    }
+}
+
+fn model_psf_error(e: crate::simulate::SimError, path: &Path) -> IoError {
+    IoError::Format {
+        path: path.to_path_buf(),
+        message: format!("the design model PSF: {e}"),
+    }
+}
+
+/// Write the design model PSF of a single-array simulation (`psf_model.fits`) into `dir`.
+pub fn write_model_psf(dir: &Path, sim: &Simulator) -> Result<PathBuf, IoError> {
+    let path = dir.join(MODEL_PSF_NAME);
+    let e = model_psf(sim).map_err(|e| model_psf_error(e, &path))?;
+    fits::write(&path, &[model_psf_hdu("", &e, sim)])?;
+    Ok(path)
+}
+
+/// The extension of array `k` (0-based) in a focal-plane model PSF file.
+pub fn model_psf_extension(k: usize) -> String {
+    format!("PSF{}", k + 1)
+}
+
+/// Write the design model PSFs of the focal plane (`PSF1` … in one file) into `dir`.
+pub fn write_focal_plane_model_psfs(
+    dir: &Path,
+    fps: &FocalPlaneSimulator,
+) -> Result<PathBuf, IoError> {
+    let path = dir.join(MODEL_PSF_NAME);
+    let psfs = fps
+        .arrays
+        .iter()
+        .map(model_psf)
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(|e| model_psf_error(e, &path))?;
+    let names: Vec<String> = (0..fps.arrays.len()).map(model_psf_extension).collect();
+    let mut hdus = vec![Hdu::Header {
+        cards: vec![
+            Card::i(
+                "NARRAYS",
+                fps.arrays.len() as i64,
+                "arrays: extensions PSF1..",
+            ),
+            Card::s("ORIGIN", "jsim", "JASMINE image simulator"),
+        ],
+    }];
+    for ((sim, e), name) in fps.arrays.iter().zip(&psfs).zip(&names) {
+        hdus.push(model_psf_hdu(name.as_str(), e, sim));
+    }
+    fits::write(&path, &hdus)?;
+    Ok(path)
+}
+
+/// Read a model PSF (an ePSF table: `epsf.fits` or `psf_model.fits`; `ext` as for the flat).
+pub fn read_model_psf(
+    path: &Path,
+    ext: Option<&str>,
+) -> Result<crate::analysis::epsf::Epsf, IoError> {
+    let (nx, ny, data) = fits::read_plane(path, ext)?;
+    let os = fits::read_f64_key_in(path, ext, "OVERSAMP")?;
+    let bad = |message: String| IoError::Format {
+        path: path.to_path_buf(),
+        message,
+    };
+    if nx != ny || nx % 2 == 0 {
+        return Err(bad(format!(
+            "a model PSF table is square and odd, not {nx}×{ny}"
+        )));
+    }
+    if !((1.0..=64.0).contains(&os) && os.fract() == 0.0) {
+        return Err(bad(format!(
+            "header OVERSAMP = {os}: a whole number in [1, 64]"
+        )));
+    }
+    if data.iter().any(|v| !v.is_finite()) {
+        return Err(bad("a model PSF value is not finite".into()));
+    }
+    Ok(crate::analysis::epsf::Epsf {
+        oversampling: os as usize,
+        half_nodes: nx / 2,
+        data: data.iter().map(|v| *v as f64).collect(),
+    })
+}
+
+/// The model PSF to use for an image: the one given, else `psf_model.fits` beside the image.
+pub fn find_model_psf(image: &Path, given: Option<&Path>) -> Option<PathBuf> {
+    match given {
+        Some(p) => Some(p.to_path_buf()),
+        None => {
+            let p = image
+                .parent()
+                .unwrap_or(Path::new("."))
+                .join(MODEL_PSF_NAME);
             p.exists().then_some(p)
         }
     }

@@ -415,6 +415,17 @@ impl Simulator {
         self.kernel_with_blur(&psf, 0.0)
     }
 
+    /// The design pixel kernel: the PSF of the design wavefront at the field's centre for the scene's
+    /// colour (no star's own field-dependent wavefront error), with this simulation's pixel model, in this
+    /// array's axes — the model PSF an instrument team hands the analysis.
+    pub fn design_kernel(&self) -> Result<Arc<PixelKernel>, SimError> {
+        let psf = self.in_array_axes(
+            self.bank
+                .get(self.cfg.scene.j_minus_h, &self.bank.centre_key()),
+        );
+        self.kernel_with_blur(&psf, 0.0)
+    }
+
     /// The nominal window (first pixel's) of exposure `index` on its track.
     pub fn nominal_window(&self, track: &Track) -> crate::integrate::track::WindowWeights {
         track.window(

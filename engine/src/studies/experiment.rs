@@ -63,7 +63,7 @@ pub fn analyse_in_stare(
         &sim.cfg.analysis,
         plan,
         sim.cfg.seed,
-        None,
+        &Default::default(),
     )?;
     Ok(StareImage {
         analysis,

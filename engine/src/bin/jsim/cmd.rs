@@ -112,6 +112,8 @@ pub fn simulate(
     engine::io::instrument::write_calibration_flat(out, &sim)?;
     outputs.path(engine::io::instrument::REFCAT_NAME);
     engine::io::instrument::write_reference_catalogue(out, &sim, survey)?;
+    outputs.path(engine::io::instrument::MODEL_PSF_NAME);
+    engine::io::instrument::write_model_psf(out, &sim)?;
     let pb = progress(cfg.fidelity.images as u64, "simulate");
     let mut summary = Vec::new();
     for i in 0..cfg.fidelity.images {
@@ -181,6 +183,8 @@ fn simulate_focal_plane(
     engine::io::instrument::write_focal_plane_flats(out, &fps)?;
     outputs.path(engine::io::instrument::REFCAT_NAME);
     engine::io::instrument::write_focal_plane_reference_catalogue(out, &fps, survey)?;
+    outputs.path(engine::io::instrument::MODEL_PSF_NAME);
+    engine::io::instrument::write_focal_plane_model_psfs(out, &fps)?;
     let pb = progress(cfg.fidelity.images as u64, "simulate");
     let mut summary = Vec::new();
     for i in 0..cfg.fidelity.images {

@@ -99,6 +99,8 @@ pub fn crowded(a: &CrowdedArgs) -> Result<()> {
                 &fps,
                 &engine::io::instrument::SurveyModel::default(),
             )?;
+            outputs.add(&dir.join(engine::io::instrument::MODEL_PSF_NAME));
+            engine::io::instrument::write_focal_plane_model_psfs(&dir, &fps)?;
         }
         crate::outputs::interrupted()?;
         let analyses = crowded::analyse_focal_plane(&fps, &exp, &plan, &edges)?;
