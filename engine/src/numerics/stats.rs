@@ -32,13 +32,22 @@ pub fn median(v: &[f64]) -> f64 {
     if v.is_empty() {
         return 0.0;
     }
+    // selection, not a sort: O(n), and the same value (the k-th smallest is unique whatever the method)
     let mut s = v.to_vec();
-    s.sort_by(|a, b| a.total_cmp(b));
     let n = s.len();
+    let (lower, mid, _) = s.select_nth_unstable_by(n / 2, |a, b| a.total_cmp(b));
+    let mid = *mid;
     if n % 2 == 1 {
-        s[n / 2]
+        mid
     } else {
-        0.5 * (s[n / 2 - 1] + s[n / 2])
+        let below = lower
+            .iter()
+            .copied()
+            .fold(f64::NEG_INFINITY, |a, b| match a.total_cmp(&b) {
+                std::cmp::Ordering::Less => b,
+                _ => a,
+            });
+        0.5 * (below + mid)
     }
 }
 
