@@ -139,6 +139,24 @@ pub fn wilson_interval(k: usize, n: usize, z: f64) -> (f64, f64) {
 mod tests {
     use super::*;
 
+    /// The selection median equals the sorted-list median exactly, odd and even lengths, with ties.
+    #[test]
+    fn median_by_selection_equals_the_sorted_median() {
+        for n in 1..40usize {
+            let v: Vec<f64> = (0..n)
+                .map(|k| ((k * 7919 + 13) % 17) as f64 * 0.25 - 1.0)
+                .collect();
+            let mut s = v.clone();
+            s.sort_by(|a, b| a.total_cmp(b));
+            let expect = if n % 2 == 1 {
+                s[n / 2]
+            } else {
+                0.5 * (s[n / 2 - 1] + s[n / 2])
+            };
+            assert_eq!(median(&v).to_bits(), expect.to_bits(), "n = {n}");
+        }
+    }
+
     #[test]
     fn basics() {
         let v = [1.0, 2.0, 3.0, 4.0, 100.0];
