@@ -332,3 +332,83 @@ fn the_analysis_reads_no_truth_or_config_only_the_products() {
         let _ = std::fs::remove_dir_all(d);
     }
 }
+
+/// The attitude telemetry product: `jsim analyze`'s telemetry correction from the recorded file equals the
+/// in-memory correction recorded from the series at the same quality (to 1e-9 px: the file's start time has
+/// 15 digits), and a telemetry file of another exposure is refused by name.
+#[test]
+fn the_telemetry_product_corrects_as_the_in_memory_telemetry_does() {
+    use engine::analysis::countermeasures::{Countermeasure, TelemetryQuality};
+    use engine::analysis::crowding::Crowding;
+    use engine::io::instrument;
+    use engine::session::Session;
+    let mut cfg = small_config();
+    cfg.ace.case = AceCase::Realistic;
+    let sim = Simulator::new(&cfg).expect("simulator");
+    let exp = sim.exposure(1).expect("exposure");
+    let dir = temp_dir("telemetry-product");
+    let files = exposure::write_exposure(&dir, &sim, &exp).expect("write");
+    let q = TelemetryQuality::DEFAULT;
+    instrument::write_telemetry(&dir, &sim, 1, &q)
+        .expect("telemetry")
+        .expect("a realistic ACE records telemetry");
+    let session = Session::new();
+    let input = analysis_input::AnalysisInput::read_products(
+        &files.image,
+        Some(&files.truth_csv),
+        None,
+        None,
+        None,
+        &cfg,
+    )
+    .expect("input");
+    assert!(
+        input.telemetry.is_some(),
+        "telemetry_001.fits beside the image is found"
+    );
+    let cm = Countermeasure::Telemetry(q);
+    let from_file = session
+        .analyze_input(&cfg, &input, None, cm, Crowding::Off)
+        .expect("analysis with the product");
+    let mut bare = input.clone();
+    bare.telemetry = None;
+    let in_memory = session
+        .analyze_input(&cfg, &bare, None, cm, Crowding::Off)
+        .expect("analysis from the series");
+    let moved = in_memory
+        .stars
+        .iter()
+        .zip(&from_file.stars)
+        .map(|(a, b)| (a.x - b.x).abs().max((a.y - b.y).abs()))
+        .fold(0.0, f64::max);
+    assert!(
+        moved < 1e-9,
+        "the product and the series differ by {moved} px"
+    );
+    // the correction did something: the telemetry moved the stars from the plain fit
+    let none = session
+        .analyze_input(&cfg, &bare, None, Countermeasure::None, Crowding::Off)
+        .expect("plain");
+    assert!(
+        none.stars
+            .iter()
+            .zip(&from_file.stars)
+            .any(|(a, b)| (a.x - b.x).abs() > 1e-4),
+        "the telemetry corrected nothing"
+    );
+    // another exposure's telemetry is refused
+    let other = instrument::write_telemetry(&dir, &sim, 2, &q)
+        .expect("telemetry")
+        .expect("written");
+    let e = analysis_input::AnalysisInput::read_products(
+        &files.image,
+        None,
+        None,
+        None,
+        Some(&other),
+        &cfg,
+    )
+    .expect_err("another exposure's telemetry");
+    assert!(e.to_string().contains("exposure 2"), "{e}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -387,6 +387,7 @@ fn too_few_stars_for_an_epsf_fall_back_to_a_stated_psf() {
         &engine::analysis::pipeline::Supplied {
             reference: None,
             model_psf: Some(&model),
+            telemetry: None,
         },
     )
     .expect("analysis");

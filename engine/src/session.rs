@@ -203,6 +203,7 @@ impl Session {
             &Supplied {
                 reference: input.reference.as_deref(),
                 model_psf: input.model_psf.as_ref(),
+                telemetry: input.telemetry.as_ref(),
             },
         )?;
         res.into_of(&countermeasure)

@@ -276,6 +276,13 @@ impl PyExposure {
         engine::io::instrument::write_reference_catalogue(dir, &self.sim, &SurveyModel::default())
             .or_py()?;
         engine::io::instrument::write_model_psf(dir, &self.sim).or_py()?;
+        engine::io::instrument::write_telemetry(
+            dir,
+            &self.sim,
+            self.exp.index,
+            &engine::analysis::countermeasures::TelemetryQuality::DEFAULT,
+        )
+        .or_py()?;
         Ok(())
     }
 

@@ -342,6 +342,9 @@ pub fn exact_epsf(kernel: &PixelKernel, half_px: usize) -> Epsf {
 pub struct Supplied<'a> {
     pub reference: Option<&'a [(f64, f64)]>,
     pub model_psf: Option<&'a Epsf>,
+    /// The attitude telemetry product: what the telemetry correction corrects with (its recorded quality
+    /// replaces the plan's); without it the telemetry is recorded from the simulation's series.
+    pub telemetry: Option<&'a countermeasures::telemetry::TelemetryRecord>,
 }
 
 /// The simulated exposure an image came from: what only a simulation knows (the ACE series behind the
@@ -377,6 +380,28 @@ impl Source<'_> {
             sim.array.rotation_deg,
             quality,
             sim.cfg.seed,
+            &*sim.optical_kernel()?,
+            &self.fit_noise(cfg),
+        )?))
+    }
+
+    /// The exposure's telemetry from a recorded product (the response still from this simulation's optics
+    /// and noise); `None` for a static ACE.
+    pub fn telemetry_from_record(
+        &self,
+        rec: &countermeasures::telemetry::TelemetryRecord,
+        cfg: &AnalysisCfg,
+    ) -> Result<Option<Telemetry>, AnalysisError> {
+        if self.sim.series().is_none() {
+            return Ok(None);
+        }
+        let sim = self.sim;
+        Ok(Some(Telemetry::from_record(
+            rec,
+            0.0,
+            sim.timing,
+            sim.cfg.instrument.plate_scale_mas(),
+            sim.array.rotation_deg,
             &*sim.optical_kernel()?,
             &self.fit_noise(cfg),
         )?))
@@ -487,7 +512,11 @@ pub fn analyse_image(
                 analyze(img, truth, &o)?
             }
             Countermeasure::Telemetry(q) => {
-                match source.map(|s| s.telemetry(q, cfg)).transpose()?.flatten() {
+                let tel = match (supplied.telemetry, source) {
+                    (Some(rec), Some(s)) => s.telemetry_from_record(rec, cfg)?,
+                    _ => source.map(|s| s.telemetry(q, cfg)).transpose()?.flatten(),
+                };
+                match tel {
                     // a static ACE (or an image without its simulation) has nothing to correct
                     None => global.clone(),
                     Some(tel) => with_countermeasure(

@@ -127,6 +127,8 @@ pub struct AnalysisInput {
     pub reference: Option<Vec<(f64, f64)>>,
     /// The design model PSF product (`psf_model.fits`), when there is one.
     pub model_psf: Option<crate::analysis::epsf::Epsf>,
+    /// The attitude telemetry product of this exposure (`telemetry_NNN.fits`), when there is one.
+    pub telemetry: Option<crate::analysis::countermeasures::telemetry::TelemetryRecord>,
 }
 
 impl AnalysisInput {
@@ -150,6 +152,19 @@ impl AnalysisInput {
         truth_path: Option<&Path>,
         flat_path: Option<&Path>,
         refcat_path: Option<&Path>,
+        fallback: &Config,
+    ) -> Result<Self, IoError> {
+        Self::read_products(path, truth_path, flat_path, refcat_path, None, fallback)
+    }
+
+    /// [`AnalysisInput::read_with`] with the attitude telemetry product `telemetry_path` (default:
+    /// `telemetry_NNN.fits` beside the image, NNN its `IMAGEIDX`).
+    pub fn read_products(
+        path: &Path,
+        truth_path: Option<&Path>,
+        flat_path: Option<&Path>,
+        refcat_path: Option<&Path>,
+        telemetry_path: Option<&Path>,
         fallback: &Config,
     ) -> Result<Self, IoError> {
         let flat = match instrument::find_flat(path, flat_path) {
@@ -192,6 +207,7 @@ impl AnalysisInput {
                 Some(p) => Some(instrument::read_model_psf(&p, None)?),
                 None => None,
             };
+            input.telemetry = read_telemetry_for(path, telemetry_path)?;
             Ok(input)
         })
     }
@@ -269,6 +285,7 @@ impl AnalysisInput {
             assumptions,
             reference: None,
             model_psf: None,
+            telemetry: None,
         })
     }
 }
@@ -402,4 +419,42 @@ fn read_reference(
             Ok(None)
         }
     }
+}
+
+/// The attitude telemetry product for an image: the one given, else `telemetry_NNN.fits` beside the image
+/// (NNN its `IMAGEIDX`); one that covers another exposure is refused by name.
+fn read_telemetry_for(
+    image: &Path,
+    given: Option<&Path>,
+) -> Result<Option<crate::analysis::countermeasures::telemetry::TelemetryRecord>, IoError> {
+    let index = fits::read_f64_key(image, "IMAGEIDX")
+        .ok()
+        .filter(|i| *i >= 0.0 && i.fract() == 0.0)
+        .map(|i| i as usize);
+    let path = match (given, index) {
+        (Some(p), _) => p.to_path_buf(),
+        (None, Some(i)) => {
+            let p = image
+                .parent()
+                .unwrap_or(Path::new("."))
+                .join(instrument::telemetry_name(i));
+            if !p.exists() {
+                return Ok(None);
+            }
+            p
+        }
+        (None, None) => return Ok(None),
+    };
+    let (rec, covers) = instrument::read_telemetry(&path)?;
+    if let Some(i) = index
+        && i != covers
+    {
+        return Err(IoError::Format {
+            path,
+            message: format!(
+                "telemetry of exposure {covers} (IMAGEIDX), the image is exposure {i}: not this exposure's"
+            ),
+        });
+    }
+    Ok(Some(rec))
 }

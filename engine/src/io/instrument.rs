@@ -13,6 +13,9 @@
 //!   `OVERSAMP` nodes per pixel, origin at `CRPIX1/2`, a star's pixels sum to 1). The analysis falls back to it
 //!   when an image has too few stars to build its own ePSF. One array: the primary HDU; the focal plane:
 //!   `PSF1` … `PSF4` (each array's axes).
+//! * **Attitude telemetry** (`telemetry_NNN.fits`, one per exposure): the telescope attitude as the
+//!   spacecraft records it — sampled at the telemetry rate with its white and correlated errors and latency,
+//!   not the true series ([`write_telemetry`]).
 //! * **Reference astrometric catalogue** (`refcat.csv`): what a survey gives of the field ([`SurveyModel`]:
 //!   magnitude-dependent errors, a limiting magnitude, incompleteness), with each star's position on the sky
 //!   and in the pixels of its array through the array's design WCS. The `plate-*@catalogue` countermeasures
@@ -526,4 +529,137 @@ pub fn find_model_psf(image: &Path, given: Option<&Path>) -> Option<PathBuf> {
             p.exists().then_some(p)
         }
     }
+}
+
+/// File name of the attitude telemetry of exposure `index` beside the images.
+pub fn telemetry_name(index: usize) -> String {
+    format!("telemetry_{index:03}.fits")
+}
+
+/// Write the attitude telemetry of exposure `index` as the spacecraft records it under `quality` (one
+/// binary table `ATTITUDE`: `T_S` in the ACE series' time, `ATT_X_MAS`, `ATT_Y_MAS` the telescope's attitude
+/// with the recording's errors and latency) into `dir`; none for a static ACE (nothing moves). The
+/// recording is the one the in-memory analysis makes (same stream of the run seed).
+pub fn write_telemetry(
+    dir: &Path,
+    sim: &Simulator,
+    index: usize,
+    quality: &crate::analysis::countermeasures::TelemetryQuality,
+) -> Result<Option<PathBuf>, IoError> {
+    let Some(series) = sim.series() else {
+        return Ok(None);
+    };
+    let path = dir.join(telemetry_name(index));
+    let rec = crate::analysis::countermeasures::telemetry::TelemetryRecord::record(
+        series,
+        sim.timing.span_s(),
+        sim.exposure_start_s(index),
+        quality,
+        sim.cfg.seed,
+    )
+    .map_err(|e| IoError::Format {
+        path: path.clone(),
+        message: e.to_string(),
+    })?;
+    let t: Vec<f64> = (0..rec.x_mas.len())
+        .map(|k| rec.t0_s + k as f64 * rec.dt_s)
+        .collect();
+    fits::write(
+        &path,
+        &[
+            Hdu::Header {
+                cards: vec![
+                    Card::i(
+                        "IMAGEIDX",
+                        index as i64,
+                        "the exposure this telemetry covers",
+                    ),
+                    Card::s("ORIGIN", "jsim", "JASMINE image simulator"),
+                ],
+            },
+            Hdu::Table {
+                name: "ATTITUDE",
+                columns: vec![
+                    fits::Column::F64("T_S".into(), t),
+                    fits::Column::F64("ATT_X_MAS".into(), rec.x_mas.clone()),
+                    fits::Column::F64("ATT_Y_MAS".into(), rec.y_mas.clone()),
+                ],
+                cards: vec![
+                    Card::f(
+                        "TSTART",
+                        rec.exposure_start_s,
+                        "[s] exposure start, series time",
+                    ),
+                    Card::f("DT_S", rec.dt_s, "[s] sample interval"),
+                    Card::f("RATE_HZ", quality.rate_hz, "[Hz] telemetry rate"),
+                    Card::f(
+                        "NOISEMAS",
+                        quality.noise_mas,
+                        "[mas] white noise per sample",
+                    ),
+                    Card::f("LATENCY", quality.latency_s, "[s] latency"),
+                    Card::f(
+                        "CORRMAS",
+                        quality.correlated_mas,
+                        "[mas] correlated error rms",
+                    ),
+                    Card::f(
+                        "CORRTAU",
+                        quality.correlation_time_s,
+                        "[s] its correlation time",
+                    ),
+                    Card::i(
+                        "IMAGEIDX",
+                        index as i64,
+                        "the exposure this telemetry covers",
+                    ),
+                    Card::i("SEED", sim.cfg.seed as i64, "master random seed"),
+                    Card::s("CONFHASH", sim.cfg.hash_hex(), "configuration hash"),
+                    Card::s("CONTENT", "attitude telemetry", "telescope frame, recorded"),
+                ],
+            },
+        ],
+    )?;
+    Ok(Some(path))
+}
+
+/// Read an attitude telemetry product, with the exposure index it covers.
+pub fn read_telemetry(
+    path: &Path,
+) -> Result<
+    (
+        crate::analysis::countermeasures::telemetry::TelemetryRecord,
+        usize,
+    ),
+    IoError,
+> {
+    let cols = fits::read_table(path, "ATTITUDE", &["T_S", "ATT_X_MAS", "ATT_Y_MAS"])?;
+    let key = |k: &str| fits::read_f64_key_in(path, Some("ATTITUDE"), k);
+    let (start, dt, idx) = (key("TSTART")?, key("DT_S")?, key("IMAGEIDX")?);
+    let bad = |message: String| IoError::Format {
+        path: path.to_path_buf(),
+        message,
+    };
+    if cols[0].is_empty() {
+        return Err(bad("the ATTITUDE table has no samples".into()));
+    }
+    if !(dt > 0.0 && dt.is_finite()) {
+        return Err(bad(format!("header DT_S = {dt}: must be > 0 [s]")));
+    }
+    if !(idx >= 0.0 && idx.fract() == 0.0) {
+        return Err(bad(format!("header IMAGEIDX = {idx}: a whole number ≥ 0")));
+    }
+    if cols.iter().flatten().any(|v| !v.is_finite()) {
+        return Err(bad("a telemetry sample is not finite".into()));
+    }
+    Ok((
+        crate::analysis::countermeasures::telemetry::TelemetryRecord {
+            t0_s: cols[0][0],
+            dt_s: dt,
+            x_mas: cols[1].clone(),
+            y_mas: cols[2].clone(),
+            exposure_start_s: start,
+        },
+        idx as usize,
+    ))
 }

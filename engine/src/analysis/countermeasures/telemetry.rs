@@ -21,20 +21,29 @@ pub struct Telemetry {
     pub response: FitResponse,
 }
 
-impl Telemetry {
-    /// Sample `series` at the quality's `rate_hz` with `noise_mas` Gaussian noise per sample (seeded),
-    /// reporting at time t the attitude of time t − `latency_s`, over one exposure; interpolate linearly between samples; and
-    /// build the fit response from the PSF's pixel kernel.
-    pub fn from_series(
+/// Attitude telemetry as the spacecraft records it over one exposure: samples at `dt_s` from `t0_s` (seconds
+/// in the ACE series' time), the telescope's attitude in mas with the recording's errors and latency — the
+/// instrument product (`telemetry_NNN.fits`), not the true series.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TelemetryRecord {
+    pub t0_s: f64,
+    pub dt_s: f64,
+    pub x_mas: Vec<f64>,
+    pub y_mas: Vec<f64>,
+    /// The exposure's start (the series' time) the record covers.
+    pub exposure_start_s: f64,
+}
+
+impl TelemetryRecord {
+    /// Record `series` at the quality's `rate_hz` with `noise_mas` Gaussian noise per sample (seeded),
+    /// reporting at time t the attitude of time t − `latency_s`, plus the correlated (Gauss–Markov) error,
+    /// over one exposure of span `span_s` starting at `exposure_start_s` (two samples of margin each side).
+    pub fn record(
         series: &AceSeries,
-        timing: ReadoutTiming,
+        span_s: f64,
         exposure_start_s: f64,
-        plate_scale_mas: f64,
-        rotation_deg: f64,
         quality: &TelemetryQuality,
         seed: u64,
-        kernel: &PixelKernel,
-        noise: &FitNoise,
     ) -> Result<Self, CountermeasureError> {
         quality.validate()?;
         let TelemetryQuality {
@@ -50,10 +59,9 @@ impl Telemetry {
             ));
         }
         let dt = 1.0 / rate_hz;
-        let span = timing.span_s();
         let (t0, t1) = (
             exposure_start_s - 2.0 * dt,
-            exposure_start_s + span + 2.0 * dt,
+            exposure_start_s + span_s + 2.0 * dt,
         );
         let n = ((t1 - t0) / dt).ceil() as usize + 1;
         if n > 50_000_000 {
@@ -90,8 +98,68 @@ impl Telemetry {
                 }
             }
         }
+        Ok(Self {
+            t0_s: t0,
+            dt_s: dt,
+            x_mas: xs,
+            y_mas: ys,
+            exposure_start_s,
+        })
+    }
+}
+
+impl Telemetry {
+    /// Sample `series` as [`TelemetryRecord::record`] does and build the telemetry from it
+    /// ([`Telemetry::from_record`]).
+    pub fn from_series(
+        series: &AceSeries,
+        timing: ReadoutTiming,
+        exposure_start_s: f64,
+        plate_scale_mas: f64,
+        rotation_deg: f64,
+        quality: &TelemetryQuality,
+        seed: u64,
+        kernel: &PixelKernel,
+        noise: &FitNoise,
+    ) -> Result<Self, CountermeasureError> {
+        let rec =
+            TelemetryRecord::record(series, timing.span_s(), exposure_start_s, quality, seed)?;
+        // the integration grid need be no finer than the series it was recorded from
+        Self::from_record(
+            &rec,
+            series.dt_s,
+            timing,
+            plate_scale_mas,
+            rotation_deg,
+            kernel,
+            noise,
+        )
+    }
+
+    /// The telemetry of a recorded exposure: interpolated linearly between samples onto a grid of step
+    /// `min(1 ms, max(finest_s, dt/4))`, turned into this array's axes, and the fit response built from
+    /// the PSF's pixel kernel.
+    pub fn from_record(
+        rec: &TelemetryRecord,
+        finest_s: f64,
+        timing: ReadoutTiming,
+        plate_scale_mas: f64,
+        rotation_deg: f64,
+        kernel: &PixelKernel,
+        noise: &FitNoise,
+    ) -> Result<Self, CountermeasureError> {
+        let (t0, dt, exposure_start_s) = (rec.t0_s, rec.dt_s, rec.exposure_start_s);
+        let (xs, ys) = (&rec.x_mas, &rec.y_mas);
+        let n = xs.len();
+        if n == 0 || ys.len() != n || !(dt > 0.0) {
+            return Err(CountermeasureError::Telemetry(format!(
+                "a telemetry record of {n} x and {} y samples at {dt} s: needs ≥ 1 of each, dt > 0",
+                ys.len()
+            )));
+        }
+        let span = timing.span_s();
         // resample on the integration grid (at most 1 ms, and no coarser than the series)
-        let step = series.dt_s.max(dt.min(1e-3) / 4.0).min(1e-3);
+        let step = finest_s.max(dt.min(1e-3) / 4.0).min(1e-3);
         let m = (span / step).ceil() as usize + 2;
         let lin = |t_abs: f64, v: &[f64]| -> f64 {
             let u = ((t_abs - t0) / dt).clamp(0.0, (n - 1) as f64);
@@ -107,10 +175,10 @@ impl Telemetry {
             step,
             0.0,
             (0..m)
-                .map(|j| lin(exposure_start_s + j as f64 * step, &xs) / plate_scale_mas)
+                .map(|j| lin(exposure_start_s + j as f64 * step, xs) / plate_scale_mas)
                 .collect(),
             (0..m)
-                .map(|j| lin(exposure_start_s + j as f64 * step, &ys) / plate_scale_mas)
+                .map(|j| lin(exposure_start_s + j as f64 * step, ys) / plate_scale_mas)
                 .collect(),
         );
         // the attitude is the telescope's: turned into this array's pixel axes, as the simulated jitter is

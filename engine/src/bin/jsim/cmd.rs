@@ -122,6 +122,14 @@ pub fn simulate(
         outputs.add(&out.join(exposure::image_name(i)));
         outputs.add(&out.join(exposure::truth_name(i)));
         let files = exposure::write_exposure(out, &sim, &exp)?;
+        // the attitude telemetry the spacecraft records over this exposure (the default quality)
+        outputs.add(&out.join(engine::io::instrument::telemetry_name(i)));
+        engine::io::instrument::write_telemetry(
+            out,
+            &sim,
+            i,
+            &engine::analysis::countermeasures::TelemetryQuality::DEFAULT,
+        )?;
         summary.push(serde_json::json!({
             "image": files.image.file_name().map(|n| n.to_string_lossy().to_string()),
             "truth": files.truth_csv.file_name().map(|n| n.to_string_lossy().to_string()),
@@ -258,6 +266,7 @@ pub struct AnalyzeArgs {
     pub truth: Option<PathBuf>,
     pub flat: Option<PathBuf>,
     pub refcat: Option<PathBuf>,
+    pub telemetry: Option<PathBuf>,
     pub zones: Option<usize>,
     pub countermeasure: Countermeasure,
     pub crowding: engine::analysis::crowding::Crowding,
@@ -273,11 +282,12 @@ pub fn analyze(session: &Session, cfg: &Config, a: &AnalyzeArgs) -> Result<()> {
         return analyze_focal_plane(session, cfg, a, &arrays);
     }
     let t0 = Instant::now();
-    let input = analysis_input::AnalysisInput::read_with(
+    let input = analysis_input::AnalysisInput::read_products(
         &a.image,
         a.truth.as_deref(),
         a.flat.as_deref(),
         a.refcat.as_deref(),
+        a.telemetry.as_deref(),
         cfg,
     )?;
     for s in &input.assumptions {

@@ -179,6 +179,11 @@ enum Command {
         /// refcat.csv beside the image, if any).
         #[arg(long, value_name = "CSV")]
         refcat: Option<PathBuf>,
+        /// Attitude telemetry of the exposure (FITS table ATTITUDE; default: telemetry_NNN.fits beside the
+        /// image, NNN its IMAGEIDX). With it, the telemetry correction uses what was recorded (its own
+        /// quality; the --telemetry-* options then do not apply).
+        #[arg(long, value_name = "FITS")]
+        telemetry: Option<PathBuf>,
         /// Y zones of the position-dependent ePSF (with --countermeasure yzones|yzones-shared).
         #[arg(long = "epsf-zones")]
         epsf_zones: Option<usize>,
@@ -362,6 +367,7 @@ fn run(cli: Cli) -> Result<()> {
             truth,
             flat,
             refcat,
+            telemetry,
             epsf_zones,
             cm,
             crowding,
@@ -382,6 +388,7 @@ fn run(cli: Cli) -> Result<()> {
                     truth,
                     flat,
                     refcat,
+                    telemetry,
                     zones: epsf_zones,
                     countermeasure: plan.countermeasures[0],
                     crowding,
