@@ -33,8 +33,9 @@ pub enum AnalysisError {
     )]
     NotApplicable { countermeasure: String },
     #[error(
-        "{countermeasure} is not offered for a crowded field (it refits single stars; use none, telemetry or \
-         plate-*@catalogue)"
+        "{countermeasure} is not offered for a crowded field here (yzones and exact-epsf refit single stars; \
+         the analysis of an image offers none, plate-*@catalogue, and plate-*@oracle with a truth; the \
+         telemetry correction needs a single array's simulation: `jsim crowded` applies it)"
     )]
     NotInCrowdedField { countermeasure: String },
 }

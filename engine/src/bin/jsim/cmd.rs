@@ -555,14 +555,15 @@ pub fn score(a: &ScoreArgs) -> Result<()> {
         s.offset_x_px,
         s.offset_y_px
     );
-    println!("  mag bin      true  matched  complete  accuracy [mas]");
+    println!("  mag bin      true  matched  scored  complete  accuracy [mas]");
     for b in s.bins.iter().chain(std::iter::once(&s.all)) {
         println!(
-            "  {:5.1}–{:<5.1} {:6} {:8} {:9.3} {}",
+            "  {:5.1}–{:<5.1} {:6} {:8} {:7} {:9.3} {}",
             b.mag_lo,
             b.mag_hi,
             b.n_true,
             b.n_matched,
+            b.n_scored,
             b.completeness,
             acc(b.accuracy_mas)
         );
