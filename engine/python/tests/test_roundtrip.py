@@ -60,6 +60,36 @@ def test_the_image_wcs_reads_in_astropy_without_warnings(exposure, tmp_path):
     assert xe < x0 and abs(ye - y0) < 0.1
 
 
+def test_time_stamps_and_instrument_products_read_in_astropy_without_warnings(exposure, tmp_path):
+    import warnings
+
+    from astropy.table import Table
+    from astropy.time import Time
+
+    path = tmp_path / "img.fits"
+    exposure.write_fits(path)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        with fits.open(path) as h:
+            h.verify("exception")
+            hd = h[0].header
+            assert (hd["TELESCOP"], hd["FILTER"], hd["TIMESYS"]) == ("JASMINE", "Hw", "TT")
+            t = Time(hd["DATE-OBS"], scale="tt")
+            # DATE-OBS (to the millisecond) and MJD-OBS are the same instant: the default epoch + TSTART
+            assert abs(t.mjd - hd["MJD-OBS"]) * 86400 < 1e-3
+            assert abs((hd["MJD-OBS"] - 62867.0) * 86400 - hd["TSTART"]) < 1e-3
+        for name in ["flat_cal.fits", "psf_model.fits", f"telemetry_{exposure.index:03d}.fits"]:
+            with fits.open(tmp_path / name) as h:
+                h.verify("exception")
+        with fits.open(tmp_path / "flat_cal.fits") as h:
+            assert 0.0 < h[0].header["FLATERR"] < 1.0
+            assert abs(np.mean(h[0].data) - 1.0) < 0.05
+        att = Table.read(tmp_path / f"telemetry_{exposure.index:03d}.fits", hdu="ATTITUDE")
+        assert att.colnames == ["T_S", "ATT_X_MAS", "ATT_Y_MAS"] and len(att) > 100
+        ref = Table.read(tmp_path / "refcat.csv", format="ascii.csv")
+        assert {"ra_deg", "dec_deg", "x_px", "y_px", "hw", "sigma_mas"} <= set(ref.colnames)
+
+
 def test_the_image_is_handed_over_without_a_copy(exposure):
     img = exposure.image
     assert not img.flags.owndata, "the array must wrap the engine's buffer"

@@ -25,6 +25,39 @@ pub fn truth_name(index: usize) -> String {
     format!("truth_{index:03}.csv")
 }
 
+/// The epoch an exposure's time stamps count from until observation sequences set real ones: MJD 62867.0 =
+/// 2031-01-01T00:00:00 TT (a date in JASMINE's planned mission; a choice, not a schedule). `DATE-OBS` and
+/// `MJD-OBS` are this epoch plus the exposure's start in the ACE series (`TSTART`), in TT (`TIMESYS`): a
+/// future UTC needs leap seconds nobody knows yet.
+pub const DEFAULT_EPOCH_MJD: f64 = 62_867.0;
+
+/// `YYYY-MM-DDThh:mm:ss.sss` of `mjd` days plus `plus_s` seconds, in a uniform time scale (TT: days of
+/// 86 400 s, no leap seconds).
+pub fn iso_utc(mjd: f64, plus_s: f64) -> String {
+    let total_ms = ((mjd * 86_400.0 + plus_s) * 1e3).round() as i64;
+    let (days, ms) = (
+        total_ms.div_euclid(86_400_000),
+        total_ms.rem_euclid(86_400_000),
+    );
+    // MJD 0 = 1858-11-17; civil date from days since 1970-01-01 (MJD 40587), H. Hinnant's algorithm
+    let z = days - 40_587 + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z.rem_euclid(146_097);
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let d = doy - (153 * mp + 2) / 5 + 1;
+    let m = if mp < 10 { mp + 3 } else { mp - 9 };
+    let y = yoe + era * 400 + i64::from(m <= 2);
+    format!(
+        "{y:04}-{m:02}-{d:02}T{:02}:{:02}:{:02}.{:03}",
+        ms / 3_600_000,
+        ms / 60_000 % 60,
+        ms / 1000 % 60,
+        ms % 1000
+    )
+}
+
 /// The provenance headers of an exposure.
 pub fn headers(sim: &Simulator, exp: &Exposure) -> Vec<Card> {
     let c = &sim.cfg;
@@ -98,6 +131,20 @@ pub fn headers(sim: &Simulator, exp: &Exposure) -> Vec<Card> {
             "TSTART",
             exp.t_start_s,
             "[s] exposure start in the ACE series",
+        ),
+        Card::s("TELESCOP", "JASMINE", "telescope (simulated)"),
+        Card::s("INSTRUME", "JASMINE NIR", "instrument (simulated by jsim)"),
+        Card::s("FILTER", "Hw", "band: 1.0-1.6 um (the Hw magnitude system)"),
+        Card::s("TIMESYS", "TT", "time scale of DATE-OBS, MJD-OBS"),
+        Card::s(
+            "DATE-OBS",
+            iso_utc(DEFAULT_EPOCH_MJD, exp.t_start_s),
+            "exposure start (default epoch + TSTART)",
+        ),
+        Card::f(
+            "MJD-OBS",
+            DEFAULT_EPOCH_MJD + exp.t_start_s / 86_400.0,
+            "[d] exposure start, MJD (TT)",
         ),
         Card::s("READOUT", c.readout.order.name(), "readout order"),
         Card::i("NCHAN", c.readout.channels as i64, "readout channels"),
@@ -403,4 +450,24 @@ pub fn write_exposure(
     write_image_file(&image, sim, exp, pixels, &exp.image.dq)?;
     write_truth_csv(&truth_csv, &exp.truth, sim.wcs())?;
     Ok(ExposureFiles { image, truth_csv })
+}
+
+#[cfg(test)]
+mod time_tests {
+    use super::*;
+
+    /// Known dates: MJD 51544 = 2000-01-01 (the J2000 day), 40587 = 1970-01-01, the default epoch
+    /// 62867 = 2031-01-01, a leap day, and seconds carried into the next day.
+    #[test]
+    fn iso_dates_of_known_mjds() {
+        assert_eq!(iso_utc(51_544.0, 0.0), "2000-01-01T00:00:00.000");
+        assert_eq!(iso_utc(40_587.0, 0.0), "1970-01-01T00:00:00.000");
+        assert_eq!(iso_utc(DEFAULT_EPOCH_MJD, 0.0), "2031-01-01T00:00:00.000");
+        assert_eq!(iso_utc(51_603.0, 0.0), "2000-02-29T00:00:00.000");
+        assert_eq!(iso_utc(51_544.0, 86_399.5), "2000-01-01T23:59:59.500");
+        assert_eq!(
+            iso_utc(51_544.0, 86_400.0 + 3_723.25),
+            "2000-01-02T01:02:03.250"
+        );
+    }
 }
