@@ -121,6 +121,20 @@ fn grid_stars(n: usize, step: usize) -> Vec<(f64, f64, f64)> {
     out
 }
 
+/// A simulation of an `n`-pixel array (128-px channels) with coarse optics: for the products' tests.
+fn coarse_config(n: usize) -> engine::Config {
+    let mut cfg = engine::Config::default();
+    cfg.instrument.detector_px = n;
+    cfg.instrument.photosensitive_px = n - 16;
+    cfg.readout.channels = n / 128;
+    cfg.readout.channel_width_px = 128;
+    cfg.optics.pupil_samples = 64;
+    cfg.optics.psf_radius_px = 8;
+    cfg.band.wavelength_step_um = 0.1;
+    cfg.fidelity.backend = engine::config::Backend::Cpu;
+    cfg
+}
+
 fn json(path: &Path) -> serde_json::Value {
     serde_json::from_str(&std::fs::read_to_string(path).expect("json")).expect("parse")
 }
@@ -435,15 +449,7 @@ fn bad_score_options_are_named_and_write_nothing() {
 #[test]
 fn the_reference_catalogue_has_the_survey_errors_completeness_and_limit() {
     use engine::io::instrument::{self, SurveyModel};
-    let mut cfg = engine::Config::default();
-    cfg.instrument.detector_px = 512;
-    cfg.instrument.photosensitive_px = 496;
-    cfg.readout.channels = 4;
-    cfg.readout.channel_width_px = 128;
-    cfg.optics.pupil_samples = 64;
-    cfg.optics.psf_radius_px = 8;
-    cfg.band.wavelength_step_um = 0.1;
-    cfg.fidelity.backend = engine::config::Backend::Cpu;
+    let mut cfg = coarse_config(512);
     cfg.scene.grid_n = 30;
     cfg.scene.grid_spacing_px = 16.0;
     cfg.scene.mag_hw = 15.0;
@@ -512,16 +518,8 @@ fn the_reference_catalogue_has_the_survey_errors_completeness_and_limit() {
 #[test]
 fn the_model_psf_product_round_trips_and_is_normalised() {
     use engine::io::instrument;
-    let mut cfg = engine::Config::default();
-    cfg.instrument.detector_px = 256;
-    cfg.instrument.photosensitive_px = 240;
-    cfg.readout.channels = 2;
-    cfg.readout.channel_width_px = 128;
+    let mut cfg = coarse_config(256);
     cfg.scene.grid_n = 2;
-    cfg.optics.pupil_samples = 64;
-    cfg.optics.psf_radius_px = 8;
-    cfg.band.wavelength_step_um = 0.1;
-    cfg.fidelity.backend = engine::config::Backend::Cpu;
     let sim = engine::simulate::Simulator::new(&cfg).expect("simulator");
     let model = instrument::model_psf(&sim).expect("model");
     let dir = temp("model-psf");
