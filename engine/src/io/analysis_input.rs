@@ -142,22 +142,11 @@ impl AnalysisInput {
         flat_path: Option<&Path>,
         fallback: &Config,
     ) -> Result<Self, IoError> {
-        Self::read_with(path, truth_path, flat_path, None, fallback)
+        Self::read_products(path, truth_path, flat_path, None, None, fallback)
     }
 
     /// [`AnalysisInput::read`] with the reference catalogue product `refcat_path` (default: `refcat.csv`
-    /// beside the image, if there is one).
-    pub fn read_with(
-        path: &Path,
-        truth_path: Option<&Path>,
-        flat_path: Option<&Path>,
-        refcat_path: Option<&Path>,
-        fallback: &Config,
-    ) -> Result<Self, IoError> {
-        Self::read_products(path, truth_path, flat_path, refcat_path, None, fallback)
-    }
-
-    /// [`AnalysisInput::read_with`] with the attitude telemetry product `telemetry_path` (default:
+    /// beside the image, if there is one) and the attitude telemetry product `telemetry_path` (default:
     /// `telemetry_NNN.fits` beside the image, NNN its `IMAGEIDX`).
     pub fn read_products(
         path: &Path,
@@ -167,10 +156,7 @@ impl AnalysisInput {
         telemetry_path: Option<&Path>,
         fallback: &Config,
     ) -> Result<Self, IoError> {
-        let flat = match instrument::find_flat(path, flat_path) {
-            Some(p) => Some(instrument::read_calibration_flat(&p, None)?),
-            None => None,
-        };
+        let products = Products::read(path, None, flat_path, refcat_path)?;
         let provenance = fits::read_text(path, "CONFIG")
             .ok()
             .and_then(|t| Config::from_toml_str(&t).ok())
@@ -194,7 +180,7 @@ impl AnalysisInput {
             },
             truth,
             provenance,
-            flat,
+            products.flat,
             fallback,
         )
         .map_err(|message| IoError::Format {
@@ -202,11 +188,9 @@ impl AnalysisInput {
             message,
         })
         .and_then(|mut input| {
-            input.reference = read_reference(path, refcat_path, 0, &mut input.assumptions)?;
-            input.model_psf = match instrument::find_model_psf(path, None) {
-                Some(p) => Some(instrument::read_model_psf(&p, None)?),
-                None => None,
-            };
+            input.assumptions.extend(products.assumed);
+            input.reference = products.reference;
+            input.model_psf = products.model_psf;
             input.telemetry = read_telemetry_for(path, telemetry_path)?;
             Ok(input)
         })
@@ -329,13 +313,7 @@ impl AnalysisInput {
     ) -> Result<Self, IoError> {
         let ext = format!("ARRAY{}", k + 1);
         let r = fits::read_image_in(path, Some(&ext), &format!("DQ{}", k + 1))?;
-        let flat = match instrument::find_flat(path, flat_path) {
-            Some(p) => Some(instrument::read_calibration_flat(
-                &p,
-                Some(&instrument::flat_extension(k)),
-            )?),
-            None => None,
-        };
+        let products = Products::read(path, Some(k), flat_path, refcat_path)?;
         let truth = array_truth(truth_path.unwrap_or(path), k + 1).ok();
         Self::from_parts(
             ImageParts {
@@ -348,7 +326,7 @@ impl AnalysisInput {
             },
             truth,
             None,
-            flat,
+            products.flat,
             fallback,
         )
         .map(|mut input| {
@@ -365,17 +343,11 @@ impl AnalysisInput {
             path: path.to_path_buf(),
             message: format!("{ext}: {message}"),
         })
-        .and_then(|mut input| {
-            input.reference =
-                read_reference(path, refcat_path, k as u32 + 1, &mut input.assumptions)?;
-            input.model_psf = match instrument::find_model_psf(path, None) {
-                Some(p) => Some(instrument::read_model_psf(
-                    &p,
-                    Some(&instrument::model_psf_extension(k)),
-                )?),
-                None => None,
-            };
-            Ok(input)
+        .map(|mut input| {
+            input.assumptions.extend(products.assumed);
+            input.reference = products.reference;
+            input.model_psf = products.model_psf;
+            input
         })
     }
 }
@@ -393,6 +365,52 @@ fn array_truth(path: &Path, array: usize) -> Result<Vec<TruthRow>, IoError> {
         .map(|c| keep.iter().map(|&i| c[i]).collect())
         .collect();
     Ok(crate::io::exposure::truth_from_columns(&sel))
+}
+
+/// The instrument products an image's analysis reads beside it (the telemetry apart: it is per exposure),
+/// for a single image or array `k` (0-based) of a focal-plane file, with what was assumed where one is
+/// missing.
+struct Products {
+    flat: Option<CalibrationFlat>,
+    reference: Option<Vec<(f64, f64)>>,
+    model_psf: Option<crate::analysis::epsf::Epsf>,
+    assumed: Vec<String>,
+}
+
+impl Products {
+    /// The calibration flat (`flat_path`, else `flat_cal.fits` beside the image; `FLATk` of an array), the
+    /// reference catalogue (`refcat_path`, else `refcat.csv`; its rows of the array) and the model PSF
+    /// (`psf_model.fits`; `PSFk` of an array).
+    fn read(
+        image: &Path,
+        k: Option<usize>,
+        flat_path: Option<&Path>,
+        refcat_path: Option<&Path>,
+    ) -> Result<Self, IoError> {
+        let flat = match instrument::find_flat(image, flat_path) {
+            Some(p) => Some(instrument::read_calibration_flat(
+                &p,
+                k.map(instrument::flat_extension).as_deref(),
+            )?),
+            None => None,
+        };
+        let mut assumed = Vec::new();
+        let array = k.map_or(0, |k| k as u32 + 1);
+        let reference = read_reference(image, refcat_path, array, &mut assumed)?;
+        let model_psf = match instrument::find_model_psf(image, None) {
+            Some(p) => Some(instrument::read_model_psf(
+                &p,
+                k.map(instrument::model_psf_extension).as_deref(),
+            )?),
+            None => None,
+        };
+        Ok(Self {
+            flat,
+            reference,
+            model_psf,
+            assumed,
+        })
+    }
 }
 
 /// The reference catalogue product for an image (array `array`, 0 for a single one): the positions of its

@@ -414,17 +414,10 @@ fn model_psf_hdu<'a>(
     e: &'a crate::analysis::epsf::Epsf,
     sim: &Simulator,
 ) -> Hdu<'a> {
-    let n = e.n();
-    Hdu::Image {
+    super::products::epsf_hdu(
         name,
-        nx: n,
-        ny: n,
-        pixels: Pixels::F64(&e.data),
-        cards: vec![
-            Card::i("OVERSAMP", e.oversampling as i64, "ePSF nodes per pixel"),
-            Card::f("CRPIX1", e.half_nodes as f64 + 1.0, "origin (1-based)"),
-            Card::f("CRPIX2", e.half_nodes as f64 + 1.0, "origin (1-based)"),
-            Card::s("NORM", "sum = oversampling^2", "a star's pixels sum to 1"),
+        e,
+        vec![
             Card::s(
                 "CONTENT",
                 "design model PSF",
@@ -433,7 +426,7 @@ fn model_psf_hdu<'a>(
             Card::s("CONFHASH", sim.cfg.hash_hex(), "configuration hash"),
             Card::s("ORIGIN", "jsim", "JASMINE image simulator"),
         ],
-    }
+    )
 }
 
 fn model_psf_error(e: crate::simulate::SimError, path: &Path) -> IoError {

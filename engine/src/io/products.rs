@@ -63,24 +63,35 @@ pub fn write_catalogue(
     )
 }
 
+/// An ePSF table as an image HDU (`epsf.fits`, the model PSF product): its nodes, nodes per pixel, origin
+/// and normalisation, then `extra` cards.
+pub fn epsf_hdu<'a>(name: &'a str, e: &'a Epsf, extra: Vec<Card>) -> Hdu<'a> {
+    let n = e.n();
+    let mut cards = vec![
+        Card::i("OVERSAMP", e.oversampling as i64, "ePSF nodes per pixel"),
+        Card::f("CRPIX1", e.half_nodes as f64 + 1.0, "origin (1-based)"),
+        Card::f("CRPIX2", e.half_nodes as f64 + 1.0, "origin (1-based)"),
+        Card::s("NORM", "sum = oversampling^2", "a star's pixels sum to 1"),
+    ];
+    cards.extend(extra);
+    Hdu::Image {
+        name,
+        nx: n,
+        ny: n,
+        pixels: Pixels::F64(&e.data),
+        cards,
+    }
+}
+
 /// Write the ePSF table (`epsf.fits`): nodes per pixel, origin, normalisation and builder iterations.
 pub fn write_epsf(path: &Path, e: &Epsf, iterations: usize) -> Result<(), IoError> {
-    let n = e.n();
     fits::write(
         path,
-        &[Hdu::Image {
-            name: "",
-            nx: n,
-            ny: n,
-            pixels: Pixels::F64(&e.data),
-            cards: vec![
-                Card::i("OVERSAMP", e.oversampling as i64, "ePSF nodes per pixel"),
-                Card::f("CRPIX1", e.half_nodes as f64 + 1.0, "origin (1-based)"),
-                Card::f("CRPIX2", e.half_nodes as f64 + 1.0, "origin (1-based)"),
-                Card::s("NORM", "sum = oversampling^2", "a star's pixels sum to 1"),
-                Card::i("ITER", iterations as i64, "builder iterations"),
-            ],
-        }],
+        &[epsf_hdu(
+            "",
+            e,
+            vec![Card::i("ITER", iterations as i64, "builder iterations")],
+        )],
     )
 }
 
