@@ -123,13 +123,27 @@ pub fn summarise(
     if used.len() < MIN_SCORED_STARS {
         // no accuracy without at least two scored stars (or without a truth to score against): absent
         // (NaN, `null` in JSON), never 0, so nothing downstream can count it as meeting a threshold
+        // …and so is every statistic over the scored stars (the bound, the phase bias, the prediction's fit)
         for v in [
             &mut report.accuracy_x_mas,
             &mut report.accuracy_y_mas,
             &mut report.accuracy_mas,
             &mut report.bias_x_mas,
             &mut report.bias_y_mas,
+            &mut report.crlb_median_mas,
             &mut report.accuracy_over_crlb,
+            &mut report.phase_bias_x_mas,
+            &mut report.phase_bias_y_mas,
+            &mut report.predicted_corr_x,
+            &mut report.predicted_corr_y,
+            &mut report.predicted_slope_x,
+            &mut report.predicted_slope_y,
+            &mut report.predicted_rms_mas,
+            &mut report.response_corr_x,
+            &mut report.response_corr_y,
+            &mut report.response_slope_x,
+            &mut report.response_slope_y,
+            &mut report.response_rms_mas,
         ] {
             *v = f64::NAN;
         }
@@ -154,6 +168,9 @@ pub fn summarise(
     } else {
         0.0
     };
+    // the phase bias needs the true positions' sub-pixel phases: absent without them
+    report.phase_bias_x_mas = f64::NAN;
+    report.phase_bias_y_mas = f64::NAN;
     if let Some(t) = truth {
         let px: Vec<f64> = used
             .iter()
