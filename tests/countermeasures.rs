@@ -7,7 +7,6 @@ use common::{pooled_accuracy_over_bound, small_config};
 use engine::analysis::AnalysisImage;
 use engine::analysis::countermeasures::{Countermeasure, Plan, Telemetry, TelemetryQuality};
 use engine::analysis::pipeline::Options;
-use engine::analysis::response::FitNoise;
 use engine::config::{AceCase, FlatField, ReadoutOrder};
 use engine::numerics::stats;
 use engine::simulate::Simulator;
@@ -53,7 +52,7 @@ fn telemetry_predicts_the_measured_errors_of_a_noise_free_image() {
     let measured: Vec<(f64, f64)> = used.iter().map(|s| (s.dx_px, s.dy_px)).collect();
     let pos: Vec<(f64, f64)> = used.iter().map(|s| (s.x, s.y)).collect();
     let scale = c.instrument.plate_scale_mas();
-    let noise = FitNoise::of_simulation(&sim, c.analysis.fit_radius_px);
+    let noise = engine::session::source::simulation_fit_noise(&sim, c.analysis.fit_radius_px);
     let series = sim.series().expect("series");
     let tel_q = |q: TelemetryQuality| {
         Telemetry::from_series(

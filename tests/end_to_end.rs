@@ -202,7 +202,7 @@ fn the_image_holds_the_light_the_truth_and_the_predictor_count() {
         if ace == AceCase::Realistic {
             // the predictor's model of a star: FitNoise's flux × the pixel sum of the (unblurred) kernel its
             // fit response is built on
-            let noise = engine::analysis::response::FitNoise::of_simulation(&sim, 2.5);
+            let noise = engine::session::source::simulation_fit_noise(&sim, 2.5);
             let k = sim.optical_kernel().expect("kernel");
             let per_star = image / sim.stars.len() as f64;
             let model = noise.flux_e * k.pixel_sum(0.0, 0.0);
@@ -288,11 +288,15 @@ fn the_analysis_reads_no_truth_or_config_only_the_products() {
             .expect("analysis");
         (a, input.assumptions)
     };
-    let (a_full, _) = analyse(&files.image);
+    let (a_full, assumed_full) = analyse(&files.image);
     let (a_bare, assumed) = analyse(&image);
+    let extra: Vec<&String> = assumed
+        .iter()
+        .filter(|a| !assumed_full.contains(a))
+        .collect();
     assert!(
-        assumed.iter().all(|a| a.contains("CONFIG")),
-        "only the missing simulation context is said: {assumed:?}"
+        extra.len() == 1 && extra[0].contains("CONFIG"),
+        "only the missing simulation context (an oracle's) is said: {extra:?}"
     );
     assert_eq!(a_full.stars.len(), a_bare.stars.len());
     for (p, q) in a_full.stars.iter().zip(&a_bare.stars) {
@@ -301,7 +305,7 @@ fn the_analysis_reads_no_truth_or_config_only_the_products() {
     let (x, y) = (a_full.report.accuracy_mas, a_bare.report.accuracy_mas);
     assert!((x - y).abs() <= 1e-9 * x, "{x} vs {y}");
     // in memory, with the simulator's calibration flat: the same fits
-    let mem = AnalysisImage::of_exposure(&sim, &exp.image);
+    let mem = engine::session::analysis_image(&sim, &exp.image);
     let m = astrometry::analyze(&mem, Some(&exp.truth), &Options::new(&cfg.analysis))
         .expect("analysis");
     for (p, q) in m.stars.iter().zip(&a_full.stars) {
@@ -349,6 +353,7 @@ fn the_telemetry_product_corrects_as_the_in_memory_telemetry_does() {
     let dir = temp_dir("telemetry-product");
     let files = exposure::write_exposure(&dir, &sim, &exp).expect("write");
     let q = TelemetryQuality::DEFAULT;
+    instrument::write_calibration_flat(&dir, &sim).expect("flat");
     instrument::write_telemetry(&dir, &sim, 1, &q)
         .expect("telemetry")
         .expect("a realistic ACE records telemetry");
@@ -370,11 +375,22 @@ fn the_telemetry_product_corrects_as_the_in_memory_telemetry_does() {
     let from_file = session
         .analyze_input(&cfg, &input, None, cm, Crowding::Off)
         .expect("analysis with the product");
-    let mut bare = input.clone();
-    bare.telemetry = None;
-    let in_memory = session
-        .analyze_input(&cfg, &bare, None, cm, Crowding::Off)
-        .expect("analysis from the series");
+    // in memory: the simulated instrument records the same telemetry; the pipeline corrects with it
+    let plan = engine::analysis::countermeasures::Plan::new(vec![cm]).expect("plan");
+    let in_memory = engine::session::Source {
+        sim: &sim,
+        index: 1,
+    }
+    .analyse(
+        &engine::session::analysis_image(&sim, &exp.image),
+        Some(&exp.truth),
+        &cfg.analysis,
+        &plan,
+        &Default::default(),
+    )
+    .expect("analysis from the simulation")
+    .into_of(&cm)
+    .expect("telemetry applies");
     let moved = in_memory
         .stars
         .iter()
@@ -387,7 +403,7 @@ fn the_telemetry_product_corrects_as_the_in_memory_telemetry_does() {
     );
     // the correction did something: the telemetry moved the stars from the plain fit
     let none = session
-        .analyze_input(&cfg, &bare, None, Countermeasure::None, Crowding::Off)
+        .analyze_input(&cfg, &input, None, Countermeasure::None, Crowding::Off)
         .expect("plain");
     assert!(
         none.stars
@@ -395,6 +411,31 @@ fn the_telemetry_product_corrects_as_the_in_memory_telemetry_does() {
             .zip(&from_file.stars)
             .any(|(a, b)| (a.x - b.x).abs() > 1e-4),
         "the telemetry corrected nothing"
+    );
+    // without the product the correction has nothing to correct with: nothing moves, and it is said
+    let mut bare = input.clone();
+    bare.telemetry = None;
+    let uncorrected = session
+        .analyze_input(&cfg, &bare, None, cm, Crowding::Off)
+        .expect("no telemetry");
+    assert!(
+        uncorrected
+            .stars
+            .iter()
+            .zip(&none.stars)
+            .all(|(a, b)| (a.x, a.y) == (b.x, b.y))
+    );
+    let without = analysis_input::AnalysisInput::read_products(
+        &files.image,
+        None,
+        None,
+        None,
+        Some(&dir.join("absent.fits")),
+        &cfg,
+    );
+    assert!(
+        without.is_err(),
+        "a named telemetry file that is absent is an error"
     );
     // another exposure's telemetry is refused
     let other = instrument::write_telemetry(&dir, &sim, 2, &q)

@@ -6,9 +6,9 @@ mod common;
 
 use common::{pooled_accuracy_over_bound, small_config};
 use engine::analysis::countermeasures::Countermeasure;
-use engine::analysis::predict::Predictor;
 use engine::config::{AceCase, Config, FlatField};
 use engine::simulate::Simulator;
+use engine::studies::predict::Predictor;
 
 /// Accuracy / median bound over the images (per-axis accuracies pooled), and the predictor's value /
 /// the measured mean accuracy.

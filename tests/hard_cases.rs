@@ -328,12 +328,13 @@ fn psf_halo_adds_the_light_beyond_the_table() {
 }
 
 /// Too few stars for an ePSF: the analysis says so and falls back to a stated PSF — the instrument's
-/// model PSF when the image's simulation is known, else a Gaussian — instead of building an ePSF from
-/// four stars.
+/// design model PSF when it is supplied (a simulation supplies its own), else a Gaussian — instead of
+/// building an ePSF from four stars.
 #[test]
 fn too_few_stars_for_an_epsf_fall_back_to_a_stated_psf() {
     use engine::analysis::countermeasures::Plan;
-    use engine::analysis::{Source, analyse_image};
+    use engine::analysis::pipeline::{Supplied, analyse_image, exact_epsf};
+    use engine::session::Source;
     let mut c = small_config();
     c.ace.case = AceCase::Gaussian;
     c.scene.grid_n = 2;
@@ -342,16 +343,15 @@ fn too_few_stars_for_an_epsf_fall_back_to_a_stated_psf() {
     let e = sim.exposure(0).expect("exp");
     let img = AnalysisImage::from_detector(&c, &e.image);
     let plan = Plan::default();
-    let with_model = analyse_image(
+    let with_model = Source {
+        sim: &sim,
+        index: 0,
+    }
+    .analyse(
         &img,
         Some(&e.truth),
-        Some(Source {
-            sim: &sim,
-            index: 0,
-        }),
         &c.analysis,
         &plan,
-        c.seed,
         &Default::default(),
     )
     .expect("analysis");
@@ -362,10 +362,8 @@ fn too_few_stars_for_an_epsf_fall_back_to_a_stated_psf() {
     let without = analyse_image(
         &img,
         Some(&e.truth),
-        None,
         &c.analysis,
         &plan,
-        c.seed,
         &Default::default(),
     )
     .expect("analysis");
@@ -374,28 +372,38 @@ fn too_few_stars_for_an_epsf_fall_back_to_a_stated_psf() {
         "{:?}",
         without.global.report
     );
-    // no simulation, only the design model PSF product (from the design wavefront, not the stars' own): it
-    // stands in, and measures the stars as well as the simulation's true PSF does (within 1.5 ×)
+    // the design model PSF product (from the design wavefront, not the stars' own) stands in as the
+    // simulation's does, and measures the stars within 1.5 × of the true optical PSF (the oracle)
     let model = engine::io::instrument::model_psf(&sim).expect("model PSF");
-    let product = analyse_image(
-        &img,
-        Some(&e.truth),
-        None,
-        &c.analysis,
-        &plan,
-        c.seed,
-        &engine::analysis::pipeline::Supplied {
-            reference: None,
-            model_psf: Some(&model),
-            telemetry: None,
-        },
-    )
-    .expect("analysis");
-    let p = &product.global.report;
+    let with = |m: &engine::analysis::epsf::Epsf| {
+        analyse_image(
+            &img,
+            Some(&e.truth),
+            &c.analysis,
+            &plan,
+            &Supplied {
+                model_psf: Some(m),
+                ..Default::default()
+            },
+        )
+        .expect("analysis")
+        .global
+        .report
+    };
+    let p = with(&model);
     assert!(p.epsf_fallback.contains("model PSF"), "{p:?}");
     assert!(
-        p.accuracy_mas < 1.5 * r.accuracy_mas.max(1.0),
-        "{p:?} against {r:?}"
+        (p.accuracy_mas - r.accuracy_mas).abs() <= 1e-9 * r.accuracy_mas,
+        "the product and the simulation's design PSF: {p:?} against {r:?}"
+    );
+    let truth_psf = exact_epsf(
+        &sim.optical_kernel().expect("kernel"),
+        c.analysis.epsf_radius_px,
+    );
+    let oracle = with(&truth_psf);
+    assert!(
+        p.accuracy_mas < 1.5 * oracle.accuracy_mas.max(1.0),
+        "{p:?} against the true PSF's {oracle:?}"
     );
     // the grid of 64 stars builds its ePSF: no fallback
     let c = small_config();

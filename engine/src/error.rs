@@ -3,16 +3,17 @@
 
 use crate::analysis::AnalysisError;
 use crate::analysis::countermeasures::CountermeasureError;
-use crate::analysis::predict::PredictError;
 use crate::config::ConfigError;
 use crate::integrate::gpu::GpuError;
 use crate::integrate::kernel::KernelError;
 use crate::io::IoError;
 use crate::io::plot::PlotError;
 use crate::scene::SceneError;
+use crate::session::SourceError;
 use crate::simulate::SimError;
 use crate::studies::bench::BenchError;
 use crate::studies::experiment::ExperimentError;
+use crate::studies::predict::PredictError;
 use crate::studies::sweep::SweepError;
 
 /// Any failure of the engine.
@@ -34,6 +35,8 @@ pub enum Error {
     Countermeasure(#[from] CountermeasureError),
     #[error(transparent)]
     Predict(#[from] PredictError),
+    #[error(transparent)]
+    Source(#[from] SourceError),
     #[error(transparent)]
     Io(#[from] IoError),
     #[error(transparent)]

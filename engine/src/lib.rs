@@ -9,15 +9,17 @@
 //! sky          pointing, TAN (+SIP) world coordinates of an array (the CDS `wcs` crate), the 2 × 2 focal plane
 //! stages       scene ─► optics ─► readout ─► jitter ─► integrate (kernel, track, cpu, gpu) ─► detector
 //!              stars    PSF       windows    ACE       pixel integration, CPU or wgpu        flat, noise, ADC
+//!              truth: the answer key of a simulation (only scoring and `@oracle` read it)
 //! image        simulate: one dataset's exposures (image + truth)
-//! analysis     image, detection, epsf, countermeasures, response, predict, report, vectors, and the one
-//!              per-image pipeline
+//! analysis     image, detection, epsf, countermeasures, response, report, vectors, and the one per-image
+//!              pipeline — from an image and the instrument's products; it never sees the simulator
 //! scoring      the only step that reads the truth: measured positions matched to true ones by position,
 //!              completeness, accuracy and false detections per magnitude bin
 //! io           fits, csv, plot (figures), exposure (image files), analysis_input (reading an image for
 //!              analysis), products (the schema of every output), score (`jsim score`'s files)
-//! session      the engine session: PSF banks, kernels, the integrator, simulators (what front ends hold)
-//! studies      experiment, bench, sweep (spec, record, shard, run, merge, report, slurm)
+//! session      the engine session: PSF banks, kernels, the integrator, simulators (what front ends hold);
+//!              source: a simulated exposure's products and oracles for the pipeline
+//! studies      experiment, bench, sweep (spec, record, shard, run, merge, report, slurm), predict
 //! error        engine::Error, joining every module's error
 //! ```
 //!
@@ -57,6 +59,7 @@ pub mod sky;
 pub mod studies;
 #[cfg(any(test, feature = "testkit"))]
 pub mod testkit;
+pub mod truth;
 
 pub use config::Config;
 pub use error::{Error, Result};

@@ -288,8 +288,9 @@ fn a_dense_outside_image_is_analysed_as_a_crowded_field() {
         .expect("run");
     assert!(out.status.success());
     assert_eq!(json(&iso.join("summary.json"))["report"]["crowded"], false);
-    // in crowded mode a countermeasure that refits single stars, or needs a simulation, is refused by name
-    for cm in ["yzones", "telemetry", "plate-poly:3@oracle"] {
+    // in crowded mode a countermeasure that refits single stars, or whose reference is missing (no
+    // truth for @oracle, no refcat.csv for @catalogue), is refused by name
+    for cm in ["yzones", "plate-poly:3@oracle", "plate-affine@catalogue"] {
         let bad = dir.join(format!("bad-{}", cm.replace([':', '@'], "_")));
         let out = jsim()
             .args(["analyze", "--countermeasure", cm, "--image"])

@@ -6,10 +6,10 @@ use super::out::{Out, StageResult, failed};
 use super::protocol::{CurvePoint, Msg, Request, Stage};
 use super::stages::EngineState;
 use engine::analysis::countermeasures::Countermeasure;
-use engine::analysis::predict::Predictor;
 use engine::config::Config;
 use engine::simulate::{SimError, Simulator};
 use engine::studies::experiment::{self, ImageResult};
+use engine::studies::predict::Predictor;
 use std::sync::Arc;
 use std::time::Instant;
 

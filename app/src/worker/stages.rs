@@ -10,13 +10,12 @@ use super::protocol::{
 };
 use super::views;
 use engine::analysis::countermeasures::{Countermeasure, Plan};
-use engine::analysis::predict::Predictor;
 use engine::analysis::vectors::VectorMap;
-use engine::analysis::{AnalysisImage, Source, analyse_image};
 use engine::config::{AceCase, Config};
-use engine::session::{Session, simulation_key};
+use engine::session::{Session, Source, analysis_image, simulation_key};
 use engine::simulate::{Exposure, FocalPlaneSimulator, Simulator};
 use engine::studies::experiment::Row;
+use engine::studies::predict::Predictor;
 use std::collections::HashMap;
 use std::sync::Arc;
 use std::time::Instant;
@@ -179,17 +178,16 @@ impl EngineState {
         out.progress(Stage::Image, 1, 2, "ePSF analysis");
         let t1 = Instant::now();
         let plan = r.plan().map_err(failed(Stage::Image))?;
-        let img = AnalysisImage::of_exposure(&sim, &exp.image);
-        let res = analyse_image(
-            &img,
-            Some(&exp.truth),
-            Some(Source { sim: &sim, index }),
-            &cfg.analysis,
-            &plan,
-            cfg.seed,
-            &Default::default(),
-        )
-        .map_err(failed(Stage::Image))?;
+        let img = analysis_image(&sim, &exp.image);
+        let res = Source { sim: &sim, index }
+            .analyse(
+                &img,
+                Some(&exp.truth),
+                &cfg.analysis,
+                &plan,
+                &Default::default(),
+            )
+            .map_err(failed(Stage::Image))?;
         let analyse_s = t1.elapsed().as_secs_f64();
         // a countermeasure that does not apply to this image leaves the plain analysis
         let shown = res.of(&r.countermeasure).unwrap_or(&res.global);
@@ -392,18 +390,17 @@ impl EngineState {
         let sim = self.simulator(&tcfg, Stage::Twin)?;
         let exp = self.exposure(&sim, index, Stage::Twin)?;
         out.check()?;
-        let img = AnalysisImage::of_exposure(&sim, &exp.image);
-        let report = analyse_image(
-            &img,
-            Some(&exp.truth),
-            Some(Source { sim: &sim, index }),
-            &tcfg.analysis,
-            &Plan::default(),
-            tcfg.seed,
-            &Default::default(),
-        )
-        .ok()
-        .map(|a| a.global.report);
+        let img = analysis_image(&sim, &exp.image);
+        let report = Source { sim: &sim, index }
+            .analyse(
+                &img,
+                Some(&exp.truth),
+                &tcfg.analysis,
+                &Plan::default(),
+                &Default::default(),
+            )
+            .ok()
+            .map(|a| a.global.report);
         out.send(Msg::Twin(Box::new(TwinResult {
             generation: out.generation,
             cfg_hash: r.cfg.hash_hex(),

@@ -157,6 +157,17 @@ impl PyExposure {
                         }
                         e
                     });
+                // the attitude telemetry (the default quality) and the readout timing, as `write_fits`
+                // writes them beside and in the image
+                let source = engine::session::Source {
+                    sim: &self.sim,
+                    index: self.exp.index,
+                };
+                input.readout = Some(source.readout());
+                input.telemetry = source
+                    .telemetry_record(&engine::analysis::countermeasures::TelemetryQuality::DEFAULT)
+                    .ok()
+                    .flatten();
                 input
             })
             .map_err(PyValueError::new_err)

@@ -10,13 +10,13 @@ use engine::analysis::countermeasures::{
     Countermeasure, DEFAULT_CATALOGUE_ERROR_MAS, Plan, TelemetryQuality,
 };
 use engine::analysis::crowding::Crowding;
-use engine::analysis::predict::Predictor;
 use engine::io::analysis_input::{AnalysisInput, ImageParts};
 use engine::io::exposure::{TRUTH_HEADER, truth_from_columns};
 use engine::io::instrument::CalibrationFlat;
 use engine::io::products;
 use engine::session::Session;
 use engine::simulate::Simulator;
+use engine::studies::predict::Predictor;
 use numpy::{PyReadonlyArray2, PyUntypedArrayMethods};
 use pyo3::exceptions::{PyRuntimeWarning, PyTypeError, PyValueError};
 use pyo3::prelude::*;
@@ -230,8 +230,9 @@ impl PySession {
     /// its `header` (a dict with GAIN, RDNOISE or RNREAD + SAMPLING, BIASADU, SATURATE, PLTSCALE; missing
     /// keys are assumed and listed in `assumptions`), optionally its `dq` (uint8, same shape), its
     /// `truth` (a dict with the columns of `Exposure.truth`: without it no accuracy is measured) and the
-    /// `config` it was simulated with (with the header's IMAGEIDX: the simulation context the telemetry
-    /// and exact-epsf need). `countermeasure`: one of `jsim.COUNTERMEASURES`. `crowding`: `"auto"` (from
+    /// `config` it was simulated with (with the header's IMAGEIDX: the exact-epsf control's simulation,
+    /// an oracle; the calibration never comes from it). Readout cards in the header (READOUT, ROWDIR,
+    /// NCHAN, CHANWID, PIXTIME, TOVERHD, ROTATION) give the timing a telemetry is applied with. `countermeasure`: one of `jsim.COUNTERMEASURES`. `crowding`: `"auto"` (from
     /// the measured source density), `"on"` (the crowded-field analysis) or `"off"` (isolated stars), as
     /// `jsim analyze --crowding`. `flat`: the calibration flat product (a 2-D array of the image's shape,
     /// e.g. `Exposure.calibration_flat[0]` or `flat_cal.fits`) with its relative error `flat_error`;
@@ -301,7 +302,7 @@ impl PySession {
                     .analyze_input(&self.cfg, &input, epsf_zones, cm, crowding)
             })
             .or_py()?;
-        PyAnalysis::new(py, analysis, &input)
+        PyAnalysis::new(py, analysis, &input, &cm)
     }
 
     /// The instant predictor (no image simulated): the expected accuracy [mas] of the dataset per
@@ -371,6 +372,7 @@ impl PySession {
                 .and_then(|v| v.extract::<String>().ok())
         };
         let facts = facts_of(number, text)?;
+        let exposure_s = facts.exposure_s;
         let dq: Option<Vec<u8>> = match dq {
             None => None,
             Some(d) => {
@@ -415,6 +417,14 @@ impl PySession {
             flat,
             &self.cfg,
         )
+        .and_then(|mut input| {
+            // the readout timing the header states (READOUT, PIXTIME, …): what a telemetry is applied with
+            let card = |k: &str| text(k).or_else(|| number(k).map(|v| v.to_string()));
+            let (readout, _) =
+                engine::io::readout_header::from_cards(card, ny, exposure_s, &self.cfg)?;
+            input.readout = readout;
+            Ok(input)
+        })
         .map_err(PyValueError::new_err)
     }
 }
@@ -436,7 +446,12 @@ pub struct PyAnalysis {
 }
 
 impl PyAnalysis {
-    fn new(py: Python<'_>, a: Analysis, input: &AnalysisInput) -> PyResult<Self> {
+    fn new(
+        py: Python<'_>,
+        a: Analysis,
+        input: &AnalysisInput,
+        cm: &engine::analysis::countermeasures::Countermeasure,
+    ) -> PyResult<Self> {
         let scale = input.plate_scale_mas;
         let catalogue = convert::table(
             py,
@@ -447,7 +462,7 @@ impl PyAnalysis {
         Ok(Self {
             catalogue: catalogue.unbind(),
             summary: convert::to_py_json(py, &a.report)?.unbind(),
-            assumptions: PyList::new(py, &input.assumptions)?.unbind(),
+            assumptions: PyList::new(py, input.assumptions_for(cm))?.unbind(),
             epsf_oversampling: a.epsf.oversampling,
             epsf: convert::plane(py, a.epsf.data, n, n)?.unbind(),
             countermeasure: a.report.countermeasure.clone(),

@@ -5,7 +5,7 @@ use crate::analysis::epsf::build::{self, StarStart};
 use crate::analysis::image::AnalysisImage;
 use crate::config::Analysis as AnalysisCfg;
 use crate::numerics::stats;
-use crate::simulate::TruthRow;
+use crate::truth::TruthRow;
 use rayon::prelude::*;
 
 /// Local maxima (5 × 5) above `nsigma` × the image's robust noise over its median; brightest first, closer

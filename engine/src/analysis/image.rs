@@ -4,7 +4,6 @@
 use crate::analysis::epsf::fit::PixelData;
 use crate::config::{Config, FlatField};
 use crate::detector::{self, DetectorImage, dq};
-use crate::simulate::Simulator;
 
 /// An image ready for analysis: electrons with bias removed, a mask, the noise floor.
 #[derive(Debug, Clone)]
@@ -21,28 +20,16 @@ pub struct AnalysisImage {
 }
 
 impl AnalysisImage {
-    /// An exposure of `sim`, flat-fielded as its `analysis.flat_field` says with the simulator's (cached)
-    /// calibration flat.
-    pub fn of_exposure(sim: &Simulator, img: &DetectorImage) -> Self {
-        let mut a = Self::unflattened(&sim.cfg, img);
-        if let (Some(flat), FlatField::Calibrated { error }) =
-            (sim.calibration_flat(), sim.cfg.analysis.flat_field)
-        {
-            a.divide_by(&flat, error);
-        }
-        a
-    }
-
     /// From a simulated detector image, flat-fielded as `cfg.analysis.flat_field` says (the calibration
-    /// flat made anew: [`AnalysisImage::of_exposure`] reuses a simulator's).
+    /// flat made anew: `session::source::analysis_image` reuses a simulator's).
     pub fn from_detector(cfg: &Config, img: &DetectorImage) -> Self {
-        let mut a = Self::unflattened(cfg, img);
+        let mut a = Self::from_detector_unflattened(cfg, img);
         a.flat_field(cfg, cfg.analysis.flat_field);
         a
     }
 
     /// Electrons, mask and noise floor, not flat-fielded.
-    fn unflattened(cfg: &Config, img: &DetectorImage) -> Self {
+    pub fn from_detector_unflattened(cfg: &Config, img: &DetectorImage) -> Self {
         let g = cfg.detector.gain_e_per_adu;
         let bad_bits = dq::BORDER | dq::SATURATED | dq::ADC_HIGH;
         Self {

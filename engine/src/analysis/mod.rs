@@ -1,5 +1,5 @@
 //! Analysis of images: detection, the effective PSF (Anderson & King 2000), fits, countermeasures, the fit's
-//! response to jitter, the instant predictor, the accuracy report and the deviation vector map — and the
+//! response to jitter, the accuracy report and the deviation vector map — and the
 //! one per-image [`pipeline`] that runs them in order.
 
 pub mod countermeasures;
@@ -9,13 +9,12 @@ pub mod detection;
 pub mod epsf;
 pub mod image;
 pub mod pipeline;
-pub mod predict;
 pub mod report;
 pub mod response;
 pub mod vectors;
 
 pub use image::AnalysisImage;
-pub use pipeline::{Analysis, ImageAnalysis, Options, Source, analyse_image};
+pub use pipeline::{Analysis, ImageAnalysis, Options, Supplied, analyse_image};
 pub use report::{Report, StarResult};
 
 /// An analysis failure.
@@ -25,17 +24,19 @@ pub enum AnalysisError {
     NoStars(f64),
     #[error("countermeasure: {0}")]
     Countermeasure(#[from] countermeasures::CountermeasureError),
-    /// What the analysis asked of the simulation the image came from (its kernel, its stars).
-    #[error(transparent)]
-    Simulation(#[from] crate::simulate::SimError),
+    #[error(
+        "the telemetry correction needs the image's readout timing (headers READOUT, PIXTIME, TOVERHD, EXPTIME, \
+         or a simulator's): none was given"
+    )]
+    NoReadoutTiming,
     #[error(
         "{countermeasure} does not apply to this image (exact-epsf needs a static-ACE image simulated by jsim)"
     )]
     NotApplicable { countermeasure: String },
     #[error(
-        "{countermeasure} is not offered for a crowded field here (yzones and exact-epsf refit single stars; \
-         the analysis of an image offers none, plate-*@catalogue, and plate-*@oracle with a truth; the \
-         telemetry correction needs a single array's simulation: `jsim crowded` applies it)"
+        "{countermeasure} is not offered for a crowded field (yzones and exact-epsf refit single stars, a stack \
+         reference needs a stare; offered: none, plate-*@catalogue with the reference catalogue, \
+         plate-*@oracle with a truth, telemetry with the telemetry product)"
     )]
     NotInCrowdedField { countermeasure: String },
 }

@@ -4,17 +4,20 @@
 //! the tests and for studies that need one step alone.
 
 use crate::analysis::AnalysisError;
+use crate::analysis::countermeasures::TelemetryQuality;
+use crate::analysis::countermeasures::telemetry::{ExposureReadout, TelemetryRecord};
 use crate::analysis::countermeasures::{self, Context, Countermeasure, Plan, Telemetry, stack};
+use crate::analysis::crowded::focal_plane::CrowdedSummary;
 use crate::analysis::detection::{detect, match_truth, starts};
 use crate::analysis::epsf::Epsf;
 use crate::analysis::epsf::build::{self, BuildOptions, StarStart};
 use crate::analysis::epsf::fit::{FitOptions, StarFit, fit_star, flags};
 use crate::analysis::image::AnalysisImage;
-use crate::analysis::report::{Report, StarResult, attach_fit_prediction, star_results, summarise};
-use crate::analysis::response::{FitNoise, FitResponse};
-use crate::config::{AceCase, Analysis as AnalysisCfg};
+use crate::analysis::report::{Report, StarResult, star_results, summarise};
+use crate::analysis::response::FitNoise;
+use crate::config::Analysis as AnalysisCfg;
 use crate::integrate::kernel::PixelKernel;
-use crate::simulate::{Simulator, TruthRow};
+use crate::truth::TruthRow;
 use rayon::prelude::*;
 use std::sync::Arc;
 
@@ -34,10 +37,7 @@ pub struct Options {
     pub countermeasure: Countermeasure,
     /// The exposure's telemetry, for [`Countermeasure::Telemetry`] (none: nothing to correct).
     pub telemetry: Option<Arc<Telemetry>>,
-    /// Seed of the reference catalogue's error draws (the simulation's seed).
-    pub seed: u64,
-    /// The reference catalogue product's positions (pixels of this image) for `plate-*@catalogue`; without
-    /// one the reference is drawn from the truth with the plan's error (a simulation's).
+    /// The reference catalogue product's positions (pixels of this image) for `plate-*@catalogue`.
     pub reference: Option<Vec<(f64, f64)>>,
     /// Fit with this ePSF instead of building one (e.g. the exact ePSF from the simulator).
     pub fixed_epsf: Option<Epsf>,
@@ -58,7 +58,6 @@ impl Options {
             cfg: cfg.clone(),
             countermeasure: Countermeasure::None,
             telemetry: None,
-            seed: 0,
             reference: None,
             fixed_epsf: None,
             model_epsf: None,
@@ -113,7 +112,6 @@ pub fn analyze(
         &opts.countermeasure,
         opts.telemetry.as_deref(),
         opts.reference.as_deref(),
-        opts.seed,
     )
 }
 
@@ -223,7 +221,6 @@ pub fn with_countermeasure(
     cm: &Countermeasure,
     telemetry: Option<&Telemetry>,
     reference: Option<&[(f64, f64)]>,
-    seed: u64,
 ) -> Result<Analysis, AnalysisError> {
     let mut stars = plain.stars.clone();
     let mut report = countermeasure_report(&plain.report, cm);
@@ -237,7 +234,6 @@ pub fn with_countermeasure(
         default_zones: prepared.default_zones,
         telemetry,
         reference,
-        seed,
     };
     report.dof_absorbed = countermeasures::apply(cm, &ctx, &mut stars)?;
     if cm.needs_stare() {
@@ -252,78 +248,109 @@ pub fn with_countermeasure(
     })
 }
 
-/// The crowded-field analysis of one image ([`crate::analysis::crowded::analyse`]) as an [`Analysis`] of the
-/// pipeline: its stars, its ePSF and a report (the accuracy only with a truth given), corrected by `cm` when
-/// it is one that acts on the fitted positions alone — a plate model referenced to the reference catalogue
-/// product (`reference`) or, `@oracle`, to the truth. The others are refused by name: those that refit
-/// single stars (`yzones`, `exact-epsf`), the telemetry correction (it needs the simulation context of a
-/// single-array jsim image: `jsim crowded` applies it) and a stack reference (a stare's).
-pub fn analyze_crowded(
+/// Whether a countermeasure acts in a crowded field: on the fitted positions alone (a plate model referenced
+/// to a catalogue or, `@oracle`, to the truth; the telemetry correction). Those that refit single stars
+/// (`yzones`, `exact-epsf`) and a stack reference (a stare's) do not.
+pub fn offered_in_crowded_field(cm: &Countermeasure) -> bool {
+    !matches!(
+        cm,
+        Countermeasure::YZones { .. }
+            | Countermeasure::ExactEpsf
+            | Countermeasure::Plate {
+                reference: countermeasures::Reference::Stack,
+                ..
+            }
+    )
+}
+
+/// The crowded-field analysis of one image ([`crate::analysis::crowded::analyse`]) under every countermeasure
+/// of `plan`, as an [`ImageAnalysis`] of the pipeline: the crowded analysis runs once, each countermeasure
+/// corrects its positions. A countermeasure not [`offered_in_crowded_field`] is refused by name. A field
+/// without stars gives an analysis without stars (the reason in [`ImageAnalysis::crowded`]).
+pub fn analyse_crowded_image(
     img: &AnalysisImage,
     truth: Option<&[TruthRow]>,
     cfg: &AnalysisCfg,
-    model_epsf: Option<&Epsf>,
-    cm: &Countermeasure,
-    reference: Option<&[(f64, f64)]>,
-    seed: u64,
-) -> Result<Analysis, AnalysisError> {
-    let applies = match cm {
-        Countermeasure::None => true,
-        Countermeasure::Plate {
-            reference: countermeasures::Reference::Catalogue { .. },
-            ..
-        } => reference.is_some() || truth.is_some(),
-        Countermeasure::Plate {
-            reference: countermeasures::Reference::Oracle,
-            ..
-        } => truth.is_some(),
-        _ => false,
-    };
-    if !applies {
+    plan: &Plan,
+    supplied: &Supplied<'_>,
+) -> Result<ImageAnalysis, AnalysisError> {
+    if let Some(cm) = plan
+        .countermeasures
+        .iter()
+        .find(|c| !offered_in_crowded_field(c))
+    {
         return Err(AnalysisError::NotInCrowdedField {
             countermeasure: cm.to_string(),
         });
     }
-    let c = crate::analysis::crowded::analyse(img, cfg, model_epsf);
-    if c.fits.is_empty() {
-        return Err(AnalysisError::NoStars(cfg.crowded_detect_sigma));
-    }
-    let pos: Vec<(f64, f64)> = c.fits.iter().map(|f| (f.x, f.y)).collect();
+    let t0 = std::time::Instant::now();
+    // an empty field is a result (no star, the reason in the summary's fallback), not an error: a study
+    // over the focal plane reports its empty arrays; a caller that needs stars checks
+    let c = crate::analysis::crowded::analyse(img, cfg, supplied.model_psf);
     let matches = match truth {
-        Some(t) => match_truth(&pos, t),
-        None => vec![None; pos.len()],
+        Some(t) => crate::analysis::crowded::report::match_catalogue(&c.fits, t),
+        None => vec![None; c.fits.len()],
     };
-    let mut stars = star_results(&c.fits, &matches, truth);
-    let mut report = Report {
+    let stars = star_results(&c.fits, &matches, truth);
+    let mut summary = CrowdedSummary::of(&c, &stars, t0.elapsed().as_secs_f64());
+    if truth.is_none() {
+        summary.n_unmatched = None;
+    }
+    let report = Report {
         n_detected: c.fits.len(),
         epsf_iterations: c.epsf_iterations,
         epsf_stars: c.epsf_stars,
         epsf_fallback: c.fallback,
-        countermeasure: cm.to_string(),
+        countermeasure: Countermeasure::None.to_string(),
         crowded: true,
         ..Default::default()
     };
-    if *cm != Countermeasure::None {
-        let build = build_options(cfg);
+    let mut plain = Analysis {
+        report,
+        stars,
+        epsf: c.epsf,
+    };
+    summarise(&plain.stars, truth, img.plate_scale_mas, &mut plain.report);
+    let build = build_options(cfg);
+    let mut measured = Vec::with_capacity(plan.countermeasures.len());
+    for cm in &plan.countermeasures {
+        if *cm == Countermeasure::None {
+            measured.push((*cm, plain.clone()));
+            continue;
+        }
+        let telemetry = match cm {
+            Countermeasure::Telemetry(q) => telemetry_for(q, supplied, img, &plain, cfg)?,
+            _ => None,
+        };
         let ctx = Context {
             img,
             starts: &[],
             usable: &[],
             build: &build,
-            global: &c.epsf,
+            global: &plain.epsf,
             truth,
             default_zones: cfg.epsf_zones.max(2),
-            telemetry: None,
-            reference,
-            seed,
+            telemetry: telemetry.as_ref(),
+            reference: supplied.reference_for(cm),
         };
+        let mut stars = plain.stars.clone();
+        let mut report = countermeasure_report(&plain.report, cm);
+        report.crowded = true;
         report.dof_absorbed = countermeasures::apply(cm, &ctx, &mut stars)?;
+        summarise(&stars, truth, img.plate_scale_mas, &mut report);
+        measured.push((
+            *cm,
+            Analysis {
+                report,
+                stars,
+                epsf: plain.epsf.clone(),
+            },
+        ));
     }
-    summarise(&stars, truth, img.plate_scale_mas, &mut report);
-    Ok(Analysis {
-        report,
-        stars,
-        epsf: c.epsf,
+    Ok(ImageAnalysis {
+        global: plain,
+        measured,
+        crowded: Some(summary),
     })
 }
 
@@ -336,117 +363,102 @@ pub fn exact_epsf(kernel: &PixelKernel, half_px: usize) -> Epsf {
 }
 
 /// What the instrument supplied beside an image (its products), for the analysis: the reference catalogue's
-/// positions in the image's pixels (`plate-*@catalogue`) and the design model PSF (the fallback below
-/// [`MIN_EPSF_STARS`] ePSF stars).
+/// positions in the image's pixels (`plate-*@catalogue`), the design model PSF (the fallback below
+/// [`MIN_EPSF_STARS`] ePSF stars), the attitude telemetry and the readout timing it is applied with.
 #[derive(Debug, Clone, Copy, Default)]
 pub struct Supplied<'a> {
     pub reference: Option<&'a [(f64, f64)]>,
+    /// Reference catalogues at the catalogue errors (mas) a plan asks for, as a simulated survey draws them
+    /// (used where no product is given).
+    pub reference_by_error: &'a [(f64, Vec<(f64, f64)>)],
     pub model_psf: Option<&'a Epsf>,
-    /// The attitude telemetry product: what the telemetry correction corrects with (its recorded quality
-    /// replaces the plan's); without it the telemetry is recorded from the simulation's series.
-    pub telemetry: Option<&'a countermeasures::telemetry::TelemetryRecord>,
+    /// The attitude telemetry product of the exposure: what every telemetry countermeasure of a plan
+    /// corrects with (its recorded quality replaces the plan's).
+    pub telemetry: Option<&'a TelemetryRecord>,
+    /// Telemetry records of the exposure at the qualities a plan asks for, as a simulated instrument records
+    /// them (used where no product is given; a quality without a record: nothing to correct).
+    pub telemetry_by_quality: &'a [(TelemetryQuality, TelemetryRecord)],
+    /// When each pixel integrated and how the array is turned: what the telemetry is applied with.
+    pub readout: Option<ExposureReadout>,
+    /// The exact ePSF of a static-ACE simulation: the `exact-epsf` control (an oracle; without it that
+    /// control does not apply).
+    pub exact_epsf: Option<&'a Epsf>,
 }
 
-/// The simulated exposure an image came from: what only a simulation knows (the ACE series behind the
-/// telemetry and the ACE prediction, the exact ePSF of the control).
-#[derive(Clone, Copy)]
-pub struct Source<'a> {
-    pub sim: &'a Simulator,
-    /// The exposure's index in the simulator's dataset.
-    pub index: usize,
-}
-
-impl Source<'_> {
-    /// Noise parameters of a typical star's fit in this simulation, with the analysis' fit radius.
-    fn fit_noise(&self, cfg: &AnalysisCfg) -> FitNoise {
-        FitNoise::of_simulation(self.sim, cfg.fit_radius_px)
-    }
-
-    /// The exposure's telemetry of the given quality, `None` for a static ACE (nothing to correct).
-    pub fn telemetry(
-        &self,
-        quality: &countermeasures::TelemetryQuality,
-        cfg: &AnalysisCfg,
-    ) -> Result<Option<Telemetry>, AnalysisError> {
-        let Some(series) = self.sim.series() else {
-            return Ok(None);
+impl Supplied<'_> {
+    /// The reference catalogue a countermeasure is referenced to: the product, else the simulated survey's
+    /// at its catalogue error (`plate-*@catalogue` only).
+    pub fn reference_for(&self, cm: &Countermeasure) -> Option<&[(f64, f64)]> {
+        let Countermeasure::Plate {
+            reference: countermeasures::Reference::Catalogue { error_mas },
+            ..
+        } = cm
+        else {
+            return None;
         };
-        let sim = self.sim;
-        Ok(Some(Telemetry::from_series(
-            series,
-            sim.timing,
-            sim.exposure_start_s(self.index),
-            sim.cfg.instrument.plate_scale_mas(),
-            sim.array.rotation_deg,
-            quality,
-            sim.cfg.seed,
-            &*sim.optical_kernel()?,
-            &self.fit_noise(cfg),
-        )?))
+        self.reference.or_else(|| {
+            self.reference_by_error
+                .iter()
+                .find(|(e, _)| e == error_mas)
+                .map(|(_, r)| r.as_slice())
+        })
     }
 
-    /// The exposure's telemetry from a recorded product (the response still from this simulation's optics
-    /// and noise); `None` for a static ACE.
-    pub fn telemetry_from_record(
-        &self,
-        rec: &countermeasures::telemetry::TelemetryRecord,
-        cfg: &AnalysisCfg,
-    ) -> Result<Option<Telemetry>, AnalysisError> {
-        if self.sim.series().is_none() {
-            return Ok(None);
-        }
-        let sim = self.sim;
-        Ok(Some(Telemetry::from_record(
-            rec,
-            0.0,
-            sim.timing,
-            sim.cfg.instrument.plate_scale_mas(),
-            sim.array.rotation_deg,
-            &*sim.optical_kernel()?,
-            &self.fit_noise(cfg),
-        )?))
+    /// The telemetry record a countermeasure of quality `q` corrects with: the product, else the record at
+    /// that quality.
+    fn telemetry_record(&self, q: &TelemetryQuality) -> Option<&TelemetryRecord> {
+        self.telemetry.or_else(|| {
+            self.telemetry_by_quality
+                .iter()
+                .find(|(k, _)| k == q)
+                .map(|(_, r)| r)
+        })
     }
+}
 
-    /// Attach to an analysis the fit displacement the true ACE predicts for every star (realistic ACE only;
-    /// the mechanism, shown beside the measured errors) and refresh its report.
-    pub fn attach_ace_prediction(
-        &self,
-        truth: &[TruthRow],
-        analysis: &mut Analysis,
-        cfg: &AnalysisCfg,
-        plate_scale_mas: f64,
-    ) -> Result<(), AnalysisError> {
-        let sim = self.sim;
-        if let Some(track) = sim.track(self.index) {
-            let resp = FitResponse::build(
-                &*sim.optical_kernel()?,
-                &track,
-                &sim.nominal_window(&track),
-                &self.fit_noise(cfg),
-            );
-            let pos: Vec<(f64, f64)> = truth.iter().map(|t| (t.x_px, t.y_px)).collect();
-            let pred = resp.displacements(&track, &sim.timing, &pos);
-            attach_fit_prediction(&mut analysis.stars, &pred);
-            summarise(
-                &analysis.stars,
-                Some(truth),
-                plate_scale_mas,
-                &mut analysis.report,
-            );
-        }
-        Ok(())
-    }
+/// The telemetry of quality `q` for an image, its fit response built from the analysis' own ePSF (the
+/// image-average PSF it measured) and the measured fluxes and sky of its stars ([`FitNoise::of_stars`]);
+/// `None` without a record (a static ACE, or nothing recorded: nothing to correct).
+pub fn telemetry_for(
+    q: &TelemetryQuality,
+    supplied: &Supplied<'_>,
+    img: &AnalysisImage,
+    plain: &Analysis,
+    cfg: &AnalysisCfg,
+) -> Result<Option<Telemetry>, AnalysisError> {
+    let Some(rec) = supplied.telemetry_record(q) else {
+        return Ok(None);
+    };
+    let Some(ro) = supplied.readout else {
+        return Err(AnalysisError::NoReadoutTiming);
+    };
+    let epsf = &plain.epsf;
+    let half_px = epsf.half_px().floor() as usize;
+    let kernel =
+        crate::integrate::kernel::PixelKernel::tabulated(8, half_px, |x, y| epsf.value(x, y));
+    let noise = FitNoise::of_stars(&plain.stars, img.var_floor_e2, cfg.fit_radius_px);
+    Ok(Some(Telemetry::from_record(
+        rec,
+        0.0,
+        ro.timing,
+        img.plate_scale_mas,
+        ro.rotation_deg,
+        &kernel,
+        &noise,
+    )?))
 }
 
 /// One image analysed under a plan.
 #[derive(Debug, Clone)]
 pub struct ImageAnalysis {
-    /// The global-ePSF analysis, with the ACE prediction attached when the image is a simulated one with a
-    /// realistic ACE (the result of countermeasure `none`).
+    /// The global-ePSF analysis (the result of countermeasure `none`; a simulation's study may attach the
+    /// fit displacement its true ACE predicts).
     pub global: Analysis,
     /// One analysis per countermeasure of the plan that applies to this image, in plan order (`exact-epsf`
     /// applies only to a simulated image with a static ACE).
     pub measured: Vec<(Countermeasure, Analysis)>,
+    /// What the crowded-field analysis did (detections per pass, groups, its time), when it ran.
+    pub crowded: Option<CrowdedSummary>,
 }
 
 impl ImageAnalysis {
@@ -465,79 +477,48 @@ impl ImageAnalysis {
 }
 
 /// The pipeline: analyse one image under every countermeasure of `plan`, detecting the stars and building
-/// the global ePSF once. `source` is the simulation the image came from, when known (without it the
-/// telemetry has no ACE series to correct with and the exact-ePSF control does not apply); `seed` draws the
-/// reference catalogue's errors.
+/// the global ePSF once, with what the instrument `supplied` beside the image (a countermeasure whose
+/// product is missing corrects nothing — a telemetry correction without telemetry — does not apply —
+/// `exact-epsf` without an exact ePSF — or is refused by name — `plate-*@catalogue` without a reference).
 pub fn analyse_image(
     img: &AnalysisImage,
     truth: Option<&[TruthRow]>,
-    source: Option<Source<'_>>,
     cfg: &AnalysisCfg,
     plan: &Plan,
-    seed: u64,
     supplied: &Supplied<'_>,
 ) -> Result<ImageAnalysis, AnalysisError> {
-    let reference = supplied.reference;
     let base = Options::new(cfg);
-    let model = || -> Result<Option<Epsf>, AnalysisError> {
-        if let Some(m) = supplied.model_psf {
-            return Ok(Some(m.clone()));
-        }
-        // without the model PSF product: the simulation's own (its true optics), when there is one
-        match source {
-            Some(src) => Ok(Some(exact_epsf(
-                &*src.sim.optical_kernel()?,
-                cfg.epsf_radius_px,
-            ))),
-            None => Ok(None),
-        }
-    };
+    let model = || -> Result<Option<Epsf>, AnalysisError> { Ok(supplied.model_psf.cloned()) };
     let (plain, prepared) = analyze_prepared_with(img, truth, &base, &model)?;
-    let mut global = plain.clone();
-    if let (Some(src), Some(t)) = (source, truth) {
-        src.attach_ace_prediction(t, &mut global, cfg, img.plate_scale_mas)?;
-    }
     let mut measured = Vec::with_capacity(plan.countermeasures.len());
     for cm in &plan.countermeasures {
+        let reference = supplied.reference_for(cm);
         let analysis = match cm {
-            Countermeasure::None => global.clone(),
+            Countermeasure::None => plain.clone(),
             Countermeasure::ExactEpsf => {
-                let Some(src) = source.filter(|s| s.sim.cfg.ace.case != AceCase::Realistic) else {
+                let Some(exact) = supplied.exact_epsf else {
                     continue;
                 };
-                let jobs = src.sim.jobs()?;
-                let Some(j) = jobs.first() else { continue };
                 let mut o = base.clone();
-                o.fixed_epsf = Some(exact_epsf(&j.kernel, cfg.epsf_radius_px));
+                o.fixed_epsf = Some(exact.clone());
                 analyze(img, truth, &o)?
             }
-            Countermeasure::Telemetry(q) => {
-                let tel = match (supplied.telemetry, source) {
-                    (Some(rec), Some(s)) => s.telemetry_from_record(rec, cfg)?,
-                    _ => source.map(|s| s.telemetry(q, cfg)).transpose()?.flatten(),
-                };
-                match tel {
-                    // a static ACE (or an image without its simulation) has nothing to correct
-                    None => global.clone(),
-                    Some(tel) => with_countermeasure(
-                        img,
-                        truth,
-                        &plain,
-                        &prepared,
-                        cm,
-                        Some(&tel),
-                        reference,
-                        seed,
-                    )?,
+            Countermeasure::Telemetry(q) => match telemetry_for(q, supplied, img, &plain, cfg)? {
+                // a static ACE (or no telemetry at all) has nothing to correct
+                None => plain.clone(),
+                Some(tel) => {
+                    with_countermeasure(img, truth, &plain, &prepared, cm, Some(&tel), reference)?
                 }
-            }
-            other => {
-                with_countermeasure(img, truth, &plain, &prepared, other, None, reference, seed)?
-            }
+            },
+            other => with_countermeasure(img, truth, &plain, &prepared, other, None, reference)?,
         };
         measured.push((*cm, analysis));
     }
-    Ok(ImageAnalysis { global, measured })
+    Ok(ImageAnalysis {
+        global: plain,
+        measured,
+        crowded: None,
+    })
 }
 
 /// Finish the analyses of a stare's exposures (`images[k]`, with `truths[k]` when known): every plate model

@@ -10,7 +10,7 @@
 
 use crate::analysis::epsf::fit::{StarFit, flags};
 use crate::numerics::stats;
-use crate::simulate::TruthRow;
+use crate::truth::TruthRow;
 use serde::Serialize;
 
 /// One star's result.

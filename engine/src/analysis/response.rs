@@ -12,13 +12,13 @@
 //! weighs the core: this is why the measured positions follow the *mean* jitter of a star's window with a
 //! regression slope that differs from 1, and why this response — not the mean — predicts them.
 
+use crate::analysis::epsf::fit::flags;
+use crate::analysis::report::StarResult;
 use crate::integrate::cpu::{Histogram, StarSpec};
 use crate::integrate::kernel::PixelKernel;
 use crate::integrate::track::{Track, WindowWeights};
 use crate::numerics::stats;
-use crate::photometry;
 use crate::readout::ReadoutTiming;
-use crate::simulate::Simulator;
 
 /// R_x and R_y tabulated on a grid of jitter offsets u (px).
 #[derive(Debug, Clone, PartialEq)]
@@ -42,20 +42,25 @@ pub struct FitNoise {
 }
 
 impl FitNoise {
-    /// Noise parameters of a typical star's fit in a simulation (median flux, sky, read/quantisation floor)
-    /// with the analysis' fit radius (px).
-    pub fn of_simulation(sim: &Simulator, radius_px: f64) -> Self {
-        let cfg = &sim.cfg;
-        let d = &cfg.detector;
-        let rates: Vec<f64> = sim
-            .stars
+    /// Noise parameters of a typical star's fit measured on an image: the median fitted flux and sky of its
+    /// stars that a fit did not reject, the image's read/quantisation floor `floor_e2`, and the analysis'
+    /// fit radius (px). Without such a star: 10⁴ e⁻ on no sky.
+    pub fn of_stars(stars: &[StarResult], floor_e2: f64, radius_px: f64) -> Self {
+        let good: Vec<&StarResult> = stars
             .iter()
-            .map(|s| photometry::electrons_per_s(s.mag_hw, cfg.photometry.zero_point_e_per_s))
+            .filter(|s| s.flags & flags::REJECT == 0 && s.flux_e.is_finite() && s.flux_e > 0.0)
             .collect();
+        let med = |v: Vec<f64>, default: f64| {
+            if v.is_empty() {
+                default
+            } else {
+                stats::median(&v)
+            }
+        };
         FitNoise {
-            flux_e: stats::median(&rates) * d.exposure_s,
-            sky_e: d.dark_e_per_s * d.exposure_s,
-            floor_e2: d.noise_floor_e2(),
+            flux_e: med(good.iter().map(|s| s.flux_e).collect(), 1e4),
+            sky_e: med(good.iter().map(|s| s.sky_e.max(0.0)).collect(), 0.0),
+            floor_e2,
             radius_px,
         }
     }

@@ -223,6 +223,34 @@ impl PixelKernel {
         })
     }
 
+    /// K tabulated from a function of Δ (px) on `nodes_per_px` nodes per pixel out to `half_px`, plus the
+    /// closing ring of zeros — e.g. an analysis' own ePSF, which already is a pixel-integrated PSF.
+    /// `light_fraction` is the table's pixel sum at phase 0.
+    pub fn tabulated(nodes_per_px: usize, half_px: usize, f: impl Fn(f64, f64) -> f64) -> Self {
+        let g = nodes_per_px.max(1);
+        let half = half_px * g + 1;
+        let n = 2 * half + 1;
+        let mut data = vec![0.0; n * n];
+        for iy in 1..n - 1 {
+            for ix in 1..n - 1 {
+                let (dx, dy) = (
+                    (ix as f64 - half as f64) / g as f64,
+                    (iy as f64 - half as f64) / g as f64,
+                );
+                data[iy * n + ix] = f(dx, dy);
+            }
+        }
+        let mut k = Self {
+            nodes_per_px: g,
+            half_nodes: half,
+            data,
+            light_fraction: 0.0,
+            envelope: std::sync::OnceLock::new(),
+        };
+        k.light_fraction = k.pixel_sum(0.0, 0.0);
+        k
+    }
+
     pub fn n(&self) -> usize {
         2 * self.half_nodes + 1
     }

@@ -7,9 +7,10 @@ use super::exposure::read_truth;
 use super::fits::{self, ImageFacts};
 use super::instrument::{self, CalibrationFlat};
 use crate::analysis::AnalysisImage;
+use crate::analysis::countermeasures::telemetry::ExposureReadout;
 use crate::config::Config;
 use crate::detector::dq;
-use crate::simulate::TruthRow;
+use crate::truth::TruthRow;
 use std::path::Path;
 
 /// An image in ADU as an analysis image: electrons with the bias removed (the header facts), the mask
@@ -129,6 +130,9 @@ pub struct AnalysisInput {
     pub model_psf: Option<crate::analysis::epsf::Epsf>,
     /// The attitude telemetry product of this exposure (`telemetry_NNN.fits`), when there is one.
     pub telemetry: Option<crate::analysis::countermeasures::telemetry::TelemetryRecord>,
+    /// The readout timing and array rotation the header states ([`super::readout_header`]): what the
+    /// telemetry is applied with.
+    pub readout: Option<ExposureReadout>,
 }
 
 impl AnalysisInput {
@@ -192,7 +196,7 @@ impl AnalysisInput {
             input.reference = products.reference;
             input.model_psf = products.model_psf;
             input.telemetry = read_telemetry_for(path, telemetry_path)?;
-            Ok(input)
+            input.with_readout(path, None, fallback)
         })
     }
 
@@ -231,9 +235,8 @@ impl AnalysisInput {
         };
         if provenance.is_none() {
             assumptions.push(
-                "no CONFIG extension (or IMAGEIDX): not a jsim image, so no simulation context — the \
-                 telemetry has no ACE series to correct with, no ACE prediction is attached, exact-epsf \
-                 does not apply; the reference seed is the command line's"
+                "no CONFIG extension (or IMAGEIDX): not a jsim image, so the exact-epsf control (an oracle \
+                 from the image's simulation) does not apply"
                     .to_string(),
             );
         }
@@ -270,7 +273,31 @@ impl AnalysisInput {
             reference: None,
             model_psf: None,
             telemetry: None,
+            readout: None,
         })
+    }
+}
+
+impl AnalysisInput {
+    /// What the analysis under `cm` assumes of this input: [`AnalysisInput::assumptions`], and for the
+    /// telemetry correction without a telemetry product, that it has nothing to correct with.
+    pub fn assumptions_for(
+        &self,
+        cm: &crate::analysis::countermeasures::Countermeasure,
+    ) -> Vec<String> {
+        let mut out = self.assumptions.clone();
+        if matches!(
+            cm,
+            crate::analysis::countermeasures::Countermeasure::Telemetry(_)
+        ) && self.telemetry.is_none()
+        {
+            out.push(format!(
+                "no attitude telemetry product ({} beside the image, or --telemetry): the telemetry \
+                 correction has nothing to correct with",
+                instrument::telemetry_name(0).replace("000", "NNN")
+            ));
+        }
+        out
     }
 }
 
@@ -301,14 +328,16 @@ impl AnalysisInput {
     /// Read array `k` (0-based: extension `ARRAY{k+1}`, its `DQ{k+1}`) of a focal-plane file for analysis,
     /// with the calibration flat's extension `FLAT{k+1}` (from `flat_path`, else `flat_cal.fits` beside
     /// the file) and, when a truth is wanted for the report, the rows of array k+1 of the file's TRUTH
-    /// table (or of `truth_path`, a table with an `array` column). The file's CONFIG describes the whole
-    /// focal plane, not one array's simulation: no simulation context is taken from it.
+    /// table (or of `truth_path`, a table with an `array` column), the reference catalogue's rows of the
+    /// array, the model PSF's `PSF{k+1}` and the exposure's attitude telemetry (`telemetry_path`, else
+    /// `telemetry_NNN.fits` beside the file).
     pub fn read_array(
         path: &Path,
         k: usize,
         truth_path: Option<&Path>,
         flat_path: Option<&Path>,
         refcat_path: Option<&Path>,
+        telemetry_path: Option<&Path>,
         fallback: &Config,
     ) -> Result<Self, IoError> {
         let ext = format!("ARRAY{}", k + 1);
@@ -332,8 +361,8 @@ impl AnalysisInput {
         .map(|mut input| {
             for a in input.assumptions.iter_mut() {
                 if a.starts_with("no CONFIG extension") {
-                    *a = "a focal-plane array: no single-array simulation context (the telemetry \
-                          correction and exact-epsf need one; none is taken from the file's CONFIG)"
+                    *a = "a focal-plane array: the exact-epsf control (an oracle from a single array's \
+                          simulation) does not apply"
                         .to_string();
                 }
             }
@@ -349,6 +378,33 @@ impl AnalysisInput {
             input.model_psf = products.model_psf;
             input
         })
+        .and_then(|mut input| {
+            // the telescope's attitude, the same record for every array (each applies it turned by its
+            // own ROTATION)
+            input.telemetry = read_telemetry_for(path, telemetry_path)?;
+            input.with_readout(path, Some(&ext), fallback)
+        })
+    }
+
+    /// The readout timing the header of HDU `ext` of `path` states, and what it assumed.
+    fn with_readout(
+        mut self,
+        path: &Path,
+        ext: Option<&str>,
+        fallback: &Config,
+    ) -> Result<Self, IoError> {
+        let (readout, assumed) = super::readout_header::read(
+            path,
+            ext,
+            self.img.ny,
+            fits::read_f64_key_in(path, ext, "EXPTIME").unwrap_or(fallback.detector.exposure_s),
+            fallback,
+        )?;
+        self.readout = readout;
+        if self.telemetry.is_some() {
+            self.assumptions.extend(assumed);
+        }
+        Ok(self)
     }
 }
 
@@ -430,8 +486,8 @@ fn read_reference(
         )),
         None => {
             assumptions.push(format!(
-                "no reference catalogue ({} beside the image, or --refcat): plate-*@catalogue would draw its \
-                 reference from the truth with the stated error, as a simulation does",
+                "no reference catalogue ({} beside the image, or --refcat): plate-*@catalogue has no \
+                 reference and is refused",
                 instrument::REFCAT_NAME
             ));
             Ok(None)

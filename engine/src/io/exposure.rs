@@ -149,6 +149,29 @@ pub fn headers(sim: &Simulator, exp: &Exposure) -> Vec<Card> {
         Card::s("READOUT", c.readout.order.name(), "readout order"),
         Card::i("NCHAN", c.readout.channels as i64, "readout channels"),
         Card::f("PIXTIME", c.readout.pixel_time_us, "[us] pixel read time"),
+        Card::s(
+            "ROWDIR",
+            match c.readout.row_direction {
+                crate::config::RowDirection::Up => "up",
+                crate::config::RowDirection::Down => "down",
+            },
+            "rows read bottom (Y=0) first: up",
+        ),
+        Card::i(
+            "CHANWID",
+            c.readout.channel_width_px as i64,
+            "[pix] readout channel width",
+        ),
+        Card::f(
+            "TOVERHD",
+            c.readout.t_overhead_s,
+            "[s] reset end to first read",
+        ),
+        Card::f(
+            "ROTATION",
+            sim.array.rotation_deg,
+            "[deg] array turn on the sky",
+        ),
         Card::s("ACECASE", c.ace.case.name(), "attitude control error model"),
         Card::f("ACESIGMA", ace_sigma, "[mas] requested ACE sigma per axis"),
         Card::s(

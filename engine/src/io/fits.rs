@@ -491,6 +491,14 @@ pub fn read_f64_key_in(path: &Path, ext: Option<&str>, key: &str) -> Result<f64,
         .map_err(|e| IoError::fits(path, format!("header {key}: {e}")))
 }
 
+/// Read a string header of an HDU (`ext`: an EXTNAME, or `None` for the primary).
+pub fn read_string_key_in(path: &Path, ext: Option<&str>, key: &str) -> Result<String, IoError> {
+    let mut f = open(path)?;
+    let hdu = select(&mut f, path, ext)?;
+    hdu.read_key::<String>(&mut f, key)
+        .map_err(|e| IoError::fits(path, format!("header {key}: {e}")))
+}
+
 /// Read an image HDU (`image_ext`: an EXTNAME, or `None` for the primary) and its DQ extension `dq_ext`
 /// (if the file has one of the image's size) with what the image's header says.
 pub fn read_image_in(

@@ -102,11 +102,6 @@ pub fn write_focal_plane_exposure(
             sim.array.index as i64 + 1,
             "array number (1-4)",
         ));
-        cards.push(Card::f(
-            "ROTATION",
-            sim.array.rotation_deg,
-            "[deg] array turn on the sky",
-        ));
         cards.push(Card::i(
             "ARRSEED",
             sim.array.seed as i64,

@@ -11,6 +11,7 @@ pub mod focal_plane;
 pub mod instrument;
 pub mod plot;
 pub mod products;
+pub mod readout_header;
 pub mod score;
 
 use std::path::{Path, PathBuf};

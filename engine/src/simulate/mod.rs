@@ -14,6 +14,7 @@ use crate::optics::psf::PsfTable;
 use crate::photometry;
 use crate::readout::ReadoutTiming;
 use crate::scene::{self, PlacementCounts, SceneError, Star};
+pub use crate::truth::TruthRow;
 use std::borrow::Cow;
 use std::collections::HashMap;
 use std::sync::Arc;
@@ -80,27 +81,6 @@ pub fn psf_colour(j_minus_h: f64, step_mag: f64) -> f64 {
     } else {
         j_minus_h
     }
-}
-
-/// The true parameters of one star in one exposure.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct TruthRow {
-    pub id: usize,
-    /// True position (0-based pixels), without jitter.
-    pub x_px: f64,
-    pub y_px: f64,
-    pub mag_hw: f64,
-    pub j_minus_h: f64,
-    /// Electrons the star delivered during its window (all light, modelled or not).
-    pub flux_e: f64,
-    /// Fraction of that light the PSF table models (the rest, beyond `psf_radius_px`, is dropped).
-    pub modelled_fraction: f64,
-    /// Integration window of the star's central pixel (s from the exposure start) and its length.
-    pub t_start_s: f64,
-    pub exptime_s: f64,
-    /// Mean ACE displacement over the star's window (px): the photocentre shift the jitter predicts.
-    pub jitter_dx_px: f64,
-    pub jitter_dy_px: f64,
 }
 
 /// Per-exposure ACE statistics over the nominal window (mas).

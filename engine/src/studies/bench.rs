@@ -37,6 +37,15 @@ pub enum BenchError {
     File(#[from] IoError),
 }
 
+impl From<crate::session::SourceError> for BenchError {
+    fn from(e: crate::session::SourceError) -> Self {
+        match e {
+            crate::session::SourceError::Simulation(e) => e.into(),
+            crate::session::SourceError::Analysis(e) => e.into(),
+        }
+    }
+}
+
 /// One line of the benchmark.
 #[derive(Debug, Clone, Serialize)]
 pub struct BenchRow {
@@ -599,7 +608,7 @@ pub fn epsf_iterations(
     let imgs: Vec<_> = (0..c.fidelity.images)
         .map(|i| {
             sim.exposure(i)
-                .map(|e| (AnalysisImage::of_exposure(&sim, &e.image), e.truth))
+                .map(|e| (crate::session::analysis_image(&sim, &e.image), e.truth))
         })
         .collect::<Result<_, _>>()?;
     let mut rows = Vec::new();

@@ -5,16 +5,15 @@
 //! Per array, as the instrument would: the array's own image (flat-fielded with its calibration flat), its
 //! own ePSF, its own plate model and its own telemetry correction (the rolling readout runs a different
 //! way on the sky on each array). Countermeasures that act on the fitted positions apply: `telemetry`,
-//! `plate-*@catalogue` (and the `@oracle` upper limit, only when asked); a stack-referenced plate model
-//! corrects nothing in a single exposure. Those that refit single stars (`yzones`, `exact-epsf`) are not
-//! offered for a crowded field and are refused by name.
+//! `plate-*@catalogue` (and the `@oracle` upper limit, only when asked). Those that refit single stars
+//! (`yzones`, `exact-epsf`) and a stack reference (a stare's) are not offered for a crowded field and are
+//! refused by name.
 
 use crate::analysis::AnalysisError;
-use crate::analysis::countermeasures::{self, Context, Countermeasure, Plan};
-use crate::analysis::crowded::{self, Crowded, report};
-use crate::analysis::image::AnalysisImage;
-use crate::analysis::pipeline::{Source, build_options, exact_epsf};
-use crate::analysis::report::{StarResult, star_results};
+use crate::analysis::countermeasures::Plan;
+use crate::analysis::crowded::report;
+use crate::analysis::pipeline::{ImageAnalysis, analyse_crowded_image, offered_in_crowded_field};
+use crate::session::{Source, SourceError, analysis_image};
 use crate::simulate::{FocalPlaneExposure, FocalPlaneSimulator};
 use std::time::Instant;
 
@@ -25,7 +24,7 @@ pub use crate::analysis::crowded::focal_plane::{
 /// Refuse the countermeasures a crowded field does not offer, by name.
 pub fn check_plan(plan: &Plan) -> Result<(), AnalysisError> {
     for c in &plan.countermeasures {
-        if matches!(c, Countermeasure::YZones { .. } | Countermeasure::ExactEpsf) {
+        if !offered_in_crowded_field(c) {
             return Err(AnalysisError::NotInCrowdedField {
                 countermeasure: c.to_string(),
             });
@@ -35,65 +34,51 @@ pub fn check_plan(plan: &Plan) -> Result<(), AnalysisError> {
 }
 
 /// Analyse one focal-plane exposure under every countermeasure of `plan`, binning accuracy by true Hw at
-/// `edges`. The crowded analysis of each array runs once; the countermeasures correct its positions.
+/// `edges`: each array's image through the pipeline's crowded analysis ([`analyse_crowded_image`], as
+/// `jsim analyze` runs it on the exposure's file) with the products its simulated instrument delivers
+/// (calibration flat, design model PSF, reference catalogue, telemetry); the truth only scores.
 pub fn analyse_focal_plane(
     fps: &FocalPlaneSimulator,
     exp: &FocalPlaneExposure,
     plan: &Plan,
     edges: &[f64],
-) -> Result<Vec<FocalPlaneAnalysis>, AnalysisError> {
+) -> Result<Vec<FocalPlaneAnalysis>, SourceError> {
     check_plan(plan)?;
     let cfg = &fps.cfg.analysis;
     let t0 = Instant::now();
-    let mut plain: Vec<(AnalysisImage, Crowded, Vec<StarResult>, f64)> = Vec::new();
+    let mut per_array: Vec<ImageAnalysis> = Vec::with_capacity(fps.arrays.len());
     for (sim, e) in fps.arrays.iter().zip(&exp.arrays) {
-        let t = Instant::now();
-        let img = AnalysisImage::of_exposure(sim, &e.image);
-        let model = exact_epsf(&*sim.optical_kernel()?, cfg.epsf_radius_px);
-        let c = crowded::analyse(&img, cfg, Some(&model));
-        let matches = report::match_catalogue(&c.fits, &e.truth);
-        let stars = star_results(&c.fits, &matches, Some(&e.truth));
-        plain.push((img, c, stars, t.elapsed().as_secs_f64()));
+        let img = analysis_image(sim, &e.image);
+        let products = Source {
+            sim,
+            index: exp.index,
+        }
+        .products(plan, cfg)?;
+        per_array.push(analyse_crowded_image(
+            &img,
+            Some(&e.truth),
+            cfg,
+            plan,
+            &products.supplied(None),
+        )?);
     }
-    let base_s = t0.elapsed().as_secs_f64();
+    let analyse_s = t0.elapsed().as_secs_f64();
     let scale = fps.cfg.instrument.plate_scale_mas();
     let mut out = Vec::with_capacity(plan.countermeasures.len());
     for cm in &plan.countermeasures {
-        let t = Instant::now();
-        let mut arrays = Vec::with_capacity(fps.arrays.len());
-        for ((sim, e), (img, c, stars, s)) in fps.arrays.iter().zip(&exp.arrays).zip(&plain) {
-            let summary = CrowdedSummary::of(c, stars, *s);
-            let mut stars = stars.clone();
-            let source = Source {
-                sim,
-                index: exp.index,
-            };
-            let telemetry = match cm {
-                Countermeasure::Telemetry(q) => source.telemetry(q, cfg)?,
-                _ => None,
-            };
-            let build = build_options(cfg);
-            let ctx = Context {
-                img,
-                starts: &[],
-                usable: &[],
-                build: &build,
-                global: &c.epsf,
-                truth: Some(&e.truth),
-                default_zones: cfg.epsf_zones.max(2),
-                telemetry: telemetry.as_ref(),
-                reference: None,
-                seed: fps.cfg.seed ^ sim.array.index as u64,
-            };
-            countermeasures::apply(cm, &ctx, &mut stars)?;
-            arrays.push(ArrayAnalysis {
+        let arrays: Vec<ArrayAnalysis> = fps
+            .arrays
+            .iter()
+            .zip(&exp.arrays)
+            .zip(&per_array)
+            .map(|((sim, e), ia)| ArrayAnalysis {
                 index: sim.array.index,
-                stars,
+                stars: ia.of(cm).map(|a| a.stars.clone()).unwrap_or_default(),
                 truth: e.truth.clone(),
                 n_px: e.image.n,
-                summary: summary.clone(),
-            });
-        }
+                summary: ia.crowded.clone().unwrap_or_default(),
+            })
+            .collect();
         let views: Vec<report::ArrayStars<'_>> = arrays
             .iter()
             .map(|a| report::ArrayStars {
@@ -107,7 +92,7 @@ pub fn analyse_focal_plane(
             countermeasure: *cm,
             arrays,
             bins,
-            analyse_s: base_s + t.elapsed().as_secs_f64(),
+            analyse_s,
         });
     }
     Ok(out)

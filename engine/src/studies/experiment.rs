@@ -3,16 +3,17 @@
 //!
 //! A dataset reports, per countermeasure, the mean over its images of the per-image accuracy and the
 //! standard error of that mean (the paper's figure), the median Cramér–Rao bound, and the accuracy the
-//! instant predictor expects ([`crate::analysis::predict`]).
+//! instant predictor expects ([`crate::studies::predict`]).
 
+use crate::analysis::AnalysisError;
 use crate::analysis::countermeasures::Plan;
 use crate::analysis::pipeline::{self, ImageAnalysis};
-use crate::analysis::predict::{PredictError, Predictor};
 pub use crate::analysis::report::{ImageResult, Measured, Row};
-use crate::analysis::{AnalysisError, AnalysisImage, Source, analyse_image};
 use crate::config::{AceCase, Config, ReadoutOrder};
 use crate::numerics::stats;
+use crate::session::{Source, analysis_image};
 use crate::simulate::{SimError, Simulator, TruthRow};
+use crate::studies::predict::{PredictError, Predictor};
 use std::ops::ControlFlow;
 use std::time::Instant;
 
@@ -27,6 +28,15 @@ pub enum ExperimentError {
     /// The caller's progress callback asked to stop (Ctrl-C in the CLI or in Python).
     #[error("stopped")]
     Stopped,
+}
+
+impl From<crate::session::SourceError> for ExperimentError {
+    fn from(e: crate::session::SourceError) -> Self {
+        match e {
+            crate::session::SourceError::Simulation(e) => e.into(),
+            crate::session::SourceError::Analysis(e) => e.into(),
+        }
+    }
 }
 
 /// One exposure of a stare, analysed by the pipeline; the countermeasures that need the whole stare (plate
@@ -55,14 +65,12 @@ pub fn analyse_in_stare(
     let t0 = Instant::now();
     let exp = sim.exposure(index)?;
     let t1 = Instant::now();
-    let img = AnalysisImage::of_exposure(sim, &exp.image);
-    let analysis = analyse_image(
+    let img = analysis_image(sim, &exp.image);
+    let analysis = Source { sim, index }.analyse(
         &img,
         Some(&exp.truth),
-        Some(Source { sim, index }),
         &sim.cfg.analysis,
         plan,
-        sim.cfg.seed,
         &Default::default(),
     )?;
     Ok(StareImage {

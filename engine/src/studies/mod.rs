@@ -5,4 +5,5 @@ pub mod bench;
 pub mod bench_field;
 pub mod crowded;
 pub mod experiment;
+pub mod predict;
 pub mod sweep;

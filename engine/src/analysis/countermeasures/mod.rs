@@ -40,7 +40,7 @@ use crate::analysis::epsf::build::{BuildOptions, StarStart};
 use crate::analysis::epsf::fit::{fit_star, flags};
 use crate::analysis::image::AnalysisImage;
 use crate::analysis::report::StarResult;
-use crate::simulate::TruthRow;
+use crate::truth::TruthRow;
 use rayon::prelude::*;
 use serde::Serialize;
 use std::fmt;
@@ -76,6 +76,10 @@ pub enum CountermeasureError {
     Degenerate { what: String },
     #[error("{0} needs the truth catalogue (reference positions)")]
     NeedsTruth(String),
+    #[error(
+        "{0} needs the reference catalogue product (refcat.csv beside the image, or --refcat): none was given"
+    )]
+    NeedsReference(String),
     #[error(
         "{what}: the stack reference needs stars seen in at least 2 exposures of the stare, found {have}"
     )]
@@ -462,11 +466,8 @@ pub struct Context<'a> {
     pub default_zones: usize,
     /// The exposure's telemetry; `None` when the ACE is static (nothing to correct).
     pub telemetry: Option<&'a Telemetry>,
-    /// The reference catalogue product (positions in this image's pixels) for `plate-*@catalogue`; `None`:
-    /// the reference is the truth with the plan's error, as a simulation draws it.
+    /// The reference catalogue product (positions in this image's pixels) for `plate-*@catalogue`.
     pub reference: Option<&'a [(f64, f64)]>,
-    /// Seed of the reference catalogue's error draws.
-    pub seed: u64,
 }
 
 /// Apply a correction to the star results of an image; returns the parameters absorbed per exposure.
@@ -530,28 +531,18 @@ pub fn apply(
         Countermeasure::Plate {
             model,
             reference: Reference::Catalogue { .. },
-        } if ctx.reference.is_some() => plate::plate_fit_to_catalogue(
-            stars,
-            ctx.reference.unwrap_or(&[]),
+        } => match ctx.reference {
+            Some(r) => plate::plate_fit_to_catalogue(stars, r, model, &cm.to_string()),
+            None => Err(CountermeasureError::NeedsReference(cm.to_string())),
+        },
+        Countermeasure::Plate {
             model,
-            &cm.to_string(),
-        ),
-        Countermeasure::Plate { model, reference } => {
+            reference: Reference::Oracle,
+        } => {
             let t = ctx
                 .truth
                 .ok_or_else(|| CountermeasureError::NeedsTruth(cm.to_string()))?;
-            let err_mas = match reference {
-                Reference::Catalogue { error_mas } => error_mas,
-                _ => 0.0,
-            };
-            plate::plate_fit(
-                stars,
-                t,
-                model,
-                &cm.to_string(),
-                err_mas / ctx.img.plate_scale_mas,
-                ctx.seed,
-            )
+            plate::plate_fit(stars, t, model, &cm.to_string())
         }
         Countermeasure::Telemetry(_) => {
             let Some(tel) = ctx.telemetry else {

@@ -4,9 +4,7 @@
 use super::CountermeasureError;
 use crate::analysis::report::StarResult;
 use crate::numerics::linalg;
-use crate::rng::{self, Stream};
-use crate::simulate::TruthRow;
-use rand_distr::{Distribution, Normal};
+use crate::truth::TruthRow;
 
 /// The model of a plate fit: its design row is the one basis shared by the countermeasure and the
 /// predictor. Coordinates are normalised as `u = x/1000 − 1` (≈ [−1, 1] over the 1968-px array) for
@@ -71,37 +69,20 @@ impl PlateModel {
     }
 }
 
-/// Reference positions: the truth, plus its own error when asked (seeded).
-pub(super) fn reference(truth: &[TruthRow], k: usize, err_px: f64, seed: u64) -> (f64, f64) {
-    if err_px > 0.0 {
-        let mut r = rng::stream(seed, Stream::ReferenceCatalogue, truth[k].id as u64);
-        let n = Normal::new(0.0, err_px)
-            .map(|n| (n.sample(&mut r), n.sample(&mut r)))
-            .unwrap_or((0.0, 0.0));
-        (truth[k].x_px + n.0, truth[k].y_px + n.1)
-    } else {
-        (truth[k].x_px, truth[k].y_px)
-    }
-}
-
-/// Fit Δ = design · coefficients per axis over the matched, usable stars onto the reference (the truth, with
-/// its own error `err_px` when > 0), subtract, and return the number of parameters absorbed.
+/// Fit Δ = design · coefficients per axis over the matched, usable stars onto their true positions (the
+/// `@oracle` reference: a control, never a default), subtract, and return the number of parameters absorbed.
 pub fn plate_fit(
     stars: &mut [StarResult],
     truth: &[TruthRow],
     model: PlateModel,
     what: &str,
-    err_px: f64,
-    seed: u64,
 ) -> Result<usize, CountermeasureError> {
     let (pos, target): (Vec<(f64, f64)>, Vec<(f64, f64)>) = stars
         .iter()
         .filter(|s| s.is_used())
-        .map(|s| {
-            (
-                (s.x, s.y),
-                reference(truth, s.truth.unwrap_or(0), err_px, seed),
-            )
+        .filter_map(|s| {
+            let t = truth.get(s.truth?)?;
+            Some(((s.x, s.y), (t.x_px, t.y_px)))
         })
         .unzip();
     let c = fit_correction(model, &pos, &target, what)?;
@@ -265,15 +246,7 @@ mod tests {
                 .collect()
         };
         let mut by_truth = make();
-        plate_fit(
-            &mut by_truth,
-            &truth,
-            PlateModel::PolyY(3),
-            "plate-poly:3",
-            0.0,
-            0,
-        )
-        .expect("truth fit");
+        plate_fit(&mut by_truth, &truth, PlateModel::PolyY(3), "plate-poly:3").expect("truth fit");
         let mut by_catalogue = make();
         for s in &mut by_catalogue {
             s.truth = None; // the catalogue fit needs no truth
@@ -331,15 +304,7 @@ mod tests {
                 star(x, y, dx, dy, k)
             })
             .collect();
-        let dof = plate_fit(
-            &mut stars,
-            &truth,
-            PlateModel::PolyY(3),
-            "plate-poly:3",
-            0.0,
-            0,
-        )
-        .expect("fit");
+        let dof = plate_fit(&mut stars, &truth, PlateModel::PolyY(3), "plate-poly:3").expect("fit");
         assert_eq!(dof, 10);
         // the field is a polynomial of the true positions and the model one of the measured positions: the
         // difference is second order in the field (here < 1e-6 px = 5e-4 mas)
@@ -365,14 +330,7 @@ mod tests {
             .enumerate()
             .map(|(k, &(x, y))| star(x, y, 0.1, 0.0, k))
             .collect();
-        let r = plate_fit(
-            &mut stars,
-            &truth,
-            PlateModel::Affine,
-            "plate-affine",
-            0.0,
-            0,
-        );
+        let r = plate_fit(&mut stars, &truth, PlateModel::Affine, "plate-affine");
         (r, stars)
     }
 

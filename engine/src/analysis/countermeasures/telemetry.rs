@@ -21,6 +21,16 @@ pub struct Telemetry {
     pub response: FitResponse,
 }
 
+/// When each pixel of an exposure integrated (its readout timing) and how its array is turned on the sky:
+/// what a telemetry record is applied with. From the image's headers (READOUT, ROWDIR, NCHAN, CHANWID,
+/// PIXTIME, TOVERHD, EXPTIME, ROTANG), or from a simulator.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ExposureReadout {
+    pub timing: ReadoutTiming,
+    /// The array's rotation on the sky (deg): the telemetry's attitude is the telescope's.
+    pub rotation_deg: f64,
+}
+
 /// Attitude telemetry as the spacecraft records it over one exposure: samples at `dt_s` from `t0_s` (seconds
 /// in the ACE series' time), the telescope's attitude in mas with the recording's errors and latency — the
 /// instrument product (`telemetry_NNN.fits`), not the true series.

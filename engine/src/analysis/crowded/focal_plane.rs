@@ -9,8 +9,8 @@ use super::report::MagBin;
 use crate::analysis::countermeasures::Countermeasure;
 use crate::analysis::report::StarResult;
 use crate::numerics::stats;
-use crate::simulate::TruthRow;
 use crate::sky::focal_plane::FocalPlane;
+use crate::truth::TruthRow;
 
 /// One array's crowded analysis under one countermeasure.
 #[derive(Debug, Clone)]

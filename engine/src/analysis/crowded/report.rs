@@ -20,7 +20,7 @@ use super::neighbours::Neighbours;
 use crate::analysis::epsf::fit::{StarFit, flags};
 use crate::analysis::report::StarResult;
 use crate::numerics::stats;
-use crate::simulate::TruthRow;
+use crate::truth::TruthRow;
 use serde::Serialize;
 
 /// Largest distance of a fit from its truth star (after the common offset), px.

@@ -203,6 +203,17 @@ fn simulate_focal_plane(
         outputs.add(&out.join(engine::io::focal_plane::focal_plane_name(i)));
         let t = Instant::now();
         let file = engine::io::focal_plane::write_focal_plane_exposure(out, &fps, &exp)?;
+        // the telescope's attitude as the spacecraft records it (the default quality; one record for all
+        // arrays, each applies it turned by its ROTATION)
+        if let Some(first) = fps.arrays.first() {
+            outputs.add(&out.join(engine::io::instrument::telemetry_name(i)));
+            engine::io::instrument::write_telemetry(
+                out,
+                first,
+                i,
+                &engine::analysis::countermeasures::TelemetryQuality::DEFAULT,
+            )?;
+        }
         summary.push(serde_json::json!({
             "image": file.file_name().map(|n| n.to_string_lossy().to_string()),
             "t_start_s": exp.arrays.first().map(|e| e.t_start_s),
@@ -290,7 +301,8 @@ pub fn analyze(session: &Session, cfg: &Config, a: &AnalyzeArgs) -> Result<()> {
         a.telemetry.as_deref(),
         cfg,
     )?;
-    for s in &input.assumptions {
+    let assumptions = input.assumptions_for(&a.countermeasure);
+    for s in &assumptions {
         eprintln!("jsim: {}: {s}", a.image.display());
     }
     let an = session.analyze_input(cfg, &input, a.zones, a.countermeasure, a.crowding)?;
@@ -298,7 +310,6 @@ pub fn analyze(session: &Session, cfg: &Config, a: &AnalyzeArgs) -> Result<()> {
         img,
         truth,
         plate_scale_mas: scale,
-        assumptions,
         ..
     } = input;
     let an = &an;
@@ -454,7 +465,7 @@ pub fn predict(session: &Session, cfg: &Config, plan: &Plan) -> Result<()> {
     let sim = session.new_simulator(cfg)?;
     let setup = t0.elapsed().as_secs_f64();
     let t1 = Instant::now();
-    let p = engine::analysis::predict::Predictor::new(&sim, &cfg.analysis)?;
+    let p = engine::studies::predict::Predictor::new(&sim, &cfg.analysis)?;
     println!(
         "Hw {} {} ACE, {} readout, {} images:",
         cfg.scene.mag_hw,
@@ -591,6 +602,14 @@ fn analyze_focal_plane(
     let mut all_stars = Vec::new();
     let mut all_crowded = true;
     let mut scale = f64::NAN;
+    // each array's stars, truth and size, for the accuracy against magnitude when every array has a truth
+    let mut scored: Vec<
+        Option<(
+            Vec<engine::analysis::StarResult>,
+            Vec<engine::truth::TruthRow>,
+            usize,
+        )>,
+    > = Vec::new();
     for (k, name) in arrays.iter().enumerate() {
         let t = Instant::now();
         let input = analysis_input::AnalysisInput::read_array(
@@ -599,9 +618,11 @@ fn analyze_focal_plane(
             a.truth.as_deref(),
             a.flat.as_deref(),
             a.refcat.as_deref(),
+            a.telemetry.as_deref(),
             cfg,
         )?;
-        for s in &input.assumptions {
+        let assumptions = input.assumptions_for(&a.countermeasure);
+        for s in &assumptions {
             eprintln!("jsim: {}[{name}]: {s}", a.image.display());
         }
         let an = session
@@ -618,7 +639,7 @@ fn analyze_focal_plane(
             plate_scale_mas: scale,
             countermeasure: &an.report.countermeasure,
             report: &an.report,
-            assumptions: input.assumptions.clone(),
+            assumptions: assumptions.clone(),
             seconds: t.elapsed().as_secs_f64(),
         };
         products::write_analysis(&dir, &an, &summary, None)?;
@@ -640,10 +661,16 @@ fn analyze_focal_plane(
             ..*s
         }));
         all_crowded &= an.report.crowded;
+        scored.push(
+            input
+                .truth
+                .clone()
+                .map(|t| (an.stars.clone(), t, input.img.nx)),
+        );
         per_array.push(serde_json::json!({
             "array": name,
             "report": an.report,
-            "assumptions": input.assumptions,
+            "assumptions": assumptions,
         }));
     }
     let mut combined = engine::analysis::Report {
@@ -656,6 +683,38 @@ fn analyze_focal_plane(
     let mut header = vec!["array"];
     header.extend(products::CATALOGUE_HEADER);
     csv::write(&a.out.join("catalogue.csv"), &header, &rows)?;
+    // with every array's truth: accuracy against magnitude as `jsim crowded` reports it (its bins, its
+    // classes, the same file)
+    let bins = match scored
+        .iter()
+        .map(|o| o.as_ref())
+        .collect::<Option<Vec<_>>>()
+    {
+        Some(arrays) => {
+            let views: Vec<engine::analysis::crowded::report::ArrayStars<'_>> = arrays
+                .iter()
+                .map(
+                    |(stars, truth, n_px)| engine::analysis::crowded::report::ArrayStars {
+                        stars,
+                        truth,
+                        n_px: *n_px,
+                    },
+                )
+                .collect();
+            let b = &cfg.scene.bulge;
+            let edges = engine::analysis::crowded::report::edges(b.hw_min, b.hw_max, 0.5);
+            let bins = engine::analysis::crowded::report::mag_bins(&views, scale, &edges);
+            let path = a.out.join("crowded_bins.csv");
+            outputs.add(&path);
+            engine::io::crowded::write_table(
+                &path,
+                &engine::io::crowded::BINS_HEADER,
+                &engine::io::crowded::bin_rows("image", &a.countermeasure.to_string(), &bins),
+            )?;
+            Some(bins)
+        }
+        None => None,
+    };
     let json = serde_json::json!({
         "image": a.image.display().to_string(),
         "plate_scale_mas": scale,
@@ -674,6 +733,10 @@ fn analyze_focal_plane(
         combined.n_matched > 0,
         t0.elapsed().as_secs_f64(),
     );
+    if let Some(bins) = bins {
+        crate::crowded_cmd::print_bin_table(&bins);
+        println!("wrote {}", a.out.join("crowded_bins.csv").display());
+    }
     Ok(())
 }
 

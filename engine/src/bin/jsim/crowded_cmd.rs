@@ -57,6 +57,14 @@ pub fn crowded(a: &CrowdedArgs) -> Result<()> {
     }
     let plan = a.tel.plan(&a.countermeasures)?;
     crowded::check_plan(&plan)?;
+    let telemetry_quality = plan
+        .countermeasures
+        .iter()
+        .find_map(|c| match c {
+            engine::analysis::countermeasures::Countermeasure::Telemetry(q) => Some(*q),
+            _ => None,
+        })
+        .unwrap_or(engine::analysis::countermeasures::TelemetryQuality::DEFAULT);
     let mut outputs = crate::outputs::Outputs::in_dir(&a.out)?;
     for name in [
         "crowded_bins.csv",
@@ -101,6 +109,10 @@ pub fn crowded(a: &CrowdedArgs) -> Result<()> {
             )?;
             outputs.add(&dir.join(engine::io::instrument::MODEL_PSF_NAME));
             engine::io::instrument::write_focal_plane_model_psfs(&dir, &fps)?;
+            // the telescope's attitude as recorded at the plan's telemetry quality (one record for
+            // all arrays; none for a static ACE)
+            outputs.add(&dir.join(engine::io::instrument::telemetry_name(0)));
+            engine::io::instrument::write_telemetry(&dir, &fps.arrays[0], 0, &telemetry_quality)?;
         }
         crate::outputs::interrupted()?;
         let analyses = crowded::analyse_focal_plane(&fps, &exp, &plan, &edges)?;
@@ -158,29 +170,7 @@ pub fn crowded(a: &CrowdedArgs) -> Result<()> {
 
 fn print_bins(case: &str, cm: &str, r: &FocalPlaneAnalysis) {
     println!("{case}, {cm}");
-    println!(
-        "  Hw bin      true  found  compl.  blend  sat.  | isolated: n  mas   CRLB  ratio | crowded: n  mas   | merged: n  mas"
-    );
-    for b in &r.bins {
-        println!(
-            "  {:5.2}-{:5.2} {:6} {:6} {:6.3} {:6.3} {:5.3} | {:6} {:6.2} {:6.2} {:5.2} | {:6} {:6.2} | {:5} {:6.2}",
-            b.hw_lo,
-            b.hw_hi,
-            b.n_true,
-            b.n_found,
-            b.completeness,
-            b.frac_blended,
-            b.frac_saturated,
-            b.isolated.n,
-            b.isolated.accuracy_mas,
-            b.isolated.crlb_mas,
-            b.isolated.ratio(),
-            b.crowded.n,
-            b.crowded.accuracy_mas,
-            b.merged.n,
-            b.merged.accuracy_mas
-        );
-    }
+    print_bin_table(&r.bins);
     for a in &r.arrays {
         let s = &a.summary;
         println!(
@@ -198,6 +188,34 @@ fn print_bins(case: &str, cm: &str, r: &FocalPlaneAnalysis) {
             s.n_groups,
             s.largest_group,
             s.analyse_s
+        );
+    }
+}
+
+/// The accuracy against magnitude of a focal-plane exposure, one line per bin of true Hw (`jsim crowded`, and
+/// `jsim analyze` on a focal-plane file with its truth).
+pub fn print_bin_table(bins: &[engine::analysis::crowded::report::MagBin]) {
+    println!(
+        "  Hw bin      true  found  compl.  blend  sat.  | isolated: n  mas   CRLB  ratio | crowded: n  mas   | merged: n  mas"
+    );
+    for b in bins {
+        println!(
+            "  {:5.2}-{:5.2} {:6} {:6} {:6.3} {:6.3} {:5.3} | {:6} {:6.2} {:6.2} {:5.2} | {:6} {:6.2} | {:5} {:6.2}",
+            b.hw_lo,
+            b.hw_hi,
+            b.n_true,
+            b.n_found,
+            b.completeness,
+            b.frac_blended,
+            b.frac_saturated,
+            b.isolated.n,
+            b.isolated.accuracy_mas,
+            b.isolated.crlb_mas,
+            b.isolated.ratio(),
+            b.crowded.n,
+            b.crowded.accuracy_mas,
+            b.merged.n,
+            b.merged.accuracy_mas
         );
     }
 }

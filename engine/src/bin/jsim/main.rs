@@ -180,8 +180,7 @@ enum Command {
         #[arg(long, value_name = "CSV")]
         refcat: Option<PathBuf>,
         /// Attitude telemetry of the exposure (FITS table ATTITUDE; default: telemetry_NNN.fits beside the
-        /// image, NNN its IMAGEIDX). With it, the telemetry correction uses what was recorded (its own
-        /// quality; the --telemetry-* options then do not apply).
+        /// image, NNN its IMAGEIDX): what the telemetry correction corrects with (without it, nothing).
         #[arg(long, value_name = "FITS")]
         telemetry: Option<PathBuf>,
         /// Y zones of the position-dependent ePSF (with --countermeasure yzones|yzones-shared).
@@ -316,15 +315,16 @@ impl SurveyArgs {
     }
 }
 
-/// The countermeasure of `jsim analyze`.
+/// The countermeasure of `jsim analyze`: its quality comes from the products (the telemetry file's own
+/// recording, the reference catalogue's own errors), so there is no quality option to give.
 #[derive(Args, Clone, Debug)]
 pub struct CountermeasureArgs {
-    /// none, yzones[:K], yzones-shared[:K], plate-affine[@R], plate-poly:N[@R] (R: stack, catalogue,
-    /// oracle), telemetry or exact-epsf. A single image is a stare of one: the stack corrects nothing.
+    /// none, yzones[:K], yzones-shared[:K], plate-affine[@R], plate-poly:N[@R] (R: stack, catalogue — the
+    /// reference catalogue product —, oracle — the truth, a control), telemetry (with the telemetry
+    /// product) or exact-epsf (a control: the image's own simulation). A single image is a stare of one:
+    /// the stack corrects nothing.
     #[arg(long, default_value = "none")]
     pub countermeasure: String,
-    #[command(flatten)]
-    pub tel: TelemetryArgs,
 }
 
 fn main() {
@@ -374,7 +374,11 @@ fn run(cli: Cli) -> Result<()> {
             out,
         } => {
             let c = cfg.load()?;
-            let plan = cm.tel.plan(std::slice::from_ref(&cm.countermeasure))?;
+            let plan = Plan::parse(
+                std::slice::from_ref(&cm.countermeasure),
+                TelemetryQuality::DEFAULT,
+                DEFAULT_CATALOGUE_ERROR_MAS,
+            )?;
             if let Some(z) = epsf_zones
                 && !(2..=64).contains(&z)
             {

@@ -82,7 +82,7 @@
 //! (a per-row checksum). Everything before `simulate_s` is deterministic; [`without_timing`] strips the rest.
 //! `accuracy_x_mas`/`accuracy_y_mas` are the standard deviations over the stars of measured − true position per
 //! axis, `accuracy_mas = √((σx² + σy²)/2)` (per axis), `bias_*` their means, `crlb_mas` the median Cramér–Rao
-//! bound, `predicted_mas` the instant predictor's expectation for this exposure ([`crate::analysis::predict`]),
+//! bound, `predicted_mas` the instant predictor's expectation for this exposure ([`crate::studies::predict`]),
 //! `ace_sigma_mas`/`ace_drift_mas` the exposure's jitter σ and drift, `seed` the unit's master seed.
 //! `status` is `ok`, `not applicable` (e.g. `exact-epsf` with a realistic ACE), `failed: …` (fewer than
 //! [`MIN_SWEEP_STARS`] stars scored, with the count) or `error: …` (the analysis failed for that exposure);

@@ -102,7 +102,7 @@ pub fn compute_unit(sweep: &Sweep, unit: usize, session: &Session) -> Result<Uni
         std::ops::ControlFlow::Continue(())
     });
     let tp = Instant::now();
-    let predictor = crate::analysis::predict::Predictor::new(&sim, &cfg.analysis).ok();
+    let predictor = crate::studies::predict::Predictor::new(&sim, &cfg.analysis).ok();
     // a prediction that cannot be made is recorded as NaN beside the measured row (the file has no other
     // place for the reason; `jsim predict` reports it)
     let predicted: Vec<Vec<f64>> = (0..k_stare)

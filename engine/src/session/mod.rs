@@ -6,10 +6,14 @@
 //! Every stage is bit-identical whatever is cached: a simulator from a session gives the same image as one
 //! built alone ([`Simulator::new`]).
 
+pub mod source;
+
+pub use source::{Source, SourceError, SourceProducts, analysis_image};
+
 use crate::analysis::countermeasures::{Countermeasure, Plan};
 use crate::analysis::crowding::{self, Crowding};
-use crate::analysis::pipeline::{Supplied, analyze_crowded};
-use crate::analysis::{Analysis, AnalysisError, Source, analyse_image};
+use crate::analysis::pipeline::{Supplied, analyse_crowded_image};
+use crate::analysis::{Analysis, AnalysisError, analyse_image};
 use crate::config::{Backend, Config};
 use crate::integrate::Integrator;
 use crate::integrate::kernel::KernelCache;
@@ -152,9 +156,10 @@ impl Session {
 
 impl Session {
     /// The analysis pipeline on one image read for analysis (`jsim analyze`, the Python module's
-    /// `Session.analyze`): `cfg` gives the analysis knobs (`epsf_zones` overrides its zones); the image's
-    /// own configuration, when it has one, gives what only its simulation knows (the ACE series for the
-    /// telemetry and the ACE prediction, the exact ePSF of the control) and the reference seed.
+    /// `Session.analyze`): `cfg` gives the analysis knobs (`epsf_zones` overrides its zones); the
+    /// calibration is what the instrument supplied beside the image (`input`'s products and headers), never
+    /// the image's CONFIG or TRUTH. The one oracle is the `exact-epsf` control, which asks the image's own
+    /// simulation (its CONFIG) for the exact ePSF; the truth, when given, only scores the report.
     pub fn analyze_input(
         &self,
         cfg: &Config,
@@ -162,54 +167,50 @@ impl Session {
         epsf_zones: Option<usize>,
         countermeasure: Countermeasure,
         crowding: Crowding,
-    ) -> Result<Analysis, AnalysisError> {
-        let img_cfg = input.provenance.as_ref().map(|(c, _)| c).unwrap_or(cfg);
+    ) -> Result<Analysis, SourceError> {
         let mut analysis_cfg = cfg.analysis.clone();
         if let Some(z) = epsf_zones {
             analysis_cfg.epsf_zones = z;
         }
-        if crowding::is_crowded(&input.img, &analysis_cfg, crowding).0 {
-            return analyze_crowded(
-                &input.img,
-                input.truth.as_deref(),
-                &analysis_cfg,
-                input.model_psf.as_ref(),
-                &countermeasure,
-                input.reference.as_deref(),
-                img_cfg.seed,
-            );
-        }
-        let sim = match &input.provenance {
-            Some((c, index)) => {
+        let plan = Plan::new(vec![countermeasure])?;
+        let exact = match (&input.provenance, countermeasure) {
+            (Some((c, index)), Countermeasure::ExactEpsf) => {
                 let mut c = c.clone();
                 c.fidelity.backend = Backend::Cpu;
                 c.fidelity.images = index + 1;
-                Some((self.simulator(&c)?, *index))
+                let sim = self.simulator(&c)?;
+                let src = Source {
+                    sim: &sim,
+                    index: *index,
+                };
+                src.products(&plan, &analysis_cfg)?.exact_epsf
             }
-            None => None,
+            _ => None,
         };
-        let source = sim.as_ref().map(|(s, index)| Source {
-            sim: s,
-            index: *index,
-        });
-        let plan = Plan::new(vec![countermeasure])?;
-        let res = analyse_image(
-            &input.img,
-            input.truth.as_deref(),
-            source,
-            &analysis_cfg,
-            &plan,
-            img_cfg.seed,
-            &Supplied {
-                reference: input.reference.as_deref(),
-                model_psf: input.model_psf.as_ref(),
-                telemetry: input.telemetry.as_ref(),
-            },
-        )?;
-        res.into_of(&countermeasure)
-            .ok_or(AnalysisError::NotApplicable {
+        let supplied = Supplied {
+            reference: input.reference.as_deref(),
+            model_psf: input.model_psf.as_ref(),
+            telemetry: input.telemetry.as_ref(),
+            readout: input.readout,
+            exact_epsf: exact.as_ref(),
+            ..Default::default()
+        };
+        let truth = input.truth.as_deref();
+        let res = if crowding::is_crowded(&input.img, &analysis_cfg, crowding).0 {
+            let r = analyse_crowded_image(&input.img, truth, &analysis_cfg, &plan, &supplied)?;
+            if r.global.stars.is_empty() {
+                return Err(AnalysisError::NoStars(analysis_cfg.crowded_detect_sigma).into());
+            }
+            r
+        } else {
+            analyse_image(&input.img, truth, &analysis_cfg, &plan, &supplied)?
+        };
+        res.into_of(&countermeasure).ok_or_else(|| {
+            AnalysisError::NotApplicable {
                 countermeasure: countermeasure.to_string(),
-            })
+            }
+            .into()
+        })
     }
 }
 

@@ -106,7 +106,7 @@ impl Predictor {
         Ok(Self {
             map: IntraPixelMap::from_config(&cfg.detector, cfg.fidelity.subpixels)?,
             kernel: sim.optical_kernel()?,
-            noise: FitNoise::of_simulation(sim, analysis.fit_radius_px),
+            noise: crate::session::source::simulation_fit_noise(sim, analysis.fit_radius_px),
             timing: sim.timing,
             series: sim.series_arc(),
             stars: sim.stars.iter().map(|s| (s.x_px, s.y_px)).collect(),

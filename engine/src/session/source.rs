@@ -1,0 +1,245 @@
+//! A simulated exposure as the analysis meets it: what the simulated instrument delivers beside the image
+//! (the design model PSF, the attitude telemetry it records, its readout timing — [`Source::products`]),
+//! and what only a simulation knows, each labelled as such: the exact ePSF of a static simulation (the
+//! `exact-epsf` control, an oracle) and the fit displacement the true ACE predicts for every star (the
+//! mechanism, shown beside the measured errors). The analysis itself ([`analyse_image`]) never sees the
+//! simulator.
+
+use crate::analysis::countermeasures::telemetry::{ExposureReadout, TelemetryRecord};
+use crate::analysis::countermeasures::{Countermeasure, Plan, Reference, TelemetryQuality};
+use crate::analysis::epsf::Epsf;
+use crate::analysis::image::AnalysisImage;
+use crate::analysis::pipeline::{Analysis, ImageAnalysis, Supplied, analyse_image, exact_epsf};
+use crate::analysis::report::{attach_fit_prediction, summarise};
+use crate::analysis::response::{FitNoise, FitResponse};
+use crate::analysis::{AnalysisError, countermeasures::CountermeasureError};
+use crate::config::{AceCase, Analysis as AnalysisCfg, FlatField};
+use crate::detector::DetectorImage;
+use crate::io::instrument::{self, SurveyModel};
+use crate::numerics::stats;
+use crate::photometry;
+use crate::simulate::{SimError, Simulator};
+use crate::truth::TruthRow;
+
+/// A failure of a simulation's analysis: of the simulation (its kernels, its stars) or of the analysis.
+#[derive(Debug, thiserror::Error)]
+pub enum SourceError {
+    #[error(transparent)]
+    Simulation(#[from] SimError),
+    #[error(transparent)]
+    Analysis(#[from] AnalysisError),
+}
+
+impl From<CountermeasureError> for SourceError {
+    fn from(e: CountermeasureError) -> Self {
+        SourceError::Analysis(e.into())
+    }
+}
+
+/// An exposure of a simulation, flat-fielded as its `analysis.flat_field` says with the simulator's (cached)
+/// calibration flat product (the true flat with its stated error).
+pub fn analysis_image(sim: &Simulator, img: &DetectorImage) -> AnalysisImage {
+    let mut a = AnalysisImage::from_detector_unflattened(&sim.cfg, img);
+    if let (Some(flat), FlatField::Calibrated { error }) =
+        (sim.calibration_flat(), sim.cfg.analysis.flat_field)
+    {
+        a.divide_by(&flat, error);
+    }
+    a
+}
+
+/// Noise parameters of a typical star's fit in a simulation (median flux, sky, read/quantisation floor)
+/// with the analysis' fit radius (px): the predictor's model of a dataset.
+pub fn simulation_fit_noise(sim: &Simulator, radius_px: f64) -> FitNoise {
+    let cfg = &sim.cfg;
+    let d = &cfg.detector;
+    let rates: Vec<f64> = sim
+        .stars
+        .iter()
+        .map(|s| photometry::electrons_per_s(s.mag_hw, cfg.photometry.zero_point_e_per_s))
+        .collect();
+    FitNoise {
+        flux_e: if rates.is_empty() {
+            0.0
+        } else {
+            stats::median(&rates)
+        } * d.exposure_s,
+        sky_e: d.dark_e_per_s * d.exposure_s,
+        floor_e2: d.noise_floor_e2(),
+        radius_px,
+    }
+}
+
+/// The simulated exposure an image came from.
+#[derive(Clone, Copy)]
+pub struct Source<'a> {
+    pub sim: &'a Simulator,
+    /// The exposure's index in the simulator's dataset.
+    pub index: usize,
+}
+
+/// What a simulated instrument delivers beside one exposure (owned; lend it with [`SourceProducts::supplied`]).
+pub struct SourceProducts {
+    /// The design model PSF (design wavefront, pixel-integrated, no jitter).
+    pub model_psf: Epsf,
+    /// The reference catalogue a survey gives of the field ([`instrument::reference_catalogue`]: the default
+    /// survey model with its floor at each catalogue error of the plan's `plate-*@catalogue`), in pixels.
+    pub references: Vec<(f64, Vec<(f64, f64)>)>,
+    /// The attitude recorded at each telemetry quality of the plan (none for a static ACE).
+    pub telemetry: Vec<(TelemetryQuality, TelemetryRecord)>,
+    pub readout: ExposureReadout,
+    /// The exact ePSF of a static-ACE simulation, when the plan asks for the `exact-epsf` control.
+    pub exact_epsf: Option<Epsf>,
+}
+
+impl SourceProducts {
+    /// The products as the pipeline takes them; `reference`: the reference catalogue product, if any.
+    pub fn supplied<'a>(&'a self, reference: Option<&'a [(f64, f64)]>) -> Supplied<'a> {
+        Supplied {
+            reference,
+            reference_by_error: &self.references,
+            model_psf: Some(&self.model_psf),
+            telemetry: None,
+            telemetry_by_quality: &self.telemetry,
+            readout: Some(self.readout),
+            exact_epsf: self.exact_epsf.as_ref(),
+        }
+    }
+}
+
+impl Source<'_> {
+    /// The exposure's readout timing and array rotation.
+    pub fn readout(&self) -> ExposureReadout {
+        ExposureReadout {
+            timing: self.sim.timing,
+            rotation_deg: self.sim.array.rotation_deg,
+        }
+    }
+
+    /// The attitude telemetry the spacecraft records over this exposure at quality `q` (the instrument
+    /// product `telemetry_NNN.fits`); `None` for a static ACE.
+    pub fn telemetry_record(
+        &self,
+        q: &TelemetryQuality,
+    ) -> Result<Option<TelemetryRecord>, CountermeasureError> {
+        let Some(series) = self.sim.series() else {
+            return Ok(None);
+        };
+        TelemetryRecord::record(
+            series,
+            self.sim.timing.span_s(),
+            self.sim.exposure_start_s(self.index),
+            q,
+            self.sim.cfg.seed,
+        )
+        .map(Some)
+    }
+
+    /// What the simulated instrument delivers beside this exposure for the countermeasures of `plan`.
+    pub fn products(&self, plan: &Plan, cfg: &AnalysisCfg) -> Result<SourceProducts, SourceError> {
+        let mut telemetry: Vec<(TelemetryQuality, TelemetryRecord)> = Vec::new();
+        let mut references: Vec<(f64, Vec<(f64, f64)>)> = Vec::new();
+        for cm in &plan.countermeasures {
+            if let Countermeasure::Plate {
+                reference: Reference::Catalogue { error_mas },
+                ..
+            } = cm
+                && !references.iter().any(|(e, _)| e == error_mas)
+            {
+                let survey = SurveyModel {
+                    floor_mas: *error_mas,
+                    ..SurveyModel::default()
+                };
+                let stars = instrument::reference_catalogue(self.sim, &survey, 0);
+                references.push((*error_mas, stars.iter().map(|s| (s.x_px, s.y_px)).collect()));
+            }
+            if let Countermeasure::Telemetry(q) = cm
+                && !telemetry.iter().any(|(k, _)| k == q)
+                && let Some(r) = self.telemetry_record(q)?
+            {
+                telemetry.push((*q, r));
+            }
+        }
+        let exact = plan.countermeasures.contains(&Countermeasure::ExactEpsf)
+            && self.sim.cfg.ace.case != AceCase::Realistic;
+        let exact_epsf = match exact {
+            true => self
+                .sim
+                .jobs()?
+                .first()
+                .map(|j| exact_epsf(&j.kernel, cfg.epsf_radius_px)),
+            false => None,
+        };
+        Ok(SourceProducts {
+            model_psf: design_model_psf(self.sim, cfg)?,
+            references,
+            telemetry,
+            readout: self.readout(),
+            exact_epsf,
+        })
+    }
+
+    /// The pipeline on this exposure's image, with the products the simulated instrument delivers (those in
+    /// `supplied` first: a product read from a file replaces the simulated one), then the fit displacement
+    /// the true ACE predicts attached to the plain analysis (when the truth is given).
+    pub fn analyse(
+        &self,
+        img: &AnalysisImage,
+        truth: Option<&[TruthRow]>,
+        cfg: &AnalysisCfg,
+        plan: &Plan,
+        supplied: &Supplied<'_>,
+    ) -> Result<ImageAnalysis, SourceError> {
+        let products = self.products(plan, cfg)?;
+        let mut s = products.supplied(supplied.reference);
+        s.model_psf = supplied.model_psf.or(s.model_psf);
+        s.telemetry = supplied.telemetry;
+        s.readout = supplied.readout.or(s.readout);
+        let mut res = analyse_image(img, truth, cfg, plan, &s)?;
+        if let Some(t) = truth {
+            self.attach_ace_prediction(t, &mut res.global, cfg, img.plate_scale_mas)?;
+            for (cm, a) in &mut res.measured {
+                if *cm == Countermeasure::None {
+                    *a = res.global.clone();
+                }
+            }
+        }
+        Ok(res)
+    }
+
+    /// Attach to an analysis the fit displacement the true ACE predicts for every star (realistic ACE only;
+    /// the mechanism, shown beside the measured errors) and refresh its report.
+    pub fn attach_ace_prediction(
+        &self,
+        truth: &[TruthRow],
+        analysis: &mut Analysis,
+        cfg: &AnalysisCfg,
+        plate_scale_mas: f64,
+    ) -> Result<(), SimError> {
+        let sim = self.sim;
+        if let Some(track) = sim.track(self.index) {
+            let resp = FitResponse::build(
+                &*sim.optical_kernel()?,
+                &track,
+                &sim.nominal_window(&track),
+                &simulation_fit_noise(sim, cfg.fit_radius_px),
+            );
+            let pos: Vec<(f64, f64)> = truth.iter().map(|t| (t.x_px, t.y_px)).collect();
+            let pred = resp.displacements(&track, &sim.timing, &pos);
+            attach_fit_prediction(&mut analysis.stars, &pred);
+            summarise(
+                &analysis.stars,
+                Some(truth),
+                plate_scale_mas,
+                &mut analysis.report,
+            );
+        }
+        Ok(())
+    }
+}
+
+/// The design model PSF of a simulation as an ePSF table: its design wavefront at the scene's colour,
+/// pixel-integrated, no jitter (what `psf_model.fits` holds).
+pub fn design_model_psf(sim: &Simulator, cfg: &AnalysisCfg) -> Result<Epsf, SimError> {
+    Ok(exact_epsf(&*sim.design_kernel()?, cfg.epsf_radius_px))
+}
