@@ -453,3 +453,42 @@ fn the_telemetry_product_corrects_as_the_in_memory_telemetry_does() {
     assert!(e.to_string().contains("exposure 2"), "{e}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A reference catalogue of another pointing is refused by name: its stars' RA/Dec, seen through the image's
+/// WCS, land hundreds of pixels from their pixel positions. The image's own catalogue passes.
+#[test]
+fn a_reference_catalogue_of_another_pointing_is_refused() {
+    use engine::io::instrument;
+    let cfg = small_config();
+    let sim = Simulator::new(&cfg).expect("simulator");
+    let exp = sim.exposure(0).expect("exposure");
+    let dir = temp_dir("refcat-pointing");
+    let files = exposure::write_exposure(&dir, &sim, &exp).expect("write");
+    let survey = instrument::SurveyModel::default();
+    let own = instrument::write_reference_catalogue(&dir, &sim, &survey).expect("refcat");
+    let read = |refcat: &std::path::Path| {
+        analysis_input::AnalysisInput::read_products(
+            &files.image,
+            None,
+            None,
+            Some(refcat),
+            None,
+            &cfg,
+        )
+    };
+    assert!(read(&own).expect("its own catalogue").reference.is_some());
+    let mut moved = cfg.clone();
+    moved.sky.dec_deg += 0.05; // 180″: ≈ 380 px at 472 mas/px
+    let other_sim = Simulator::new(&moved).expect("simulator");
+    let other_dir = temp_dir("refcat-pointing-other");
+    let other =
+        instrument::write_reference_catalogue(&other_dir, &other_sim, &survey).expect("refcat");
+    let e = read(&other).expect_err("another pointing");
+    assert!(
+        e.to_string().contains("another pointing") && e.to_string().contains("refcat"),
+        "{e}"
+    );
+    for d in [dir, other_dir] {
+        let _ = std::fs::remove_dir_all(d);
+    }
+}

@@ -15,7 +15,7 @@ use crate::analysis::epsf::fit::{FitOptions, StarFit, fit_star, flags};
 use crate::analysis::image::AnalysisImage;
 use crate::analysis::report::{Report, StarResult, star_results, summarise};
 use crate::analysis::response::FitNoise;
-use crate::config::Analysis as AnalysisCfg;
+use crate::config::{Analysis as AnalysisCfg, TelemetryKernel};
 use crate::integrate::kernel::PixelKernel;
 use crate::truth::TruthRow;
 use rayon::prelude::*;
@@ -416,9 +416,10 @@ impl Supplied<'_> {
     }
 }
 
-/// The telemetry of quality `q` for an image, its fit response built from the analysis' own ePSF (the
-/// image-average PSF it measured) and the measured fluxes and sky of its stars ([`FitNoise::of_stars`]);
-/// `None` without a record (a static ACE, or nothing recorded: nothing to correct).
+/// The telemetry of quality `q` for an image, its fit response built from the PSF `cfg.telemetry_kernel`
+/// names — the design model PSF product (the PSF before the jitter) or the analysis' own ePSF — and the
+/// measured fluxes and sky of its stars ([`FitNoise::of_stars`]); `None` without a record (a static ACE, or
+/// nothing recorded: nothing to correct).
 pub fn telemetry_for(
     q: &TelemetryQuality,
     supplied: &Supplied<'_>,
@@ -432,7 +433,10 @@ pub fn telemetry_for(
     let Some(ro) = supplied.readout else {
         return Err(AnalysisError::NoReadoutTiming);
     };
-    let epsf = &plain.epsf;
+    let epsf = match (cfg.telemetry_kernel, supplied.model_psf) {
+        (TelemetryKernel::ModelPsf, Some(m)) => m,
+        _ => &plain.epsf,
+    };
     let half_px = epsf.half_px().floor() as usize;
     let kernel =
         crate::integrate::kernel::PixelKernel::tabulated(8, half_px, |x, y| epsf.value(x, y));

@@ -478,12 +478,12 @@ fn read_reference(
     assumptions: &mut Vec<String>,
 ) -> Result<Option<Vec<(f64, f64)>>, IoError> {
     match instrument::find_reference_catalogue(image, given) {
-        Some(p) => Ok(Some(
-            instrument::read_reference_catalogue(&p, array)?
-                .iter()
-                .map(|s| (s.x_px, s.y_px))
-                .collect(),
-        )),
+        Some(p) => {
+            let stars = instrument::read_reference_catalogue(&p, array)?;
+            let ext = (array > 0).then(|| format!("ARRAY{array}"));
+            check_pointing(image, ext.as_deref(), &p, &stars)?;
+            Ok(Some(stars.iter().map(|s| (s.x_px, s.y_px)).collect()))
+        }
         None => {
             assumptions.push(format!(
                 "no reference catalogue ({} beside the image, or --refcat): plate-*@catalogue has no \
@@ -493,6 +493,66 @@ fn read_reference(
             Ok(None)
         }
     }
+}
+
+/// Largest median distance (px) between a reference catalogue's pixel positions and its sky positions seen
+/// through the image's WCS: beyond it the catalogue belongs to another pointing. The WCS is read without its
+/// SIP terms (a few pixels of distortion at the corners), so the margin is generous; a catalogue of another
+/// field is hundreds of pixels off.
+pub const POINTING_TOLERANCE_PX: f64 = 20.0;
+
+/// Refuse a reference catalogue of another pointing: where the image has a TAN WCS (`CRPIX`, `CRVAL`, `CD`
+/// of HDU `ext`) and the catalogue sky positions, its stars' RA/Dec must land on their `x_px, y_px` within
+/// [`POINTING_TOLERANCE_PX`] (median). Without a WCS or sky positions nothing can be checked.
+fn check_pointing(
+    image: &Path,
+    ext: Option<&str>,
+    catalogue: &Path,
+    stars: &[instrument::RefStar],
+) -> Result<(), IoError> {
+    let key = |k: &str| fits::read_f64_key_in(image, ext, k).ok();
+    let (Some(c1), Some(c2), Some(v1), Some(v2), Some(n1), Some(n2)) = (
+        key("CRPIX1"),
+        key("CRPIX2"),
+        key("CRVAL1"),
+        key("CRVAL2"),
+        key("NAXIS1"),
+        key("NAXIS2"),
+    ) else {
+        return Ok(());
+    };
+    let cd = [
+        [key("CD1_1").unwrap_or(0.0), key("CD1_2").unwrap_or(0.0)],
+        [key("CD2_1").unwrap_or(0.0), key("CD2_2").unwrap_or(0.0)],
+    ];
+    let Ok(w) =
+        crate::sky::wcs::ArrayWcs::from_header([c1, c2], [v1, v2], cd, [n1 as usize, n2 as usize])
+    else {
+        return Ok(());
+    };
+    let d: Vec<f64> = stars
+        .iter()
+        .filter(|s| s.ra_deg.is_finite() && s.dec_deg.is_finite())
+        .filter_map(|s| {
+            w.sky_to_pixel(s.ra_deg, s.dec_deg)
+                .map(|(x, y)| (x - s.x_px).hypot(y - s.y_px))
+        })
+        .collect();
+    if d.is_empty() {
+        return Ok(());
+    }
+    let median = crate::numerics::stats::median(&d);
+    if median > POINTING_TOLERANCE_PX {
+        return Err(IoError::Format {
+            path: catalogue.to_path_buf(),
+            message: format!(
+                "reference catalogue of another pointing: its stars' RA/Dec land {median:.0} px (median) \
+                 from their x_px, y_px through {}'s WCS (allowed {POINTING_TOLERANCE_PX} px)",
+                image.display()
+            ),
+        });
+    }
+    Ok(())
 }
 
 /// The attitude telemetry product for an image: the one given, else `telemetry_NNN.fits` beside the image

@@ -211,6 +211,46 @@ impl ArrayWcs {
         Ok(w)
     }
 
+    /// The TAN projection a FITS header states (`CRPIX`, `CRVAL`, `CD`; its SIP terms, if any, left out:
+    /// the linear part alone, good to the distortion's few pixels) — to check that a product belongs to
+    /// the image's pointing.
+    pub fn from_header(
+        crpix: [f64; 2],
+        crval_deg: [f64; 2],
+        cd_deg: [[f64; 2]; 2],
+        naxis: [usize; 2],
+    ) -> Result<Self, String> {
+        let all = crpix
+            .iter()
+            .chain(&crval_deg)
+            .chain(cd_deg.iter().flatten());
+        if !all.into_iter().all(|v| v.is_finite()) {
+            return Err("CRPIX, CRVAL and CD must be finite".into());
+        }
+        let det = cd_deg[0][0] * cd_deg[1][1] - cd_deg[0][1] * cd_deg[1][0];
+        if det == 0.0 {
+            return Err("the CD matrix is singular".into());
+        }
+        let params = serde_json::json!({
+            "CTYPE1": "RA---TAN", "CTYPE2": "DEC--TAN", "NAXIS": 2,
+            "NAXIS1": naxis[0], "NAXIS2": naxis[1],
+            "CRPIX1": crpix[0], "CRPIX2": crpix[1], "CRVAL1": crval_deg[0], "CRVAL2": crval_deg[1],
+            "CD1_1": cd_deg[0][0], "CD1_2": cd_deg[0][1], "CD2_1": cd_deg[1][0], "CD2_2": cd_deg[1][1],
+        });
+        let params: wcs::WCSParams =
+            serde_json::from_value(params).map_err(|e| format!("WCS keywords: {e}"))?;
+        let tan = wcs::WCS::new(&params).map_err(|e| format!("TAN projection: {e:?}"))?;
+        Ok(Self {
+            crpix,
+            crval_deg,
+            cd_deg,
+            naxis,
+            sip: None,
+            sip_inverse_error_px: 0.0,
+            tan,
+        })
+    }
+
     /// The worst error of the fitted inverse distortion over the array, pixels (0 without SIP).
     pub fn sip_inverse_error_px(&self) -> f64 {
         self.sip_inverse_error_px
