@@ -184,24 +184,7 @@ impl ArrayWcs {
         ];
         let crpix = [axis_px[0] + 1.0, axis_px[1] + 1.0];
         let crval_deg = [pointing.ra_deg, pointing.dec_deg];
-        let params = serde_json::json!({
-            "CTYPE1": "RA---TAN", "CTYPE2": "DEC--TAN", "NAXIS": 2,
-            "NAXIS1": naxis[0], "NAXIS2": naxis[1],
-            "CRPIX1": crpix[0], "CRPIX2": crpix[1], "CRVAL1": crval_deg[0], "CRVAL2": crval_deg[1],
-            "CD1_1": cd_deg[0][0], "CD1_2": cd_deg[0][1], "CD2_1": cd_deg[1][0], "CD2_2": cd_deg[1][1],
-        });
-        let params: wcs::WCSParams =
-            serde_json::from_value(params).map_err(|e| format!("WCS keywords: {e}"))?;
-        let tan = wcs::WCS::new(&params).map_err(|e| format!("TAN projection: {e:?}"))?;
-        let mut w = Self {
-            crpix,
-            crval_deg,
-            cd_deg,
-            naxis,
-            sip: None,
-            sip_inverse_error_px: 0.0,
-            tan,
-        };
+        let mut w = Self::from_header(crpix, crval_deg, cd_deg, naxis)?;
         if let Some(forward) = sip {
             forward.validate()?;
             let (inverse, worst) = w.fit_inverse(&forward)?;

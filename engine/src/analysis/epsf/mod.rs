@@ -28,8 +28,9 @@ pub struct Epsf {
     pub data: Vec<f64>,
 }
 
-/// Keys' cubic convolution kernel (a = −½) and its derivative.
-#[inline]
+/// Keys' cubic convolution kernel (a = −½) and its derivative: the definition [`keys_weights`] evaluates in
+/// closed form (the test holds them equal).
+#[cfg(test)]
 fn keys(t: f64) -> (f64, f64) {
     let a = -0.5;
     let x = t.abs();
@@ -47,6 +48,19 @@ fn keys(t: f64) -> (f64, f64) {
     } else {
         (0.0, 0.0)
     }
+}
+
+/// Keys' weights (a = −½) and their derivatives for the nodes at −1, 0, 1, 2 from a fractional offset
+/// `f ∈ [0, 1)`: [`keys`] at `f + 1, f, f − 1, f − 2` in closed form (no branches).
+#[inline]
+fn keys_weights(f: f64) -> [(f64, f64); 4] {
+    let (f2, f3) = (f * f, f * f * f);
+    [
+        (-0.5 * f3 + f2 - 0.5 * f, -1.5 * f2 + 2.0 * f - 0.5),
+        (1.5 * f3 - 2.5 * f2 + 1.0, 4.5 * f2 - 5.0 * f),
+        (-1.5 * f3 + 2.0 * f2 + 0.5 * f, -4.5 * f2 + 4.0 * f + 0.5),
+        (0.5 * f3 - 0.5 * f2, 1.5 * f2 - f),
+    ]
 }
 
 impl Epsf {
@@ -97,13 +111,26 @@ impl Epsf {
             return (0.0, 0.0, 0.0);
         }
         let (fu, fv) = (u - iu as f64, v - iv as f64);
-        let mut wu = [(0.0, 0.0); 4];
-        let mut wv = [(0.0, 0.0); 4];
-        for k in 0..4 {
-            wu[k] = keys(fu - (k as f64 - 1.0));
-            wv[k] = keys(fv - (k as f64 - 1.0));
-        }
+        let (wu, wv) = (keys_weights(fu), keys_weights(fv));
         let (mut val, mut gx, mut gy) = (0.0, 0.0, 0.0);
+        let n = self.n() as i64;
+        if iu >= 1 && iv >= 1 && iu + 2 < n && iv + 2 < n {
+            // inside the table: the 4 × 4 nodes without a bounds check each
+            let n = n as usize;
+            let base = (iv as usize - 1) * n + iu as usize - 1;
+            for (j, &(wvj, dwvj)) in wv.iter().enumerate() {
+                let r = &self.data[base + j * n..base + j * n + 4];
+                let (mut row, mut drow) = (0.0, 0.0);
+                for (p, &(wui, dwui)) in r.iter().zip(&wu) {
+                    row += wui * p;
+                    drow += dwui * p;
+                }
+                val += wvj * row;
+                gx += wvj * drow;
+                gy += dwvj * row;
+            }
+            return (val, gx * os, gy * os);
+        }
         for (j, &(wvj, dwvj)) in wv.iter().enumerate() {
             let (mut row, mut drow) = (0.0, 0.0);
             for (i, &(wui, dwui)) in wu.iter().enumerate() {
@@ -210,6 +237,20 @@ impl Epsf {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn closed_form_keys_weights_equal_the_kernel() {
+        for k in 0..=100 {
+            let f = k as f64 / 100.0 * 0.999_999;
+            for (i, (w, dw)) in keys_weights(f).into_iter().enumerate() {
+                let (v, d) = keys(f - (i as f64 - 1.0));
+                assert!(
+                    (w - v).abs() < 1e-14 && (dw - d).abs() < 1e-13,
+                    "f {f} node {i}"
+                );
+            }
+        }
+    }
 
     fn gauss(os: usize) -> Epsf {
         let mut e = Epsf::from_fn(os, 5, |x, y| (-(x * x + y * y) / (2.0 * 0.8 * 0.8)).exp());
