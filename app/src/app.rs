@@ -191,7 +191,10 @@ impl ExplorerApp {
                     results.focal_plane = Some(*f);
                     results.focal_plane_serial += 1;
                 }
-                Msg::Crowded(c) => results.crowded = Some(*c),
+                Msg::Crowded(c) => {
+                    results.crowded = Some(*c);
+                    results.crowded_serial += 1;
+                }
                 Msg::Curve(c) => results.merge_curve(*c),
                 Msg::Done { elapsed_s, .. } => {
                     status.busy = false;

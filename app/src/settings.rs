@@ -27,6 +27,8 @@ pub struct ViewSettings {
     /// The chosen star (index into the scene) and pixel (for the exposure window).
     pub star: usize,
     pub pixel: Option<(usize, usize)>,
+    /// The chosen star of the quad focal plane: (array, index into that array's fitted stars).
+    pub quad_star: Option<(usize, usize)>,
     pub closeup_radius_px: usize,
     /// Show the fit displacement the ACE predicts (the mechanism) beside the measured deviations.
     pub show_predicted_arrows: bool,
@@ -44,6 +46,7 @@ impl Default for ViewSettings {
             image_index: 0,
             star: 0,
             pixel: None,
+            quad_star: None,
             closeup_radius_px: 8,
             show_predicted_arrows: true,
             auto_curve: true,

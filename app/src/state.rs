@@ -57,6 +57,7 @@ pub struct Results {
     pub frame_serial: u64,
     pub twin_serial: u64,
     pub focal_plane_serial: u64,
+    pub crowded_serial: u64,
 }
 
 impl Results {

@@ -158,6 +158,20 @@ pub fn focal_plane_ui(
                         .color(Color32::from_rgb(0, 200, 255)),
                 );
             }
+            // the chosen star (a click picks the nearest fitted star of any array)
+            if let Some(c) = results.crowded.as_ref()
+                && let Some((k, i)) = view.quad_star
+                && let Some(st) = c.fits.get(k).and_then(|a| a.stars.get(i))
+            {
+                let (x, y) = f.plane.to_focal_plane(k, st.x_px, st.y_px);
+                pui.points(
+                    Points::new("chosen star", vec![[x, y]])
+                        .shape(MarkerShape::Circle)
+                        .filled(false)
+                        .radius(8.0)
+                        .color(Color32::from_rgb(255, 200, 0)),
+                );
+            }
             if show_stars {
                 let pts: PlotPoints = f
                     .arrays
@@ -174,12 +188,17 @@ pub fn focal_plane_ui(
             }
             pui.pointer_coordinate()
         });
+    if resp.response.clicked()
+        && let (Some(p), Some(c)) = (resp.inner, results.crowded.as_ref())
+    {
+        view.quad_star = super::quad::nearest_star(c, p.x, p.y, 12.0);
+    }
     let line = match resp.response.hovered().then_some(resp.inner).flatten() {
         Some(p) => format!("cursor: {}", describe(f, p.x, p.y)),
         None => {
             let c = f.counts.unwrap_or_default();
             format!(
-                "hover for array, pixel and RA/Dec · stars: {} on the arrays, {} on borders, {} in gaps, {} off",
+                "hover for array, pixel and RA/Dec, click a star for its close-up · stars: {} on the arrays, {} on borders, {} in gaps, {} off",
                 c.photosensitive, c.border, c.gap, c.off
             )
         }

@@ -17,6 +17,9 @@ pub struct Textures {
     epsf: Option<(u64, TextureHandle)>,
     /// The quad focal plane's arrays ([`super::focal`]).
     pub focal: super::focal::FocalTextures,
+    /// The quad's chosen star and its array's ePSF ([`super::quad`]).
+    pub quad_close: Option<(super::quad::CloseKey, TextureHandle)>,
+    pub quad_epsf: Option<(u64, TextureHandle)>,
 }
 
 type CloseKey = (u64, u64, usize, usize, Stretch);
@@ -30,7 +33,7 @@ const FRAME_TEXTURE: TextureOptions = TextureOptions {
     mipmap_mode: Some(egui::TextureFilter::Linear),
 };
 
-fn set_texture(
+pub(super) fn set_texture(
     ctx: &egui::Context,
     slot: Option<TextureHandle>,
     name: &str,
@@ -345,25 +348,36 @@ pub fn epsf_ui(ui: &mut egui::Ui, screen: &OnScreen, results: &Results, textures
         ),
         f.cfg_hash != screen.cfg_hash,
     );
+    draw_epsf(ui, e, results.frame_serial, &mut textures.epsf, "epsf");
+}
+
+/// An ePSF table on a log stretch, its texture remade only when `key` changes.
+pub(super) fn draw_epsf(
+    ui: &mut egui::Ui,
+    e: &engine::analysis::epsf::Epsf,
+    key: u64,
+    slot: &mut Option<(u64, TextureHandle)>,
+    name: &str,
+) {
     let n = e.n();
     if n == 0 || e.data.len() != n * n {
         ui.weak("empty ePSF");
         return;
     }
-    if textures.epsf.as_ref().map(|t| t.0) != Some(results.frame_serial) {
+    if slot.as_ref().map(|t| t.0) != Some(key) {
         let data: Vec<f32> = e.data.iter().map(|v| *v as f32).collect();
         let hi = data.iter().copied().fold(1e-12f32, f32::max);
         let scale = Scale::new(Stretch::Log, 0.0, hi, hi * 1e-3);
         let img = to_color_image(&data, n, n, &scale, Colormap::Inferno);
-        let old = textures.epsf.take().map(|t| t.1);
-        let tex = set_texture(ui.ctx(), old, "epsf", img, TextureOptions::LINEAR);
-        textures.epsf = Some((results.frame_serial, tex));
+        let old = slot.take().map(|t| t.1);
+        let tex = set_texture(ui.ctx(), old, name, img, TextureOptions::LINEAR);
+        *slot = Some((key, tex));
     }
-    let Some((_, tex)) = &textures.epsf else {
+    let Some((_, tex)) = slot.as_ref() else {
         return;
     };
     let size = n as f32 / e.oversampling.max(1) as f32;
-    Plot::new("epsf_plot")
+    Plot::new(format!("{name}_plot"))
         .data_aspect(1.0)
         .show_grid(false)
         .x_axis_label("Δx [px]")

@@ -4,7 +4,8 @@
 //!
 //! * [`toolbar`], [`controls`], [`summary`] — the edges of the window;
 //! * [`image`] — the frame, the close-up beside the Gaussian twin, the ePSF; [`focal`] — the quad focal
-//!   plane in its sky layout, shown instead of the frame when the layout is quad;
+//!   plane in its sky layout, shown instead of the frame when the layout is quad; [`quad`] — its chosen
+//!   star's close-up and that array's ePSF;
 //! * [`psd`], [`series`], [`vectors`], [`curve`] — the four plots; [`crowded`] — the quad's vector maps
 //!   and magnitude curve from its crowded-field analysis; [`axes`] — what the plots share;
 //! * [`widgets`] — the framed cells and their titles.
@@ -16,6 +17,7 @@ pub mod curve;
 pub mod focal;
 pub mod image;
 pub mod psd;
+pub mod quad;
 pub mod series;
 pub mod summary;
 pub mod toolbar;
@@ -67,12 +69,12 @@ pub fn central_ui(
         cell(ui, frame_rect, |ui| {
             focal::focal_plane_ui(ui, screen, view, results, &mut textures.focal)
         });
-        for (rect, what) in [(close_rect, "Star close-up"), (epsf_rect, "ePSF")] {
-            cell(ui, rect, |ui| {
-                widgets::title(ui, what, false);
-                ui.weak("a single array's view: choose \"one array\" under Scene and focal plane");
-            });
-        }
+        cell(ui, close_rect, |ui| {
+            quad::quad_closeup_ui(ui, screen, view, results, textures)
+        });
+        cell(ui, epsf_rect, |ui| {
+            quad::quad_epsf_ui(ui, screen, view, results, textures)
+        });
         cell(ui, at(0, 1), |ui| crowded::vectors_ui(ui, screen, results));
         cell(ui, at(1, 1), |ui| crowded::curve_ui(ui, screen, results));
     } else {

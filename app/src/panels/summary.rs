@@ -29,8 +29,11 @@ pub fn summary_ui(ui: &mut egui::Ui, screen: &OnScreen, results: &Results) {
                     ui.strong(text)
                 };
                 r.on_hover_text(format!(
-                    "the instant predictor (no image simulated): without countermeasure {}; \
+                    "the instant predictor (no image simulated){}: without countermeasure {}; \
                      noise floor = CRLB under the exact ePSF; {:.0} ms",
+                    p.models
+                        .as_ref()
+                        .map_or(String::new(), |m| format!(" of {m}")),
                     mas(p.dataset_none_mas),
                     p.elapsed_s * 1e3
                 ));
@@ -45,6 +48,10 @@ pub fn summary_ui(ui: &mut egui::Ui, screen: &OnScreen, results: &Results) {
             }
         }
         ui.separator();
+        if engine::sky::array_count(&screen.cfg) > 1 {
+            quad_measured_ui(ui, screen, results);
+            return;
+        }
         match &results.frame {
             Some(f) => {
                 let r = &f.report;
@@ -97,4 +104,44 @@ pub fn summary_ui(ui: &mut egui::Ui, screen: &OnScreen, results: &Results) {
             }
         }
     });
+}
+
+/// The quad focal plane's measured accuracy: the isolated stars of the magnitude bin holding the explorer's
+/// magnitude, over the four arrays (the crowded-field analysis' bins), with their bound.
+fn quad_measured_ui(ui: &mut egui::Ui, screen: &OnScreen, results: &Results) {
+    let Some(c) = &results.crowded else {
+        ui.weak("Measured accuracy (focal plane): …");
+        return;
+    };
+    let m = screen.cfg.scene.mag_hw;
+    let Some(b) = c.bins.iter().find(|b| m >= b.hw_lo && m < b.hw_hi) else {
+        ui.weak(format!(
+            "Measured accuracy: Hw {m} is outside the field's bins [{}]",
+            c.countermeasure
+        ));
+        return;
+    };
+    let text = format!(
+        "Measured accuracy (focal plane, isolated stars Hw {:.1}–{:.1}): {} [image #{}, {}]",
+        b.hw_lo,
+        b.hw_hi,
+        mas(b.isolated.accuracy_mas),
+        c.image_index,
+        c.countermeasure
+    );
+    if c.cfg_hash != screen.cfg_hash {
+        ui.weak(text);
+    } else {
+        ui.strong(text);
+    }
+    ui.label(format!(
+        "CRLB {} · {} isolated of {} found, {} true · completeness {:.3}",
+        mas(b.isolated.crlb_mas),
+        b.isolated.n,
+        b.n_found,
+        b.n_true,
+        b.completeness
+    ));
+    ui.separator();
+    ui.weak(format!("analysis {:.1} s (4 arrays)", c.analyse_s));
 }

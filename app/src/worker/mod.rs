@@ -26,7 +26,7 @@ pub mod thread;
 pub mod views;
 
 pub use protocol::{
-    CrowdedResult, CurvePoint, FocalPlaneArray, FocalPlaneResult, FrameResult, Job, Msg,
-    Prediction, Request, SeriesView, Stage, Stages, TwinResult,
+    ArrayFits, CrowdedResult, CurvePoint, FittedStar, FocalPlaneArray, FocalPlaneResult,
+    FrameResult, Job, Msg, Prediction, Request, SeriesView, Stage, Stages, TwinResult,
 };
 pub use thread::Worker;

@@ -104,6 +104,9 @@ impl Stage {
 pub struct Prediction {
     pub generation: u64,
     pub cfg_hash: String,
+    /// What the prediction models, when it is not the displayed configuration itself (the quad focal
+    /// plane: an isolated star of one array at the explorer's magnitude).
+    pub models: Option<String>,
     pub countermeasure: Countermeasure,
     pub image_index: usize,
     /// Dataset mean of the predicted single-image accuracy (mas), chosen countermeasure and `none`.
@@ -228,7 +231,31 @@ pub struct CrowdedResult {
     /// Per array: (f_x, f_y, dx_mas, dy_mas) per cell ([`engine::studies::crowded::ArrayAnalysis::binned_vectors`]).
     pub vectors: Vec<Vec<(f64, f64, f64, f64)>>,
     pub summaries: Vec<engine::studies::crowded::CrowdedSummary>,
+    /// Per array: its ePSF and its fitted stars (what a click on the focal plane picks).
+    pub fits: Vec<ArrayFits>,
     pub analyse_s: f64,
+}
+
+/// One array's crowded-field fits for the explorer: the array's own ePSF and every star it reported.
+#[derive(Debug, Clone)]
+pub struct ArrayFits {
+    pub epsf: engine::analysis::epsf::Epsf,
+    pub stars: Vec<FittedStar>,
+}
+
+/// A star the crowded-field analysis reported, in its array's pixels.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FittedStar {
+    pub x_px: f64,
+    pub y_px: f64,
+    pub flux_e: f64,
+    /// The matched truth star's Hw (NaN when it matched none).
+    pub hw: f64,
+    /// Fitted − true (mas; NaN when unmatched) and the bound.
+    pub dx_mas: f64,
+    pub dy_mas: f64,
+    pub crlb_mas: f64,
+    pub flags: u32,
 }
 
 /// The Gaussian-ACE twin of the displayed frame (same configuration, `ace.case = gaussian`).

@@ -5,8 +5,8 @@
 
 use super::out::{Out, StageResult, Stop, failed};
 use super::protocol::{
-    CrowdedResult, FocalPlaneArray, FocalPlaneResult, FrameResult, Job, Msg, Prediction, Request,
-    Stage, TwinResult,
+    ArrayFits, CrowdedResult, FittedStar, FocalPlaneArray, FocalPlaneResult, FrameResult, Job, Msg,
+    Prediction, Request, Stage, TwinResult,
 };
 use super::views;
 use engine::analysis::countermeasures::{Countermeasure, Plan};
@@ -63,6 +63,25 @@ impl EngineState {
             // the quad focal plane: its exposure for the focal-plane view and its crowded-field analysis
             // (the prediction, the Gaussian twin, the single-array analysis and the curve are those of one
             // array: not run here)
+            if job.stages.predict {
+                // the instant prediction of an isolated star at the explorer's magnitude on one array of
+                // this focal plane (the predictor models a single array's grid)
+                out.check()?;
+                let mut one = r.clone();
+                one.cfg.focal_plane.layout = engine::config::Layout::Single;
+                one.cfg.scene.kind = engine::config::SceneKind::Grid;
+                self.predict(
+                    &one,
+                    out,
+                    Some((
+                        r.cfg.hash_hex(),
+                        format!(
+                            "an isolated Hw {} star on one array (the paper's grid)",
+                            r.cfg.scene.mag_hw
+                        ),
+                    )),
+                )?;
+            }
             if job.stages.image {
                 out.check()?;
                 let (fps, exp) = self.focal_plane(r, out)?;
@@ -73,7 +92,7 @@ impl EngineState {
         }
         if job.stages.predict {
             out.check()?;
-            self.predict(r, out)?;
+            self.predict(r, out, None)?;
         }
         if job.stages.image {
             // exposures of other configurations are no longer shown
@@ -115,7 +134,14 @@ impl EngineState {
         Ok(e)
     }
 
-    fn predict(&mut self, r: &Request, out: &Out) -> StageResult<()> {
+    /// The instant prediction of `r`; `shown_as`: the hash of the displayed configuration it stands for and
+    /// what it models, when `r` is a model of it (the quad's single array).
+    fn predict(
+        &mut self,
+        r: &Request,
+        out: &Out,
+        shown_as: Option<(String, String)>,
+    ) -> StageResult<()> {
         let t0 = Instant::now();
         out.progress(
             Stage::Predict,
@@ -141,9 +167,14 @@ impl EngineState {
         out.check()?;
         let dataset_mas = pred.predict(&cm).unwrap_or(f64::NAN);
         let dataset_none_mas = pred.predict(&Countermeasure::None).unwrap_or(f64::NAN);
+        let (cfg_hash, models) = match shown_as {
+            Some((h, m)) => (h, Some(m)),
+            None => (r.cfg.hash_hex(), None),
+        };
         out.send(Msg::Prediction(Box::new(Prediction {
             generation: out.generation,
-            cfg_hash: r.cfg.hash_hex(),
+            cfg_hash,
+            models,
             countermeasure: cm,
             image_index: r.image_index,
             dataset_mas,
@@ -364,6 +395,34 @@ impl EngineState {
             .ok_or_else(|| Stop::Failed(Stage::Image, "no analysis".into()))?;
         let plane = engine::sky::focal_plane(&r.cfg);
         let scale = r.cfg.instrument.plate_scale_mas();
+        let fits = run
+            .arrays
+            .iter()
+            .map(|a| ArrayFits {
+                epsf: a.epsf.clone(),
+                stars: a
+                    .stars
+                    .iter()
+                    .map(|s| {
+                        let t = s.truth.and_then(|k| a.truth.get(k));
+                        let (dx, dy) = match t {
+                            Some(_) => (s.dx_px * scale, s.dy_px * scale),
+                            None => (f64::NAN, f64::NAN),
+                        };
+                        FittedStar {
+                            x_px: s.x,
+                            y_px: s.y,
+                            flux_e: s.flux_e,
+                            hw: t.map_or(f64::NAN, |t| t.mag_hw),
+                            dx_mas: dx,
+                            dy_mas: dy,
+                            crlb_mas: (s.crlb_x_px.hypot(s.crlb_y_px) / 2f64.sqrt()) * scale,
+                            flags: s.flags,
+                        }
+                    })
+                    .collect(),
+            })
+            .collect();
         out.send(Msg::Crowded(Box::new(CrowdedResult {
             generation: out.generation,
             cfg_hash: r.cfg.hash_hex(),
@@ -376,6 +435,7 @@ impl EngineState {
                 .map(|a| a.binned_vectors(&plane, scale))
                 .collect(),
             summaries: run.arrays.iter().map(|a| a.summary.clone()).collect(),
+            fits,
             bins: run.bins,
             plane,
             analyse_s: t0.elapsed().as_secs_f64(),

@@ -77,6 +77,7 @@ pub fn analyse_focal_plane(
                 truth: e.truth.clone(),
                 n_px: e.image.n,
                 summary: ia.crowded.clone().unwrap_or_default(),
+                epsf: ia.global.epsf.clone(),
             })
             .collect();
         let views: Vec<report::ArrayStars<'_>> = arrays

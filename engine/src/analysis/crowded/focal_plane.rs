@@ -22,6 +22,8 @@ pub struct ArrayAnalysis {
     pub n_px: usize,
     /// What the crowded analysis found and how (the fits are in `stars`).
     pub summary: CrowdedSummary,
+    /// The array's own ePSF.
+    pub epsf: crate::analysis::epsf::Epsf,
 }
 
 /// Cells per array side of the binned vector maps.
