@@ -406,6 +406,42 @@ fn the_bulge_scene_shows_the_focal_plane_with_sky_positions() {
     assert!(app::panels::focal::describe(f, 0.0, 0.0).contains("gap"));
     let far = 3.0 * f.plane.array_px as f64;
     assert!(app::panels::focal::describe(f, far, 0.0).contains("off the focal plane"));
+    // a click on a star of array 2 chooses it: its close-up and array 2's own ePSF; the status line shows
+    // the predicted and the measured accuracy of the quad
+    assert_eq!(c.fits.len(), 4);
+    let s = c.fits[1]
+        .stars
+        .iter()
+        .find(|s| s.hw.is_finite())
+        .copied()
+        .expect("a matched star on array 2");
+    let (fx, fy) = c.plane.to_focal_plane(1, s.x_px, s.y_px);
+    let star = app::panels::quad::nearest_star(c, fx + 0.3, fy - 0.2, 12.0).expect("the star");
+    assert_eq!(star.0, 1, "the click lands on array 2");
+    assert!(
+        app::panels::quad::nearest_star(c, 0.0, 0.0, 12.0).is_none(),
+        "the gap has no star"
+    );
+    h.state_mut().settings.view.quad_star = Some(star);
+    h.step();
+    h.step();
+    h.get_by_label_contains(&format!("Array 2 star #{} close-up", star.1));
+    h.get_by_label_contains("Array 2 ePSF");
+    h.get_by_label_contains("true Hw");
+    h.get_by_label_contains("Measured accuracy (focal plane, isolated stars Hw");
+    let p = h
+        .state()
+        .rt
+        .results
+        .prediction
+        .as_ref()
+        .expect("a prediction in quad mode");
+    assert_eq!(p.cfg_hash, h.state().settings.cfg.hash_hex());
+    assert!(
+        p.image_mas.is_finite() && p.image_mas > 0.0,
+        "{}",
+        p.image_mas
+    );
 }
 
 #[test]
