@@ -231,7 +231,6 @@ fn the_image_holds_the_light_the_truth_and_the_predictor_count() {
 #[test]
 fn the_analysis_reads_no_truth_or_config_only_the_products() {
     use engine::analysis::countermeasures::Countermeasure;
-    use engine::analysis::crowding::Crowding;
     use engine::io::fits::{Hdu, Pixels};
     use engine::io::instrument;
     use engine::session::Session;
@@ -284,7 +283,7 @@ fn the_analysis_reads_no_truth_or_config_only_the_products() {
         let input = analysis_input::AnalysisInput::read(path, Some(&files.truth_csv), None, &cfg)
             .expect("input");
         let a = session
-            .analyze_input(&cfg, &input, None, Countermeasure::None, Crowding::Auto)
+            .analyze_input(&cfg, &input, None, Countermeasure::None)
             .expect("analysis");
         (a, input.assumptions)
     };
@@ -343,7 +342,6 @@ fn the_analysis_reads_no_truth_or_config_only_the_products() {
 #[test]
 fn the_telemetry_product_corrects_as_the_in_memory_telemetry_does() {
     use engine::analysis::countermeasures::{Countermeasure, TelemetryQuality};
-    use engine::analysis::crowding::Crowding;
     use engine::io::instrument;
     use engine::session::Session;
     let mut cfg = small_config();
@@ -354,6 +352,7 @@ fn the_telemetry_product_corrects_as_the_in_memory_telemetry_does() {
     let files = exposure::write_exposure(&dir, &sim, &exp).expect("write");
     let q = TelemetryQuality::DEFAULT;
     instrument::write_calibration_flat(&dir, &sim).expect("flat");
+    instrument::write_model_psf(&dir, &sim).expect("model PSF");
     instrument::write_telemetry(&dir, &sim, 1, &q)
         .expect("telemetry")
         .expect("a realistic ACE records telemetry");
@@ -373,7 +372,7 @@ fn the_telemetry_product_corrects_as_the_in_memory_telemetry_does() {
     );
     let cm = Countermeasure::Telemetry(q);
     let from_file = session
-        .analyze_input(&cfg, &input, None, cm, Crowding::Off)
+        .analyze_input(&cfg, &input, None, cm)
         .expect("analysis with the product");
     // in memory: the simulated instrument records the same telemetry; the pipeline corrects with it
     let plan = engine::analysis::countermeasures::Plan::new(vec![cm]).expect("plan");
@@ -384,13 +383,32 @@ fn the_telemetry_product_corrects_as_the_in_memory_telemetry_does() {
     .analyse(
         &engine::session::analysis_image(&sim, &exp.image),
         Some(&exp.truth),
-        &cfg.analysis,
+        &cfg,
         &plan,
         &Default::default(),
     )
     .expect("analysis from the simulation")
     .into_of(&cm)
     .expect("telemetry applies");
+    // the analysis knobs may differ from the simulator's; the simulation may not: an image is analysed with
+    // the configuration it was simulated with
+    let src = engine::session::Source {
+        sim: &sim,
+        index: 1,
+    };
+    let img = engine::session::analysis_image(&sim, &exp.image);
+    let mut knobs = cfg.clone();
+    knobs.analysis.epsf_iterations += 1;
+    assert!(
+        src.analyse(&img, None, &knobs, &plan, &Default::default())
+            .is_ok()
+    );
+    let mut other = cfg.clone();
+    other.seed += 1;
+    let e = src
+        .analyse(&img, None, &other, &plan, &Default::default())
+        .expect_err("another simulation's configuration");
+    assert!(e.to_string().contains("simulated with"), "{e}");
     let moved = in_memory
         .stars
         .iter()
@@ -403,7 +421,7 @@ fn the_telemetry_product_corrects_as_the_in_memory_telemetry_does() {
     );
     // the correction did something: the telemetry moved the stars from the plain fit
     let none = session
-        .analyze_input(&cfg, &input, None, Countermeasure::None, Crowding::Off)
+        .analyze_input(&cfg, &input, None, Countermeasure::None)
         .expect("plain");
     assert!(
         none.stars
@@ -416,7 +434,7 @@ fn the_telemetry_product_corrects_as_the_in_memory_telemetry_does() {
     let mut bare = input.clone();
     bare.telemetry = None;
     let uncorrected = session
-        .analyze_input(&cfg, &bare, None, cm, Crowding::Off)
+        .analyze_input(&cfg, &bare, None, cm)
         .expect("no telemetry");
     assert!(
         uncorrected

@@ -347,13 +347,7 @@ fn too_few_stars_for_an_epsf_fall_back_to_a_stated_psf() {
         sim: &sim,
         index: 0,
     }
-    .analyse(
-        &img,
-        Some(&e.truth),
-        &c.analysis,
-        &plan,
-        &Default::default(),
-    )
+    .analyse(&img, Some(&e.truth), &c, &plan, &Default::default())
     .expect("analysis");
     let r = &with_model.global.report;
     assert_eq!((r.epsf_stars, r.n_used), (4, 4), "{r:?}");
@@ -374,7 +368,7 @@ fn too_few_stars_for_an_epsf_fall_back_to_a_stated_psf() {
     );
     // the design model PSF product (from the design wavefront, not the stars' own) stands in as the
     // simulation's does, and measures the stars within 1.5 × of the true optical PSF (the oracle)
-    let model = engine::io::instrument::model_psf(&sim).expect("model PSF");
+    let model = engine::io::instrument::model_psf_product(&sim).expect("model PSF");
     let with = |m: &engine::analysis::epsf::Epsf| {
         analyse_image(
             &img,

@@ -211,13 +211,7 @@ impl EngineState {
         let plan = r.plan().map_err(failed(Stage::Image))?;
         let img = analysis_image(&sim, &exp.image);
         let res = Source { sim: &sim, index }
-            .analyse(
-                &img,
-                Some(&exp.truth),
-                &cfg.analysis,
-                &plan,
-                &Default::default(),
-            )
+            .analyse(&img, Some(&exp.truth), cfg, &plan, &Default::default())
             .map_err(failed(Stage::Image))?;
         let analyse_s = t1.elapsed().as_secs_f64();
         // a countermeasure that does not apply to this image leaves the plain analysis
@@ -455,7 +449,7 @@ impl EngineState {
             .analyse(
                 &img,
                 Some(&exp.truth),
-                &tcfg.analysis,
+                &tcfg,
                 &Plan::default(),
                 &Default::default(),
             )

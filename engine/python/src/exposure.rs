@@ -51,9 +51,10 @@ impl PyExposure {
             &files::truth_rows(&exp.truth, wcs),
         )?;
         let header = PyDict::new(py);
+        // the values as the FITS file's cards hold them (a double keeps 15 significant digits)
         for c in files::headers(&sim, &exp) {
             match c.value {
-                Value::F(v) => header.set_item(c.key, v)?,
+                Value::F(v) => header.set_item(c.key, engine::io::fits::as_header_f64(v))?,
                 Value::I(v) => header.set_item(c.key, v)?,
                 Value::S(v) => header.set_item(c.key, v)?,
             }
@@ -110,7 +111,7 @@ impl PyExposure {
             .collect();
         let facts = facts_of(
             |k| match header.get(k) {
-                Some(Value::F(v)) => Some(*v),
+                Some(Value::F(v)) => Some(engine::io::fits::as_header_f64(*v)),
                 Some(Value::I(v)) => Some(*v as f64),
                 _ => None,
             },
@@ -133,7 +134,10 @@ impl PyExposure {
                     data: &data,
                     dq: Some(dq),
                     facts,
-                    plate_scale_header_mas: Some(self.sim.cfg.instrument.plate_scale_mas()),
+                    // as the file's PLTSCALE card holds it
+                    plate_scale_header_mas: Some(engine::io::fits::as_header_f64(
+                        self.sim.cfg.instrument.plate_scale_mas(),
+                    )),
                 },
                 Some(self.exp.truth.clone()),
                 Some((self.sim.cfg.clone(), self.exp.index)),
@@ -149,14 +153,7 @@ impl PyExposure {
                         .collect(),
                 );
                 // the design model PSF, as `write_fits` writes it (f32 in the file, as read back there)
-                input.model_psf = engine::io::instrument::model_psf(&self.sim)
-                    .ok()
-                    .map(|mut e| {
-                        for v in e.data.iter_mut() {
-                            *v = *v as f32 as f64;
-                        }
-                        e
-                    });
+                input.model_psf = engine::io::instrument::model_psf_product(&self.sim).ok();
                 // the attitude telemetry (the default quality) and the readout timing, as `write_fits`
                 // writes them beside and in the image
                 let source = engine::session::Source {

@@ -224,20 +224,20 @@ impl PySession {
         Ok(d)
     }
 
-    /// ePSF astrometry of one image: the pipeline `jsim analyze` runs, with the session's analysis
-    /// settings. `image` is a `jsim.Exposure` (its header, DQ, truth and configuration come with it:
-    /// identical to `jsim analyze` on the file `exposure.write_fits` writes), or a 2-D array in ADU with
-    /// its `header` (a dict with GAIN, RDNOISE or RNREAD + SAMPLING, BIASADU, SATURATE, PLTSCALE; missing
-    /// keys are assumed and listed in `assumptions`), optionally its `dq` (uint8, same shape), its
-    /// `truth` (a dict with the columns of `Exposure.truth`: without it no accuracy is measured) and the
-    /// `config` it was simulated with (with the header's IMAGEIDX: the exact-epsf control's simulation,
-    /// an oracle; the calibration never comes from it). Readout cards in the header (READOUT, ROWDIR,
-    /// NCHAN, CHANWID, PIXTIME, TOVERHD, ROTATION) give the timing a telemetry is applied with. `countermeasure`: one of `jsim.COUNTERMEASURES`. `crowding`: `"auto"` (from
-    /// the measured source density), `"on"` (the crowded-field analysis) or `"off"` (isolated stars), as
-    /// `jsim analyze --crowding`. `flat`: the calibration flat product (a 2-D array of the image's shape,
-    /// e.g. `Exposure.calibration_flat[0]` or `flat_cal.fits`) with its relative error `flat_error`;
-    /// without it a bare array is not flat-fielded (said in `assumptions`).
-    #[pyo3(signature = (image, header = None, *, dq = None, truth = None, config = None, countermeasure = "none", epsf_zones = None, crowding = "auto", flat = None, flat_error = None))]
+    /// ePSF astrometry of one image: the pipeline `jsim analyze` runs, with the session's analysis settings. `image`
+    /// is a `jsim.Exposure` (its header, DQ, truth and configuration come with it: identical to `jsim analyze` on the
+    /// file `exposure.write_fits` writes), or a 2-D array in ADU with its `header` (a dict with GAIN, RDNOISE or
+    /// RNREAD + SAMPLING, BIASADU, SATURATE, PLTSCALE; missing keys are assumed and listed in `assumptions`),
+    /// optionally its `dq` (uint8, same shape), its `truth` (a dict with the columns of `Exposure.truth`: without it
+    /// no accuracy is measured) and the `config` it was simulated with (with the header's IMAGEIDX: the exact-epsf
+    /// control's simulation, an oracle; the calibration never comes from it). Readout cards in the header (READOUT,
+    /// ROWDIR, NCHAN, CHANWID, PIXTIME, TOVERHD, ROTATION) give the timing a telemetry is applied with.
+    /// `countermeasure`: one of `jsim.COUNTERMEASURES`. `crowding`: `"auto"` (from the measured source density),
+    /// `"on"` (the crowded-field analysis) or `"off"` (isolated stars), as `jsim analyze --crowding`; default: the
+    /// session configuration's `analysis.crowding`. `flat`: the calibration flat product (a 2-D array of the image's
+    /// shape, e.g. `Exposure.calibration_flat[0]` or `flat_cal.fits`) with its relative error `flat_error`; without
+    /// it a bare array is not flat-fielded (said in `assumptions`).
+    #[pyo3(signature = (image, header = None, *, dq = None, truth = None, config = None, countermeasure = "none", epsf_zones = None, crowding = None, flat = None, flat_error = None))]
     fn analyze(
         &self,
         py: Python<'_>,
@@ -248,12 +248,16 @@ impl PySession {
         config: Option<PyConfig>,
         countermeasure: &str,
         epsf_zones: Option<usize>,
-        crowding: &str,
+        crowding: Option<&str>,
         flat: Option<&Bound<'_, PyAny>>,
         flat_error: Option<f64>,
     ) -> PyResult<PyAnalysis> {
         let cm: Countermeasure = countermeasure.parse().or_py()?;
-        let crowding = Crowding::parse(crowding).map_err(PyValueError::new_err)?;
+        // the session's configuration, with `crowding=` when given
+        let mut cfg = self.cfg.clone();
+        if let Some(k) = crowding {
+            cfg.analysis.crowding = Crowding::parse(k).map_err(PyValueError::new_err)?;
+        }
         let input = if let Ok(exp) = image.cast::<PyExposure>() {
             if header.is_some()
                 || dq.is_some()
@@ -297,10 +301,7 @@ impl PySession {
             self.array_input(py, image, header, dq, truth, config, flat)?
         };
         let analysis = py
-            .detach(|| {
-                self.session
-                    .analyze_input(&self.cfg, &input, epsf_zones, cm, crowding)
-            })
+            .detach(|| self.session.analyze_input(&cfg, &input, epsf_zones, cm))
             .or_py()?;
         PyAnalysis::new(py, analysis, &input, &cm)
     }

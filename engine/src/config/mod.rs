@@ -803,6 +803,45 @@ pub enum TelemetryKernel {
     Epsf,
 }
 
+/// How the analysis pipeline treats crowding (`analysis::crowding`: the automatic choice from the measured
+/// source density).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Crowding {
+    /// From the measured source density.
+    #[default]
+    Auto,
+    /// Always the crowded-field analysis.
+    On,
+    /// Always the isolated-star analysis.
+    Off,
+}
+
+impl Crowding {
+    /// The accepted names, for messages.
+    pub const NAMES: &'static str = "auto, on, off";
+
+    pub fn parse(s: &str) -> Result<Self, String> {
+        match s.trim() {
+            "auto" => Ok(Self::Auto),
+            "on" | "crowded" => Ok(Self::On),
+            "off" | "isolated" => Ok(Self::Off),
+            other => Err(format!(
+                "crowding = {other:?}: allowed {} (or crowded, isolated)",
+                Self::NAMES
+            )),
+        }
+    }
+
+    pub fn name(&self) -> &'static str {
+        match self {
+            Self::Auto => "auto",
+            Self::On => "on",
+            Self::Off => "off",
+        }
+    }
+}
+
 /// ePSF analysis knobs (SPEC §7).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -834,6 +873,8 @@ pub struct Analysis {
     pub flat_field: FlatField,
     /// The PSF the telemetry correction's response is built from.
     pub telemetry_kernel: TelemetryKernel,
+    /// Isolated-star or crowded-field analysis, or chosen from the measured source density.
+    pub crowding: Crowding,
 }
 
 /// Relative error (1σ) of the default calibration flat: 0.2 %. A laboratory flat of an H4RG-class array
@@ -873,6 +914,7 @@ impl Default for Analysis {
                 error: DEFAULT_CALIBRATION_FLAT_ERROR,
             },
             telemetry_kernel: TelemetryKernel::ModelPsf,
+            crowding: Crowding::Auto,
         }
     }
 }

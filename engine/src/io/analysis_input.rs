@@ -1,6 +1,6 @@
 //! Reading an image for analysis, from a file or from memory: the header's facts, electrons with the bias
-//! removed, the mask, the image's own configuration (its simulation context) and what was assumed where the
-//! image is silent. `jsim analyze` and the Python module read images only through here.
+//! removed, the mask, the instrument products beside it, the image's own configuration (only for the
+//! `exact-epsf` control, an oracle) and what was assumed where the image is silent. `jsim analyze` and the Python module read images only through here.
 
 use super::IoError;
 use super::exposure::read_truth;
@@ -120,7 +120,8 @@ pub struct AnalysisInput {
     /// The configuration and exposure index the image was simulated with (its CONFIG extension and
     /// IMAGEIDX), when it is a jsim image.
     pub provenance: Option<(Config, usize)>,
-    /// The plate scale used: the image's configuration's, else its PLTSCALE header, else `fallback`'s.
+    /// The plate scale used: the PLTSCALE header, else (an image in memory) its configuration's, else
+    /// `fallback`'s.
     pub plate_scale_mas: f64,
     /// What was assumed because the image did not say.
     pub assumptions: Vec<String>,
@@ -138,8 +139,7 @@ pub struct AnalysisInput {
 impl AnalysisInput {
     /// Read `path` (and `truth_path`, if given) as `jsim analyze` does, with the calibration flat
     /// `flat_path` (default: `flat_cal.fits` beside the image, if there is one). The image's own
-    /// configuration, when it has one, gives the exact plate scale (a header float keeps only 15 digits)
-    /// and the simulation context; never the calibration.
+    /// configuration is kept for the `exact-epsf` control alone; never for the calibration.
     pub fn read(
         path: &Path,
         truth_path: Option<&Path>,
@@ -222,9 +222,10 @@ impl AnalysisInput {
             plate_scale_header_mas,
         } = parts;
         let mut assumptions = Vec::new();
-        let plate_scale_mas = match (&provenance, plate_scale_header_mas) {
-            (Some((c, _)), _) => c.instrument.plate_scale_mas(),
-            (None, Some(s)) => s,
+        // the header's (15 significant digits); an in-memory image without one: its simulation's
+        let plate_scale_mas = match (plate_scale_header_mas, &provenance) {
+            (Some(s), _) => s,
+            (None, Some((c, _))) => c.instrument.plate_scale_mas(),
             (None, None) => {
                 let s = fallback.instrument.plate_scale_mas();
                 assumptions.push(format!(

@@ -574,6 +574,12 @@ pub fn read_table(path: &Path, ext: &str, columns: &[&str]) -> Result<Vec<Vec<f6
         .collect()
 }
 
+/// A number as a header card keeps it: CFITSIO writes a double with 15 significant digits (`%.15G`), so an
+/// in-memory value that must equal what a reader of the file gets is rounded the same way.
+pub fn as_header_f64(v: f64) -> f64 {
+    format!("{v:.14e}").parse().unwrap_or(v)
+}
+
 /// Read a string header of the primary HDU.
 pub fn read_string_key(path: &Path, key: &str) -> Result<String, IoError> {
     let fe = |e: fitsio::errors::Error| IoError::fits(path, e);
@@ -610,6 +616,25 @@ pub fn read_text(path: &Path, ext: &str) -> Result<String, IoError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_header_double_reads_back_as_as_header_f64_says() {
+        let dir = std::env::temp_dir().join(format!("jsim-fits-f64-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("dir");
+        let path = dir.join("k.fits");
+        let values = [471.269_843_752_123_4, 1.0 / 3.0, 2.0f64.sqrt() * 1e-7, 12.5];
+        let cards: Vec<Card> = values
+            .iter()
+            .enumerate()
+            .map(|(i, v)| Card::f(&format!("V{i}"), *v, ""))
+            .collect();
+        write(&path, &[Hdu::Header { cards }]).expect("write");
+        for (i, v) in values.iter().enumerate() {
+            let back = read_f64_key(&path, &format!("V{i}")).expect("read");
+            assert_eq!(back, as_header_f64(*v), "{v}");
+        }
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 
     #[test]
     fn round_trip_image_table_and_text() {

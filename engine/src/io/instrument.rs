@@ -409,6 +409,18 @@ pub fn model_psf(
     ))
 }
 
+/// [`model_psf`] as `psf_model.fits` holds it (single precision): what an analysis in memory is handed, so
+/// that it equals the analysis of the written file.
+pub fn model_psf_product(
+    sim: &Simulator,
+) -> Result<crate::analysis::epsf::Epsf, crate::simulate::SimError> {
+    let mut e = model_psf(sim)?;
+    for v in e.data.iter_mut() {
+        *v = *v as f32 as f64;
+    }
+    Ok(e)
+}
+
 fn model_psf_hdu<'a>(
     name: &'a str,
     e: &'a crate::analysis::epsf::Epsf,

@@ -11,7 +11,7 @@ pub mod source;
 pub use source::{Source, SourceError, SourceProducts, analysis_image};
 
 use crate::analysis::countermeasures::{Countermeasure, Plan};
-use crate::analysis::crowding::{self, Crowding};
+use crate::analysis::crowding;
 use crate::analysis::pipeline::{Supplied, analyse_crowded_image};
 use crate::analysis::{Analysis, AnalysisError, analyse_image};
 use crate::config::{Backend, Config};
@@ -156,7 +156,8 @@ impl Session {
 
 impl Session {
     /// The analysis pipeline on one image read for analysis (`jsim analyze`, the Python module's
-    /// `Session.analyze`): `cfg` gives the analysis knobs (`epsf_zones` overrides its zones); the
+    /// `Session.analyze`): `cfg` gives the analysis knobs — crowding among them — (`epsf_zones` overrides its
+    /// zones); the
     /// calibration is what the instrument supplied beside the image (`input`'s products and headers), never
     /// the image's CONFIG or TRUTH. The one oracle is the `exact-epsf` control, which asks the image's own
     /// simulation (its CONFIG) for the exact ePSF; the truth, when given, only scores the report.
@@ -166,7 +167,6 @@ impl Session {
         input: &AnalysisInput,
         epsf_zones: Option<usize>,
         countermeasure: Countermeasure,
-        crowding: Crowding,
     ) -> Result<Analysis, SourceError> {
         let mut analysis_cfg = cfg.analysis.clone();
         if let Some(z) = epsf_zones {
@@ -196,7 +196,7 @@ impl Session {
             ..Default::default()
         };
         let truth = input.truth.as_deref();
-        let res = if crowding::is_crowded(&input.img, &analysis_cfg, crowding).0 {
+        let res = if crowding::is_crowded(&input.img, &analysis_cfg, analysis_cfg.crowding).0 {
             let r = analyse_crowded_image(&input.img, truth, &analysis_cfg, &plan, &supplied)?;
             if r.global.stars.is_empty() {
                 return Err(AnalysisError::NoStars(analysis_cfg.crowded_detect_sigma).into());

@@ -9,7 +9,9 @@ use crate::analysis::countermeasures::telemetry::{ExposureReadout, TelemetryReco
 use crate::analysis::countermeasures::{Countermeasure, Plan, Reference, TelemetryQuality};
 use crate::analysis::epsf::Epsf;
 use crate::analysis::image::AnalysisImage;
-use crate::analysis::pipeline::{Analysis, ImageAnalysis, Supplied, analyse_image, exact_epsf};
+use crate::analysis::pipeline::{
+    Analysis, ImageAnalysis, Supplied, analyse_crowded_image, analyse_image, exact_epsf,
+};
 use crate::analysis::report::{attach_fit_prediction, summarise};
 use crate::analysis::response::{FitNoise, FitResponse};
 use crate::analysis::{AnalysisError, countermeasures::CountermeasureError};
@@ -28,6 +30,12 @@ pub enum SourceError {
     Simulation(#[from] SimError),
     #[error(transparent)]
     Analysis(#[from] AnalysisError),
+    /// The configuration an analysis was asked for is not the one the image was simulated with.
+    #[error(
+        "the configuration given differs from the simulator's beyond the analysis knobs (config {given} against \
+         {simulated}): an image is analysed with the configuration it was simulated with"
+    )]
+    ConfigMismatch { given: String, simulated: String },
 }
 
 impl From<CountermeasureError> for SourceError {
@@ -171,7 +179,7 @@ impl Source<'_> {
             false => None,
         };
         Ok(SourceProducts {
-            model_psf: design_model_psf(self.sim, cfg)?,
+            model_psf: instrument::model_psf_product(self.sim)?,
             references,
             telemetry,
             readout: self.readout(),
@@ -179,23 +187,38 @@ impl Source<'_> {
         })
     }
 
-    /// The pipeline on this exposure's image, with the products the simulated instrument delivers (those in
+    /// The pipeline on this exposure's image — isolated or crowded as `cfg.crowding` says — with the products
+    /// the simulated instrument delivers (those in
     /// `supplied` first: a product read from a file replaces the simulated one), then the fit displacement
-    /// the true ACE predicts attached to the plain analysis (when the truth is given).
+    /// the true ACE predicts attached to the plain analysis (when the truth is given). `config` gives the
+    /// analysis knobs; the rest of it must be the simulator's (a [`SourceError::ConfigMismatch`] otherwise),
+    /// so no caller analyses with one configuration an image simulated with another.
     pub fn analyse(
         &self,
         img: &AnalysisImage,
         truth: Option<&[TruthRow]>,
-        cfg: &AnalysisCfg,
+        config: &crate::config::Config,
         plan: &Plan,
         supplied: &Supplied<'_>,
     ) -> Result<ImageAnalysis, SourceError> {
+        let (given, simulated) = (
+            super::simulation_key(config),
+            super::simulation_key(&self.sim.cfg),
+        );
+        if given != simulated {
+            return Err(SourceError::ConfigMismatch { given, simulated });
+        }
+        let cfg = &config.analysis;
         let products = self.products(plan, cfg)?;
         let mut s = products.supplied(supplied.reference);
         s.model_psf = supplied.model_psf.or(s.model_psf);
         s.telemetry = supplied.telemetry;
         s.readout = supplied.readout.or(s.readout);
-        let mut res = analyse_image(img, truth, cfg, plan, &s)?;
+        let mut res = if crate::analysis::crowding::is_crowded(img, cfg, cfg.crowding).0 {
+            analyse_crowded_image(img, truth, cfg, plan, &s)?
+        } else {
+            analyse_image(img, truth, cfg, plan, &s)?
+        };
         if let Some(t) = truth {
             self.attach_ace_prediction(t, &mut res.global, cfg, img.plate_scale_mas)?;
             for (cm, a) in &mut res.measured {
@@ -236,10 +259,4 @@ impl Source<'_> {
         }
         Ok(())
     }
-}
-
-/// The design model PSF of a simulation as an ePSF table: its design wavefront at the scene's colour,
-/// pixel-integrated, no jitter (what `psf_model.fits` holds).
-pub fn design_model_psf(sim: &Simulator, cfg: &AnalysisCfg) -> Result<Epsf, SimError> {
-    Ok(exact_epsf(&*sim.design_kernel()?, cfg.epsf_radius_px))
 }

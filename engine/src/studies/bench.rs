@@ -26,6 +26,9 @@ use std::time::Instant;
 pub enum BenchError {
     #[error(transparent)]
     Sim(#[from] SimError),
+    /// A simulated exposure's analysis (the simulation's products, the pipeline).
+    #[error(transparent)]
+    Source(#[from] crate::session::SourceError),
     #[error(transparent)]
     Analysis(#[from] AnalysisError),
     #[error("{path}: {source}")]
@@ -35,15 +38,6 @@ pub enum BenchError {
     },
     #[error(transparent)]
     File(#[from] IoError),
-}
-
-impl From<crate::session::SourceError> for BenchError {
-    fn from(e: crate::session::SourceError) -> Self {
-        match e {
-            crate::session::SourceError::Simulation(e) => e.into(),
-            crate::session::SourceError::Analysis(e) => e.into(),
-        }
-    }
 }
 
 /// One line of the benchmark.

@@ -21,6 +21,9 @@ use std::time::Instant;
 pub enum ExperimentError {
     #[error(transparent)]
     Sim(#[from] SimError),
+    /// A simulated exposure's analysis (the simulation's products, the pipeline).
+    #[error(transparent)]
+    Source(#[from] crate::session::SourceError),
     #[error(transparent)]
     Analysis(#[from] AnalysisError),
     #[error(transparent)]
@@ -28,15 +31,6 @@ pub enum ExperimentError {
     /// The caller's progress callback asked to stop (Ctrl-C in the CLI or in Python).
     #[error("stopped")]
     Stopped,
-}
-
-impl From<crate::session::SourceError> for ExperimentError {
-    fn from(e: crate::session::SourceError) -> Self {
-        match e {
-            crate::session::SourceError::Simulation(e) => e.into(),
-            crate::session::SourceError::Analysis(e) => e.into(),
-        }
-    }
 }
 
 /// One exposure of a stare, analysed by the pipeline; the countermeasures that need the whole stare (plate
@@ -69,7 +63,7 @@ pub fn analyse_in_stare(
     let analysis = Source { sim, index }.analyse(
         &img,
         Some(&exp.truth),
-        &sim.cfg.analysis,
+        &sim.cfg,
         plan,
         &Default::default(),
     )?;

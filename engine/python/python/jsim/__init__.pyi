@@ -109,15 +109,15 @@ class Session:
         config: Optional[Config] = None,
         countermeasure: str = "none",
         epsf_zones: Optional[int] = None,
-        crowding: str = "auto",
+        crowding: Optional[str] = None,
         flat: Optional[npt.ArrayLike] = None,
         flat_error: Optional[float] = None,
     ) -> Analysis:
         """ePSF astrometry of one image (``jsim analyze``): an Exposure, or a 2-D ADU array with its
         header (GAIN, RDNOISE or RNREAD+SAMPLING, BIASADU, SATURATE, PLTSCALE, IMAGEIDX), dq, truth,
         the config it was simulated with and the calibration flat product (``flat``, ``flat_error``).
-        ``crowding``: auto, on or off. TypeError for a non-numeric dtype, ValueError for a shape that
-        is not 2-D."""
+        ``crowding``: auto, on or off (default: the session configuration's ``analysis.crowding``).
+        TypeError for a non-numeric dtype, ValueError for a shape that is not 2-D."""
     def predict(self, countermeasures: Union[str, Sequence[str], None] = None) -> Dict[str, float]:
         """The instant predictor: expected accuracy [mas] per countermeasure."""
 

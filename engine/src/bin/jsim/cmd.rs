@@ -280,13 +280,12 @@ pub struct AnalyzeArgs {
     pub telemetry: Option<PathBuf>,
     pub zones: Option<usize>,
     pub countermeasure: Countermeasure,
-    pub crowding: engine::analysis::crowding::Crowding,
     pub out: PathBuf,
 }
 
-/// `jsim analyze`: the analysis pipeline on one image. `cfg` gives the analysis knobs; the image's own
-/// configuration (its CONFIG extension) gives what only its simulation knows (the ACE series for the
-/// telemetry and the ACE prediction, the exact ePSF of the control).
+/// `jsim analyze`: the analysis pipeline on one image and the instrument products beside it. `cfg` gives
+/// the analysis knobs; the image's own configuration (its CONFIG extension) serves only the `exact-epsf`
+/// control (an oracle).
 pub fn analyze(session: &Session, cfg: &Config, a: &AnalyzeArgs) -> Result<()> {
     let arrays = analysis_input::focal_plane_arrays(&a.image)?;
     if !arrays.is_empty() {
@@ -305,7 +304,7 @@ pub fn analyze(session: &Session, cfg: &Config, a: &AnalyzeArgs) -> Result<()> {
     for s in &assumptions {
         eprintln!("jsim: {}: {s}", a.image.display());
     }
-    let an = session.analyze_input(cfg, &input, a.zones, a.countermeasure, a.crowding)?;
+    let an = session.analyze_input(cfg, &input, a.zones, a.countermeasure)?;
     let analysis_input::AnalysisInput {
         img,
         truth,
@@ -626,7 +625,7 @@ fn analyze_focal_plane(
             eprintln!("jsim: {}[{name}]: {s}", a.image.display());
         }
         let an = session
-            .analyze_input(cfg, &input, a.zones, a.countermeasure, a.crowding)
+            .analyze_input(cfg, &input, a.zones, a.countermeasure)
             .with_context(|| format!("{}[{name}]", a.image.display()))?;
         scale = input.plate_scale_mas;
         let dir = a.out.join(name);

@@ -189,9 +189,10 @@ enum Command {
         #[command(flatten)]
         cm: CountermeasureArgs,
         /// auto (crowded when the measured source density puts more than 5 % of the stars within the
-        /// grouped fits' link radius of a neighbour), on (crowded-field analysis) or off (isolated stars).
-        #[arg(long, default_value = "auto", value_parser = parse_crowding)]
-        crowding: engine::analysis::crowding::Crowding,
+        /// grouped fits' link radius of a neighbour), on (crowded-field analysis) or off (isolated stars);
+        /// default: the configuration's `analysis.crowding` (auto).
+        #[arg(long, value_parser = parse_crowding)]
+        crowding: Option<engine::analysis::crowding::Crowding>,
         #[arg(long, default_value = "out/analyze")]
         out: PathBuf,
     },
@@ -373,7 +374,10 @@ fn run(cli: Cli) -> Result<()> {
             crowding,
             out,
         } => {
-            let c = cfg.load()?;
+            let mut c = cfg.load()?;
+            if let Some(k) = crowding {
+                c.analysis.crowding = k;
+            }
             let plan = Plan::parse(
                 std::slice::from_ref(&cm.countermeasure),
                 TelemetryQuality::DEFAULT,
@@ -395,7 +399,6 @@ fn run(cli: Cli) -> Result<()> {
                     telemetry,
                     zones: epsf_zones,
                     countermeasure: plan.countermeasures[0],
-                    crowding,
                     out,
                 },
             )
