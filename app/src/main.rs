@@ -1,7 +1,41 @@
-//! `jsim-app [CONFIG.toml]`: the desktop explorer. `main` only builds the window options and starts the app
-//! (on the settings of the last session, which eframe keeps).
+//! `jsim-app [CONFIG.toml]`: the desktop explorer. `main` answers `--help` and `--version` without a window,
+//! builds the window options and starts the app (on the settings of the last session, which eframe keeps);
+//! without a display it says so in one line instead of a windowing library's debug error.
 
-fn main() -> eframe::Result<()> {
+const USAGE: &str = "\
+jsim-app — the JASMINE astrometry explorer (a desktop window)
+
+Usage: jsim-app [CONFIG.toml]
+       jsim-app --help | --version
+
+CONFIG.toml   a jsim configuration to open (default: the last session's settings)
+
+Every number it shows comes from the jsim engine; `jsim --help` is the command line.";
+
+fn main() -> std::process::ExitCode {
+    let args: Vec<std::ffi::OsString> = std::env::args_os().skip(1).collect();
+    match args.first().and_then(|a| a.to_str()) {
+        Some("-h" | "--help") => {
+            println!("{USAGE}");
+            return std::process::ExitCode::SUCCESS;
+        }
+        Some("-V" | "--version") => {
+            println!("jsim-app {}", env!("CARGO_PKG_VERSION"));
+            return std::process::ExitCode::SUCCESS;
+        }
+        Some(a) if a.starts_with('-') => {
+            eprintln!("jsim-app: unknown option {a}\n\n{USAGE}");
+            return std::process::ExitCode::FAILURE;
+        }
+        _ => {}
+    }
+    if std::env::var_os("DISPLAY").is_none() && std::env::var_os("WAYLAND_DISPLAY").is_none() {
+        eprintln!(
+            "jsim-app: no display (neither DISPLAY nor WAYLAND_DISPLAY is set): the explorer needs a desktop \
+             session, or a virtual one (xvfb-run jsim-app); the command line `jsim` needs none"
+        );
+        return std::process::ExitCode::FAILURE;
+    }
     let options = eframe::NativeOptions {
         viewport: egui::ViewportBuilder::default()
             .with_inner_size([1600.0, 1000.0])
@@ -9,14 +43,21 @@ fn main() -> eframe::Result<()> {
             .with_title("JASMINE astrometry explorer"),
         ..Default::default()
     };
-    eframe::run_native(
+    let run = eframe::run_native(
         "JASMINE astrometry explorer",
         options,
-        Box::new(|cc| {
+        Box::new(move |cc| {
             Ok(Box::new(app::ExplorerApp::from_args(
                 cc.storage,
-                std::env::args_os().skip(1),
+                args.into_iter(),
             )))
         }),
-    )
+    );
+    match run {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("jsim-app: the window could not be opened: {e}");
+            std::process::ExitCode::FAILURE
+        }
+    }
 }

@@ -82,6 +82,27 @@ fn bad_values_are_named_errors_and_write_nothing() {
         .expect("run");
     assert_eq!(out.status.code(), Some(1));
     assert!(stderr_of(&out).contains("/nonexistent/img.fits"));
+    // a control that applies to no dataset is an error, not an empty table
+    let exp_dir = dir.join("exp");
+    let out = jsim()
+        .args([
+            "experiment",
+            "--aces",
+            "realistic",
+            "--countermeasures",
+            "exact-epsf",
+            "--out",
+        ])
+        .arg(&exp_dir)
+        .output()
+        .expect("run");
+    assert_eq!(out.status.code(), Some(1));
+    assert!(
+        stderr_of(&out).contains("static ACE"),
+        "{}",
+        stderr_of(&out)
+    );
+    assert!(!exp_dir.exists());
 }
 
 #[test]

@@ -397,6 +397,22 @@ fn a_catalogue_with_both_sky_and_pixel_columns_is_refused() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// A column jsim does not read is an error naming it and what is accepted — `mag` is not the Hw magnitude, and
+/// would otherwise leave every star at the default Hw 12.5; identifiers are read past.
+#[test]
+fn a_catalogue_column_jsim_does_not_read_is_refused_by_name() {
+    let dir = temp("cat-mag");
+    let p = dir.join("mag.csv");
+    std::fs::write(&p, "x,y,mag\n10,10,14.0\n").expect("write");
+    let e = engine::scene::catalogue::read(&p, 12.5, 2.0, 1968.0).expect_err("mag");
+    let msg = e.to_string();
+    assert!(msg.contains("`mag`") && msg.contains("mag_hw"), "{msg}");
+    let ok = dir.join("ok.csv");
+    std::fs::write(&ok, "id,x,y,hw\n7,10,10,14.0\n").expect("write");
+    assert!(engine::scene::catalogue::read(&ok, 12.5, 2.0, 1968.0).is_ok());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 #[test]
 fn bad_score_options_are_named_and_write_nothing() {
     let dir = temp("badscore");

@@ -86,6 +86,15 @@ def test_time_stamps_and_instrument_products_read_in_astropy_without_warnings(ex
             assert abs(np.mean(h[0].data) - 1.0) < 0.05
         att = Table.read(tmp_path / f"telemetry_{exposure.index:03d}.fits", hdu="ATTITUDE")
         assert att.colnames == ["T_S", "ATT_X_MAS", "ATT_Y_MAS"] and len(att) > 100
+        assert [str(att[c].unit) for c in att.colnames] == ["s", "mas", "mas"]
+        # every table column states its unit (TUNITn, '' for a dimensionless one); the primary has no EXTNAME
+        truth = Table.read(path, hdu="TRUTH")
+        assert str(truth["x"].unit) == "pix" and str(truth["mag_hw"].unit) == "mag"
+        with fits.open(path) as h:
+            assert "EXTNAME" not in h[0].header
+            assert h[0].header["DETECTOR"] == "NIR1"
+            cols = h["TRUTH"].header["TFIELDS"]
+            assert all(f"TUNIT{i}" in h["TRUTH"].header for i in range(1, cols + 1))
         ref = Table.read(tmp_path / "refcat.csv", format="ascii.csv")
         assert {"ra_deg", "dec_deg", "x_px", "y_px", "hw", "sigma_mas"} <= set(ref.colnames)
 

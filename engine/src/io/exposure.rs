@@ -134,6 +134,15 @@ pub fn headers(sim: &Simulator, exp: &Exposure) -> Vec<Card> {
         ),
         Card::s("TELESCOP", "JASMINE", "telescope (simulated)"),
         Card::s("INSTRUME", "JASMINE NIR", "instrument (simulated by jsim)"),
+        Card::s(
+            "DETECTOR",
+            format!("NIR{}", sim.array.index + 1),
+            &format!(
+                "{n}x{n} array {} of the focal plane",
+                sim.array.index + 1,
+                n = c.instrument.detector_px
+            ),
+        ),
         Card::s("FILTER", "Hw", "band: 1.0-1.6 um (the Hw magnitude system)"),
         Card::s("TIMESYS", "TT", "time scale of DATE-OBS, MJD-OBS"),
         Card::s(
@@ -194,8 +203,6 @@ pub fn headers(sim: &Simulator, exp: &Exposure) -> Vec<Card> {
             exp.ace.drift_mas,
             "[mas] ACE drift over this exposure",
         ),
-        Card::f("MAGHW", c.scene.mag_hw, "scene Hw magnitude (grid)"),
-        Card::f("JMINUSH", c.scene.j_minus_h, "scene J-H colour (grid)"),
         Card::i(
             "NSTARS",
             exp.truth.len() as i64,
@@ -230,6 +237,19 @@ pub fn headers(sim: &Simulator, exp: &Exposure) -> Vec<Card> {
         Card::s("METHOD", c.fidelity.method.name(), "integration method"),
         Card::s("BACKEND", exp.backend.clone(), "integration device"),
     ];
+    if c.scene.kind == crate::config::SceneKind::Grid {
+        // the grid's one magnitude and colour (a bulge or catalogue scene has many: see the truth)
+        cards.push(Card::f(
+            "MAGHW",
+            c.scene.mag_hw,
+            "scene Hw magnitude (grid)",
+        ));
+        cards.push(Card::f(
+            "JMINUSH",
+            c.scene.j_minus_h,
+            "scene J-H colour (grid)",
+        ));
+    }
     cards.extend(provenance_cards(c));
     cards.push(Card::s(
         "COORDS",

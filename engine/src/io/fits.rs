@@ -151,6 +151,52 @@ pub fn write(path: &Path, hdus: &[Hdu<'_>]) -> Result<(), IoError> {
     }
 }
 
+/// The FITS unit of a table column, from the unit its name ends with (the engine's `_px`, `_mas`, `_s`, …
+/// convention, any case); "" (dimensionless) for counts, flags, indices and fractions. Electrons are written
+/// `ct` (the FITS standard has no electron; astropy reads `electron` with a warning).
+pub fn column_unit(name: &str) -> &'static str {
+    let n = name.to_ascii_lowercase();
+    const SUFFIXES: [(&str, &str); 9] = [
+        ("_e_per_s", "ct/s"),
+        ("_px", "pix"),
+        ("_mas", "mas"),
+        ("_deg", "deg"),
+        ("_um", "um"),
+        ("_adu", "adu"),
+        ("_hz", "Hz"),
+        ("_e", "ct"),
+        ("_s", "s"),
+    ];
+    if let Some((_, u)) = SUFFIXES.iter().find(|(s, _)| n.ends_with(s)) {
+        return u;
+    }
+    match n.as_str() {
+        "hw" | "mag_hw" | "j_minus_h" | "mag" | "j_h" => "mag",
+        // the truth's positions and jitter, in pixels by the table's documentation
+        "x" | "y" | "jitter_dx" | "jitter_dy" => "pix",
+        _ => "",
+    }
+}
+
+/// Remove the `EXTNAME = '_PRIMARY'` card the `fitsio` crate gives a primary image it creates (the FITS
+/// standard reserves no such name, and a primary HDU needs none).
+#[allow(unsafe_code)] // one CFITSIO call (ffdkey) the safe wrapper does not offer; `f` is a live, open file
+fn drop_primary_extname(f: &mut FitsFile) -> Result<(), String> {
+    let key = std::ffi::CString::new("EXTNAME").map_err(|e| e.to_string())?;
+    let mut status = 0;
+    // SAFETY: `as_raw` is the open file's CFITSIO handle, valid for the call; `key` is NUL-terminated
+    unsafe {
+        fitsio::sys::ffmahd(f.as_raw(), 1, std::ptr::null_mut(), &mut status);
+        fitsio::sys::ffdkey(f.as_raw(), key.as_ptr(), &mut status);
+    }
+    match status {
+        0 | 202 => Ok(()), // 202: KEY_NO_EXIST, nothing to remove
+        s => Err(format!(
+            "removing EXTNAME from the primary HDU: CFITSIO status {s}"
+        )),
+    }
+}
+
 fn write_inner(path: &Path, hdus: &[Hdu<'_>]) -> Result<(), IoError> {
     let fe = |e: fitsio::errors::Error| IoError::fits(path, e);
     let mut f = match hdus.first() {
@@ -181,6 +227,7 @@ fn write_inner(path: &Path, hdus: &[Hdu<'_>]) -> Result<(), IoError> {
                 .with_custom_primary(&desc)
                 .open()
                 .map_err(fe)?;
+            drop_primary_extname(&mut f).map_err(|e| IoError::fits(path, e))?;
             let primary = f.primary_hdu().map_err(fe)?;
             match pixels {
                 Pixels::U16(d) => primary.write_image(&mut f, d),
@@ -263,6 +310,14 @@ fn write_inner(path: &Path, hdus: &[Hdu<'_>]) -> Result<(), IoError> {
                     .collect::<Result<Vec<_>, _>>()
                     .map_err(fe)?;
                 let hdu = f.create_table(*name, &descs).map_err(fe)?;
+                for (i, c) in columns.iter().enumerate() {
+                    hdu.write_key(
+                        &mut f,
+                        &format!("TUNIT{}", i + 1),
+                        column_unit(c.name()).to_string(),
+                    )
+                    .map_err(fe)?;
+                }
                 for c in columns {
                     if c.len() == 0 {
                         continue;
@@ -616,6 +671,47 @@ pub fn read_text(path: &Path, ext: &str) -> Result<String, IoError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_primary_image_has_no_extname_and_every_table_column_a_unit() {
+        let dir = std::env::temp_dir().join(format!("jsim-fits-meta-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("dir");
+        let path = dir.join("m.fits");
+        let data = vec![0.0f32; 4];
+        write(
+            &path,
+            &[
+                Hdu::Image {
+                    name: "",
+                    nx: 2,
+                    ny: 2,
+                    pixels: Pixels::F32(&data),
+                    cards: vec![Card::f("EXPTIME", 12.5, "")],
+                },
+                Hdu::Table {
+                    name: "T",
+                    columns: vec![
+                        Column::F64("x_px".into(), vec![1.0]),
+                        Column::F64("T_S".into(), vec![1.0]),
+                        Column::F64("mag_hw".into(), vec![1.0]),
+                        Column::I64("id".into(), vec![1]),
+                    ],
+                    cards: vec![],
+                },
+            ],
+        )
+        .expect("write");
+        assert!(
+            read_string_key(&path, "EXTNAME").is_err(),
+            "no EXTNAME on the primary"
+        );
+        for (i, unit) in ["pix", "s", "mag", ""].iter().enumerate() {
+            let u =
+                read_string_key_in(&path, Some("T"), &format!("TUNIT{}", i + 1)).expect("TUNIT");
+            assert_eq!(u.trim(), *unit);
+        }
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 
     #[test]
     fn a_header_double_reads_back_as_as_header_f64_says() {

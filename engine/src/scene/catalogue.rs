@@ -21,6 +21,32 @@ pub enum Catalogue {
     Sky(Vec<SkyStar>),
 }
 
+/// The column names a catalogue header may hold (any case): positions (`ra, dec` in degrees or `x, y` in
+/// pixels), the Hw magnitude, the colour (`j_h`, or `j` and `h` for 2MASS magnitudes), the extinction `a_hw`,
+/// and identifiers that are read past (`id`, `name`, `source_id`). Any other column is an error.
+pub const KNOWN_COLUMNS: [&str; 20] = [
+    "ra",
+    "ra_deg",
+    "dec",
+    "dec_deg",
+    "x",
+    "x_px",
+    "y",
+    "y_px",
+    "hw",
+    "mag_hw",
+    "j_h",
+    "jh",
+    "j-h",
+    "j_minus_h",
+    "j",
+    "h",
+    "a_hw",
+    "id",
+    "name",
+    "source_id",
+];
+
 /// Where each value of a row comes from.
 struct Layout {
     pos: [usize; 2],
@@ -38,6 +64,22 @@ impl Layout {
                 .iter()
                 .position(|n| alts.iter().any(|a| n.trim().eq_ignore_ascii_case(a)))
         };
+        if let Some(bad) = names.iter().find(|n| {
+            !KNOWN_COLUMNS
+                .iter()
+                .any(|k| n.trim().eq_ignore_ascii_case(k))
+        }) {
+            return Err(SceneError::Parse {
+                path: path.into(),
+                line: 1,
+                message: format!(
+                    "column `{}` is not one jsim reads (a star would silently lose it: e.g. `mag` is not \
+                     the Hw magnitude); accepted: {}",
+                    bad.trim(),
+                    KNOWN_COLUMNS.join(", ")
+                ),
+            });
+        }
         let sky_cols = (find(&["ra", "ra_deg"]), find(&["dec", "dec_deg"]));
         let pixel_cols = (find(&["x", "x_px"]), find(&["y", "y_px"]));
         if sky_cols.0.is_some()

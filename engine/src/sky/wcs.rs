@@ -154,6 +154,22 @@ impl std::fmt::Debug for ArrayWcs {
     }
 }
 
+/// sin and cos of an angle in degrees, exact (0, ±1) at multiples of 90° — so a turned array's CD matrix
+/// holds exact zeros, not 6e-17.
+pub fn sin_cos_deg(deg: f64) -> (f64, f64) {
+    let quarter = deg / 90.0;
+    if quarter.fract() == 0.0 && quarter.is_finite() {
+        match (quarter as i64).rem_euclid(4) {
+            0 => (0.0, 1.0),
+            1 => (1.0, 0.0),
+            2 => (0.0, -1.0),
+            _ => (-1.0, 0.0),
+        }
+    } else {
+        deg.to_radians().sin_cos()
+    }
+}
+
 impl ArrayWcs {
     /// The WCS of an array of `naxis` pixels whose (0-based) pixel `axis_px` is the optical axis, seen at
     /// `pointing` with its +y axis at position angle `pointing.pa_deg + rotation_deg` east of north,
@@ -177,10 +193,11 @@ impl ArrayWcs {
             return Err("an array must have at least one pixel per axis".into());
         }
         let s = scale_mas / 3.6e6;
-        let rho = (pointing.pa_deg + rotation_deg).to_radians();
+        let (sin, cos) = sin_cos_deg(pointing.pa_deg + rotation_deg);
+        // `+ 0.0` turns a −0 into 0
         let cd_deg = [
-            [-s * rho.cos(), s * rho.sin()],
-            [s * rho.sin(), s * rho.cos()],
+            [-s * cos + 0.0, s * sin + 0.0],
+            [s * sin + 0.0, s * cos + 0.0],
         ];
         let crpix = [axis_px[0] + 1.0, axis_px[1] + 1.0];
         let crval_deg = [pointing.ra_deg, pointing.dec_deg];
@@ -406,6 +423,21 @@ impl ArrayWcs {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn quarter_turns_are_exact() {
+        for (deg, sc) in [
+            (0.0, (0.0, 1.0)),
+            (90.0, (1.0, 0.0)),
+            (180.0, (0.0, -1.0)),
+            (-90.0, (-1.0, 0.0)),
+            (450.0, (1.0, 0.0)),
+        ] {
+            assert_eq!(sin_cos_deg(deg), sc, "{deg}");
+        }
+        let (s, c) = sin_cos_deg(30.0);
+        assert!((s - 0.5).abs() < 1e-15 && (c - 0.75f64.sqrt()).abs() < 1e-15);
+    }
 
     const SCALE_MAS: f64 = 472.1;
 

@@ -386,6 +386,15 @@ pub struct ExperimentArgs {
 pub fn experiment(session: &Session, base: &Config, a: &ExperimentArgs) -> Result<()> {
     let t0 = Instant::now();
     let datasets = experiment::grid(base, &a.aces, &a.readouts, &a.mags);
+    // a control that applies to none of the datasets would write an empty table and look like a result
+    if a.plan.countermeasures.contains(&Countermeasure::ExactEpsf)
+        && datasets.iter().all(|c| c.ace.case == AceCase::Realistic)
+    {
+        anyhow::bail!(
+            "--countermeasures exact-epsf: the exact-ePSF control needs a static ACE (--aces gaussian or \
+             none); every dataset here has a realistic ACE"
+        );
+    }
     let mut outputs = Outputs::in_dir(&a.out)?;
     for name in ["experiment.csv", "images.csv", "accuracy.png"] {
         outputs.path(name);

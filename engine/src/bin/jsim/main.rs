@@ -127,6 +127,7 @@ impl ConfigArgs {
 enum Command {
     /// Print the commented default configuration, or check a file.
     Config {
+        /// Print the built-in default configuration, every knob with its comment and source.
         #[arg(long)]
         print_default: bool,
         /// Validate a configuration file and print it in canonical form.
@@ -137,6 +138,7 @@ enum Command {
     Psf {
         #[command(flatten)]
         cfg: ConfigArgs,
+        /// The PSF table's FITS file.
         #[arg(long, default_value = "psf.fits")]
         out: PathBuf,
     },
@@ -144,6 +146,7 @@ enum Command {
     Ace {
         #[command(flatten)]
         cfg: ConfigArgs,
+        /// The ACE series' CSV file.
         #[arg(long, default_value = "ace.csv")]
         out: PathBuf,
         /// Keep every N-th sample (the full reference series has 2.4 million).
@@ -157,6 +160,7 @@ enum Command {
         cfg: ConfigArgs,
         #[command(flatten)]
         survey: SurveyArgs,
+        /// Output directory (images, truth, the instrument products, config.toml, run.json).
         #[arg(long, default_value = "out/simulate")]
         out: PathBuf,
     },
@@ -193,6 +197,7 @@ enum Command {
         /// default: the configuration's `analysis.crowding` (auto).
         #[arg(long, value_parser = parse_crowding)]
         crowding: Option<engine::analysis::crowding::Crowding>,
+        /// Output directory (catalogue.csv, epsf.fits, summary.json, vectors.csv, vectors.png).
         #[arg(long, default_value = "out/analyze")]
         out: PathBuf,
     },
@@ -212,12 +217,15 @@ enum Command {
         /// Magnitudes (comma separated).
         #[arg(long, default_value = "12,12.5,13,13.5,14,14.5", value_delimiter = ',')]
         mags: Vec<f64>,
-        /// Countermeasures (comma separated): none, yzones[:K], yzones-shared[:K], plate-affine, plate-poly:N,
-        /// telemetry, exact-epsf (control fit with the exact ePSF, static ACE only).
+        /// Countermeasures (comma separated): none, yzones[:K], yzones-shared[:K], plate-affine[@R],
+        /// plate-poly:N[@R] (R, the plate model's reference: stack — the stare's own, default —, catalogue — the
+        /// survey's reference catalogue —, oracle — the truth, a control), telemetry, exact-epsf (control fit
+        /// with the exact ePSF, static ACE only).
         #[arg(long, default_value = "none,yzones", value_delimiter = ',')]
         countermeasures: Vec<String>,
         #[command(flatten)]
         tel: TelemetryArgs,
+        /// Output directory (experiment.csv, images.csv, accuracy.png, vector maps).
         #[arg(long, default_value = "out/experiment")]
         out: PathBuf,
     },
@@ -235,6 +243,7 @@ enum Command {
     Predict {
         #[command(flatten)]
         cfg: ConfigArgs,
+        /// Countermeasures to predict (comma separated; the names of `jsim experiment --countermeasures`).
         #[arg(
             long,
             default_value = "none,yzones,plate-affine,plate-poly:3,telemetry",
