@@ -328,7 +328,8 @@ pub enum OpdSign {
 }
 
 /// Default WFE: a small design-like residual at 1.4 µm dominated by defocus and astigmatism
-/// (Z4 = 0.07, Z5 = 0.05, Z6 = −0.03 waves; 58 nm rms), documented in the README.
+/// (Z4 = 0.07, Z5 = 0.05, Z6 = −0.03 waves; 66 nm rms over the pupil: Fringe Z4 has rms 1/√3, Z5 and Z6
+/// 1/√6 per unit), documented in docs/methods.md.
 pub fn default_fringe() -> Vec<f64> {
     vec![0.0, 0.0, 0.0, 0.07, 0.05, -0.03]
 }

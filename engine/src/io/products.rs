@@ -1,6 +1,6 @@
 //! The schemas of the output files (one place each): the analysis catalogue, ePSF and summary of
 //! `jsim analyze`, the deviation vector map, the experiment's `experiment.csv` and `images.csv`, and the PSF
-//! FITS of `jsim psf`. The CLI and the Python module write through these; the README documents them.
+//! FITS of `jsim psf`. The CLI and the Python module write through these; docs/file-formats.md documents them.
 
 use super::IoError;
 use super::csv::{self, Cell};

@@ -137,7 +137,7 @@ impl TelemetryQuality {
     /// imaging and astrometric missions (≈ 1e-4 °/√h ≈ 6 mas/√s); over the 1.2-s spread of the rolling
     /// readout's windows that is a few mas, the size of the effect it corrects. The numbers are
     /// not a JASMINE specification (none is public); `jsim experiment --telemetry-correlated-mas E` and
-    /// the README's table show the accuracy against E.
+    /// docs/results.md shows the accuracy against E.
     pub const DEFAULT: TelemetryQuality = TelemetryQuality {
         noise_mas: 20.0,
         rate_hz: DEFAULT_TELEMETRY_RATE_HZ,
