@@ -314,3 +314,84 @@ fn jsim_analyze_on_a_saved_crowded_exposure_gives_jsim_crowdeds_bins() {
     }
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// The README's quick start, command by command, on the small scene (`small_toml`: a 256² array, 9 stars, 2
+/// images — the reduced form of the default scene): each succeeds and writes what the README says.
+#[test]
+fn the_readmes_quick_start_runs_as_written() {
+    let dir = temp("quick-start");
+    let cfg = small_toml(&dir);
+    let run = |args: &[&str]| {
+        let out = jsim()
+            .current_dir(&dir)
+            .args(args)
+            .args(["--config", cfg.to_str().expect("utf-8 path")])
+            .output()
+            .expect("run");
+        assert!(out.status.success(), "{args:?}: {}", stderr_of(&out));
+        String::from_utf8_lossy(&out.stdout).to_string()
+    };
+    let said = run(&["simulate", "--out", "out/reference"]);
+    assert!(said.contains("wrote 2 images"), "{said}");
+    for f in [
+        "img_000.fits",
+        "truth_000.csv",
+        "flat_cal.fits",
+        "refcat.csv",
+        "psf_model.fits",
+        "telemetry_000.fits",
+    ] {
+        assert!(dir.join("out/reference").join(f).exists(), "{f}");
+    }
+    let said = run(&[
+        "analyze",
+        "--image",
+        "out/reference/img_000.fits",
+        "--out",
+        "out/analysis",
+    ]);
+    assert!(
+        said.contains("accuracy") && said.contains("[none]"),
+        "{said}"
+    );
+    assert!(dir.join("out/analysis/vectors.png").exists());
+    let said = run(&[
+        "analyze",
+        "--image",
+        "out/reference/img_000.fits",
+        "--countermeasure",
+        "telemetry",
+        "--out",
+        "out/analysis_telemetry",
+    ]);
+    assert!(said.contains("[telemetry]"), "{said}");
+    let out = jsim()
+        .current_dir(&dir)
+        .args([
+            "score",
+            "--catalogue",
+            "out/analysis/catalogue.csv",
+            "--truth",
+            "out/reference/truth_000.csv",
+            "--out",
+            "out/score",
+        ])
+        .output()
+        .expect("run");
+    assert!(out.status.success(), "{}", stderr_of(&out));
+    assert!(String::from_utf8_lossy(&out.stdout).contains("9 matched"));
+    let said = run(&[
+        "experiment",
+        "--mags",
+        "12.5",
+        "--aces",
+        "realistic",
+        "--countermeasures",
+        "none,plate-poly:3,telemetry",
+    ]);
+    for cm in ["none", "plate-poly:3", "telemetry"] {
+        assert!(said.contains(cm), "{cm}: {said}");
+    }
+    assert!(dir.join("out/experiment/experiment.csv").exists());
+    let _ = std::fs::remove_dir_all(&dir);
+}
