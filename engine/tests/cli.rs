@@ -395,3 +395,39 @@ fn the_readmes_quick_start_runs_as_written() {
     assert!(dir.join("out/experiment/experiment.csv").exists());
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Every example catalogue shipped in `engine/catalogues/` (pixels and RA/Dec, CSV and FITS) simulates as
+/// `jsim simulate --scene FILE` on the small scene, every one of its stars in the truth.
+#[test]
+fn every_shipped_catalogue_simulates() {
+    let dir = temp("catalogues");
+    let cfg = small_toml(&dir);
+    let shipped = Path::new(env!("CARGO_MANIFEST_DIR")).join("catalogues");
+    let mut n = 0;
+    for e in std::fs::read_dir(&shipped).expect("engine/catalogues") {
+        let p = e.expect("entry").path();
+        let out_dir = dir.join(p.file_stem().expect("name"));
+        let out = jsim()
+            .args(["simulate", "--images", "1", "--config"])
+            .arg(&cfg)
+            .arg("--scene")
+            .arg(&p)
+            .arg("--out")
+            .arg(&out_dir)
+            .output()
+            .expect("run");
+        assert!(out.status.success(), "{}: {}", p.display(), stderr_of(&out));
+        let said = String::from_utf8_lossy(&out.stdout).to_string();
+        assert!(said.contains("of 16 stars"), "{}: {said}", p.display());
+        let truth = std::fs::read_to_string(out_dir.join("truth_000.csv")).expect("truth");
+        assert_eq!(
+            truth.lines().count(),
+            17,
+            "{}: 16 stars and a header",
+            p.display()
+        );
+        n += 1;
+    }
+    assert_eq!(n, 3, "the shipped catalogues");
+    let _ = std::fs::remove_dir_all(&dir);
+}
