@@ -62,6 +62,32 @@ pub struct ConfigArgs {
     pub set: Vec<String>,
 }
 
+/// The configuration options of a command that simulates nothing (`jsim analyze`): the analysis knobs come
+/// from a file or `--set analysis.…`; the scene, jitter, readout and backend options do not apply and are not
+/// offered.
+#[derive(Args, Clone, Debug, Default)]
+pub struct AnalysisConfigArgs {
+    /// TOML configuration: its `[analysis]` knobs (and, for an image whose header lacks them, the plate scale
+    /// and readout timing assumed; default: the built-in configuration).
+    #[arg(long, value_name = "FILE")]
+    pub config: Option<PathBuf>,
+    /// Set a field, e.g. --set analysis.detect_sigma=8 (repeatable).
+    #[arg(long = "set", value_name = "FIELD=VALUE")]
+    pub set: Vec<String>,
+}
+
+impl AnalysisConfigArgs {
+    /// The configuration these options describe, validated.
+    pub fn load(&self) -> Result<Config> {
+        ConfigArgs {
+            config: self.config.clone(),
+            set: self.set.clone(),
+            ..Default::default()
+        }
+        .load()
+    }
+}
+
 impl ConfigArgs {
     /// The configuration these options describe, validated.
     pub fn load(&self) -> Result<Config> {
@@ -167,7 +193,7 @@ enum Command {
     /// Measure positions in an image with the ePSF method: catalogue, ePSF, summary, vector map.
     Analyze {
         #[command(flatten)]
-        cfg: ConfigArgs,
+        cfg: AnalysisConfigArgs,
         /// Image to analyse (FITS from `jsim simulate`, or any image with GAIN/RDNOISE headers).
         #[arg(long)]
         image: PathBuf,
