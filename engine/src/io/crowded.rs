@@ -227,13 +227,16 @@ pub fn plot_vectors(
             (format!("array {}", a.index + 1), v)
         })
         .collect();
-    plot::vector_map(
+    plot::vector_map_on_axes(
         path,
         title,
         &sets,
         2.0 * origin,
-        f64::NAN,
-        0.75 * n / VECTOR_CELLS as f64,
+        (f64::NAN, 0.75 * n / VECTOR_CELLS as f64),
+        (
+            "focal-plane x [px], from the corner (east to the left at PA 0)",
+            "focal-plane y [px] (north up at PA 0)",
+        ),
     )?;
     Ok(())
 }

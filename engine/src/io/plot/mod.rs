@@ -19,7 +19,7 @@ mod vectors;
 pub use histogram::histogram_cdf;
 pub use image::image_png;
 pub use line::{line_plot, scatter};
-pub use vectors::vector_map;
+pub use vectors::{vector_map, vector_map_on_axes};
 
 use super::IoError;
 use std::error::Error;
@@ -402,6 +402,12 @@ fn fmt_num(v: f64) -> String {
 // Markers, legends and shared chart pieces.
 // ---------------------------------------------------------------------------------------------------------
 
+/// The marker (0–4) of series `i`: it advances once more per pass through the palette, so series i and i + 10
+/// (the same colour) differ in shape — 50 series have distinct colour-and-shape pairs.
+fn marker_index(i: usize) -> usize {
+    (i + i / PALETTE.len()) % 5
+}
+
 /// Marker outline (pixel offsets) for series `i`: circle, square, triangle, diamond, inverted triangle.
 fn marker_shape(i: usize, r: f64) -> Vec<(i32, i32)> {
     let polygon = |pts: &[(f64, f64)]| {
@@ -409,7 +415,7 @@ fn marker_shape(i: usize, r: f64) -> Vec<(i32, i32)> {
             .map(|&(x, y)| ((x * r).round() as i32, (y * r).round() as i32))
             .collect()
     };
-    match i % 5 {
+    match marker_index(i) {
         0 => (0..16)
             .map(|k| {
                 let phi = k as f64 * std::f64::consts::TAU / 16.0;
@@ -505,6 +511,14 @@ fn configure_mesh(
 pub(super) mod tests {
     use super::*;
     use std::path::PathBuf;
+
+    #[test]
+    fn fifty_series_have_distinct_colour_and_marker_pairs() {
+        let pairs: std::collections::HashSet<(usize, usize)> = (0..50)
+            .map(|i| (i % PALETTE.len(), marker_index(i)))
+            .collect();
+        assert_eq!(pairs.len(), 50);
+    }
 
     pub(super) const PNG_SIGNATURE: [u8; 8] = [0x89, b'P', b'N', b'G', 0x0D, 0x0A, 0x1A, 0x0A];
 

@@ -95,16 +95,28 @@ pub fn vector_map(
     reference_mas: f64,
     reference_len_px: f64,
 ) -> Result<(), PlotError> {
+    vector_map_on_axes(
+        path,
+        title,
+        sets,
+        extent_px,
+        (reference_mas, reference_len_px),
+        ("x [pixel]", "y [pixel]"),
+    )
+}
+
+/// [`vector_map`] with its axes named (`(x label, y label)`), e.g. the focal plane's axes and where north and
+/// east lie; `reference` is `(reference_mas, reference_len_px)`.
+pub fn vector_map_on_axes(
+    path: &Path,
+    title: &str,
+    sets: &[(String, Vec<(f64, f64, f64, f64)>)],
+    extent_px: f64,
+    reference: (f64, f64),
+    axes: (&str, &str),
+) -> Result<(), PlotError> {
     render(path, MAP_SIZE, |root| {
-        draw_vector_map(
-            root,
-            title,
-            sets,
-            extent_px,
-            reference_mas,
-            reference_len_px,
-        )
-        .map(|_| ())
+        draw_vector_map(root, title, sets, extent_px, reference, axes).map(|_| ())
     })
 }
 
@@ -113,8 +125,8 @@ fn draw_vector_map(
     title: &str,
     sets: &[(String, Vec<(f64, f64, f64, f64)>)],
     extent_px: f64,
-    reference_mas: f64,
-    reference_len_px: f64,
+    (reference_mas, reference_len_px): (f64, f64),
+    (x_label, y_label): (&str, &str),
 ) -> Result<(u32, u32), Box<dyn Error>> {
     let finite = |a: &&(f64, f64, f64, f64)| {
         a.0.is_finite() && a.1.is_finite() && a.2.is_finite() && a.3.is_finite()
@@ -171,7 +183,7 @@ fn draw_vector_map(
         .x_label_area_size(bottom)
         .y_label_area_size(left)
         .build_cartesian_2d(axis, axis)?;
-    configure_mesh(&mut chart, "x [pixel]", "y [pixel]")?;
+    configure_mesh(&mut chart, x_label, y_label)?;
     let plot_rect = chart.plotting_area().get_pixel_range();
 
     for (i, (_, set)) in sets.iter().enumerate() {
@@ -339,7 +351,7 @@ mod tests {
         ensure_font()?;
         let mut buffer = vec![0u8; 800 * 800 * 3];
         let root = BitMapBackend::with_buffer(&mut buffer, MAP_SIZE).into_drawing_area();
-        let (w, h) = draw_vector_map(&root, "t", &[], 100.0, 1.0, 5.0)?;
+        let (w, h) = draw_vector_map(&root, "t", &[], 100.0, (1.0, 5.0), ("x", "y"))?;
         assert_eq!(w, h);
         assert!(w > 500, "plot side {w}");
         Ok(())
