@@ -181,6 +181,7 @@ pub fn plot_accuracy(path: &Path, runs: &[(String, &[MagBin])]) -> Result<(), Io
             x: bins.iter().map(centre).collect(),
             y: bins.iter().map(|b| b.isolated.accuracy_mas).collect(),
             yerr: None,
+            yerr_below: None,
         })
         .collect();
     if let Some((label, bins)) = runs.first() {
@@ -189,6 +190,7 @@ pub fn plot_accuracy(path: &Path, runs: &[(String, &[MagBin])]) -> Result<(), Io
             x: bins.iter().map(centre).collect(),
             y: bins.iter().map(|b| b.isolated.crlb_mas).collect(),
             yerr: None,
+            yerr_below: None,
         });
     }
     plot::line_plot(

@@ -445,6 +445,7 @@ pub fn plot_accuracy(path: &Path, rows: &[Row]) -> Result<(), IoError> {
                 x: pts.iter().map(|r| r.mag).collect(),
                 y: pts.iter().map(|r| r.accuracy_mas).collect(),
                 yerr: Some(pts.iter().map(|r| r.sem_mas).collect()),
+                yerr_below: None,
             }
         })
         .collect();
@@ -470,6 +471,7 @@ pub fn plot_accuracy(path: &Path, rows: &[Row]) -> Result<(), IoError> {
                 x,
                 y,
                 yerr: None,
+                yerr_below: None,
             });
         }
     }

@@ -749,6 +749,7 @@ pub fn plot_bench(path: &Path, rows: &[BenchRow]) -> Result<(), IoError> {
                 x: pts.iter().map(|r| r.max_err).collect(),
                 y: pts.iter().map(|r| r.time_s).collect(),
                 yerr: None,
+                yerr_below: None,
             }
         })
         .collect();

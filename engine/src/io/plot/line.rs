@@ -7,17 +7,26 @@ use super::{
 use plotters::prelude::*;
 use std::path::Path;
 
-/// The (x, y, yerr) triples of a series, truncated to the shorter of x and y.
-fn triples(s: &Series) -> impl Iterator<Item = (f64, f64, Option<f64>)> + '_ {
-    s.x.iter()
-        .zip(&s.y)
-        .enumerate()
-        .map(|(i, (&x, &y))| (x, y, s.yerr.as_ref().and_then(|e| e.get(i).copied())))
+/// An error bar: its lengths below and above the point.
+type Bar = (f64, f64);
+
+/// The (x, y, bar) triples of a series, truncated to the shorter of x and y: the bar is `yerr` both ways, or
+/// `yerr_below` below and `yerr` above when the series has asymmetric bars.
+fn triples(s: &Series) -> impl Iterator<Item = (f64, f64, Option<Bar>)> + '_ {
+    s.x.iter().zip(&s.y).enumerate().map(|(i, (&x, &y))| {
+        let above = s.yerr.as_ref().and_then(|e| e.get(i).copied());
+        let below = match &s.yerr_below {
+            Some(b) => b.get(i).copied(),
+            None => above,
+        };
+        (x, y, above.zip(below).map(|(a, b)| (b, a)))
+    })
 }
 
-/// Usable error-bar half length.
-fn usable_err(e: Option<f64>) -> Option<f64> {
-    e.map(f64::abs).filter(|e| e.is_finite() && *e > 0.0)
+/// Usable error-bar lengths (below, above): finite, not negative, not both zero.
+fn usable_err(e: Option<Bar>) -> Option<Bar> {
+    e.map(|(b, a)| (b.abs(), a.abs()))
+        .filter(|(b, a)| b.is_finite() && a.is_finite() && (*b > 0.0 || *a > 0.0))
 }
 
 /// What distinguishes `line_plot` from `scatter`.
@@ -53,8 +62,8 @@ fn draw_xy(
         .flat_map(triples)
         .filter(|&(x, y, _)| ok(x, y))
         .flat_map(|(_, y, e)| {
-            let e = usable_err(e).unwrap_or(0.0);
-            [y, y - e, y + e]
+            let (below, above) = usable_err(e).unwrap_or((0.0, 0.0));
+            [y, y - below, y + above]
         });
     let hline_values = opts.hlines.iter().map(|h| h.0);
     let y_axis = Axis::fit(y_values.chain(hline_values), y_scale);
@@ -71,7 +80,7 @@ fn draw_xy(
     let mut any_label = false;
     for (i, s) in series.iter().enumerate() {
         let c = color(i);
-        let pts: Vec<(f64, f64, Option<f64>)> = triples(s).collect();
+        let pts: Vec<(f64, f64, Option<Bar>)> = triples(s).collect();
         let valid: Vec<(f64, f64)> = pts
             .iter()
             .filter(|p| ok(p.0, p.1))
@@ -84,8 +93,10 @@ fn draw_xy(
         let mut bars = Vec::new();
         let mut caps = Vec::new();
         for &(x, y, e) in pts.iter().filter(|p| ok(p.0, p.1)) {
-            let Some(e) = usable_err(e) else { continue };
-            let (lo, hi) = (y - e, y + e);
+            let Some((below, above)) = usable_err(e) else {
+                continue;
+            };
+            let (lo, hi) = (y - below, y + above);
             for end in [lo, hi] {
                 if Axis::usable(end, y_scale) && y_axis.contains(end) {
                     caps.push((x, end));

@@ -58,7 +58,10 @@ pub struct Series {
     pub label: String,
     pub x: Vec<f64>,
     pub y: Vec<f64>,
+    /// Error-bar lengths: both ways, or above the point when `yerr_below` is given.
     pub yerr: Option<Vec<f64>>,
+    /// Error-bar lengths below the point, for asymmetric bars (a confidence interval about a measured value).
+    pub yerr_below: Option<Vec<f64>>,
 }
 
 /// Axis scale.
@@ -584,6 +587,7 @@ pub(super) mod tests {
             x: x.to_vec(),
             y: y.to_vec(),
             yerr: yerr.map(<[f64]>::to_vec),
+            yerr_below: None,
         }
     }
 

@@ -316,7 +316,9 @@ pub fn report(dir: &Path, opts: &ReportOptions) -> Result<ReportSummary, SweepEr
         .collect();
     let span = xs.iter().copied().fold(f64::NEG_INFINITY, f64::max)
         - xs.iter().copied().fold(f64::INFINITY, f64::min);
-    let dodge = if span > 0.0 { 0.01 * span } else { 0.05 };
+    // one grid point: nothing varies along x, so the series stand side by side one unit apart
+    let one_point = !(span > 0.0);
+    let dodge = if one_point { 1.0 } else { 0.01 * span };
     let n_series = series_keys.len() as f64;
     let series: Vec<plot::Series> = series_keys
         .iter()
@@ -351,10 +353,10 @@ pub fn report(dir: &Path, opts: &ReportOptions) -> Result<ReportSummary, SweepEr
             plot::Series {
                 label,
                 x,
-                // plot::Series has symmetric bars only: draw the (asymmetric) Wilson interval exactly, marker
-                // at its centre (k + z²/2)/(n + z²); the observed fraction k/n is in report.csv and the table
-                y: pts.iter().map(|r| 0.5 * (r.ci_low + r.ci_high)).collect(),
-                yerr: Some(pts.iter().map(|r| 0.5 * (r.ci_high - r.ci_low)).collect()),
+                // the measured fraction k/n with its (asymmetric) 95 % Wilson interval
+                y: pts.iter().map(|r| r.fraction).collect(),
+                yerr: Some(pts.iter().map(|r| r.ci_high - r.fraction).collect()),
+                yerr_below: Some(pts.iter().map(|r| r.fraction - r.ci_low).collect()),
             }
         })
         .collect();
@@ -365,11 +367,12 @@ pub fn report(dir: &Path, opts: &ReportOptions) -> Result<ReportSummary, SweepEr
             "Exposures with {} ≤ {threshold} mas: 95 % Wilson intervals",
             opts.metric
         ),
-        match x_index {
-            Some(k) => fields[k].as_str(),
-            None => "grid point",
+        match (x_index, one_point) {
+            (_, true) => "series side by side (one grid point; see the legend)",
+            (Some(k), false) => fields[k].as_str(),
+            (None, false) => "grid point",
         },
-        "fraction of exposures (interval centre ± half-width)",
+        "fraction of exposures (measured, 95 % Wilson interval)",
         &series,
         &[],
         plot::Scale::Linear,
