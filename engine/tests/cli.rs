@@ -117,6 +117,8 @@ fn simulate_then_analyze_on_a_small_scene() {
         .output()
         .expect("run");
     assert!(out.status.success(), "{}", stderr_of(&out));
+    // the configuration asks for the CPU: no word about GPU adapters
+    assert!(!stderr_of(&out).contains("adapter"), "{}", stderr_of(&out));
     for f in [
         "img_000.fits",
         "img_001.fits",

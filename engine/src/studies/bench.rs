@@ -51,6 +51,8 @@ pub struct BenchRow {
     pub max_err: f64,
     pub rms_err: f64,
     pub flux_err: f64,
+    /// Position error [mas]: for an integration setting, the rms shift of the fitted positions against those
+    /// of the exact frame (Δpos); for an analysis setting (ePSF, crowded field), the accuracy against the truth.
     pub astro_mas: f64,
     pub note: String,
 }
@@ -680,7 +682,7 @@ pub fn render_table(rows: &[BenchRow]) -> String {
         "max err",
         "rms err",
         "flux err",
-        "Δpos mas",
+        "pos [mas]",
         "note"
     );
     for r in rows {
@@ -702,6 +704,10 @@ pub fn render_table(rows: &[BenchRow]) -> String {
             r.note
         ));
     }
+    s.push_str(
+        "pos [mas]: an integration setting's rms position shift against the exact frame; an analysis \
+         setting's (ePSF, crowded) accuracy against the truth\n",
+    );
     s
 }
 
