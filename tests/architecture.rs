@@ -45,7 +45,7 @@ fn layers() -> BTreeMap<String, usize> {
 }
 
 /// A source file without its test code: everything from `#[cfg(test)]` + `mod tests` on, the item right after
-/// any other `#[cfg(test)]`, and line comments.
+/// any other `#[cfg(test)]`, and line comments (doc comments kept: their `crate::…` links are uses).
 fn non_test_code(text: &str) -> String {
     let mut out = String::new();
     let mut skip_next_item = false;
@@ -69,9 +69,14 @@ fn non_test_code(text: &str) -> String {
                 continue;
             }
         }
-        let code = match l.find("//") {
-            Some(k) => &l[..k],
-            None => l,
+        // a doc comment's `crate::…` links are uses (rustdoc resolves them; a reader follows them): kept
+        let code = if l.starts_with("///") || l.starts_with("//!") {
+            l
+        } else {
+            match l.find("//") {
+                Some(k) => &l[..k],
+                None => l,
+            }
         };
         out.push_str(code);
         out.push('\n');

@@ -1,4 +1,4 @@
-//! Content digests: the SHA-256 hex strings that identify configurations ([`crate::Config::hash_hex`]),
+//! Content digests: the SHA-256 hex strings that identify configurations (`Config::hash_hex`),
 //! sweeps, sweep rows and the files a sweep writes. A foundation module: it depends on nothing else in the
 //! crate, so that any stage may name its inputs by content.
 

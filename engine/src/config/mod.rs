@@ -791,7 +791,7 @@ pub enum Smoothing {
     Quadratic,
 }
 
-/// The PSF the telemetry correction's fit response is built from ([`crate::analysis::response`]): the
+/// The PSF the telemetry correction's fit response is built from (`analysis::response`): the
 /// response needs the PSF *before* the jitter, which it then blurs with the telemetry's own window.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
