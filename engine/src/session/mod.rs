@@ -183,7 +183,7 @@ impl Session {
                     sim: &sim,
                     index: *index,
                 };
-                src.products(&plan, &analysis_cfg)?.exact_epsf
+                src.exact_epsf(&analysis_cfg)?
             }
             _ => None,
         };

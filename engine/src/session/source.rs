@@ -143,6 +143,19 @@ impl Source<'_> {
         .map(Some)
     }
 
+    /// The exact ePSF of a static-ACE simulation (the `exact-epsf` control, an oracle); `None` for a realistic
+    /// ACE, whose stars each see their own jitter.
+    pub fn exact_epsf(&self, cfg: &AnalysisCfg) -> Result<Option<Epsf>, SimError> {
+        if self.sim.cfg.ace.case == AceCase::Realistic {
+            return Ok(None);
+        }
+        Ok(self
+            .sim
+            .jobs()?
+            .first()
+            .map(|j| exact_epsf(&j.kernel, cfg.epsf_radius_px)))
+    }
+
     /// What the simulated instrument delivers beside this exposure for the countermeasures of `plan`.
     pub fn products(&self, plan: &Plan, cfg: &AnalysisCfg) -> Result<SourceProducts, SourceError> {
         let mut telemetry: Vec<(TelemetryQuality, TelemetryRecord)> = Vec::new();
@@ -168,14 +181,8 @@ impl Source<'_> {
                 telemetry.push((*q, r));
             }
         }
-        let exact = plan.countermeasures.contains(&Countermeasure::ExactEpsf)
-            && self.sim.cfg.ace.case != AceCase::Realistic;
-        let exact_epsf = match exact {
-            true => self
-                .sim
-                .jobs()?
-                .first()
-                .map(|j| exact_epsf(&j.kernel, cfg.epsf_radius_px)),
+        let exact_epsf = match plan.countermeasures.contains(&Countermeasure::ExactEpsf) {
+            true => self.exact_epsf(cfg)?,
             false => None,
         };
         Ok(SourceProducts {
