@@ -5,7 +5,7 @@ mod common;
 
 use common::{gaussian_image, grid_stars};
 use engine::analysis::epsf::fit::flags;
-use engine::analysis::pipeline::{self as astrometry, Options};
+use engine::analysis::pipeline::Options;
 use engine::config::Analysis;
 use engine::numerics::stats;
 
@@ -13,7 +13,7 @@ use engine::numerics::stats;
 fn noise_free_image_gives_positions_exact_to_1e_3_px() {
     let stars = grid_stars(12, 30.0, 7.0e4, 1);
     let (img, truth) = gaussian_image(380, &stars, 300.0, 0.8, None);
-    let a = astrometry::analyze(&img, Some(&truth), &Options::new(&Analysis::default()))
+    let a = common::analyze_scored(&img, &truth, &Options::new(&Analysis::default()))
         .expect("analysis");
     assert_eq!(a.report.n_used, 144);
     let dx: Vec<f64> = a.stars.iter().map(|s| s.dx_px).collect();
@@ -42,7 +42,7 @@ fn scatter_matches_the_cramer_rao_bound_within_7_percent() {
         let mut crlb = Vec::new();
         for seed in 0..4 {
             let (img, truth) = gaussian_image(380, &stars, 300.0, 0.8, Some(100 + seed));
-            let a = astrometry::analyze(&img, Some(&truth), &Options::new(&cfg)).expect("analysis");
+            let a = common::analyze_scored(&img, &truth, &Options::new(&cfg)).expect("analysis");
             let used: Vec<_> = a
                 .stars
                 .iter()
@@ -91,7 +91,7 @@ fn hard_cases_give_flags_or_sane_results_never_nan() {
             img.e[v] = 150_000.0;
         }
     }
-    let a = astrometry::analyze(&img, Some(&truth), &Options::new(&Analysis::default()))
+    let a = common::analyze_scored(&img, &truth, &Options::new(&Analysis::default()))
         .expect("analysis");
     for s in &a.stars {
         assert!(
@@ -130,7 +130,7 @@ fn hard_cases_give_flags_or_sane_results_never_nan() {
 fn five_stars_still_build_a_sane_epsf() {
     let stars: Vec<(f64, f64, f64)> = grid_stars(6, 50.0, 7.0e4, 4).into_iter().take(5).collect();
     let (img, truth) = gaussian_image(320, &stars, 300.0, 0.8, Some(5));
-    let a = astrometry::analyze(&img, Some(&truth), &Options::new(&Analysis::default()))
+    let a = common::analyze_scored(&img, &truth, &Options::new(&Analysis::default()))
         .expect("analysis");
     assert_eq!(a.report.n_used, 5);
     // five stars do not fill the ePSF's pixel phases: worse than the bound, but a few hundredths of a pixel
@@ -146,7 +146,7 @@ fn five_stars_still_build_a_sane_epsf() {
 #[test]
 fn empty_image_is_a_named_error() {
     let (img, truth) = gaussian_image(64, &[], 300.0, 0.8, Some(1));
-    let e = astrometry::analyze(&img, Some(&truth), &Options::new(&Analysis::default()))
+    let e = common::analyze_scored(&img, &truth, &Options::new(&Analysis::default()))
         .expect_err("no stars");
     assert!(e.to_string().contains("no star detected"), "{e}");
 }

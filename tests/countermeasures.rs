@@ -44,13 +44,10 @@ fn telemetry_predicts_the_measured_errors_of_a_noise_free_image() {
     let e = sim.exposure(0).expect("exposure");
     let kernel = sim.optical_kernel().expect("kernel");
     let o = Options::new(&c.analysis);
-    let a = engine::analysis::pipeline::analyze(
-        &AnalysisImage::from_detector(&c, &e.image),
-        Some(&e.truth),
-        &o,
-    )
-    .expect("analysis");
-    let used: Vec<&engine::analysis::StarResult> = a.stars.iter().filter(|s| s.is_used()).collect();
+    let a = common::analyze_scored(&AnalysisImage::from_detector(&c, &e.image), &e.truth, &o)
+        .expect("analysis");
+    let used: Vec<&engine::scoring::image::ScoredStar> =
+        a.stars.iter().filter(|s| s.is_used()).collect();
     assert_eq!(used.len(), 64);
     let measured: Vec<(f64, f64)> = used.iter().map(|s| (s.dx_px, s.dy_px)).collect();
     let pos: Vec<(f64, f64)> = used.iter().map(|s| (s.x, s.y)).collect();

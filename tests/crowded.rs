@@ -7,16 +7,29 @@ mod common;
 
 use common::gaussian_image;
 use engine::analysis::AnalysisImage;
-use engine::analysis::crowded::{self, report};
+use engine::analysis::crowded;
 use engine::analysis::epsf::fit::{StarFit, flags};
 use engine::analysis::report::star_results;
 use engine::config::Analysis;
+use engine::scoring::crowded as report;
+use engine::scoring::image::ScoredStar;
 use engine::simulate::TruthRow;
 use std::f64::consts::FRAC_1_SQRT_2;
 
 /// The PSF of the synthetic images: σ = 0.85 px (FWHM 2 px, JASMINE's in Hw).
 const SIGMA_PX: f64 = 0.85;
 const SKY_E: f64 = 400.0;
+
+/// The crowded fits scored against the truth (matched by position and flux).
+fn scored(fits: &[StarFit], truth: &[TruthRow]) -> Vec<ScoredStar> {
+    let stars = star_results(fits);
+    let m = report::match_catalogue(&stars, truth);
+    stars
+        .iter()
+        .zip(&m)
+        .map(|(s, k)| ScoredStar::new(*s, k.map(|k| (k, &truth[k]))))
+        .collect()
+}
 
 /// Stars on a jittered grid (builds the ePSF) in an n × n image.
 fn grid(n: usize, spacing: f64, flux: f64) -> Vec<(f64, f64, f64)> {
@@ -71,8 +84,7 @@ fn pairs_at_half_and_one_pixel_are_flagged_and_fitted_or_reported_as_one() {
         let (img, truth) = gaussian_image(n, &stars, SKY_E, SIGMA_PX, Some(seed));
         let c = crowded::analyse(&img, &cfg, None);
         assert!(c.fallback.is_empty(), "{}", c.fallback);
-        let matches = report::match_catalogue(&c.fits, &truth);
-        let results = star_results(&c.fits, &matches, Some(&truth));
+        let results = scored(&c.fits, &truth);
         let merged = report::merged(&results, &truth);
         for &(x, y, _, _) in &pairs {
             let near: Vec<usize> = (0..c.fits.len())
@@ -193,7 +205,7 @@ fn too_few_stars_for_an_epsf_fall_back_and_say_so() {
     });
     let c = crowded::analyse(&img, &cfg, Some(&model));
     assert!(c.fallback.contains("model PSF"), "{}", c.fallback);
-    let m = report::match_catalogue(&c.fits, &truth);
+    let m = report::match_catalogue(&star_results(&c.fits), &truth);
     assert_eq!(m.iter().flatten().count(), 3);
 }
 
@@ -258,8 +270,7 @@ fn a_crowded_field_reaches_its_bound_and_grouping_beats_single_fits() {
         c.fallback
     );
     assert!(c.n_groups > 50, "{} groups", c.n_groups);
-    let m = report::match_catalogue(&c.fits, &truth);
-    let res = star_results(&c.fits, &m, Some(&truth));
+    let res = scored(&c.fits, &truth);
     let bins = report::mag_bins(
         &[report::ArrayStars {
             stars: &res,
@@ -283,8 +294,8 @@ fn a_crowded_field_reaches_its_bound_and_grouping_beats_single_fits() {
     let opts = engine::analysis::pipeline::build_options(&cfg);
     let pd = img.pixels();
     let (mut grouped, mut single) = (Vec::new(), Vec::new());
-    for (f, mt) in c.fits.iter().zip(&m) {
-        let Some(k) = mt else { continue };
+    for (f, mt) in c.fits.iter().zip(res.iter().map(|s| s.truth)) {
+        let Some(k) = &mt else { continue };
         if f.flags & flags::GROUPED == 0 || !f.usable() || truth[*k].mag_hw > 15.0 {
             continue;
         }

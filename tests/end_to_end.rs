@@ -4,7 +4,7 @@ mod common;
 
 use common::{small_config, temp_dir};
 use engine::analysis::AnalysisImage;
-use engine::analysis::pipeline::{self as astrometry, Options};
+use engine::analysis::pipeline::Options;
 use engine::config::AceCase;
 use engine::io::{analysis_input, exposure, fits};
 use engine::simulate::Simulator;
@@ -55,8 +55,8 @@ fn simulate_write_read_analyse_round_trip() {
     );
     let in_memory = AnalysisImage::from_detector(&cfg, &exp.image);
     let o = Options::new(&cfg.analysis);
-    let a = astrometry::analyze(&from_file, Some(&truth_csv), &o).expect("analysis");
-    let b = astrometry::analyze(&in_memory, Some(&exp.truth), &o).expect("analysis");
+    let a = common::analyze_scored(&from_file, &truth_csv, &o).expect("analysis");
+    let b = common::analyze_scored(&in_memory, &exp.truth, &o).expect("analysis");
     assert_eq!(a.report, b.report);
     assert_eq!(a.report.n_used, 64);
     // a 12.5-mag Gaussian-ACE image: a few mas, near the bound
@@ -305,8 +305,8 @@ fn the_analysis_reads_no_truth_or_config_only_the_products() {
     assert!((x - y).abs() <= 1e-9 * x, "{x} vs {y}");
     // in memory, with the simulator's calibration flat: the same fits
     let mem = engine::session::analysis_image(&sim, &exp.image);
-    let m = astrometry::analyze(&mem, Some(&exp.truth), &Options::new(&cfg.analysis))
-        .expect("analysis");
+    let m =
+        common::analyze_scored(&mem, &exp.truth, &Options::new(&cfg.analysis)).expect("analysis");
     for (p, q) in m.stars.iter().zip(&a_full.stars) {
         assert_eq!((p.x, p.y), (q.x, q.y));
     }
@@ -380,7 +380,7 @@ fn the_telemetry_product_corrects_as_the_in_memory_telemetry_does() {
         sim: &sim,
         index: 1,
     }
-    .analyse(
+    .analyse_scored(
         &engine::session::analysis_image(&sim, &exp.image),
         Some(&exp.truth),
         &cfg,

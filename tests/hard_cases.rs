@@ -63,7 +63,7 @@ fn huge_jitter_stays_finite_and_conserves_flux() {
     // 6-px jitter the streaks break into several peaks; matching them to the truth within 2 px is not
     // expected (the accuracy of such an image is meaningless), finding and fitting them without NaN is.
     let img = AnalysisImage::from_detector(&c, &e.image);
-    let a = astrometry::analyze(&img, Some(&e.truth), &Options::new(&c.analysis))
+    let a = common::analyze_scored(&img, &e.truth, &Options::new(&c.analysis))
         .expect("a 6-px jitter is analysed, not refused");
     let reach_px = 3.0 * c.ace.sigma_mas / c.instrument.plate_scale_mas();
     for t in &e.truth {
@@ -170,8 +170,7 @@ fn saturated_dark_noise_floor_blended_and_edge_stars() {
         .count();
     assert!(sat_pixels > 0, "the Hw 6 star saturates and DQ says so");
     let img = AnalysisImage::from_detector(&c, &e.image);
-    let a =
-        astrometry::analyze(&img, Some(&e.truth), &Options::new(&c.analysis)).expect("analysis");
+    let a = common::analyze_scored(&img, &e.truth, &Options::new(&c.analysis)).expect("analysis");
     assert!(
         a.stars
             .iter()
@@ -199,7 +198,7 @@ fn saturated_dark_noise_floor_blended_and_edge_stars() {
     // the ePSF's centring convention is taken from the grid stars; χ²/dof of the 32 normalised errors lies
     // in [0.45, 1.9] with 99.9 % probability (χ²₃₂).
     let grid_fits: Vec<_> = (0..grid).filter_map(found).collect();
-    let off = |d: &dyn Fn(&engine::analysis::StarResult) -> f64| {
+    let off = |d: &dyn Fn(&engine::scoring::image::ScoredStar) -> f64| {
         grid_fits.iter().map(|s| d(s)).sum::<f64>() / grid_fits.len() as f64
     };
     let (ox, oy) = (off(&|s| s.dx_px), off(&|s| s.dy_px));
@@ -334,6 +333,7 @@ fn psf_halo_adds_the_light_beyond_the_table() {
 fn too_few_stars_for_an_epsf_fall_back_to_a_stated_psf() {
     use engine::analysis::countermeasures::Plan;
     use engine::analysis::pipeline::{Supplied, analyse_image, exact_epsf};
+    use engine::scoring::image::score;
     use engine::session::Source;
     let mut c = small_config();
     c.ace.case = AceCase::Gaussian;
@@ -347,20 +347,13 @@ fn too_few_stars_for_an_epsf_fall_back_to_a_stated_psf() {
         sim: &sim,
         index: 0,
     }
-    .analyse(&img, Some(&e.truth), &c, &plan, &Default::default())
+    .analyse_scored(&img, Some(&e.truth), &c, &plan, &Default::default())
     .expect("analysis");
     let r = &with_model.global.report;
     assert_eq!((r.epsf_stars, r.n_used), (4, 4), "{r:?}");
     assert!(r.epsf_fallback.contains("model PSF"), "{r:?}");
     assert!(r.accuracy_mas.is_finite() && r.accuracy_mas > 0.0);
-    let without = analyse_image(
-        &img,
-        Some(&e.truth),
-        &c.analysis,
-        &plan,
-        &Default::default(),
-    )
-    .expect("analysis");
+    let without = analyse_image(&img, &c.analysis, &plan, &Default::default()).expect("analysis");
     assert!(
         without.global.report.epsf_fallback.contains("Gaussian"),
         "{:?}",
@@ -370,9 +363,8 @@ fn too_few_stars_for_an_epsf_fall_back_to_a_stated_psf() {
     // simulation's does, and measures the stars within 1.5 × of the true optical PSF (the oracle)
     let model = engine::io::instrument::model_psf_product(&sim).expect("model PSF");
     let with = |m: &engine::analysis::epsf::Epsf| {
-        analyse_image(
+        let a = analyse_image(
             &img,
-            Some(&e.truth),
             &c.analysis,
             &plan,
             &Supplied {
@@ -380,9 +372,8 @@ fn too_few_stars_for_an_epsf_fall_back_to_a_stated_psf() {
                 ..Default::default()
             },
         )
-        .expect("analysis")
-        .global
-        .report
+        .expect("analysis");
+        score(&a.global, Some(&e.truth), img.plate_scale_mas).report
     };
     let p = with(&model);
     assert!(p.epsf_fallback.contains("model PSF"), "{p:?}");
@@ -405,7 +396,6 @@ fn too_few_stars_for_an_epsf_fall_back_to_a_stated_psf() {
     let e = sim.exposure(0).expect("exp");
     let a = astrometry::analyze(
         &AnalysisImage::from_detector(&c, &e.image),
-        Some(&e.truth),
         &Options::new(&c.analysis),
     )
     .expect("analysis");

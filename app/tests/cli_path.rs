@@ -9,10 +9,10 @@
 //! sampling (RNREAD, SAMPLING).
 
 use app::worker::{FrameResult, Job, Msg, Request, Stages, Worker};
-use engine::analysis::Report;
 use engine::analysis::countermeasures::Countermeasure;
 use engine::config::Config;
 use engine::io::{analysis_input, exposure, fits};
+use engine::scoring::image::Report;
 use engine::session::Session;
 use engine::testkit::{small_config, temp_dir};
 use std::path::Path;

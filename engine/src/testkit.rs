@@ -6,6 +6,8 @@ use crate::analysis::StarResult;
 use crate::config::{Backend, Config};
 use crate::integrate::gpu::{GpuIntegrator, software_adapter};
 use crate::optics::psf::PsfTable;
+use crate::scoring::image::ScoredStar;
+use crate::truth::TruthRow;
 
 /// A 512² detector (4 channels of 128 columns), an 8 × 8 grid of stars 56 px apart, a coarser PSF grid and
 /// wavelength sampling, and a 2-minute ACE series; everything else (optics, noise, photometry) as the
@@ -99,21 +101,24 @@ pub fn temp_dir(name: &str) -> std::path::PathBuf {
 
 /// A measured star matched to truth star `truth`, fitted at `(x + dx, y + dy)` for a true position `(x, y)`
 /// (px), with a 0.01-px bound and no prediction attached.
-pub fn star_result(truth: usize, x: f64, y: f64, dx: f64, dy: f64) -> StarResult {
+pub fn scored_star(truth: usize, x: f64, y: f64, dx: f64, dy: f64) -> ScoredStar {
+    let t = TruthRow {
+        x_px: x,
+        y_px: y,
+        ..Default::default()
+    };
+    ScoredStar::new(star_result(x + dx, y + dy), Some((truth, &t)))
+}
+
+/// A measured star at `(x, y)` (px) of 10⁴ e⁻ with a 0.01-px bound, unflagged.
+pub fn star_result(x: f64, y: f64) -> StarResult {
     StarResult {
-        truth: Some(truth),
-        x: x + dx,
-        y: y + dy,
+        x,
+        y,
         flux_e: 1e4,
         sky_e: 0.0,
         crlb_x_px: 0.01,
         crlb_y_px: 0.01,
         flags: 0,
-        dx_px: dx,
-        dy_px: dy,
-        predicted_dx_px: 0.0,
-        predicted_dy_px: 0.0,
-        predicted_fit_dx_px: 0.0,
-        predicted_fit_dy_px: 0.0,
     }
 }

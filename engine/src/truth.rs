@@ -1,9 +1,10 @@
 //! The answer key of a simulation: where each star truly is in one exposure and what it delivered. The
-//! simulator writes it (the TRUTH extension, `truth_NNN.csv`); the scoring step reads it; an analysis
-//! reads it only where it says `@oracle` (a control, never a default).
+//! simulator writes it (the TRUTH extension, `truth_NNN.csv`); the scoring step (layer 7) reads it;
+//! the analysis never does (the `@oracle` plate control is handed the true positions as a reference catalogue
+//! named so, by the session that simulated them).
 
 /// The true parameters of one star in one exposure.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct TruthRow {
     pub id: usize,
     /// True position (0-based pixels), without jitter.

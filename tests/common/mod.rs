@@ -117,3 +117,17 @@ pub fn pooled_accuracy_over_bound(
         acc.iter().sum::<f64>() / acc.len() as f64,
     )
 }
+
+/// The analysis of `img` (no truth enters), then scored against `truth`.
+pub fn analyze_scored(
+    img: &engine::analysis::AnalysisImage,
+    truth: &[engine::truth::TruthRow],
+    opts: &engine::analysis::Options,
+) -> Result<engine::scoring::image::Scored, engine::analysis::AnalysisError> {
+    let a = engine::analysis::pipeline::analyze(img, opts)?;
+    Ok(engine::scoring::image::score(
+        &a,
+        Some(truth),
+        img.plate_scale_mas,
+    ))
+}

@@ -121,17 +121,16 @@ pub fn curve_ui(ui: &mut egui::Ui, screen: &OnScreen, results: &Results) {
             ""
         }
     ));
-    let centre = |b: &engine::analysis::crowded::report::MagBin| 0.5 * (b.hw_lo + b.hw_hi);
-    let log_line =
-        |f: &dyn Fn(&engine::analysis::crowded::report::MagBin) -> f64| -> Vec<[f64; 2]> {
-            c.bins
-                .iter()
-                .filter_map(|b| {
-                    let v = f(b);
-                    (v.is_finite() && v > 0.0).then(|| [centre(b), v.log10()])
-                })
-                .collect()
-        };
+    let centre = |b: &engine::scoring::crowded::MagBin| 0.5 * (b.hw_lo + b.hw_hi);
+    let log_line = |f: &dyn Fn(&engine::scoring::crowded::MagBin) -> f64| -> Vec<[f64; 2]> {
+        c.bins
+            .iter()
+            .filter_map(|b| {
+                let v = f(b);
+                (v.is_finite() && v > 0.0).then(|| [centre(b), v.log10()])
+            })
+            .collect()
+    };
     // both plots span the bins (x aligned)
     let x_lo = c.bins.first().map(|b| b.hw_lo).unwrap_or(8.0);
     let x_hi = c.bins.last().map(|b| b.hw_hi).unwrap_or(17.0);
@@ -179,7 +178,7 @@ pub fn curve_ui(ui: &mut egui::Ui, screen: &OnScreen, results: &Results) {
                 .width(1.5),
             );
         });
-    let lin = |f: &dyn Fn(&engine::analysis::crowded::report::MagBin) -> f64| -> Vec<[f64; 2]> {
+    let lin = |f: &dyn Fn(&engine::scoring::crowded::MagBin) -> f64| -> Vec<[f64; 2]> {
         c.bins
             .iter()
             .filter_map(|b| {

@@ -1,4 +1,4 @@
-//! The deviation vector map: the engine's [`VectorMap`](engine::analysis::vectors::VectorMap) of the shown
+//! The deviation vector map: the engine's [`VectorMap`](engine::scoring::vectors::VectorMap) of the shown
 //! analysis (fitted − true, mean removed, with its per-axis accuracy and reference arrow) and the fit
 //! displacement the ACE predicts, drawn at the frame's star grid.
 
@@ -8,7 +8,7 @@ use crate::settings::ViewSettings;
 use crate::state::{OnScreen, Results};
 use egui::Color32;
 use egui_plot::{Arrows, Plot, PlotPoint, PlotPoints, Text};
-use engine::analysis::vectors::Arrow;
+use engine::scoring::vectors::Arrow;
 
 /// Origins and tips of arrows drawn `px_per_mas` pixels per mas.
 fn arrows(a: &[Arrow], px_per_mas: f64) -> (Vec<[f64; 2]>, Vec<[f64; 2]>) {

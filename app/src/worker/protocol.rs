@@ -4,9 +4,9 @@
 
 use engine::analysis::countermeasures::{Countermeasure, CountermeasureError, Plan};
 use engine::analysis::epsf::Epsf;
-use engine::analysis::vectors::{Arrow, VectorMap};
-use engine::analysis::{Report, StarResult};
 use engine::config::Config;
+use engine::scoring::image::{Report, ScoredStar};
+use engine::scoring::vectors::{Arrow, VectorMap};
 use engine::studies::experiment::Row;
 use std::sync::Arc;
 
@@ -164,7 +164,7 @@ pub struct FrameResult {
     pub truth_xy: Vec<(f64, f64)>,
     /// Report and star results under the chosen countermeasure.
     pub report: Report,
-    pub stars: Vec<StarResult>,
+    pub stars: Vec<ScoredStar>,
     /// Report of the plain analysis (global ePSF, no countermeasure).
     pub report_none: Report,
     pub epsf: Epsf,
@@ -227,7 +227,7 @@ pub struct CrowdedResult {
     pub countermeasure: String,
     pub note: Option<String>,
     pub plane: engine::sky::focal_plane::FocalPlane,
-    pub bins: Vec<engine::analysis::crowded::report::MagBin>,
+    pub bins: Vec<engine::scoring::crowded::MagBin>,
     /// Per array: (f_x, f_y, dx_mas, dy_mas) per cell ([`engine::studies::crowded::ArrayAnalysis::binned_vectors`]).
     pub vectors: Vec<Vec<(f64, f64, f64, f64)>>,
     pub summaries: Vec<engine::studies::crowded::CrowdedSummary>,

@@ -10,8 +10,8 @@ use super::protocol::{
 };
 use super::views;
 use engine::analysis::countermeasures::{Countermeasure, Plan};
-use engine::analysis::vectors::VectorMap;
 use engine::config::{AceCase, Config};
+use engine::scoring::vectors::VectorMap;
 use engine::session::{Session, Source, analysis_image, simulation_key};
 use engine::simulate::{Exposure, FocalPlaneSimulator, Simulator};
 use engine::studies::experiment::Row;
@@ -211,7 +211,7 @@ impl EngineState {
         let plan = r.plan().map_err(failed(Stage::Image))?;
         let img = analysis_image(&sim, &exp.image);
         let res = Source { sim: &sim, index }
-            .analyse(&img, Some(&exp.truth), cfg, &plan, &Default::default())
+            .analyse_scored(&img, Some(&exp.truth), cfg, &plan, &Default::default())
             .map_err(failed(Stage::Image))?;
         let analyse_s = t1.elapsed().as_secs_f64();
         // a countermeasure that does not apply to this image leaves the plain analysis
@@ -382,7 +382,7 @@ impl EngineState {
             ),
         };
         let b = &r.cfg.scene.bulge;
-        let edges = engine::analysis::crowded::report::edges(b.hw_min, b.hw_max, 0.5);
+        let edges = engine::scoring::crowded::edges(b.hw_min, b.hw_max, 0.5);
         let run = crowded::analyse_focal_plane(fps, exp, &plan, &edges)
             .map_err(failed(Stage::Image))?
             .pop()
@@ -446,7 +446,7 @@ impl EngineState {
         out.check()?;
         let img = analysis_image(&sim, &exp.image);
         let report = Source { sim: &sim, index }
-            .analyse(
+            .analyse_scored(
                 &img,
                 Some(&exp.truth),
                 &tcfg,

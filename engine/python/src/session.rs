@@ -5,7 +5,6 @@ use crate::config::PyConfig;
 use crate::exposure::{PyExposure, facts_of};
 use crate::{OrPy, convert};
 use engine::Config;
-use engine::analysis::Analysis;
 use engine::analysis::countermeasures::{
     Countermeasure, DEFAULT_CATALOGUE_ERROR_MAS, Plan, TelemetryQuality,
 };
@@ -14,6 +13,7 @@ use engine::io::analysis_input::{AnalysisInput, ImageParts};
 use engine::io::exposure::{TRUTH_HEADER, truth_from_columns};
 use engine::io::instrument::CalibrationFlat;
 use engine::io::products;
+use engine::scoring::image::Scored;
 use engine::session::Session;
 use engine::simulate::Simulator;
 use engine::studies::predict::Predictor;
@@ -449,7 +449,7 @@ pub struct PyAnalysis {
 impl PyAnalysis {
     fn new(
         py: Python<'_>,
-        a: Analysis,
+        a: Scored,
         input: &AnalysisInput,
         cm: &engine::analysis::countermeasures::Countermeasure,
     ) -> PyResult<Self> {

@@ -1,11 +1,10 @@
 //! Finding the stars: local maxima above the noise, their starting values, which of them may build the ePSF,
-//! and the match of detections to a truth catalogue.
+//! and the cross-match of positions to reference positions.
 
 use crate::analysis::epsf::build::{self, StarStart};
 use crate::analysis::image::AnalysisImage;
 use crate::config::Analysis as AnalysisCfg;
 use crate::numerics::stats;
-use crate::truth::TruthRow;
 use rayon::prelude::*;
 
 /// Local maxima (5 × 5) above `nsigma` × the image's robust noise over its median; brightest first, closer
@@ -133,15 +132,6 @@ pub fn clear_box(img: &AnalysisImage, x: f64, y: f64, r_px: f64) -> bool {
 pub fn sky_annulus(cfg: &AnalysisCfg) -> (f64, f64) {
     let r = cfg.epsf_radius_px as f64;
     (r + 1.0, r + 4.0)
-}
-
-/// Match detections to the truth: for each detection the nearest truth star within 2 px of its position
-/// corrected for the common offset. The common offset (the exposure's mean pointing error, the ePSF's
-/// centring convention) is the median displacement of the detections to their nearest truth star within
-/// 20 px (when at least 3 such pairs exist; else none), as a cross-match with an offset search would find it.
-pub fn match_truth(pos: &[(f64, f64)], truth: &[TruthRow]) -> Vec<Option<usize>> {
-    let refs: Vec<(f64, f64)> = truth.iter().map(|t| (t.x_px, t.y_px)).collect();
-    match_positions(pos, &refs, 20.0, 2.0)
 }
 
 /// Cross-match positions to reference positions: the common offset is the median displacement of the pairs

@@ -11,7 +11,6 @@ pub mod image;
 pub mod pipeline;
 pub mod report;
 pub mod response;
-pub mod vectors;
 
 pub use image::AnalysisImage;
 pub use pipeline::{Analysis, ImageAnalysis, Options, Supplied, analyse_image};
@@ -36,7 +35,7 @@ pub enum AnalysisError {
     #[error(
         "{countermeasure} is not offered for a crowded field (yzones and exact-epsf refit single stars, a stack \
          reference needs a stare; offered: none, plate-*@catalogue with the reference catalogue, \
-         plate-*@oracle with a truth, telemetry with the telemetry product)"
+         plate-*@oracle on a simulated exposure, telemetry with the telemetry product)"
     )]
     NotInCrowdedField { countermeasure: String },
 }

@@ -1,23 +1,22 @@
-//! The per-image analysis pipeline: detect → global ePSF → fits → each countermeasure of a [`Plan`] → the
-//! ACE prediction → report. `jsim analyze`, `jsim experiment`, the sweeps and the explorer all run
-//! [`analyse_image`]; the pieces ([`analyze_prepared`], [`with_countermeasure`], [`analyze`]) are public for
+//! The per-image analysis pipeline: detect → global ePSF → fits → each countermeasure of a [`Plan`] →
+//! report. No truth enters: scoring the fits against one is the next layer's (`scoring::image`). `jsim
+//! analyze`, `jsim experiment`, the sweeps and the explorer all run [`analyse_image`]; the pieces ([`analyze_prepared`], [`with_countermeasure`], [`analyze`]) are public for
 //! the tests and for studies that need one step alone.
 
 use crate::analysis::AnalysisError;
 use crate::analysis::countermeasures::TelemetryQuality;
 use crate::analysis::countermeasures::telemetry::{ExposureReadout, TelemetryRecord};
 use crate::analysis::countermeasures::{self, Context, Countermeasure, Plan, Telemetry, stack};
-use crate::analysis::crowded::focal_plane::CrowdedSummary;
-use crate::analysis::detection::{detect, match_truth, starts};
+use crate::analysis::crowded::CrowdedSummary;
+use crate::analysis::detection::{detect, starts};
 use crate::analysis::epsf::Epsf;
 use crate::analysis::epsf::build::{self, BuildOptions, StarStart};
 use crate::analysis::epsf::fit::{FitOptions, StarFit, fit_star, flags};
 use crate::analysis::image::AnalysisImage;
-use crate::analysis::report::{Report, StarResult, star_results, summarise};
+use crate::analysis::report::{Report, StarResult, star_results};
 use crate::analysis::response::FitNoise;
 use crate::config::{Analysis as AnalysisCfg, TelemetryKernel};
 use crate::integrate::kernel::PixelKernel;
-use crate::truth::TruthRow;
 use rayon::prelude::*;
 use std::sync::Arc;
 
@@ -98,15 +97,10 @@ pub struct Prepared {
 }
 
 /// Analyse one image: detect, build (or take) the ePSF, fit, apply the countermeasure, report.
-pub fn analyze(
-    img: &AnalysisImage,
-    truth: Option<&[TruthRow]>,
-    opts: &Options,
-) -> Result<Analysis, AnalysisError> {
-    let (plain, prepared) = analyze_prepared(img, truth, opts)?;
+pub fn analyze(img: &AnalysisImage, opts: &Options) -> Result<Analysis, AnalysisError> {
+    let (plain, prepared) = analyze_prepared(img, opts)?;
     with_countermeasure(
         img,
-        truth,
         &plain,
         &prepared,
         &opts.countermeasure,
@@ -118,16 +112,14 @@ pub fn analyze(
 /// The analysis without a countermeasure, and what it prepared for [`with_countermeasure`].
 pub fn analyze_prepared(
     img: &AnalysisImage,
-    truth: Option<&[TruthRow]>,
     opts: &Options,
 ) -> Result<(Analysis, Prepared), AnalysisError> {
-    analyze_prepared_with(img, truth, opts, &|| Ok(opts.model_epsf.clone()))
+    analyze_prepared_with(img, opts, &|| Ok(opts.model_epsf.clone()))
 }
 
 /// [`analyze_prepared`] with the model PSF of the few-star fallback made only when it is needed.
 fn analyze_prepared_with(
     img: &AnalysisImage,
-    truth: Option<&[TruthRow]>,
     opts: &Options,
     model_epsf: &dyn Fn() -> Result<Option<Epsf>, AnalysisError>,
 ) -> Result<(Analysis, Prepared), AnalysisError> {
@@ -136,11 +128,6 @@ fn analyze_prepared_with(
         return Err(AnalysisError::NoStars(opts.cfg.detect_sigma));
     }
     let (starts, usable) = starts(img, &det, &opts.cfg);
-    let initial: Vec<(f64, f64)> = starts.iter().map(|s| (s.x, s.y)).collect();
-    let matches = match truth {
-        Some(t) => match_truth(&initial, t),
-        None => vec![None; initial.len()],
-    };
     let bopt = opts.build_options();
     let pd = img.pixels();
     let n_build = usable.iter().filter(|u| **u).count();
@@ -174,7 +161,7 @@ fn analyze_prepared_with(
     };
     flags::mark_poor_fits(&mut fits);
     flags::mark_blends(&mut fits, flags::blend_radius_px(opts.cfg.fit_radius_px));
-    let stars = star_results(&fits, &matches, truth);
+    let stars = star_results(&fits);
     let mut report = Report {
         n_detected: det.len(),
         epsf_iterations: iterations,
@@ -183,7 +170,7 @@ fn analyze_prepared_with(
         countermeasure: Countermeasure::None.to_string(),
         ..Default::default()
     };
-    summarise(&stars, truth, img.plate_scale_mas, &mut report);
+    report.count(&stars);
     Ok((
         Analysis {
             report,
@@ -215,7 +202,6 @@ fn countermeasure_report(plain: &Report, cm: &Countermeasure) -> Report {
 /// Apply a countermeasure to the plain analysis of an image (from [`analyze_prepared`]) and report.
 pub fn with_countermeasure(
     img: &AnalysisImage,
-    truth: Option<&[TruthRow]>,
     plain: &Analysis,
     prepared: &Prepared,
     cm: &Countermeasure,
@@ -230,7 +216,6 @@ pub fn with_countermeasure(
         usable: &prepared.usable,
         build: &prepared.build,
         global: &plain.epsf,
-        truth,
         default_zones: prepared.default_zones,
         telemetry,
         reference,
@@ -240,7 +225,7 @@ pub fn with_countermeasure(
         // the image alone is its own stack: nothing corrected until the stare is finished
         report.stare_exposures = 1;
     }
-    summarise(&stars, truth, img.plate_scale_mas, &mut report);
+    report.count(&stars);
     Ok(Analysis {
         report,
         stars,
@@ -269,7 +254,6 @@ pub fn offered_in_crowded_field(cm: &Countermeasure) -> bool {
 /// without stars gives an analysis without stars (the reason in [`ImageAnalysis::crowded`]).
 pub fn analyse_crowded_image(
     img: &AnalysisImage,
-    truth: Option<&[TruthRow]>,
     cfg: &AnalysisCfg,
     plan: &Plan,
     supplied: &Supplied<'_>,
@@ -287,16 +271,9 @@ pub fn analyse_crowded_image(
     // an empty field is a result (no star, the reason in the summary's fallback), not an error: a study
     // over the focal plane reports its empty arrays; a caller that needs stars checks
     let c = crate::analysis::crowded::analyse(img, cfg, supplied.model_psf);
-    let matches = match truth {
-        Some(t) => crate::analysis::crowded::report::match_catalogue(&c.fits, t),
-        None => vec![None; c.fits.len()],
-    };
-    let stars = star_results(&c.fits, &matches, truth);
-    let mut summary = CrowdedSummary::of(&c, &stars, t0.elapsed().as_secs_f64());
-    if truth.is_none() {
-        summary.n_unmatched = None;
-    }
-    let report = Report {
+    let stars = star_results(&c.fits);
+    let summary = CrowdedSummary::of(&c, t0.elapsed().as_secs_f64());
+    let mut report = Report {
         n_detected: c.fits.len(),
         epsf_iterations: c.epsf_iterations,
         epsf_stars: c.epsf_stars,
@@ -305,12 +282,12 @@ pub fn analyse_crowded_image(
         crowded: true,
         ..Default::default()
     };
-    let mut plain = Analysis {
+    report.count(&stars);
+    let plain = Analysis {
         report,
         stars,
         epsf: c.epsf,
     };
-    summarise(&plain.stars, truth, img.plate_scale_mas, &mut plain.report);
     let build = build_options(cfg);
     let mut measured = Vec::with_capacity(plan.countermeasures.len());
     for cm in &plan.countermeasures {
@@ -328,7 +305,6 @@ pub fn analyse_crowded_image(
             usable: &[],
             build: &build,
             global: &plain.epsf,
-            truth,
             default_zones: cfg.epsf_zones.max(2),
             telemetry: telemetry.as_ref(),
             reference: supplied.reference_for(cm),
@@ -337,7 +313,7 @@ pub fn analyse_crowded_image(
         let mut report = countermeasure_report(&plain.report, cm);
         report.crowded = true;
         report.dof_absorbed = countermeasures::apply(cm, &ctx, &mut stars)?;
-        summarise(&stars, truth, img.plate_scale_mas, &mut report);
+        report.count(&stars);
         measured.push((
             *cm,
             Analysis {
@@ -383,25 +359,28 @@ pub struct Supplied<'a> {
     /// The exact ePSF of a static-ACE simulation: the `exact-epsf` control (an oracle; without it that
     /// control does not apply).
     pub exact_epsf: Option<&'a Epsf>,
+    /// The true positions (this image's pixels) of a simulated exposure: the `plate-*@oracle` control's
+    /// reference (an oracle; without it that control is refused by name).
+    pub oracle_reference: Option<&'a [(f64, f64)]>,
 }
 
 impl Supplied<'_> {
-    /// The reference catalogue a countermeasure is referenced to: the product, else the simulated survey's
-    /// at its catalogue error (`plate-*@catalogue` only).
+    /// The reference positions a countermeasure is referenced to: for `plate-*@catalogue` the product, else
+    /// the simulated survey's at its catalogue error; for `plate-*@oracle` the true positions.
     pub fn reference_for(&self, cm: &Countermeasure) -> Option<&[(f64, f64)]> {
-        let Countermeasure::Plate {
-            reference: countermeasures::Reference::Catalogue { error_mas },
-            ..
-        } = cm
-        else {
+        let Countermeasure::Plate { reference, .. } = cm else {
             return None;
         };
-        self.reference.or_else(|| {
-            self.reference_by_error
-                .iter()
-                .find(|(e, _)| e == error_mas)
-                .map(|(_, r)| r.as_slice())
-        })
+        match reference {
+            countermeasures::Reference::Catalogue { error_mas } => self.reference.or_else(|| {
+                self.reference_by_error
+                    .iter()
+                    .find(|(e, _)| e == error_mas)
+                    .map(|(_, r)| r.as_slice())
+            }),
+            countermeasures::Reference::Oracle => self.oracle_reference,
+            countermeasures::Reference::Stack => None,
+        }
     }
 
     /// The telemetry record a countermeasure of quality `q` corrects with: the product, else the record at
@@ -455,8 +434,7 @@ pub fn telemetry_for(
 /// One image analysed under a plan.
 #[derive(Debug, Clone)]
 pub struct ImageAnalysis {
-    /// The global-ePSF analysis (the result of countermeasure `none`; a simulation's study may attach the
-    /// fit displacement its true ACE predicts).
+    /// The global-ePSF analysis (the result of countermeasure `none`).
     pub global: Analysis,
     /// One analysis per countermeasure of the plan that applies to this image, in plan order (`exact-epsf`
     /// applies only to a simulated image with a static ACE).
@@ -486,14 +464,13 @@ impl ImageAnalysis {
 /// `exact-epsf` without an exact ePSF — or is refused by name — `plate-*@catalogue` without a reference).
 pub fn analyse_image(
     img: &AnalysisImage,
-    truth: Option<&[TruthRow]>,
     cfg: &AnalysisCfg,
     plan: &Plan,
     supplied: &Supplied<'_>,
 ) -> Result<ImageAnalysis, AnalysisError> {
     let base = Options::new(cfg);
     let model = || -> Result<Option<Epsf>, AnalysisError> { Ok(supplied.model_psf.cloned()) };
-    let (plain, prepared) = analyze_prepared_with(img, truth, &base, &model)?;
+    let (plain, prepared) = analyze_prepared_with(img, &base, &model)?;
     let mut measured = Vec::with_capacity(plan.countermeasures.len());
     for cm in &plan.countermeasures {
         let reference = supplied.reference_for(cm);
@@ -505,16 +482,16 @@ pub fn analyse_image(
                 };
                 let mut o = base.clone();
                 o.fixed_epsf = Some(exact.clone());
-                analyze(img, truth, &o)?
+                analyze(img, &o)?
             }
             Countermeasure::Telemetry(q) => match telemetry_for(q, supplied, img, &plain, cfg)? {
                 // a static ACE (or no telemetry at all) has nothing to correct
                 None => plain.clone(),
                 Some(tel) => {
-                    with_countermeasure(img, truth, &plain, &prepared, cm, Some(&tel), reference)?
+                    with_countermeasure(img, &plain, &prepared, cm, Some(&tel), reference)?
                 }
             },
-            other => with_countermeasure(img, truth, &plain, &prepared, other, None, reference)?,
+            other => with_countermeasure(img, &plain, &prepared, other, None, reference)?,
         };
         measured.push((*cm, analysis));
     }
@@ -525,15 +502,10 @@ pub fn analyse_image(
     })
 }
 
-/// Finish the analyses of a stare's exposures (`images[k]`, with `truths[k]` when known): every plate model
+/// Finish the analyses of a stare's exposures (`images[k]`): every plate model
 /// of the plan referenced to the stack is fitted over all of them ([`stack::stack_plate`], from each image's
 /// global fits) and replaces each image's stare-of-one result. A stare of one exposure is left as it is.
-pub fn finish_stare(
-    images: &mut [ImageAnalysis],
-    truths: &[Option<&[TruthRow]>],
-    plan: &Plan,
-    plate_scale_mas: f64,
-) -> Result<(), AnalysisError> {
+pub fn finish_stare(images: &mut [ImageAnalysis], plan: &Plan) -> Result<(), AnalysisError> {
     if images.len() < 2 {
         return Ok(());
     }
@@ -545,16 +517,11 @@ pub fn finish_stare(
         let mut stars: Vec<Vec<StarResult>> =
             images.iter().map(|im| im.global.stars.clone()).collect();
         let out = stack::stack_plate(&mut stars, *model, &cm.to_string())?;
-        for (k, (im, st)) in images.iter_mut().zip(stars).enumerate() {
+        for (im, st) in images.iter_mut().zip(stars) {
             let mut report = countermeasure_report(&im.global.report, cm);
             report.dof_absorbed = out.dof_absorbed;
             report.stare_exposures = n;
-            summarise(
-                &st,
-                truths.get(k).copied().flatten(),
-                plate_scale_mas,
-                &mut report,
-            );
+            report.count(&st);
             let analysis = Analysis {
                 report,
                 stars: st,

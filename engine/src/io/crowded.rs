@@ -17,8 +17,8 @@
 use super::IoError;
 use super::csv::{self, Cell};
 use super::plot::{self, Scale, Series};
-use crate::analysis::crowded::focal_plane::{ArrayAnalysis, FocalPlaneAnalysis, VECTOR_CELLS};
-use crate::analysis::crowded::report::{ClassStats, MagBin};
+use crate::scoring::crowded::{ClassStats, MagBin};
+use crate::scoring::focal_plane::{ArrayAnalysis, FocalPlaneAnalysis, VECTOR_CELLS};
 use crate::sky::focal_plane::FocalPlane;
 use std::path::Path;
 
@@ -106,7 +106,7 @@ pub fn array_rows(case: &str, arrays: &[ArrayAnalysis]) -> Vec<Vec<Cell>> {
                 Cell::I(a.index as i64 + 1),
                 Cell::I(s.n_first as i64),
                 Cell::I(s.n_residual as i64),
-                Cell::I(s.n_unmatched.map(|v| v as i64).unwrap_or(-1)),
+                Cell::I(a.n_unmatched as i64),
                 Cell::I(s.epsf_stars as i64),
                 Cell::I(s.epsf_iterations as i64),
                 Cell::I(s.n_groups as i64),
@@ -136,7 +136,7 @@ pub const STARS_HEADER: [&str; 12] = [
 
 /// One row per reported star of every array.
 pub fn star_rows(arrays: &[ArrayAnalysis], scale_mas: f64) -> Vec<Vec<Cell>> {
-    use crate::analysis::crowded::report;
+    use crate::scoring::crowded as report;
     let mut rows = Vec::new();
     for a in arrays {
         let merged = report::merged(&a.stars, &a.truth);

@@ -7,11 +7,11 @@ use super::csv::{self, Cell};
 use super::fits::{self, Card, Hdu, Pixels};
 use super::plot;
 use crate::analysis::epsf::Epsf;
-use crate::analysis::report::{ImageResult, Row};
-use crate::analysis::vectors::VectorMap;
-use crate::analysis::{Analysis, Report, StarResult};
 use crate::config::Config;
 use crate::optics::psf::PsfTable;
+use crate::scoring::dataset::{ImageResult, Row};
+use crate::scoring::image::{Report, Scored, ScoredStar};
+use crate::scoring::vectors::VectorMap;
 use serde::Serialize;
 use std::path::Path;
 
@@ -30,7 +30,7 @@ pub const CATALOGUE_HEADER: [&str; 10] = [
 ];
 
 /// Rows of `catalogue.csv`: one per detected star (`plate_scale_mas` per pixel; truth_id −1 when unmatched).
-pub fn catalogue_rows(stars: &[StarResult], plate_scale_mas: f64) -> Vec<Vec<Cell>> {
+pub fn catalogue_rows(stars: &[ScoredStar], plate_scale_mas: f64) -> Vec<Vec<Cell>> {
     stars
         .iter()
         .map(|s| {
@@ -53,7 +53,7 @@ pub fn catalogue_rows(stars: &[StarResult], plate_scale_mas: f64) -> Vec<Vec<Cel
 /// Write `catalogue.csv`.
 pub fn write_catalogue(
     path: &Path,
-    stars: &[StarResult],
+    stars: &[ScoredStar],
     plate_scale_mas: f64,
 ) -> Result<(), IoError> {
     csv::write(
@@ -120,7 +120,7 @@ pub fn write_summary(path: &Path, s: &Summary<'_>) -> Result<(), IoError> {
 /// the vector map when the truth was known.
 pub fn write_analysis(
     dir: &Path,
-    analysis: &Analysis,
+    analysis: &Scored,
     summary: &Summary<'_>,
     vectors: Option<(&VectorMap, f64, &str)>,
 ) -> Result<(), IoError> {
@@ -176,7 +176,7 @@ pub fn write_vectors(
         })
         .collect();
     csv::write(&dir.join(format!("{stem}.csv")), &VECTORS_HEADER, &rows)?;
-    let set = |v: &[crate::analysis::vectors::Arrow]| -> Vec<(f64, f64, f64, f64)> {
+    let set = |v: &[crate::scoring::vectors::Arrow]| -> Vec<(f64, f64, f64, f64)> {
         v.iter()
             .map(|a| (a.x_px, a.y_px, a.dx_mas, a.dy_mas))
             .collect()

@@ -13,12 +13,13 @@ pub use source::{Source, SourceError, SourceProducts, analysis_image};
 use crate::analysis::countermeasures::{Countermeasure, Plan};
 use crate::analysis::crowding;
 use crate::analysis::pipeline::{Supplied, analyse_crowded_image};
-use crate::analysis::{Analysis, AnalysisError, analyse_image};
+use crate::analysis::{AnalysisError, analyse_image};
 use crate::config::{Backend, Config};
 use crate::integrate::Integrator;
 use crate::integrate::kernel::KernelCache;
 use crate::io::analysis_input::AnalysisInput;
 use crate::optics::PsfBank;
+use crate::scoring::image::{Scored, score};
 use crate::simulate::{FocalPlaneSimulator, SimError, Simulator};
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex, MutexGuard};
@@ -159,15 +160,17 @@ impl Session {
     /// `Session.analyze`): `cfg` gives the analysis knobs — crowding among them — (`epsf_zones` overrides its
     /// zones); the
     /// calibration is what the instrument supplied beside the image (`input`'s products and headers), never
-    /// the image's CONFIG or TRUTH. The one oracle is the `exact-epsf` control, which asks the image's own
-    /// simulation (its CONFIG) for the exact ePSF; the truth, when given, only scores the report.
+    /// the image's CONFIG or TRUTH. The oracles are controls asked for by name: `exact-epsf` asks the
+    /// image's own simulation (its CONFIG) for the exact ePSF, `plate-*@oracle` takes the given truth's
+    /// positions as its reference. The truth, when given, then scores the result
+    /// ([`crate::scoring::image`]); without one every accuracy is absent.
     pub fn analyze_input(
         &self,
         cfg: &Config,
         input: &AnalysisInput,
         epsf_zones: Option<usize>,
         countermeasure: Countermeasure,
-    ) -> Result<Analysis, SourceError> {
+    ) -> Result<Scored, SourceError> {
         let mut analysis_cfg = cfg.analysis.clone();
         if let Some(z) = epsf_zones {
             analysis_cfg.epsf_zones = z;
@@ -187,30 +190,32 @@ impl Session {
             }
             _ => None,
         };
+        let truth = input.truth.as_deref();
+        let oracle = source::oracle_reference(&plan, truth);
         let supplied = Supplied {
             reference: input.reference.as_deref(),
             model_psf: input.model_psf.as_ref(),
             telemetry: input.telemetry.as_ref(),
             readout: input.readout,
             exact_epsf: exact.as_ref(),
+            oracle_reference: oracle.as_deref(),
             ..Default::default()
         };
-        let truth = input.truth.as_deref();
         let res = if crowding::is_crowded(&input.img, &analysis_cfg, analysis_cfg.crowding).0 {
-            let r = analyse_crowded_image(&input.img, truth, &analysis_cfg, &plan, &supplied)?;
+            let r = analyse_crowded_image(&input.img, &analysis_cfg, &plan, &supplied)?;
             if r.global.stars.is_empty() {
                 return Err(AnalysisError::NoStars(analysis_cfg.crowded_detect_sigma).into());
             }
             r
         } else {
-            analyse_image(&input.img, truth, &analysis_cfg, &plan, &supplied)?
+            analyse_image(&input.img, &analysis_cfg, &plan, &supplied)?
         };
-        res.into_of(&countermeasure).ok_or_else(|| {
-            AnalysisError::NotApplicable {
+        let analysis = res.into_of(&countermeasure).ok_or_else(|| {
+            SourceError::from(AnalysisError::NotApplicable {
                 countermeasure: countermeasure.to_string(),
-            }
-            .into()
-        })
+            })
+        })?;
+        Ok(score(&analysis, truth, input.img.plate_scale_mas))
     }
 }
 

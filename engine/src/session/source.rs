@@ -2,17 +2,17 @@
 //! (the design model PSF, the attitude telemetry it records, its readout timing — [`Source::products`]),
 //! and what only a simulation knows, each labelled as such: the exact ePSF of a static simulation (the
 //! `exact-epsf` control, an oracle) and the fit displacement the true ACE predicts for every star (the
-//! mechanism, shown beside the measured errors). The analysis itself ([`analyse_image`]) never sees the
-//! simulator.
+//! mechanism, shown beside the measured errors), and the true positions (the `plate-*@oracle` control's
+//! reference). The analysis itself ([`analyse_image`]) never sees the simulator; [`Source::score`] scores
+//! its result against the exposure's truth.
 
 use crate::analysis::countermeasures::telemetry::{ExposureReadout, TelemetryRecord};
 use crate::analysis::countermeasures::{Countermeasure, Plan, Reference, TelemetryQuality};
 use crate::analysis::epsf::Epsf;
 use crate::analysis::image::AnalysisImage;
 use crate::analysis::pipeline::{
-    Analysis, ImageAnalysis, Supplied, analyse_crowded_image, analyse_image, exact_epsf,
+    ImageAnalysis, Supplied, analyse_crowded_image, analyse_image, exact_epsf,
 };
-use crate::analysis::report::{attach_fit_prediction, summarise};
 use crate::analysis::response::{FitNoise, FitResponse};
 use crate::analysis::{AnalysisError, countermeasures::CountermeasureError};
 use crate::config::{AceCase, Analysis as AnalysisCfg, FlatField};
@@ -20,8 +20,17 @@ use crate::detector::DetectorImage;
 use crate::io::instrument::{self, SurveyModel};
 use crate::numerics::stats;
 use crate::photometry;
+use crate::scoring::image::{Scored, ScoredImage, attach_fit_prediction, score_image};
 use crate::simulate::{SimError, Simulator};
 use crate::truth::TruthRow;
+
+/// The true positions a `plate-*@oracle` control of `plan` is referenced to (`None` when the plan asks for
+/// none, or without a truth).
+pub fn oracle_reference(plan: &Plan, truth: Option<&[TruthRow]>) -> Option<Vec<(f64, f64)>> {
+    truth
+        .filter(|_| plan.asks_oracle_plate())
+        .map(|t| t.iter().map(|r| (r.x_px, r.y_px)).collect())
+}
 
 /// A failure of a simulation's analysis: of the simulation (its kernels, its stars) or of the analysis.
 #[derive(Debug, thiserror::Error)]
@@ -111,6 +120,7 @@ impl SourceProducts {
             telemetry_by_quality: &self.telemetry,
             readout: Some(self.readout),
             exact_epsf: self.exact_epsf.as_ref(),
+            oracle_reference: None,
         }
     }
 }
@@ -195,11 +205,11 @@ impl Source<'_> {
     }
 
     /// The pipeline on this exposure's image — isolated or crowded as `cfg.crowding` says — with the products
-    /// the simulated instrument delivers (those in
-    /// `supplied` first: a product read from a file replaces the simulated one), then the fit displacement
-    /// the true ACE predicts attached to the plain analysis (when the truth is given). `config` gives the
-    /// analysis knobs; the rest of it must be the simulator's (a [`SourceError::ConfigMismatch`] otherwise),
-    /// so no caller analyses with one configuration an image simulated with another.
+    /// the simulated instrument delivers (those in `supplied` first: a product read from a file replaces the
+    /// simulated one). `truth` is read for one thing only: the true positions a `plate-*@oracle` control of
+    /// the plan is referenced to (without it that control is refused by name). `config` gives the analysis
+    /// knobs; the rest of it must be the simulator's (a [`SourceError::ConfigMismatch`] otherwise), so no
+    /// caller analyses with one configuration an image simulated with another.
     pub fn analyse(
         &self,
         img: &AnalysisImage,
@@ -221,28 +231,59 @@ impl Source<'_> {
         s.model_psf = supplied.model_psf.or(s.model_psf);
         s.telemetry = supplied.telemetry;
         s.readout = supplied.readout.or(s.readout);
-        let mut res = if crate::analysis::crowding::is_crowded(img, cfg, cfg.crowding).0 {
-            analyse_crowded_image(img, truth, cfg, plan, &s)?
-        } else {
-            analyse_image(img, truth, cfg, plan, &s)?
-        };
-        if let Some(t) = truth {
-            self.attach_ace_prediction(t, &mut res.global, cfg, img.plate_scale_mas)?;
-            for (cm, a) in &mut res.measured {
-                if *cm == Countermeasure::None {
-                    *a = res.global.clone();
-                }
+        let oracle = oracle_reference(plan, truth);
+        s.oracle_reference = oracle.as_deref();
+        Ok(
+            if crate::analysis::crowding::is_crowded(img, cfg, cfg.crowding).0 {
+                analyse_crowded_image(img, cfg, plan, &s)?
+            } else {
+                analyse_image(img, cfg, plan, &s)?
+            },
+        )
+    }
+
+    /// Score an analysis of this exposure against its truth, with the fit displacement the true ACE predicts
+    /// attached to the plain analysis (and to countermeasure `none`, the same analysis).
+    pub fn score(
+        &self,
+        analysis: &ImageAnalysis,
+        truth: &[TruthRow],
+        cfg: &AnalysisCfg,
+        plate_scale_mas: f64,
+    ) -> Result<ScoredImage, SourceError> {
+        let mut res = score_image(analysis, Some(truth), plate_scale_mas);
+        self.attach_ace_prediction(truth, &mut res.global, cfg, plate_scale_mas)?;
+        for (cm, a) in &mut res.measured {
+            if *cm == Countermeasure::None {
+                *a = res.global.clone();
             }
         }
         Ok(res)
     }
 
-    /// Attach to an analysis the fit displacement the true ACE predicts for every star (realistic ACE only;
-    /// the mechanism, shown beside the measured errors) and refresh its report.
+    /// [`Source::analyse`], then [`Source::score`] against `truth` (unscored — every accuracy absent —
+    /// without one).
+    pub fn analyse_scored(
+        &self,
+        img: &AnalysisImage,
+        truth: Option<&[TruthRow]>,
+        config: &crate::config::Config,
+        plan: &Plan,
+        supplied: &Supplied<'_>,
+    ) -> Result<ScoredImage, SourceError> {
+        let a = self.analyse(img, truth, config, plan, supplied)?;
+        match truth {
+            Some(t) => self.score(&a, t, &config.analysis, img.plate_scale_mas),
+            None => Ok(score_image(&a, None, img.plate_scale_mas)),
+        }
+    }
+
+    /// Attach to a scored analysis the fit displacement the true ACE predicts for every star (realistic ACE
+    /// only; the mechanism, shown beside the measured errors) and refresh its report.
     pub fn attach_ace_prediction(
         &self,
         truth: &[TruthRow],
-        analysis: &mut Analysis,
+        analysis: &mut Scored,
         cfg: &AnalysisCfg,
         plate_scale_mas: f64,
     ) -> Result<(), SimError> {
@@ -256,13 +297,7 @@ impl Source<'_> {
             );
             let pos: Vec<(f64, f64)> = truth.iter().map(|t| (t.x_px, t.y_px)).collect();
             let pred = resp.displacements(&track, &sim.timing, &pos);
-            attach_fit_prediction(&mut analysis.stars, &pred);
-            summarise(
-                &analysis.stars,
-                Some(truth),
-                plate_scale_mas,
-                &mut analysis.report,
-            );
+            attach_fit_prediction(analysis, &pred, truth, plate_scale_mas);
         }
         Ok(())
     }

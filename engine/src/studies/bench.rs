@@ -14,6 +14,7 @@ use crate::integrate::{self, FrameSpec, Integrator, Motion, Stamp};
 use crate::io::IoError;
 use crate::io::csv::{self, Cell};
 use crate::numerics::stats;
+use crate::scoring::image::score;
 use crate::session::Session;
 use crate::simulate::{SimError, Simulator};
 use serde::Serialize;
@@ -227,7 +228,11 @@ fn positions_of_image(
     };
     let jobs = sim.jobs()?;
     let truth = sim.truth(&jobs, sim.track(0).as_ref());
-    let a = analyze(&img, Some(&truth), &Options::new(&sim.cfg.analysis))?;
+    let a = score(
+        &analyze(&img, &Options::new(&sim.cfg.analysis))?,
+        Some(&truth),
+        img.plate_scale_mas,
+    );
     let mut out = vec![None; truth.len()];
     for s in &a.stars {
         if let Some(k) = s.truth {
@@ -634,7 +639,8 @@ pub fn epsf_iterations(
         let mut acc = Vec::new();
         let mut ratio = Vec::new();
         for (img, truth) in &imgs {
-            if let Ok(a) = analyze(img, Some(truth), &o) {
+            if let Ok(a) = analyze(img, &o) {
+                let a = score(&a, Some(truth), img.plate_scale_mas);
                 acc.push(a.report.accuracy_mas);
                 ratio.push(a.report.accuracy_over_crlb);
             }

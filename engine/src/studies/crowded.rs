@@ -1,6 +1,6 @@
 //! The crowded-field study: one exposure of the focal plane, analysed array by array with the crowded-field
 //! ePSF astrometry ([`crate::analysis::crowded`]) and each countermeasure of a plan, then accuracy against
-//! magnitude over the four arrays ([`crate::analysis::crowded::report`]).
+//! magnitude over the four arrays, scored against the truth ([`crate::scoring::crowded`]).
 //!
 //! Per array, as the instrument would: the array's own image (flat-fielded with its calibration flat), its
 //! own ePSF, its own plate model and its own telemetry correction (the rolling readout runs a different
@@ -11,15 +11,16 @@
 
 use crate::analysis::AnalysisError;
 use crate::analysis::countermeasures::Plan;
-use crate::analysis::crowded::report;
-use crate::analysis::pipeline::{ImageAnalysis, analyse_crowded_image, offered_in_crowded_field};
+use crate::analysis::pipeline::{analyse_crowded_image, offered_in_crowded_field};
+use crate::scoring::crowded as report;
+use crate::scoring::image::{ScoredImage, score_image};
+use crate::session::source::oracle_reference;
 use crate::session::{Source, SourceError, analysis_image};
 use crate::simulate::{FocalPlaneExposure, FocalPlaneSimulator};
 use std::time::Instant;
 
-pub use crate::analysis::crowded::focal_plane::{
-    ArrayAnalysis, CrowdedSummary, FocalPlaneAnalysis, VECTOR_CELLS,
-};
+pub use crate::analysis::crowded::CrowdedSummary;
+pub use crate::scoring::focal_plane::{ArrayAnalysis, FocalPlaneAnalysis, VECTOR_CELLS};
 
 /// Refuse the countermeasures a crowded field does not offer, by name.
 pub fn check_plan(plan: &Plan) -> Result<(), AnalysisError> {
@@ -46,7 +47,8 @@ pub fn analyse_focal_plane(
     check_plan(plan)?;
     let cfg = &fps.cfg.analysis;
     let t0 = Instant::now();
-    let mut per_array: Vec<ImageAnalysis> = Vec::with_capacity(fps.arrays.len());
+    let scale = fps.cfg.instrument.plate_scale_mas();
+    let mut per_array: Vec<ScoredImage> = Vec::with_capacity(fps.arrays.len());
     for (sim, e) in fps.arrays.iter().zip(&exp.arrays) {
         let img = analysis_image(sim, &e.image);
         let products = Source {
@@ -54,16 +56,13 @@ pub fn analyse_focal_plane(
             index: exp.index,
         }
         .products(plan, cfg)?;
-        per_array.push(analyse_crowded_image(
-            &img,
-            Some(&e.truth),
-            cfg,
-            plan,
-            &products.supplied(None),
-        )?);
+        let oracle = oracle_reference(plan, Some(&e.truth));
+        let mut supplied = products.supplied(None);
+        supplied.oracle_reference = oracle.as_deref();
+        let analysis = analyse_crowded_image(&img, cfg, plan, &supplied)?;
+        per_array.push(score_image(&analysis, Some(&e.truth), scale));
     }
     let analyse_s = t0.elapsed().as_secs_f64();
-    let scale = fps.cfg.instrument.plate_scale_mas();
     let mut out = Vec::with_capacity(plan.countermeasures.len());
     for cm in &plan.countermeasures {
         let arrays: Vec<ArrayAnalysis> = fps
@@ -77,6 +76,7 @@ pub fn analyse_focal_plane(
                 truth: e.truth.clone(),
                 n_px: e.image.n,
                 summary: ia.crowded.clone().unwrap_or_default(),
+                n_unmatched: ia.n_unmatched.unwrap_or(0),
                 epsf: ia.global.epsf.clone(),
             })
             .collect();

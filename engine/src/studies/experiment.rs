@@ -8,9 +8,9 @@
 use crate::analysis::AnalysisError;
 use crate::analysis::countermeasures::Plan;
 use crate::analysis::pipeline::{self, ImageAnalysis};
-pub use crate::analysis::report::{ImageResult, Measured, Row};
 use crate::config::{AceCase, Config, ReadoutOrder};
 use crate::numerics::stats;
+pub use crate::scoring::dataset::{ImageResult, Measured, Row};
 use crate::session::{Source, analysis_image};
 use crate::simulate::{SimError, Simulator, TruthRow};
 use crate::studies::predict::{PredictError, Predictor};
@@ -92,16 +92,23 @@ pub fn finish_stare(
         .into_iter()
         .map(|im| (im.analysis, im.exposure))
         .unzip();
-    let truths: Vec<Option<&[TruthRow]>> = exposures.iter().map(|e| Some(&e.truth[..])).collect();
-    pipeline::finish_stare(
-        &mut analyses,
-        &truths,
-        plan,
-        sim.cfg.instrument.plate_scale_mas(),
-    )?;
+    pipeline::finish_stare(&mut analyses, plan)?;
     // the stack's cost, shared out over the stare's images
     let stack_s = t0.elapsed().as_secs_f64() / analyses.len().max(1) as f64;
-    Ok(analyses
+    // then each exposure scored against its truth (only here does the truth enter)
+    let scale = sim.cfg.instrument.plate_scale_mas();
+    let scored = analyses
+        .iter()
+        .zip(&exposures)
+        .map(|(a, e)| {
+            Source {
+                sim,
+                index: e.index,
+            }
+            .score(a, &e.truth, &sim.cfg.analysis, scale)
+        })
+        .collect::<Result<Vec<_>, _>>()?;
+    Ok(scored
         .into_iter()
         .zip(exposures)
         .map(|(a, e)| ImageResult {

@@ -16,8 +16,9 @@
 //!   parameters absorbed are reported (`dof_absorbed`): with n stars the residual variance of pure noise
 //!   shrinks by (1 − p/n). The reference ([`Reference`]) is, by default, **the stare's own stack**: the mean
 //!   position of each star over the stare's exposures, iterated with the per-exposure plates
-//!   ([`stack`]; the instrument has it). `@catalogue` takes an external catalogue with a stated error
-//!   (simulated as the truth plus that error); `@oracle` takes the simulation's truth (an upper limit).
+//!   ([`stack`]; the instrument has it). `@catalogue` takes the reference catalogue product (a survey's,
+//!   with its errors), cross-matched by position; `@oracle` the same fit onto the simulation's true
+//!   positions, which only a simulation can hand over (an upper limit, never a default).
 //! * `telemetry` — subtract, from each star, the displacement the attitude telemetry predicts for its fit:
 //!   the ACE series sampled at `rate_hz`, delayed by `latency_s`, with Gaussian noise `noise_mas` per sample,
 //!   linearly interpolated, and turned into each star's fitted shift through the fit's response to the jitter
@@ -40,7 +41,6 @@ use crate::analysis::epsf::build::{BuildOptions, StarStart};
 use crate::analysis::epsf::fit::{fit_star, flags};
 use crate::analysis::image::AnalysisImage;
 use crate::analysis::report::StarResult;
-use crate::truth::TruthRow;
 use rayon::prelude::*;
 use serde::Serialize;
 use std::fmt;
@@ -74,7 +74,9 @@ pub enum CountermeasureError {
     },
     #[error("{what}: the stars do not constrain the model (all in one row or column?)")]
     Degenerate { what: String },
-    #[error("{0} needs the truth catalogue (reference positions)")]
+    #[error(
+        "{0} needs the true positions, which only a simulated exposure has (an oracle control)"
+    )]
     NeedsTruth(String),
     #[error(
         "{0} needs the reference catalogue product (refcat.csv beside the image, or --refcat): none was given"
@@ -267,6 +269,17 @@ impl Countermeasure {
         )
     }
 
+    /// Whether this countermeasure is a plate model referenced to the true positions (`@oracle`).
+    pub fn is_oracle_plate(&self) -> bool {
+        matches!(
+            self,
+            Countermeasure::Plate {
+                reference: Reference::Oracle,
+                ..
+            }
+        )
+    }
+
     /// Check the parameters.
     pub fn validate(&self) -> Result<(), CountermeasureError> {
         let bad = |why: String| {
@@ -451,6 +464,11 @@ impl Plan {
     pub fn needs_stare(&self) -> bool {
         self.countermeasures.iter().any(|c| c.needs_stare())
     }
+
+    /// Whether any countermeasure is referenced to the true positions (`plate-*@oracle`).
+    pub fn asks_oracle_plate(&self) -> bool {
+        self.countermeasures.iter().any(|c| c.is_oracle_plate())
+    }
 }
 
 /// What a correction needs from the image beyond its fits.
@@ -461,12 +479,12 @@ pub struct Context<'a> {
     pub build: &'a BuildOptions,
     /// The global ePSF the fits were made with.
     pub global: &'a Epsf,
-    pub truth: Option<&'a [TruthRow]>,
     /// Zones of `yzones` without `:K` (the analysis configuration's `epsf_zones`).
     pub default_zones: usize,
     /// The exposure's telemetry; `None` when the ACE is static (nothing to correct).
     pub telemetry: Option<&'a Telemetry>,
-    /// The reference catalogue product (positions in this image's pixels) for `plate-*@catalogue`.
+    /// The reference positions (this image's pixels) of a plate model: the reference catalogue product for
+    /// `plate-*@catalogue`, the true positions for `plate-*@oracle`.
     pub reference: Option<&'a [(f64, f64)]>,
 }
 
@@ -509,7 +527,6 @@ pub fn apply(
                 })
                 .collect();
             for (s, f) in stars.iter_mut().zip(refits) {
-                let (ddx, ddy) = (f.x - s.x, f.y - s.y);
                 s.x = f.x;
                 s.y = f.y;
                 s.flux_e = f.flux;
@@ -517,8 +534,6 @@ pub fn apply(
                 s.crlb_y_px = f.crlb_y;
                 // a neighbour found by the global analysis is still a neighbour
                 s.flags = f.flags | (s.flags & flags::BLENDED);
-                s.dx_px += ddx;
-                s.dy_px += ddy;
             }
             Ok(0)
         }
@@ -535,15 +550,14 @@ pub fn apply(
             Some(r) => plate::plate_fit_to_catalogue(stars, r, model, &cm.to_string()),
             None => Err(CountermeasureError::NeedsReference(cm.to_string())),
         },
+        // the oracle: the same fit onto the true positions, handed over as a reference named so
         Countermeasure::Plate {
             model,
             reference: Reference::Oracle,
-        } => {
-            let t = ctx
-                .truth
-                .ok_or_else(|| CountermeasureError::NeedsTruth(cm.to_string()))?;
-            plate::plate_fit(stars, t, model, &cm.to_string())
-        }
+        } => match ctx.reference {
+            Some(r) => plate::plate_fit_to_catalogue(stars, r, model, &cm.to_string()),
+            None => Err(CountermeasureError::NeedsTruth(cm.to_string())),
+        },
         Countermeasure::Telemetry(_) => {
             let Some(tel) = ctx.telemetry else {
                 return Ok(0);
@@ -552,8 +566,6 @@ pub fn apply(
             for (s, (px, py)) in stars.iter_mut().zip(tel.predicted_px(&pos)) {
                 s.x -= px;
                 s.y -= py;
-                s.dx_px -= px;
-                s.dy_px -= py;
             }
             Ok(0)
         }

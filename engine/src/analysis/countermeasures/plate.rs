@@ -4,7 +4,6 @@
 use super::CountermeasureError;
 use crate::analysis::report::StarResult;
 use crate::numerics::linalg;
-use crate::truth::TruthRow;
 
 /// The model of a plate fit: its design row is the one basis shared by the countermeasure and the
 /// predictor. Coordinates are normalised as `u = x/1000 − 1` (≈ [−1, 1] over the 1968-px array) for
@@ -69,27 +68,6 @@ impl PlateModel {
     }
 }
 
-/// Fit Δ = design · coefficients per axis over the matched, usable stars onto their true positions (the
-/// `@oracle` reference: a control, never a default), subtract, and return the number of parameters absorbed.
-pub fn plate_fit(
-    stars: &mut [StarResult],
-    truth: &[TruthRow],
-    model: PlateModel,
-    what: &str,
-) -> Result<usize, CountermeasureError> {
-    let (pos, target): (Vec<(f64, f64)>, Vec<(f64, f64)>) = stars
-        .iter()
-        .filter(|s| s.is_used())
-        .filter_map(|s| {
-            let t = truth.get(s.truth?)?;
-            Some(((s.x, s.y), (t.x_px, t.y_px)))
-        })
-        .unzip();
-    let c = fit_correction(model, &pos, &target, what)?;
-    c.apply(stars);
-    Ok(2 * model.n_params())
-}
-
 /// A fitted plate correction: Δx, Δy as functions of the position.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Correction {
@@ -108,14 +86,12 @@ impl Correction {
         )
     }
 
-    /// Move every star (and its error against the truth) by the correction at its position.
+    /// Move every star by the correction at its position.
     pub fn apply(&self, stars: &mut [StarResult]) {
         for s in stars.iter_mut() {
             let (ddx, ddy) = self.at(s.x, s.y);
             s.x += ddx;
             s.y += ddy;
-            s.dx_px += ddx;
-            s.dy_px += ddy;
         }
     }
 }
@@ -167,13 +143,7 @@ pub fn plate_fit_to_catalogue(
     model: PlateModel,
     what: &str,
 ) -> Result<usize, CountermeasureError> {
-    let usable: Vec<usize> = (0..stars.len())
-        .filter(|&k| {
-            stars[k].flags & crate::analysis::epsf::fit::flags::REJECT == 0
-                && stars[k].x.is_finite()
-                && stars[k].y.is_finite()
-        })
-        .collect();
+    let usable: Vec<usize> = (0..stars.len()).filter(|&k| stars[k].is_usable()).collect();
     let pos: Vec<(f64, f64)> = usable.iter().map(|&k| (stars[k].x, stars[k].y)).collect();
     let m = crate::analysis::detection::match_positions(&pos, reference, 20.0, 1.0);
     let (p, target): (Vec<(f64, f64)>, Vec<(f64, f64)>) = pos
@@ -190,34 +160,25 @@ pub fn plate_fit_to_catalogue(
 mod tests {
     use super::*;
 
-    fn star(x: f64, y: f64, dx: f64, dy: f64, k: usize) -> StarResult {
-        crate::testkit::star_result(k, x, y, dx, dy)
+    /// A star truly at (x, y), fitted at (x + dx, y + dy).
+    fn star(x: f64, y: f64, dx: f64, dy: f64) -> StarResult {
+        crate::testkit::star_result(x + dx, y + dy)
     }
 
-    fn truth_at(pos: &[(f64, f64)]) -> Vec<TruthRow> {
-        pos.iter()
-            .enumerate()
-            .map(|(k, &(x, y))| TruthRow {
-                id: k,
-                x_px: x,
-                y_px: y,
-                mag_hw: 12.5,
-                j_minus_h: 2.0,
-                flux_e: 1e4,
-                modelled_fraction: 1.0,
-                t_start_s: 0.0,
-                exptime_s: 12.5,
-                jitter_dx_px: 0.0,
-                jitter_dy_px: 0.0,
-            })
-            .collect()
+    /// Largest |fitted − true| of corrected stars, px.
+    fn worst(stars: &[StarResult], pos: &[(f64, f64)]) -> f64 {
+        stars
+            .iter()
+            .zip(pos)
+            .map(|(s, p)| (s.x - p.0).abs().max((s.y - p.1).abs()))
+            .fold(0.0, f64::max)
     }
 
-    /// The fit onto a catalogue product (matched by position, no truth) equals the fit onto the truth when the
-    /// catalogue holds the true positions — another way to the same result — and leaves unmatched and
-    /// rejected stars out of the fit but corrects them.
+    /// The fit onto a catalogue (matched by position) equals the least-squares fit over the known pairs when
+    /// the catalogue holds every star — the cross-match finds them all — and leaves stars missing from it and
+    /// rejected fits out of the fit but corrects them.
     #[test]
-    fn the_catalogue_product_fit_equals_the_truth_fit_on_true_positions() {
+    fn the_catalogue_fit_equals_the_fit_over_known_pairs() {
         let pos: Vec<(f64, f64)> = (0..120)
             .map(|k| {
                 (
@@ -226,7 +187,6 @@ mod tests {
                 )
             })
             .collect();
-        let truth = truth_at(&pos);
         let field = |x: f64, y: f64| {
             let yn = y / 1000.0 - 1.0;
             (
@@ -241,16 +201,16 @@ mod tests {
                     let (dx, dy) = field(x, y);
                     // a small per-star error so the fit has residuals
                     let e = 0.003 * (((k * 37) % 11) as f64 - 5.0) / 5.0;
-                    star(x, y, dx + e, dy - e, k)
+                    star(x, y, dx + e, dy - e)
                 })
                 .collect()
         };
-        let mut by_truth = make();
-        plate_fit(&mut by_truth, &truth, PlateModel::PolyY(3), "plate-poly:3").expect("truth fit");
+        let mut by_pairs = make();
+        let fitted: Vec<(f64, f64)> = by_pairs.iter().map(|s| (s.x, s.y)).collect();
+        fit_correction(PlateModel::PolyY(3), &fitted, &pos, "plate-poly:3")
+            .expect("pairs fit")
+            .apply(&mut by_pairs);
         let mut by_catalogue = make();
-        for s in &mut by_catalogue {
-            s.truth = None; // the catalogue fit needs no truth
-        }
         plate_fit_to_catalogue(
             &mut by_catalogue,
             &pos,
@@ -258,23 +218,20 @@ mod tests {
             "plate-poly:3",
         )
         .expect("catalogue fit");
-        for (a, b) in by_truth.iter().zip(&by_catalogue) {
+        for (a, b) in by_pairs.iter().zip(&by_catalogue) {
             assert!(
                 (a.x - b.x).abs() < 1e-9 && (a.y - b.y).abs() < 1e-9,
                 "{a:?} {b:?}"
             );
         }
-        // a catalogue missing a third of the stars, with one rejected fit: still a good correction
+        // a catalogue missing two thirds of the stars, with one rejected fit: still a good correction
         let partial: Vec<(f64, f64)> = pos.iter().step_by(3).copied().collect();
         let mut stars = make();
         stars[1].flags = crate::analysis::epsf::fit::flags::NOT_CONVERGED;
         plate_fit_to_catalogue(&mut stars, &partial, PlateModel::PolyY(3), "plate-poly:3")
             .expect("partial catalogue");
-        let worst = stars
-            .iter()
-            .map(|s| s.dx_px.abs().max(s.dy_px.abs()))
-            .fold(0.0, f64::max);
-        assert!(worst < 0.01, "residual {worst} px");
+        let w = worst(&stars, &pos);
+        assert!(w < 0.01, "residual {w} px");
     }
 
     #[test]
@@ -287,7 +244,6 @@ mod tests {
                 )
             })
             .collect();
-        let truth = truth_at(&pos);
         // a cubic displacement along Y, plus a shift and a rotation-like term
         let field = |x: f64, y: f64| {
             let yn = y / 1000.0 - 1.0;
@@ -298,24 +254,18 @@ mod tests {
         };
         let mut stars: Vec<StarResult> = pos
             .iter()
-            .enumerate()
-            .map(|(k, &(x, y))| {
+            .map(|&(x, y)| {
                 let (dx, dy) = field(x, y);
-                star(x, y, dx, dy, k)
+                star(x, y, dx, dy)
             })
             .collect();
-        let dof = plate_fit(&mut stars, &truth, PlateModel::PolyY(3), "plate-poly:3").expect("fit");
+        let dof = plate_fit_to_catalogue(&mut stars, &pos, PlateModel::PolyY(3), "plate-poly:3")
+            .expect("fit");
         assert_eq!(dof, 10);
         // the field is a polynomial of the true positions and the model one of the measured positions: the
         // difference is second order in the field (here < 1e-6 px = 5e-4 mas)
-        for s in &stars {
-            assert!(
-                s.dx_px.abs() < 1e-6 && s.dy_px.abs() < 1e-6,
-                "{} {}",
-                s.dx_px,
-                s.dy_px
-            );
-        }
+        let w = worst(&stars, &pos);
+        assert!(w < 1e-6, "{w}");
     }
 
     /// An affine plate fit of stars in one row at `spacing_px`, each displaced by 0.1 px in x.
@@ -324,13 +274,8 @@ mod tests {
         spacing_px: f64,
     ) -> (Result<usize, CountermeasureError>, Vec<StarResult>) {
         let pos: Vec<(f64, f64)> = (0..n).map(|k| (k as f64 * spacing_px, 500.0)).collect();
-        let truth = truth_at(&pos);
-        let mut stars: Vec<StarResult> = pos
-            .iter()
-            .enumerate()
-            .map(|(k, &(x, y))| star(x, y, 0.1, 0.0, k))
-            .collect();
-        let r = plate_fit(&mut stars, &truth, PlateModel::Affine, "plate-affine");
+        let mut stars: Vec<StarResult> = pos.iter().map(|&(x, y)| star(x, y, 0.1, 0.0)).collect();
+        let r = plate_fit_to_catalogue(&mut stars, &pos, PlateModel::Affine, "plate-affine");
         (r, stars)
     }
 
@@ -343,6 +288,6 @@ mod tests {
         let (r, stars) = affine_fit_of_a_row(20, 90.0);
         let e = r.expect_err("one row");
         assert!(matches!(e, CountermeasureError::Degenerate { .. }), "{e}");
-        assert!(stars.iter().all(|s| s.dx_px.is_finite()));
+        assert!(stars.iter().all(|s| s.x.is_finite()));
     }
 }

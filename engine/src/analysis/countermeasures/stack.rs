@@ -16,7 +16,6 @@
 use super::CountermeasureError;
 use super::plate::{Correction, PlateModel, fit_correction};
 use crate::analysis::detection::match_positions;
-use crate::analysis::epsf::fit::flags;
 use crate::analysis::report::StarResult;
 
 /// Largest distance (px) between a star's positions in two exposures of the stare, after their common
@@ -40,10 +39,6 @@ pub struct StackOutcome {
     pub iterations: usize,
 }
 
-fn usable(s: &StarResult) -> bool {
-    s.flags & flags::REJECT == 0 && s.x.is_finite() && s.y.is_finite()
-}
-
 /// Correct every exposure of a stare (`exposures[k]` = its star results, as fitted) with `model` fitted onto
 /// the stack reference, in place.
 pub fn stack_plate(
@@ -59,7 +54,7 @@ pub fn stack_plate(
     };
     let refs0: Vec<(f64, f64)> = first
         .iter()
-        .filter(|s| usable(s))
+        .filter(|s| s.is_usable())
         .map(|s| (s.x, s.y))
         .collect();
     // ids[e][k]: reference star of star k of exposure e
@@ -70,7 +65,7 @@ pub fn stack_plate(
             match_positions(&pos, &refs0, OFFSET_SEARCH_PX, MATCH_RADIUS_PX)
                 .into_iter()
                 .zip(stars)
-                .map(|(m, s)| m.filter(|_| usable(s)))
+                .map(|(m, s)| m.filter(|_| s.is_usable()))
                 .collect()
         })
         .collect();
@@ -154,8 +149,9 @@ pub fn stack_plate(
 mod tests {
     use super::*;
 
+    /// A star truly at (x, y), fitted at (x + dx, y + dy).
     fn star(x: f64, y: f64, dx: f64, dy: f64) -> StarResult {
-        crate::testkit::star_result(0, x, y, dx, dy)
+        crate::testkit::star_result(x + dx, y + dy)
     }
 
     /// Exposures whose displacement fields the model holds, without noise: every exposure ends at the
@@ -192,8 +188,11 @@ mod tests {
             .collect();
         for (missing, tol) in [(false, 1e-9), (true, 1e-3)] {
             let mut exposures = exposures.clone();
+            // the true positions of each exposure's stars
+            let mut truths = vec![grid.clone(); 4];
             if missing {
                 exposures[2].remove(17); // a star missed in one exposure
+                truths[2].remove(17);
             }
             let out =
                 stack_plate(&mut exposures, PlateModel::PolyY(3), "plate-poly:3").expect("fit");
@@ -203,17 +202,15 @@ mod tests {
                 "converged: {} iterations",
                 out.iterations
             );
-            for stars in &exposures {
-                for s in stars {
-                    let (x, y) = (s.x - s.dx_px, s.y - s.dy_px); // the truth
+            for (stars, truth) in exposures.iter().zip(&truths) {
+                for (s, &(x, y)) in stars.iter().zip(truth) {
+                    let (dx, dy) = (s.x - x, s.y - y);
                     let mean = (0..4)
                         .map(|k| field(k, x, y))
                         .fold((0.0, 0.0), |a, d| (a.0 + d.0 / 4.0, a.1 + d.1 / 4.0));
                     assert!(
-                        (s.dx_px - mean.0).abs() < tol && (s.dy_px - mean.1).abs() < tol,
-                        "error ({}, {}) vs the mean field ({}, {})",
-                        s.dx_px,
-                        s.dy_px,
+                        (dx - mean.0).abs() < tol && (dy - mean.1).abs() < tol,
+                        "error ({dx}, {dy}) vs the mean field ({}, {})",
                         mean.0,
                         mean.1
                     );

@@ -19,14 +19,14 @@
 
 pub mod detect;
 pub mod epsf;
-pub mod focal_plane;
 pub mod group_fit;
 pub mod neighbours;
 pub mod pass;
-pub mod report;
+pub mod summary;
 
 pub use epsf::{MAX_CROWDED_ITERATIONS, MAX_EPSF_STARS, MIN_EPSF_SNR, build_epsf, epsf_candidates};
 pub use pass::{GroupStats, fit_pass, model_image};
+pub use summary::CrowdedSummary;
 
 use crate::analysis::detection::sky_and_noise;
 use crate::analysis::epsf::Epsf;

@@ -4,10 +4,10 @@
 use crate::outputs::{Outputs, interrupted};
 use anyhow::{Context, Result};
 use engine::analysis::countermeasures::{Countermeasure, Plan};
-use engine::analysis::vectors::VectorMap;
 use engine::config::{AceCase, Config, ReadoutOrder};
 use engine::io::{analysis_input, csv, exposure, products};
 use engine::jitter::AceSeries;
+use engine::scoring::vectors::VectorMap;
 use engine::session::Session;
 use engine::studies::experiment;
 use indicatif::{ProgressBar, ProgressStyle};
@@ -613,7 +613,7 @@ fn analyze_focal_plane(
     // each array's stars, truth and size, for the accuracy against magnitude when every array has a truth
     let mut scored: Vec<
         Option<(
-            Vec<engine::analysis::StarResult>,
+            Vec<engine::scoring::image::ScoredStar>,
             Vec<engine::truth::TruthRow>,
             usize,
         )>,
@@ -663,7 +663,7 @@ fn analyze_focal_plane(
         );
         // the combined accuracy, like each array's, does not count an array's common offset: its bias goes
         let (bx, by) = (an.report.bias_x_mas / scale, an.report.bias_y_mas / scale);
-        all_stars.extend(an.stars.iter().map(|s| engine::analysis::StarResult {
+        all_stars.extend(an.stars.iter().map(|s| engine::scoring::image::ScoredStar {
             dx_px: s.dx_px - if bx.is_finite() { bx } else { 0.0 },
             dy_px: s.dy_px - if by.is_finite() { by } else { 0.0 },
             ..*s
@@ -681,13 +681,17 @@ fn analyze_focal_plane(
             "assumptions": assumptions,
         }));
     }
-    let mut combined = engine::analysis::Report {
-        n_detected: all_stars.len(),
-        countermeasure: a.countermeasure.to_string(),
-        crowded: all_crowded,
-        ..Default::default()
-    };
-    engine::analysis::report::summarise(&all_stars, None, scale, &mut combined);
+    let combined = engine::scoring::image::summarise(
+        &all_stars,
+        None,
+        scale,
+        &engine::analysis::Report {
+            n_detected: all_stars.len(),
+            countermeasure: a.countermeasure.to_string(),
+            crowded: all_crowded,
+            ..Default::default()
+        },
+    );
     let mut header = vec!["array"];
     header.extend(products::CATALOGUE_HEADER);
     csv::write(&a.out.join("catalogue.csv"), &header, &rows)?;
@@ -699,10 +703,10 @@ fn analyze_focal_plane(
         .collect::<Option<Vec<_>>>()
     {
         Some(arrays) => {
-            let views: Vec<engine::analysis::crowded::report::ArrayStars<'_>> = arrays
+            let views: Vec<engine::scoring::crowded::ArrayStars<'_>> = arrays
                 .iter()
                 .map(
-                    |(stars, truth, n_px)| engine::analysis::crowded::report::ArrayStars {
+                    |(stars, truth, n_px)| engine::scoring::crowded::ArrayStars {
                         stars,
                         truth,
                         n_px: *n_px,
@@ -710,8 +714,8 @@ fn analyze_focal_plane(
                 )
                 .collect();
             let b = &cfg.scene.bulge;
-            let edges = engine::analysis::crowded::report::edges(b.hw_min, b.hw_max, 0.5);
-            let bins = engine::analysis::crowded::report::mag_bins(&views, scale, &edges);
+            let edges = engine::scoring::crowded::edges(b.hw_min, b.hw_max, 0.5);
+            let bins = engine::scoring::crowded::mag_bins(&views, scale, &edges);
             let path = a.out.join("crowded_bins.csv");
             outputs.add(&path);
             engine::io::crowded::write_table(
@@ -749,7 +753,7 @@ fn analyze_focal_plane(
 }
 
 /// One line for an analysis report: the accuracy when it was scored, else why not.
-fn print_report(what: &str, r: &engine::analysis::Report, has_truth: bool, seconds: f64) {
+fn print_report(what: &str, r: &engine::scoring::image::Report, has_truth: bool, seconds: f64) {
     let mode = if r.crowded {
         "crowded-field"
     } else {
@@ -771,7 +775,7 @@ fn print_report(what: &str, r: &engine::analysis::Report, has_truth: bool, secon
             format!(
                 "{} star(s) matched to the truth and used, fewer than {}",
                 r.n_used,
-                engine::analysis::report::MIN_SCORED_STARS
+                engine::scoring::image::MIN_SCORED_STARS
             )
         } else {
             "no truth to score against (score catalogue.csv with `jsim score`)".to_string()

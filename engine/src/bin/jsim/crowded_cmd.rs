@@ -78,7 +78,7 @@ pub fn crowded(a: &CrowdedArgs) -> Result<()> {
         SceneKind::Bulge => (cfg.scene.bulge.hw_min, cfg.scene.bulge.hw_max),
         _ => (8.0, 17.0),
     };
-    let edges = engine::analysis::crowded::report::edges(lo, hi, a.bin_mag);
+    let edges = engine::scoring::crowded::edges(lo, hi, a.bin_mag);
     let mut bin_rows = Vec::new();
     let mut array_rows = Vec::new();
     let mut runs: Vec<(String, FocalPlaneAnalysis)> = Vec::new();
@@ -158,7 +158,7 @@ pub fn crowded(a: &CrowdedArgs) -> Result<()> {
         &out::ARRAYS_HEADER,
         &array_rows,
     )?;
-    let curves: Vec<(String, &[engine::analysis::crowded::report::MagBin])> = runs
+    let curves: Vec<(String, &[engine::scoring::crowded::MagBin])> = runs
         .iter()
         .map(|(l, r)| (l.clone(), r.bins.as_slice()))
         .collect();
@@ -178,7 +178,7 @@ fn print_bins(case: &str, cm: &str, r: &FocalPlaneAnalysis) {
             a.index + 1,
             s.n_first,
             s.n_residual,
-            s.n_unmatched.unwrap_or(0),
+            a.n_unmatched,
             s.epsf_stars,
             if s.fallback.is_empty() {
                 String::new()
@@ -194,7 +194,7 @@ fn print_bins(case: &str, cm: &str, r: &FocalPlaneAnalysis) {
 
 /// The accuracy against magnitude of a focal-plane exposure, one line per bin of true Hw (`jsim crowded`, and
 /// `jsim analyze` on a focal-plane file with its truth).
-pub fn print_bin_table(bins: &[engine::analysis::crowded::report::MagBin]) {
+pub fn print_bin_table(bins: &[engine::scoring::crowded::MagBin]) {
     println!(
         "  Hw bin      true  found  compl.  blend  sat.  | isolated: n  mas   CRLB  ratio | crowded: n  mas   | merged: n  mas"
     );

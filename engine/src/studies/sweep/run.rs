@@ -76,7 +76,7 @@ pub struct RunSummary {
 pub const MIN_SWEEP_STARS: usize = 10;
 
 /// Whether an analysis has an accuracy a sweep can count ([`MIN_SWEEP_STARS`] scored stars, finite).
-fn scored(r: &crate::analysis::Report) -> bool {
+fn scored(r: &crate::scoring::image::Report) -> bool {
     r.n_used >= MIN_SWEEP_STARS && r.accuracy_mas.is_finite()
 }
 

@@ -1,13 +1,13 @@
-//! The crowded-field analysis of a whole focal-plane exposure, as its results are kept and shown: each
-//! array's star results with its truth and a summary of how it was analysed ([`ArrayAnalysis`]), its
+//! The crowded-field analysis of a whole focal-plane exposure scored, as its results are kept and shown: each
+//! array's scored stars with its truth and a summary of how it was analysed ([`ArrayAnalysis`]), its
 //! deviation map in the focal plane's sky layout ([`ArrayAnalysis::binned_vectors`]), and the focal plane
 //! under one countermeasure with its magnitude bins ([`FocalPlaneAnalysis`]). The study that fills them is
 //! `studies::crowded`.
 
-use super::Crowded;
-use super::report::MagBin;
+use super::crowded::MagBin;
+use super::image::ScoredStar;
 use crate::analysis::countermeasures::Countermeasure;
-use crate::analysis::report::StarResult;
+use crate::analysis::crowded::CrowdedSummary;
 use crate::numerics::stats;
 use crate::sky::focal_plane::FocalPlane;
 use crate::truth::TruthRow;
@@ -17,11 +17,14 @@ use crate::truth::TruthRow;
 pub struct ArrayAnalysis {
     /// The array's index (0 … 3).
     pub index: usize,
-    pub stars: Vec<StarResult>,
+    pub stars: Vec<ScoredStar>,
     pub truth: Vec<TruthRow>,
     pub n_px: usize,
     /// What the crowded analysis found and how (the fits are in `stars`).
     pub summary: CrowdedSummary,
+    /// Reported stars matched to no true star: noise peaks, light from stars off the array's edge, or
+    /// duplicates.
+    pub n_unmatched: usize,
     /// The array's own ePSF.
     pub epsf: crate::analysis::epsf::Epsf,
 }
@@ -70,40 +73,6 @@ impl ArrayAnalysis {
                 (fx, fy, (gx - fx) * scale_mas, (gy - fy) * scale_mas)
             })
             .collect()
-    }
-}
-
-/// The crowded analysis of an array without its fits.
-#[derive(Debug, Clone, Default, serde::Serialize)]
-pub struct CrowdedSummary {
-    pub n_first: usize,
-    pub n_residual: usize,
-    pub epsf_stars: usize,
-    pub epsf_iterations: usize,
-    pub fallback: String,
-    pub n_groups: usize,
-    pub largest_group: usize,
-    /// Reported stars matched to no truth star: noise peaks, light from stars off the array's edge, or
-    /// duplicates (`None` without a truth).
-    pub n_unmatched: Option<usize>,
-    /// Wall-clock seconds of the array's crowded analysis (detection, ePSF, grouped fits).
-    pub analyse_s: f64,
-}
-
-impl CrowdedSummary {
-    /// The summary of `c`, whose fits became `stars` (matched to the truth where known).
-    pub fn of(c: &Crowded, stars: &[StarResult], analyse_s: f64) -> Self {
-        Self {
-            n_first: c.n_first,
-            n_residual: c.n_residual,
-            epsf_stars: c.epsf_stars,
-            epsf_iterations: c.epsf_iterations,
-            fallback: c.fallback.clone(),
-            n_groups: c.n_groups,
-            largest_group: c.largest_group,
-            n_unmatched: Some(stars.iter().filter(|s| s.truth.is_none()).count()),
-            analyse_s,
-        }
     }
 }
 

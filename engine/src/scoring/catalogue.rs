@@ -1,4 +1,4 @@
-//! Scoring: the one step that reads the truth. It takes the positions an analysis measured (from any tool:
+//! A measured list against a truth list (`jsim score`): the positions an analysis measured (from any tool:
 //! only `x, y` are needed) and a truth list (`x, y` and a magnitude), matches them by position and reports
 //! per magnitude bin the completeness, the position accuracy and the false detections.
 //!
@@ -12,7 +12,7 @@
 //!    but a false detection or a blend). The match is **one-to-one**: of several measured stars that reach the
 //!    same true star the closest keeps it and the others count as false detections.
 //!
-//! **Accuracy** of a bin (the convention of SPEC §7 and [`crate::analysis::report`]): the standard deviation
+//! **Accuracy** of a bin (the convention of SPEC §7 and [`super::image`]): the standard deviation
 //! over the bin's matched stars of measured − true per axis, in mas; `accuracy_mas = √((σx² + σy²)/2)`. It is
 //! **absent** (NaN; `null` in JSON, empty in CSV) with fewer than [`MIN_SCORED`] matched stars or with no
 //! truth — never 0.

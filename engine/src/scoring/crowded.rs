@@ -1,5 +1,5 @@
-//! Accuracy against magnitude from one crowded exposure: the cross-match of fits to the truth, the class of
-//! each star, and per-magnitude-bin statistics over the arrays.
+//! Scoring a crowded exposure: the cross-match of fits to the truth, the class of each star, and
+//! per-magnitude-bin statistics over the arrays.
 //!
 //! * **Match** ([`match_catalogue`]): the common offset as in [`crate::analysis::detection::match_positions`],
 //!   then each fit takes the truth star within [`MATCH_RADIUS_PX`] that best agrees in position *and* flux
@@ -16,8 +16,9 @@
 //!   array's own common offset — its median over used stars — removed first) with the median
 //!   Cramér–Rao bound of the same stars.
 
-use super::neighbours::Neighbours;
-use crate::analysis::epsf::fit::{StarFit, flags};
+use super::image::ScoredStar;
+use crate::analysis::crowded::neighbours::Neighbours;
+use crate::analysis::epsf::fit::flags;
 use crate::analysis::report::StarResult;
 use crate::numerics::stats;
 use crate::truth::TruthRow;
@@ -31,12 +32,12 @@ pub const MERGE_RADIUS_PX: f64 = 1.5;
 pub const MERGE_FLUX_RATIO: f64 = 0.1;
 
 /// Cross-match fits to the truth (see the module's documentation).
-pub fn match_catalogue(fits: &[StarFit], truth: &[TruthRow]) -> Vec<Option<usize>> {
+pub fn match_catalogue(fits: &[StarResult], truth: &[TruthRow]) -> Vec<Option<usize>> {
     let pos: Vec<(f64, f64)> = fits.iter().map(|f| (f.x, f.y)).collect();
     let refs: Vec<(f64, f64)> = truth.iter().map(|t| (t.x_px, t.y_px)).collect();
     // the common offset from the brightest fits' nearest truth stars (bright stars are rarely mismatched)
     let mut bright: Vec<usize> = (0..fits.len()).collect();
-    bright.sort_by(|&a, &b| fits[b].flux.total_cmp(&fits[a].flux));
+    bright.sort_by(|&a, &b| fits[b].flux_e.total_cmp(&fits[a].flux_e));
     bright.truncate(500);
     let bpos: Vec<(f64, f64)> = bright.iter().map(|&k| pos[k]).collect();
     let off = crate::analysis::detection::common_offset(&bpos, &refs, 20.0);
@@ -49,8 +50,8 @@ pub fn match_catalogue(fits: &[StarFit], truth: &[TruthRow]) -> Vec<Option<usize
         }
         for j in nb.within(x, y, MATCH_RADIUS_PX) {
             let d2 = (refs[j].0 - x).powi(2) + (refs[j].1 - y).powi(2);
-            let dm = if f.flux > 0.0 && truth[j].flux_e > 0.0 {
-                2.5 * (f.flux / truth[j].flux_e).log10()
+            let dm = if f.flux_e > 0.0 && truth[j].flux_e > 0.0 {
+                2.5 * (f.flux_e / truth[j].flux_e).log10()
             } else {
                 3.0
             };
@@ -71,7 +72,7 @@ pub fn match_catalogue(fits: &[StarFit], truth: &[TruthRow]) -> Vec<Option<usize
 
 /// Whether each star result is a merged blend: its truth star has a companion within [`MERGE_RADIUS_PX`]
 /// with ≥ [`MERGE_FLUX_RATIO`] of its flux that no result matched.
-pub fn merged(stars: &[StarResult], truth: &[TruthRow]) -> Vec<bool> {
+pub fn merged(stars: &[ScoredStar], truth: &[TruthRow]) -> Vec<bool> {
     let refs: Vec<(f64, f64)> = truth.iter().map(|t| (t.x_px, t.y_px)).collect();
     let nb = Neighbours::new(&refs);
     let mut found = vec![false; truth.len()];
@@ -119,7 +120,7 @@ pub fn class(s: &StarResult, merged: bool) -> Class {
 
 /// One array's results for the bins: its star results (residuals against `truth`), its truth and its size.
 pub struct ArrayStars<'a> {
-    pub stars: &'a [StarResult],
+    pub stars: &'a [ScoredStar],
     pub truth: &'a [TruthRow],
     pub n_px: usize,
 }
@@ -194,7 +195,7 @@ pub fn mag_bins(arrays: &[ArrayStars<'_>], scale_mas: f64, edges: &[f64]) -> Vec
             }
         }
         let m = merged(a.stars, a.truth);
-        let used: Vec<&StarResult> = a.stars.iter().filter(|s| s.is_used()).collect();
+        let used: Vec<&ScoredStar> = a.stars.iter().filter(|s| s.is_used()).collect();
         let ox = stats::median(&used.iter().map(|s| s.dx_px).collect::<Vec<_>>());
         let oy = stats::median(&used.iter().map(|s| s.dy_px).collect::<Vec<_>>());
         for (s, &mg) in a.stars.iter().zip(&m) {

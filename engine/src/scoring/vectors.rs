@@ -3,7 +3,7 @@
 //! per-axis accuracy and a reference arrow). The CLI's `vectors.csv/.png` and the explorer's panel both draw
 //! this one reduction.
 
-use crate::analysis::report::StarResult;
+use super::image::ScoredStar;
 use crate::numerics::stats;
 
 /// One arrow: where (fitted position, px) and how much (mas, mean removed).
@@ -33,9 +33,9 @@ pub struct VectorMap {
 
 /// Arrows of `stars` (used stars only) with their mean removed.
 fn arrows(
-    stars: &[&StarResult],
+    stars: &[&ScoredStar],
     scale_mas: f64,
-    d: impl Fn(&StarResult) -> (f64, f64),
+    d: impl Fn(&ScoredStar) -> (f64, f64),
 ) -> Vec<Arrow> {
     let n = stars.len().max(1) as f64;
     let (mx, my) = (
@@ -58,8 +58,8 @@ fn arrows(
 
 impl VectorMap {
     /// The map of an analysis' stars (`plate_scale_mas` per pixel).
-    pub fn new(stars: &[StarResult], plate_scale_mas: f64) -> Self {
-        let used: Vec<&StarResult> = stars.iter().filter(|s| s.is_used()).collect();
+    pub fn new(stars: &[ScoredStar], plate_scale_mas: f64) -> Self {
+        let used: Vec<&ScoredStar> = stars.iter().filter(|s| s.is_used()).collect();
         let measured = arrows(&used, plate_scale_mas, |s| (s.dx_px, s.dy_px));
         let fit_pred = used
             .iter()
@@ -107,8 +107,8 @@ impl VectorMap {
 mod tests {
     use super::*;
 
-    fn star(x: f64, dx: f64, dy: f64) -> StarResult {
-        crate::testkit::star_result(0, x - dx, 0.0, dx, dy)
+    fn star(x: f64, dx: f64, dy: f64) -> ScoredStar {
+        crate::testkit::scored_star(0, x - dx, 0.0, dx, dy)
     }
 
     #[test]
