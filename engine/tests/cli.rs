@@ -433,3 +433,113 @@ fn every_shipped_catalogue_simulates() {
     assert_eq!(n, 3, "the shipped catalogues");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Each command offers only the options that change what it does: `--help` lists none that do not apply,
+/// and one given anyway is refused by name (never accepted and ignored).
+#[test]
+fn each_command_offers_only_its_own_options() {
+    // (command, options it must offer, options it must not)
+    let cases: [(&str, &[&str], &[&str]); 7] = [
+        (
+            "psf",
+            &["--config", "--set", "--out"],
+            &[
+                "--mag",
+                "--images",
+                "--scene",
+                "--ace",
+                "--readout",
+                "--backend",
+                "--seed",
+            ],
+        ),
+        (
+            "ace",
+            &["--config", "--set", "--seed", "--ace", "--images"],
+            &["--mag", "--scene", "--readout", "--backend", "--method"],
+        ),
+        (
+            "analyze",
+            &["--config", "--set", "--image", "--countermeasure"],
+            &[
+                "--mag",
+                "--images",
+                "--scene",
+                "--ace",
+                "--readout",
+                "--backend",
+                "--seed",
+            ],
+        ),
+        (
+            "experiment",
+            &[
+                "--config",
+                "--mags",
+                "--aces",
+                "--readouts",
+                "--images",
+                "--backend",
+            ],
+            &["--mag ", "--ace ", "--readout "],
+        ),
+        (
+            "crowded",
+            &["--config", "--aces", "--scene", "--readout", "--backend"],
+            &["--mag", "--ace ", "--images"],
+        ),
+        (
+            "predict",
+            &[
+                "--config",
+                "--mag",
+                "--ace",
+                "--readout",
+                "--countermeasures",
+            ],
+            &["--images", "--backend", "--method"],
+        ),
+        (
+            "simulate",
+            &[
+                "--config",
+                "--mag",
+                "--scene",
+                "--ace",
+                "--readout",
+                "--images",
+                "--backend",
+            ],
+            &[],
+        ),
+    ];
+    for (cmd, offered, absent) in cases {
+        let out = jsim().args([cmd, "--help"]).output().expect("run");
+        assert!(out.status.success(), "{cmd} --help");
+        let help = String::from_utf8_lossy(&out.stdout).to_string();
+        for o in offered {
+            assert!(help.contains(o), "jsim {cmd} --help lacks {o}:\n{help}");
+        }
+        for o in absent {
+            assert!(
+                !help.contains(o),
+                "jsim {cmd} --help offers {o}, which does not apply:\n{help}"
+            );
+        }
+    }
+    let dir = temp("own-options");
+    for args in [
+        vec!["analyze", "--mag", "14", "--image", "x.fits"],
+        vec!["psf", "--images", "3"],
+        vec!["experiment", "--mag", "14"],
+    ] {
+        let out = jsim().current_dir(&dir).args(&args).output().expect("run");
+        assert!(!out.status.success(), "{args:?} accepted");
+        let err = stderr_of(&out);
+        assert!(err.contains(args[1]), "{args:?}: {err}");
+    }
+    assert!(
+        std::fs::read_dir(&dir).expect("dir").next().is_none(),
+        "a refused command wrote something"
+    );
+}

@@ -223,7 +223,7 @@ pub fn with_countermeasure(
     report.dof_absorbed = countermeasures::apply(cm, &ctx, &mut stars)?;
     if cm.needs_stare() {
         // the image alone is its own stack: nothing corrected until the stare is finished
-        report.stare_exposures = 1;
+        report.stare_exposures = Some(1);
     }
     report.count(&stars);
     Ok(Analysis {
@@ -520,7 +520,7 @@ pub fn finish_stare(images: &mut [ImageAnalysis], plan: &Plan) -> Result<(), Ana
         for (im, st) in images.iter_mut().zip(stars) {
             let mut report = countermeasure_report(&im.global.report, cm);
             report.dof_absorbed = out.dof_absorbed;
-            report.stare_exposures = n;
+            report.stare_exposures = Some(n);
             report.count(&st);
             let analysis = Analysis {
                 report,

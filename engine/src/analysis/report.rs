@@ -61,9 +61,10 @@ pub struct Report {
     pub crowded: bool,
     /// Parameters a countermeasure fitted per exposure (degrees of freedom absorbed).
     pub dof_absorbed: usize,
-    /// Exposures of the stare whose stack referenced a plate model: 0 when no plate model of the stack was
-    /// asked for; 1 when the image stood alone (its own stack: nothing corrected); K for a stare of K.
-    pub stare_exposures: usize,
+    /// Exposures of the stare whose stack referenced a plate model: 1 when the image stood alone (a stare
+    /// of one, its own stack: nothing corrected), K for a stare of K; absent (`null`) when no plate model
+    /// referenced to the stack was asked for.
+    pub stare_exposures: Option<usize>,
 }
 
 impl Report {

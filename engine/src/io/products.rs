@@ -299,7 +299,8 @@ pub fn image_rows(cfg: &Config, images: &[ImageResult]) -> Vec<Vec<Cell>> {
                 Cell::F(r.response_slope_y),
                 Cell::I(r.n_used as i64),
                 Cell::I(r.dof_absorbed as i64),
-                Cell::I(r.stare_exposures as i64),
+                r.stare_exposures
+                    .map_or(Cell::S(String::new()), |n| Cell::I(n as i64)),
                 Cell::F(im.ace_sigma_mas),
                 Cell::F(im.ace_drift_mas),
                 Cell::F(im.simulate_s),

@@ -2,7 +2,8 @@
 //! Galactic-centre field by default), per ACE case and countermeasure, with completeness and the blended
 //! and saturated fractions; vector maps of the four arrays. Products: [`engine::io::crowded`].
 
-use crate::{ConfigArgs, TelemetryArgs};
+use crate::TelemetryArgs;
+use crate::options::CrowdedConfigArgs;
 use anyhow::{Result, bail};
 use clap::Args;
 use engine::config::{AceCase, SceneKind};
@@ -14,7 +15,7 @@ use std::time::Instant;
 #[derive(Args, Clone, Debug)]
 pub struct CrowdedArgs {
     #[command(flatten)]
-    pub cfg: ConfigArgs,
+    pub cfg: CrowdedConfigArgs,
     /// ACE cases (comma separated), each one exposure.
     #[arg(long, default_value = "gaussian,realistic", value_delimiter = ',')]
     pub aces: Vec<String>,
@@ -35,12 +36,7 @@ pub struct CrowdedArgs {
 }
 
 pub fn crowded(a: &CrowdedArgs) -> Result<()> {
-    let mut base = a.cfg.clone();
-    if base.scene.is_none() && base.config.is_none() {
-        // the study's field unless told otherwise
-        base.scene = Some("bulge".into());
-    }
-    let cfg = base.load()?;
+    let cfg = a.cfg.load()?;
     if cfg.scene.kind == SceneKind::Grid {
         eprintln!("jsim crowded: note: the scene is the paper's grid, not a crowded field");
     }

@@ -1,19 +1,25 @@
-//! `jsim`: the command-line front of the engine. Every command takes the same configuration options
-//! (`--config FILE`, shortcuts such as `--mag`, and `--set field=value` for any field); `jsim config
-//! --print-default` writes the commented default configuration.
+//! `jsim`: the command-line front of the engine. Every command reads a configuration (`--config FILE`,
+//! `--set field=value` for any field) and offers the shortcuts that apply to it, such as `--mag`
+//! ([`options`]); `jsim config --print-default` writes the commented default configuration.
 
-use anyhow::{Context, Result, bail};
+use anyhow::{Result, bail};
 use clap::{Args, Parser, Subcommand};
 use engine::analysis::countermeasures::{DEFAULT_CATALOGUE_ERROR_MAS, Plan, TelemetryQuality};
-use engine::config::{AceCase, Backend, Config, Method, ReadoutOrder};
+use engine::config::{AceCase, Config, ReadoutOrder};
 use engine::session::Session;
 use std::path::PathBuf;
 
 mod bench_cmd;
 mod cmd;
 mod crowded_cmd;
+mod options;
 mod outputs;
 mod sweep_cmd;
+
+pub use options::{
+    AceConfigArgs, AnalysisConfigArgs, ConfigArgs, ExperimentConfigArgs, PredictConfigArgs,
+    PsfConfigArgs,
+};
 
 #[derive(Parser)]
 #[command(
@@ -24,129 +30,6 @@ mod sweep_cmd;
 struct Cli {
     #[command(subcommand)]
     cmd: Command,
-}
-
-/// Configuration options shared by every command (applied in this order: file, shortcuts, --set).
-#[derive(Args, Clone, Debug, Default)]
-pub struct ConfigArgs {
-    /// TOML configuration (default: the built-in reference experiment).
-    #[arg(long, value_name = "FILE")]
-    pub config: Option<PathBuf>,
-    /// Master seed.
-    #[arg(long)]
-    pub seed: Option<u64>,
-    /// Hw magnitude of the grid stars.
-    #[arg(long)]
-    pub mag: Option<f64>,
-    /// Scene: grid (the paper's, one array), bulge (the mock Galactic-centre field on the quad focal plane:
-    /// also sets focal_plane.layout = quad) or a catalogue file (CSV or FITS; x,y or ra,dec).
-    #[arg(long, value_name = "grid|bulge|FILE")]
-    pub scene: Option<String>,
-    /// ACE model: gaussian, realistic or none.
-    #[arg(long)]
-    pub ace: Option<String>,
-    /// Readout order: rolling, global-reset or sample-hold.
-    #[arg(long)]
-    pub readout: Option<String>,
-    /// Number of images.
-    #[arg(long)]
-    pub images: Option<usize>,
-    /// Integration backend: auto, cpu or gpu.
-    #[arg(long)]
-    pub backend: Option<String>,
-    /// Integration method: fast, direct or reference.
-    #[arg(long)]
-    pub method: Option<String>,
-    /// Set any field: --set ace.sigma_mas=150 (repeatable).
-    #[arg(long = "set", value_name = "FIELD=VALUE")]
-    pub set: Vec<String>,
-}
-
-/// The configuration options of a command that simulates nothing (`jsim analyze`): the analysis knobs come
-/// from a file or `--set analysis.…`; the scene, jitter, readout and backend options do not apply and are not
-/// offered.
-#[derive(Args, Clone, Debug, Default)]
-pub struct AnalysisConfigArgs {
-    /// TOML configuration: its `[analysis]` knobs (and, for an image whose header lacks them, the plate scale
-    /// and readout timing assumed; default: the built-in configuration).
-    #[arg(long, value_name = "FILE")]
-    pub config: Option<PathBuf>,
-    /// Set a field, e.g. --set analysis.detect_sigma=8 (repeatable).
-    #[arg(long = "set", value_name = "FIELD=VALUE")]
-    pub set: Vec<String>,
-}
-
-impl AnalysisConfigArgs {
-    /// The configuration these options describe, validated.
-    pub fn load(&self) -> Result<Config> {
-        ConfigArgs {
-            config: self.config.clone(),
-            set: self.set.clone(),
-            ..Default::default()
-        }
-        .load()
-    }
-}
-
-impl ConfigArgs {
-    /// The configuration these options describe, validated.
-    pub fn load(&self) -> Result<Config> {
-        let mut cfg = match &self.config {
-            Some(p) => Config::load(p)?,
-            None => Config::default(),
-        };
-        if let Some(s) = self.seed {
-            cfg.seed = s;
-        }
-        if let Some(m) = self.mag {
-            cfg.scene.mag_hw = m;
-        }
-        match self.scene.as_deref() {
-            None => {}
-            Some("grid") => cfg.scene.kind = engine::config::SceneKind::Grid,
-            Some("bulge") => {
-                cfg.scene.kind = engine::config::SceneKind::Bulge;
-                cfg.focal_plane.layout = engine::config::Layout::Quad;
-            }
-            Some(file) => {
-                cfg.scene.kind = engine::config::SceneKind::Catalogue;
-                cfg.scene.catalogue = Some(PathBuf::from(file));
-            }
-        }
-        if let Some(a) = &self.ace {
-            cfg.ace.case = AceCase::parse(a)?;
-        }
-        if let Some(r) = &self.readout {
-            cfg.readout.order = ReadoutOrder::parse(r)?;
-        }
-        if let Some(n) = self.images {
-            cfg.fidelity.images = n;
-        }
-        if let Some(b) = &self.backend {
-            cfg.fidelity.backend = match b.as_str() {
-                "auto" => Backend::Auto,
-                "cpu" => Backend::Cpu,
-                "gpu" => Backend::Gpu,
-                other => bail!("--backend {other}: expected auto, cpu or gpu"),
-            };
-        }
-        if let Some(m) = &self.method {
-            cfg.fidelity.method = match m.as_str() {
-                "fast" => Method::Fast,
-                "direct" => Method::Direct,
-                "reference" => Method::Reference,
-                other => bail!("--method {other}: expected fast, direct or reference"),
-            };
-        }
-        for kv in &self.set {
-            let (k, v) = kv
-                .split_once('=')
-                .with_context(|| format!("--set {kv}: expected FIELD=VALUE"))?;
-            cfg = cfg.with_override(k.trim(), v.trim())?;
-        }
-        cfg.validate()?;
-        Ok(cfg)
-    }
 }
 
 #[derive(Subcommand)]
@@ -163,7 +46,7 @@ enum Command {
     /// Compute the polychromatic PSF and write it as FITS.
     Psf {
         #[command(flatten)]
-        cfg: ConfigArgs,
+        cfg: PsfConfigArgs,
         /// The PSF table's FITS file.
         #[arg(long, default_value = "psf.fits")]
         out: PathBuf,
@@ -171,7 +54,7 @@ enum Command {
     /// Generate the ACE time series and write t_s, x_mas, y_mas as CSV.
     Ace {
         #[command(flatten)]
-        cfg: ConfigArgs,
+        cfg: AceConfigArgs,
         /// The ACE series' CSV file.
         #[arg(long, default_value = "ace.csv")]
         out: PathBuf,
@@ -197,8 +80,9 @@ enum Command {
         /// Image to analyse (FITS from `jsim simulate`, or any image with GAIN/RDNOISE headers).
         #[arg(long)]
         image: PathBuf,
-        /// Truth catalogue (CSV or FITS TRUTH table; default: the image's TRUTH extension). Only the
-        /// report's accuracy reads it; `jsim score` scores a catalogue apart.
+        /// Truth catalogue (CSV or FITS TRUTH table; default: the image's TRUTH extension). The analysis
+        /// never reads it: it scores the result after (and is the `@oracle` control's reference); `jsim
+        /// score` scores any catalogue apart.
         #[arg(long)]
         truth: Option<PathBuf>,
         /// Calibration flat (FITS; default: flat_cal.fits beside the image, if any; without one the image
@@ -233,7 +117,7 @@ enum Command {
     /// The paper's experiment: accuracy vs magnitude for each ACE case, readout order and countermeasure.
     Experiment {
         #[command(flatten)]
-        cfg: ConfigArgs,
+        cfg: ExperimentConfigArgs,
         /// ACE cases (comma separated).
         #[arg(long, default_value = "gaussian,realistic", value_delimiter = ',')]
         aces: Vec<String>,
@@ -268,7 +152,7 @@ enum Command {
     /// Predict the accuracy of a configuration per countermeasure, without simulating images.
     Predict {
         #[command(flatten)]
-        cfg: ConfigArgs,
+        cfg: PredictConfigArgs,
         /// Countermeasures to predict (comma separated; the names of `jsim experiment --countermeasures`).
         #[arg(
             long,
