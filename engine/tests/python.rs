@@ -2,9 +2,10 @@
 //! test command covers Rust and Python alike.
 //!
 //! It makes a virtual environment under the target directory (once), installs what the suite needs
-//! (maturin, numpy, pytest, astropy: `engine/python/pyproject.toml`'s `test` extra), builds the module's
-//! wheel with maturin in the dev profile (incremental: the workspace's own target directory), installs it
-//! and runs pytest with `JSIM_BIN` pointing at the `jsim` binary cargo built, for the CLI comparisons.
+//! (maturin, numpy, pytest, astropy, and matplotlib and photutils for the docs' scripts:
+//! `engine/python/pyproject.toml`'s `test` extra), builds the module's wheel with maturin in the dev profile
+//! (incremental: the workspace's own target directory), installs it and runs pytest with `JSIM_BIN` pointing
+//! at the `jsim` binary cargo built, for the CLI comparisons.
 //! Without a Python 3 this test fails in CI (`CI` set) and says why elsewhere; a module that does not build
 //! or import fails it everywhere.
 
@@ -12,7 +13,16 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 /// Python packages the suite needs (the build backend and the `test` extra).
-const PACKAGES: [&str; 4] = ["maturin>=1.9,<2", "numpy>=1.21", "pytest>=7", "astropy>=5"];
+/// What the suite needs: the build tool, the test runner, numpy and astropy for the module's tests, and
+/// matplotlib and photutils for the docs' example and benchmark scripts (`test_docs_commands.py` runs them).
+const PACKAGES: [&str; 6] = [
+    "maturin>=1.9,<2",
+    "numpy>=1.21",
+    "pytest>=7",
+    "astropy>=5",
+    "matplotlib>=3.5",
+    "photutils>=1.9",
+];
 
 fn run(cmd: &mut Command, what: &str) {
     let out = cmd
@@ -62,7 +72,10 @@ fn the_python_module_passes_its_pytest_suite() {
     }
     let vpython = bin.join("python");
     let have_all = Command::new(&vpython)
-        .args(["-c", "import maturin, numpy, pytest, astropy"])
+        .args([
+            "-c",
+            "import maturin, numpy, pytest, astropy, matplotlib, photutils",
+        ])
         .output()
         .is_ok_and(|o| o.status.success());
     if !have_all {

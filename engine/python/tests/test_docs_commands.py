@@ -1,0 +1,232 @@
+"""Every command README.md and docs/*.md show runs, as written but reduced.
+
+The commands are read from the Markdown itself (code blocks, and inline code that is a whole command), so a page
+that gains a command gains a test. Templates — a command with a placeholder such as `DIR`, `F.fits`, `…` or
+`$SLURM_ARRAY_TASK_ID` — and bare mentions (`jsim analyze`) are not commands and are left out; optional parts in
+brackets are dropped. They run in one scratch directory laid out like the repository (its catalogues, configs,
+sweep files and Python scripts), producers before consumers, each one exactly as written except for the
+reductions below, which make the whole page set run in a few minutes:
+
+* every command that simulates (or reads a configuration to predict) gets `--set` overrides for a 256-px array, a 4 × 4 grid, coarse
+  optics and 2 images (`REDUCED`), except for the keys the command sets itself;
+* `jsim bench` gets `--quick` and small star counts (its own star-count options are replaced);
+* the sweep files are copied with the same reduced `[base]` and 4 exposures in stares of 2;
+* `crowded_image.py` writes a 256-px array of 1500 stars instead of 1968 px and 10⁵ stars,
+  `photutils_catalogue.py` cuts 128 px instead of 512, and `simulate_reference.py` runs the reduced configuration
+  once (`--config`, `--repeat 1`) with the jsim binary under test;
+* an absolute output path (`/shared/…`) is taken inside the scratch directory.
+"""
+
+import glob
+import os
+import re
+import shlex
+import shutil
+import subprocess
+import sys
+import time
+import tomllib
+
+import pytest
+
+REPO = os.path.abspath(os.path.join(os.path.dirname(__file__), "..", "..", ".."))
+
+REDUCED = {
+    "instrument.detector_px": "256",
+    "instrument.photosensitive_px": "240",
+    "readout.channels": "2",
+    "readout.channel_width_px": "128",
+    "scene.grid_n": "4",
+    "scene.grid_spacing_px": "50.0",
+    "optics.pupil_samples": "64",
+    "optics.psf_oversampling": "8",
+    "optics.psf_radius_px": "8",
+    "band.wavelength_step_um": "0.1",
+    "fidelity.images": "2",
+    "fidelity.subpixels": "4",
+    "fidelity.stamp_radius_px": "8",
+    "fidelity.backend": '"cpu"',
+    "ace.span_s": "60.0",
+}
+# the command-line shortcut that sets each reduced key (the command's own value is kept)
+SHORTCUT = {"fidelity.images": "--images", "fidelity.backend": "--backend"}
+TAKES_SET = {"psf", "ace", "simulate", "experiment", "crowded", "bench", "predict"}
+BENCH = {"--quick": None, "--stars": "50,100", "--bulge-stars": "50,100", "--ref-stars": "5",
+         "--epsf-images": "1"}
+# a placeholder word (`DIR`, `F.fits`, `fidelity.images=K`, `$VAR`, `…`), or an option in a list (`--a, --b`)
+PLACEHOLDER = re.compile(r"(…|<|\$|^[A-Z]{1,4}(\.[a-z]+)?$|=[A-Z]{1,4}$|^(DIR|PATH)$|NNN|^/$|^--[a-z-]+,$)")
+# producers before consumers; within a rank, the pages' order
+RANK = {"config": 0, "psf": 1, "ace": 1, "predict": 1, "simulate": 2, "crowded_image.py": 3, "crowded": 3,
+        "experiment": 4, "bench": 4, "analyze": 5, "photutils_catalogue.py": 6, "focal_plane_image.py": 6,
+        "crowded_photutils.py": 6, "simulate_reference.py": 6, "score": 7, "sweep": 8, "merge": 9, "report": 10}
+
+
+def pages():
+    return [os.path.join(REPO, "README.md")] + sorted(glob.glob(os.path.join(REPO, "docs", "*.md")))
+
+
+def commands_in(text):
+    """The `jsim …` and `python …` commands of a page: code-block lines (with `\\` continuations) and inline
+    code (a span may cross a line break)."""
+    out = []
+    lines = text.split("\n")
+    in_block, prose, i = False, [], 0
+    while i < len(lines):
+        line = lines[i]
+        if line.strip().startswith("```"):
+            in_block = not in_block
+        elif in_block:
+            cmd = line.strip()
+            while cmd.endswith("\\") and i + 1 < len(lines):
+                i += 1
+                cmd = cmd[:-1].strip() + " " + lines[i].strip()
+            if cmd.startswith(("jsim ", "python ")):
+                out.append(re.sub(r"\s+#.*$", "", cmd))
+        else:
+            prose.append(line)
+        i += 1
+    for m in re.finditer(r"`((?:jsim|python) [^`]+)`", " ".join(prose)):
+        out.append(m.group(1))
+    return out
+
+
+def runnable(cmd):
+    """The command without its optional [parts], or None for a template or a bare mention."""
+    cmd = re.sub(r"\s*\[[^\]]*\]", "", cmd).strip()
+    words = shlex.split(cmd)
+    if len(words) < 3 or any(PLACEHOLDER.search(w) for w in words):
+        return None
+    return words
+
+
+def name_of(words):
+    return os.path.basename(words[1]) if words[0] == "python" else words[1]
+
+
+def reduce(words, jsim_bin="jsim"):
+    """The command as run here (see the module's documentation)."""
+    words = [w[1:] if w.startswith("/shared/") else w for w in words]
+    name = name_of(words)
+    if words[0] == "python":
+        if name == "crowded_image.py":
+            k = words.index("--stars")
+            words[k + 1:k + 2] = ["1500", "--size", "256", "--mag-min", "11", "--mag-max", "16"]
+        if name == "photutils_catalogue.py":
+            words[words.index("--size") + 1] = "128"
+        if name == "simulate_reference.py":
+            words[words.index("--jsim") + 1] = jsim_bin
+            words += ["--config", "small.toml", "--repeat", "1"]
+        return [sys.executable] + words[1:]
+    if name == "bench":
+        for opt, value in BENCH.items():
+            if opt in words:
+                if value is not None:
+                    words[words.index(opt) + 1] = value
+            else:
+                words += [opt] if value is None else [opt, value]
+    if name in TAKES_SET:
+        given = " ".join(words)
+        for key, value in REDUCED.items():
+            if key in given or (SHORTCUT.get(key) and SHORTCUT[key] in words):
+                continue
+            words += ["--set", f"{key}={value}"]
+    return words
+
+
+def toml_value(v):
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, str):
+        return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    if isinstance(v, list):
+        return "[" + ", ".join(toml_value(x) for x in v) + "]"
+    if isinstance(v, dict):
+        return "{ " + ", ".join(f'"{k}" = {toml_value(x)}' for k, x in v.items()) + " }"
+    return repr(v)
+
+
+def write_toml(path, data, prefix=""):
+    """A nested dict as TOML (scalars, lists, inline tables for lists of tables)."""
+    lines, tables = [], []
+    for k, v in data.items():
+        if isinstance(v, dict):
+            tables.append((k, v))
+        else:
+            lines.append(f'"{k}" = {toml_value(v)}')
+    text = "\n".join(lines) + "\n"
+    for k, v in tables:
+        name = f"{prefix}.{k}" if prefix else k
+        text += f"\n[{name}]\n" + write_toml(None, v, name)
+    if path is None:
+        return text
+    with open(path, "w") as f:
+        f.write(text)
+
+
+def reduced_sweep(src, dst):
+    with open(src, "rb") as f:
+        s = tomllib.load(f)
+    s["exposures"], s["stare_exposures"] = 4, 2
+    base = s.setdefault("base", {})
+    for key, value in REDUCED.items():
+        table, field = key.split(".")
+        if key in s.get("grid", {}):
+            continue
+        base.setdefault(table, {})[field] = tomllib.loads(f"v = {value}")["v"]
+    write_toml(dst, s)
+
+
+@pytest.fixture(scope="module")
+def scratch(tmp_path_factory):
+    """A directory laid out like the repository: catalogues and configs as they are, the sweep files reduced,
+    the Python scripts linked."""
+    d = tmp_path_factory.mktemp("docs")
+    for sub in ["catalogues", "configs"]:
+        shutil.copytree(os.path.join(REPO, "engine", sub), d / "engine" / sub)
+    os.makedirs(d / "engine" / "sweeps")
+    for f in glob.glob(os.path.join(REPO, "engine", "sweeps", "*.toml")):
+        reduced_sweep(f, d / "engine" / "sweeps" / os.path.basename(f))
+    os.symlink(os.path.join(REPO, "engine", "python"), d / "engine" / "python")
+    small = {}
+    for key, value in REDUCED.items():
+        table, field = key.split(".")
+        small.setdefault(table, {})[field] = tomllib.loads(f"v = {value}")["v"]
+    write_toml(d / "small.toml", small)
+    return d
+
+
+def test_the_pages_show_the_commands_this_test_knows():
+    found = {name_of(w) for p in pages() for c in commands_in(open(p).read()) if (w := runnable(c))}
+    unknown = found - set(RANK)
+    assert not unknown, f"commands this test cannot order (add them to RANK): {unknown}"
+    # the main jobs are among them: a regression in the extraction would silently drop everything
+    assert {"simulate", "analyze", "score", "experiment", "crowded", "sweep", "bench"} <= found, found
+
+
+def test_every_command_of_the_readme_and_docs_runs(scratch, jsim_bin):
+    cmds, seen = [], set()
+    for p in pages():
+        for c in commands_in(open(p).read()):
+            words = runnable(c)
+            if words and " ".join(words) not in seen:
+                seen.add(" ".join(words))
+                cmds.append((os.path.relpath(p, REPO), words))
+    cmds.sort(key=lambda pw: RANK[name_of(pw[1])])
+    env = dict(os.environ, PATH=os.path.dirname(os.path.abspath(jsim_bin)) + os.pathsep + os.environ["PATH"],
+               MPLBACKEND="Agg")
+    failed = []
+    for page, words in cmds:
+        run = reduce(list(words), jsim_bin)
+        if run[0] == "jsim":
+            run[0] = jsim_bin
+        t0 = time.perf_counter()
+        r = subprocess.run(run, cwd=scratch, env=env, capture_output=True, text=True, timeout=600)
+        print(f"{time.perf_counter() - t0:6.1f} s  rc {r.returncode}  {page}: {' '.join(words)}")
+        if r.returncode != 0:
+            failed.append(f"{page}: {' '.join(words)}\n  ran: {' '.join(run)}\n  {r.stderr.strip()[-800:]}")
+            continue
+        if "--out" in words and name_of(words) != "sweep":
+            out = words[words.index("--out") + 1].lstrip("/")
+            assert os.path.exists(scratch / out), f"{page}: {' '.join(words)} wrote no {out}"
+    assert not failed, "commands of the pages that do not run:\n" + "\n".join(failed)
+    assert len(cmds) >= 30, f"only {len(cmds)} commands found"
