@@ -348,6 +348,8 @@ fn write_inner(path: &Path, hdus: &[Hdu<'_>]) -> Result<(), IoError> {
                     .create()
                     .map_err(fe)?;
                 let hdu = f.create_table(*name, &[desc]).map_err(fe)?;
+                // text has no unit, said as every column's is (TUNITn on every column)
+                hdu.write_key(&mut f, "TUNIT1", String::new()).map_err(fe)?;
                 if !lines.is_empty() {
                     hdu.write_col(&mut f, "LINE", &lines).map_err(fe)?;
                 }

@@ -739,13 +739,23 @@ pub fn write_bench(path: &Path, rows: &[BenchRow]) -> Result<(), IoError> {
     csv::write(path, &CSV_HEADER, &cells)
 }
 
+/// Fewest settings with a measured error (against their exact setting) that make a speed-against-error
+/// figure: one point is not a trade-off.
+pub const MIN_PLOTTED_SETTINGS: usize = 2;
+
 /// The speed-against-error figure of `jsim bench` (`bench.png`): time against the largest error, one point
-/// set per knob group.
-pub fn plot_bench(path: &Path, rows: &[BenchRow]) -> Result<(), IoError> {
+/// set per knob group. Returns whether it was drawn: with fewer than [`MIN_PLOTTED_SETTINGS`] settings that
+/// have an error (e.g. one method against its exact reference, whose error is 0) there is nothing to draw,
+/// and no file is written.
+pub fn plot_bench(path: &Path, rows: &[BenchRow]) -> Result<bool, IoError> {
     use crate::io::plot::{Scale, Series, scatter};
+    let plotted = |r: &&BenchRow| r.max_err.is_finite() && r.max_err > 0.0;
+    if rows.iter().filter(plotted).count() < MIN_PLOTTED_SETTINGS {
+        return Ok(false);
+    }
     let mut groups: Vec<String> = Vec::new();
-    for r in rows {
-        if r.max_err.is_finite() && r.max_err > 0.0 && !groups.contains(&r.group) {
+    for r in rows.iter().filter(plotted) {
+        if !groups.contains(&r.group) {
             groups.push(r.group.clone());
         }
     }
@@ -775,5 +785,37 @@ pub fn plot_bench(path: &Path, rows: &[BenchRow]) -> Result<(), IoError> {
         Scale::Log,
         false,
     )?;
-    Ok(())
+    Ok(true)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn row(setting: &str, max_err: f64) -> BenchRow {
+        BenchRow {
+            max_err,
+            ..BenchRow::timing("method", setting.into(), "cpu".into(), 400, 1.0, "")
+        }
+    }
+
+    /// One method against its exact reference is one point: no figure is written (not a lone dot); two
+    /// settings with an error are a trade-off and are drawn.
+    #[test]
+    fn the_figure_is_drawn_only_for_a_trade_off() {
+        let dir = std::env::temp_dir().join(format!("jsim-bench-plot-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("dir");
+        let png = dir.join("bench.png");
+        let one = [row("reference", 0.0), row("fast", 1e-4)];
+        assert!(!plot_bench(&png, &one).expect("plot"));
+        assert!(!png.exists());
+        let two = [
+            row("reference", 0.0),
+            row("fast", 1e-4),
+            row("direct", 1e-9),
+        ];
+        assert!(plot_bench(&png, &two).expect("plot"));
+        assert!(png.exists());
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 }

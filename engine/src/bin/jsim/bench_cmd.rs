@@ -116,9 +116,18 @@ pub fn bench(a: &BenchArgs) -> Result<()> {
         rows.extend(bench::scaling(&session, &cfg, &a.stars, gpu.as_ref())?);
         save(&rows)?;
     }
-    bench::plot_bench(&a.out.join("bench.png"), &rows)?;
+    let drawn = bench::plot_bench(&a.out.join("bench.png"), &rows)?;
     outputs.keep();
     println!("{}", bench::render_table(&rows));
-    println!("wrote {}/bench.csv and bench.png", a.out.display());
+    if drawn {
+        println!("wrote {}/bench.csv and bench.png", a.out.display());
+    } else {
+        println!(
+            "wrote {}/bench.csv (no bench.png: fewer than {} settings with an error against their exact \
+             setting, nothing to trade off)",
+            a.out.display(),
+            bench::MIN_PLOTTED_SETTINGS
+        );
+    }
     Ok(())
 }
