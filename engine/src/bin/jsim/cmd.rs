@@ -531,6 +531,12 @@ fn summary_plate_scale(catalogue: &Path) -> Option<f64> {
 
 /// `jsim score`
 pub fn score(a: &ScoreArgs) -> Result<()> {
+    // the inputs first: a missing file is the problem to name, not what its absence implies
+    for (what, p) in [("--catalogue", &a.catalogue), ("--truth", &a.truth)] {
+        if !p.is_file() {
+            anyhow::bail!("{what} {}: no such file", p.display());
+        }
+    }
     let scale = match a
         .plate_scale_mas
         .or_else(|| summary_plate_scale(&a.catalogue))

@@ -252,9 +252,26 @@ fn main() {
     outputs::install_interrupt_handler();
     let cli = Cli::parse();
     if let Err(e) = run(cli) {
-        eprintln!("jsim: error: {e:#}");
+        eprintln!("jsim: error: {}", message_of(&e));
         std::process::exit(1);
     }
+}
+
+/// An error and its causes on one line, each cause said once: an engine error already quotes its source
+/// ("cannot read config file F: No such file or directory"), which the chain would repeat.
+fn message_of(e: &anyhow::Error) -> String {
+    let mut out = String::new();
+    for cause in e.chain() {
+        let text = cause.to_string();
+        if out.contains(&text) {
+            continue;
+        }
+        if !out.is_empty() {
+            out.push_str(": ");
+        }
+        out.push_str(&text);
+    }
+    out
 }
 
 fn run(cli: Cli) -> Result<()> {
