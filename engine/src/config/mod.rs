@@ -745,7 +745,7 @@ pub struct Fidelity {
     pub time_stride: usize,
     pub method: Method,
     pub backend: Backend,
-    /// Add the PSF halo (static, at 1 cell per pixel) out to this radius beyond the PSF table; 0 = off.
+    /// Add the PSF halo (static, at 2 cells per pixel) out to this radius beyond the PSF table; 0 = off.
     pub halo_radius_px: usize,
     /// Stars share a PSF when their J − H round to the same multiple of this (mag); 0 = each colour its
     /// own PSF (to 1 mmag). The truth keeps every star's own colour; `jsim bench` reports the centroid
