@@ -7,8 +7,36 @@ use crate::config::Analysis as AnalysisCfg;
 use crate::numerics::stats;
 use rayon::prelude::*;
 
+/// Two peaks closer than this are one star's (a jitter-smeared star can show several), px.
+pub const SAME_STAR_PX: f64 = 3.0;
+
+/// Of positions sorted brightest first, those not within `d_px` of a brighter one kept before: O(N) with a
+/// grid of `d_px` cells (each position looks at its own cell and the eight around it).
+pub fn drop_close(sorted: impl IntoIterator<Item = (f64, f64)>, d_px: f64) -> Vec<(f64, f64)> {
+    let cell = d_px.max(1e-9);
+    let mut grid: std::collections::HashMap<(i64, i64), Vec<(f64, f64)>> =
+        std::collections::HashMap::new();
+    let mut kept = Vec::new();
+    for (x, y) in sorted {
+        let (cx, cy) = ((x / cell).floor() as i64, (y / cell).floor() as i64);
+        let near = (cy - 1..=cy + 1).any(|gy| {
+            (cx - 1..=cx + 1).any(|gx| {
+                grid.get(&(gx, gy)).is_some_and(|v| {
+                    v.iter()
+                        .any(|(kx, ky)| (kx - x).powi(2) + (ky - y).powi(2) < d_px * d_px)
+                })
+            })
+        });
+        if !near {
+            grid.entry((cx, cy)).or_default().push((x, y));
+            kept.push((x, y));
+        }
+    }
+    kept
+}
+
 /// Local maxima (5 × 5) above `nsigma` × the image's robust noise over its median; brightest first, closer
-/// than 3 px to a brighter one dropped.
+/// than [`SAME_STAR_PX`] to a brighter one dropped.
 pub fn detect(img: &AnalysisImage, nsigma: f64) -> Vec<(f64, f64)> {
     let (sky, noise) = sky_and_noise(img);
     let thr = sky + nsigma * noise;
@@ -56,16 +84,7 @@ pub fn detect(img: &AnalysisImage, nsigma: f64) -> Vec<(f64, f64)> {
         })
         .collect();
     peaks.sort_by(|a, b| b.0.total_cmp(&a.0));
-    let mut kept: Vec<(f64, f64)> = Vec::new();
-    for (_, x, y) in peaks {
-        if kept
-            .iter()
-            .all(|(kx, ky)| (kx - x).powi(2) + (ky - y).powi(2) >= 9.0)
-        {
-            kept.push((x, y));
-        }
-    }
-    kept
+    drop_close(peaks.into_iter().map(|(_, x, y)| (x, y)), SAME_STAR_PX)
 }
 
 /// The image's sky level and pixel noise: median and MAD-σ of every 7th unmasked pixel (robust to the
