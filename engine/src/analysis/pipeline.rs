@@ -235,12 +235,14 @@ pub fn with_countermeasure(
 
 /// Whether a countermeasure acts in a crowded field: on the fitted positions alone (a plate model referenced
 /// to a catalogue or, `@oracle`, to the truth; the telemetry correction). Those that refit single stars
-/// (`yzones`, `exact-epsf`) and a stack reference (a stare's) do not.
+/// (`yzones`, `exact-epsf`, `telemetry-model`: not yet with grouped fits) and a stack reference (a stare's) do
+/// not.
 pub fn offered_in_crowded_field(cm: &Countermeasure) -> bool {
     !matches!(
         cm,
         Countermeasure::YZones { .. }
             | Countermeasure::ExactEpsf
+            | Countermeasure::TelemetryModel(_)
             | Countermeasure::Plate {
                 reference: countermeasures::Reference::Stack,
                 ..
@@ -296,7 +298,9 @@ pub fn analyse_crowded_image(
             continue;
         }
         let telemetry = match cm {
-            Countermeasure::Telemetry(q) => telemetry_for(q, supplied, img, &plain, cfg)?,
+            Countermeasure::Telemetry(q) | Countermeasure::TelemetryModel(q) => {
+                telemetry_for(q, supplied, img, &plain, cfg)?
+            }
             _ => None,
         };
         let ctx = Context {
@@ -420,7 +424,7 @@ pub fn telemetry_for(
     let kernel =
         crate::integrate::kernel::PixelKernel::tabulated(8, half_px, |x, y| epsf.value(x, y));
     let noise = FitNoise::of_stars(&plain.stars, img.var_floor_e2, cfg.fit_radius_px);
-    Ok(Some(Telemetry::from_record(
+    let mut tel = Telemetry::from_record(
         rec,
         0.0,
         ro.timing,
@@ -428,7 +432,9 @@ pub fn telemetry_for(
         ro.rotation_deg,
         &kernel,
         &noise,
-    )?))
+    )?;
+    tel.profile = Some(epsf.clone());
+    Ok(Some(tel))
 }
 
 /// One image analysed under a plan.
@@ -484,13 +490,15 @@ pub fn analyse_image(
                 o.fixed_epsf = Some(exact.clone());
                 analyze(img, &o)?
             }
-            Countermeasure::Telemetry(q) => match telemetry_for(q, supplied, img, &plain, cfg)? {
-                // a static ACE (or no telemetry at all) has nothing to correct
-                None => plain.clone(),
-                Some(tel) => {
-                    with_countermeasure(img, &plain, &prepared, cm, Some(&tel), reference)?
+            Countermeasure::Telemetry(q) | Countermeasure::TelemetryModel(q) => {
+                match telemetry_for(q, supplied, img, &plain, cfg)? {
+                    // a static ACE (or no telemetry at all) has nothing to correct
+                    None => plain.clone(),
+                    Some(tel) => {
+                        with_countermeasure(img, &plain, &prepared, cm, Some(&tel), reference)?
+                    }
                 }
-            },
+            }
             other => with_countermeasure(img, &plain, &prepared, other, None, reference)?,
         };
         measured.push((*cm, analysis));

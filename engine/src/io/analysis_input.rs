@@ -287,11 +287,7 @@ impl AnalysisInput {
         cm: &crate::analysis::countermeasures::Countermeasure,
     ) -> Vec<String> {
         let mut out = self.assumptions.clone();
-        if matches!(
-            cm,
-            crate::analysis::countermeasures::Countermeasure::Telemetry(_)
-        ) && self.telemetry.is_none()
-        {
+        if cm.telemetry_quality().is_some() && self.telemetry.is_none() {
             out.push(format!(
                 "no attitude telemetry product ({} beside the image, or --telemetry): the telemetry \
                  correction has nothing to correct with",

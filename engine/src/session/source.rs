@@ -184,11 +184,11 @@ impl Source<'_> {
                 let stars = instrument::reference_catalogue(self.sim, &survey, 0);
                 references.push((*error_mas, stars.iter().map(|s| (s.x_px, s.y_px)).collect()));
             }
-            if let Countermeasure::Telemetry(q) = cm
-                && !telemetry.iter().any(|(k, _)| k == q)
-                && let Some(r) = self.telemetry_record(q)?
+            if let Some(q) = cm.telemetry_quality()
+                && !telemetry.iter().any(|(k, _)| *k == q)
+                && let Some(r) = self.telemetry_record(&q)?
             {
-                telemetry.push((*q, r));
+                telemetry.push((q, r));
             }
         }
         let exact_epsf = match plan.countermeasures.contains(&Countermeasure::ExactEpsf) {

@@ -262,7 +262,9 @@ impl Predictor {
                 let r: Vec<(f64, f64)> = rx.into_iter().zip(ry).collect();
                 Ok((rms2(&r), 2 * model.n_params()))
             }
-            Countermeasure::Telemetry(q) => {
+            // the forward model is predicted by its linear part, the shift the telemetry's errors leave (the
+            // shape change it models beyond that is not in the predictor)
+            Countermeasure::Telemetry(q) | Countermeasure::TelemetryModel(q) => {
                 let (Some(series), Some(im)) = (&self.series, self.images.get(i)) else {
                     return Ok((rms2(&d), 0));
                 };

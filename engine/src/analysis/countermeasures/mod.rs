@@ -28,6 +28,7 @@
 //!
 //! The names are typed ([`Countermeasure`], `FromStr`/`Display`); [`Plan`] is a validated list of them.
 
+pub mod forward;
 pub mod plate;
 pub mod stack;
 pub mod telemetry;
@@ -48,7 +49,7 @@ use std::str::FromStr;
 
 /// Every countermeasure name, as the CLI, the sweep files and the CSVs spell them.
 pub const NAMES: &str = "none, yzones[:K], yzones-shared[:K], plate-affine[@R], plate-poly:N[@R] \
-     (R: stack (default), catalogue, oracle), telemetry, exact-epsf";
+     (R: stack (default), catalogue, oracle), telemetry, telemetry-model, exact-epsf";
 
 /// Default error of an external reference catalogue, mas: a Gaia-DR3-like star of G ≈ 17–18 propagated
 /// ~15 years to the 2030s (position ≈ 0.1–0.3 mas at 2016 plus ≈ 0.1–0.2 mas/yr of proper-motion error;
@@ -206,6 +207,9 @@ pub enum Countermeasure {
     },
     /// The telemetry correction.
     Telemetry(TelemetryQuality),
+    /// The telemetry forward model: each star refitted with the static profile seen through the jitter the
+    /// telemetry records over its pixels' windows ([`forward`]).
+    TelemetryModel(TelemetryQuality),
     /// The control fit with the exact ePSF (static ACE only).
     ExactEpsf,
 }
@@ -223,7 +227,7 @@ pub enum Reference {
 
 impl Countermeasure {
     /// The countermeasures the explorer offers, with their default parameters.
-    pub const OFFERED: [Countermeasure; 5] = [
+    pub const OFFERED: [Countermeasure; 6] = [
         Countermeasure::None,
         Countermeasure::YZones {
             zones: None,
@@ -238,6 +242,7 @@ impl Countermeasure {
             reference: Reference::Stack,
         },
         Countermeasure::Telemetry(TelemetryQuality::DEFAULT),
+        Countermeasure::TelemetryModel(TelemetryQuality::DEFAULT),
     ];
 
     /// The same countermeasure with the given telemetry quality and catalogue error (for the variants that
@@ -245,6 +250,7 @@ impl Countermeasure {
     pub fn with_quality(self, telemetry: TelemetryQuality, catalogue_error_mas: f64) -> Self {
         match self {
             Countermeasure::Telemetry(_) => Countermeasure::Telemetry(telemetry),
+            Countermeasure::TelemetryModel(_) => Countermeasure::TelemetryModel(telemetry),
             Countermeasure::Plate {
                 model,
                 reference: Reference::Catalogue { .. },
@@ -267,6 +273,15 @@ impl Countermeasure {
                 ..
             }
         )
+    }
+
+    /// The telemetry quality of a countermeasure that corrects with telemetry (`telemetry`,
+    /// `telemetry-model`).
+    pub fn telemetry_quality(&self) -> Option<TelemetryQuality> {
+        match self {
+            Countermeasure::Telemetry(q) | Countermeasure::TelemetryModel(q) => Some(*q),
+            _ => None,
+        }
     }
 
     /// Whether this countermeasure is a plate model referenced to the true positions (`@oracle`).
@@ -308,7 +323,7 @@ impl Countermeasure {
                 }
                 Ok(())
             }
-            Countermeasure::Telemetry(q) => q.validate(),
+            Countermeasure::Telemetry(q) | Countermeasure::TelemetryModel(q) => q.validate(),
             _ => Ok(()),
         }
     }
@@ -337,6 +352,7 @@ impl fmt::Display for Countermeasure {
                 }
             }
             Countermeasure::Telemetry(_) => write!(f, "telemetry"),
+            Countermeasure::TelemetryModel(_) => write!(f, "telemetry-model"),
             Countermeasure::ExactEpsf => write!(f, "exact-epsf"),
         }
     }
@@ -380,6 +396,7 @@ impl FromStr for Countermeasure {
             ("none", None) => Countermeasure::None,
             ("exact-epsf", None) => Countermeasure::ExactEpsf,
             ("telemetry", None) => Countermeasure::Telemetry(TelemetryQuality::DEFAULT),
+            ("telemetry-model", None) => Countermeasure::TelemetryModel(TelemetryQuality::DEFAULT),
             ("plate-affine", None) => Countermeasure::Plate {
                 model: PlateModel::Affine,
                 reference,
@@ -488,6 +505,18 @@ pub struct Context<'a> {
     pub reference: Option<&'a [(f64, f64)]>,
 }
 
+/// Replace the star results by their refits (a neighbour found by the global analysis is still a neighbour).
+fn take_refits(stars: &mut [StarResult], refits: Vec<crate::analysis::epsf::fit::StarFit>) {
+    for (s, f) in stars.iter_mut().zip(refits) {
+        s.x = f.x;
+        s.y = f.y;
+        s.flux_e = f.flux;
+        s.crlb_x_px = f.crlb_x;
+        s.crlb_y_px = f.crlb_y;
+        s.flags = f.flags | (s.flags & flags::BLENDED);
+    }
+}
+
 /// Apply a correction to the star results of an image; returns the parameters absorbed per exposure.
 pub fn apply(
     cm: &Countermeasure,
@@ -526,15 +555,7 @@ pub fn apply(
                     )
                 })
                 .collect();
-            for (s, f) in stars.iter_mut().zip(refits) {
-                s.x = f.x;
-                s.y = f.y;
-                s.flux_e = f.flux;
-                s.crlb_x_px = f.crlb_x;
-                s.crlb_y_px = f.crlb_y;
-                // a neighbour found by the global analysis is still a neighbour
-                s.flags = f.flags | (s.flags & flags::BLENDED);
-            }
+            take_refits(stars, refits);
             Ok(0)
         }
         // the stack reference of a stare of one exposure is that exposure: nothing to correct (a stare is
@@ -558,6 +579,38 @@ pub fn apply(
             Some(r) => plate::plate_fit_to_catalogue(stars, r, model, &cm.to_string()),
             None => Err(CountermeasureError::NeedsTruth(cm.to_string())),
         },
+        Countermeasure::TelemetryModel(_) => {
+            let Some(tel) = ctx.telemetry else {
+                return Ok(0);
+            };
+            let model = forward::Forward::new(
+                tel.profile.as_ref().unwrap_or(ctx.global),
+                &tel.track,
+                &tel.timing,
+                forward::DEFAULT_NODES_PER_PX,
+                ctx.img.nx,
+            );
+            // the pixels a fit may reach: its disc, grown around a saturated core, and a re-selection
+            let reach =
+                ctx.build.fit.radius_px + crate::analysis::epsf::fit::MAX_RADIUS_GROWTH_PX + 1.0;
+            let refits: Vec<_> = stars
+                .par_iter()
+                .map(|s| {
+                    let profile = model.star(s.x, s.y, reach, ctx.img.nx, ctx.img.ny);
+                    fit_star(
+                        &pd,
+                        &profile,
+                        s.x,
+                        s.y,
+                        s.flux_e.max(1.0),
+                        s.sky_e,
+                        &ctx.build.fit,
+                    )
+                })
+                .collect();
+            take_refits(stars, refits);
+            Ok(0)
+        }
         Countermeasure::Telemetry(_) => {
             let Some(tel) = ctx.telemetry else {
                 return Ok(0);
@@ -588,6 +641,7 @@ mod tests {
             "plate-affine@catalogue",
             "plate-poly:3@oracle",
             "telemetry",
+            "telemetry-model",
             "exact-epsf",
         ] {
             let c: Countermeasure = name.parse().expect(name);
@@ -605,6 +659,7 @@ mod tests {
             "none:2",
             "plate-poly:3@truth",
             "none@oracle",
+            "telemetry-model@oracle",
         ] {
             let e = bad.parse::<Countermeasure>().expect_err(bad);
             assert!(

@@ -19,6 +19,9 @@ pub struct Telemetry {
     pub timing: ReadoutTiming,
     /// The ePSF fit's response to jitter under this telemetry ([`crate::analysis::response`]).
     pub response: FitResponse,
+    /// The static profile the response was built from (the design model PSF or the image's ePSF), which the
+    /// forward model ([`super::forward`]) sees through the telemetry; `None`: the image's global ePSF.
+    pub profile: Option<crate::analysis::epsf::Epsf>,
 }
 
 /// When each pixel of an exposure integrated (its readout timing) and how its array is turned on the sky:
@@ -199,6 +202,7 @@ impl Telemetry {
             track,
             timing,
             response,
+            profile: None,
         })
     }
 

@@ -175,11 +175,9 @@ pub fn annulus_sky(img: &PixelData<'_>, x: f64, y: f64, r_in: f64, r_out: f64) -
     Some(stats::median(&kept))
 }
 
-/// Pixels (index, X, Y) within `radius` of (x, y); also whether the disc was clipped by the image edge and
-/// whether bad pixels were excluded.
-/// The fit pixels around (x, y): the disc of `radius`, grown 1 px at a time (by at most
-/// [`MAX_RADIUS_GROWTH_PX`]) while masked pixels (a saturated core) leave fewer good pixels than the
-/// unmasked disc would hold, so a saturated star is fitted from its unsaturated wings. Returns the pixels
+/// The fit pixels (index, X, Y) around (x, y): the disc of `radius`, grown 1 px at a time (by at most
+/// [`MAX_RADIUS_GROWTH_PX`]) while masked pixels (a saturated core) leave fewer good pixels than 80 % of the
+/// unmasked disc's area (π·radius²), so a saturated star is fitted from its unsaturated wings. Returns the pixels
 /// and whether the disc met the image edge or masked pixels.
 pub(crate) fn select(
     img: &PixelData<'_>,
@@ -231,9 +229,24 @@ fn select_disc(
     (out, edge, bad)
 }
 
+/// What a star's pixels are fitted with: its normalised profile in pixel `i` (centre `(px, py)`) for a star at
+/// `(x, y)`, and the profile's gradient with respect to the pixel's offset from the star (so the position
+/// derivatives are its negatives). The ePSF is one ([`Epsf`]: a function of the offset alone); a profile that
+/// follows each pixel's own exposure window is another (`analysis::countermeasures::forward`).
+pub trait Profile: Sync {
+    fn eval_at(&self, i: usize, px: f64, py: f64, x: f64, y: f64) -> (f64, f64, f64);
+}
+
+impl Profile for Epsf {
+    #[inline]
+    fn eval_at(&self, _i: usize, px: f64, py: f64, x: f64, y: f64) -> (f64, f64, f64) {
+        self.eval(px - x, py - y)
+    }
+}
+
 /// Fisher matrix of (x, y, f[, s]) for a star at (x, y) with flux f on sky s, over `pix`.
-fn fisher(
-    epsf: &Epsf,
+fn fisher<P: Profile + ?Sized>(
+    epsf: &P,
     pix: &[(usize, f64, f64)],
     x: f64,
     y: f64,
@@ -245,8 +258,8 @@ fn fisher(
 ) -> (Vec<f64>, usize) {
     let np = if fit_sky { 4 } else { 3 };
     let mut m = vec![0.0; np * np];
-    for &(_, px, py) in pix {
-        let (psi, gx, gy) = epsf.eval(px - x, py - y);
+    for &(i, px, py) in pix {
+        let (psi, gx, gy) = epsf.eval_at(i, px, py, x, y);
         let mu = f * psi + s;
         let w = 1.0 / pixel_variance(mu, f * psi, floor, flat_sigma);
         let j = [-f * gx, -f * gy, psi, 1.0];
@@ -295,10 +308,11 @@ pub fn crlb(
     ))
 }
 
-/// Fit one star starting from (x0, y0) with flux guess f0 and sky s0.
-pub fn fit_star(
+/// Fit one star starting from (x0, y0) with flux guess f0 and sky s0, with the profile `epsf` (an [`Epsf`], or
+/// any [`Profile`]).
+pub fn fit_star<P: Profile + ?Sized>(
     img: &PixelData<'_>,
-    epsf: &Epsf,
+    epsf: &P,
     x0: f64,
     y0: f64,
     f0: f64,
@@ -321,7 +335,7 @@ pub fn fit_star(
     let chi2_of = |p: &[f64; 4], pix: &[(usize, f64, f64)]| -> f64 {
         pix.iter()
             .map(|&(i, px, py)| {
-                let star = p[2] * epsf.value(px - p[0], py - p[1]);
+                let star = p[2] * epsf.eval_at(i, px, py, p[0], p[1]).0;
                 let mu = star + p[3];
                 (img.e[i] - mu).powi(2) / pixel_variance(mu, star, img.var_floor_e2, img.flat_sigma)
             })
@@ -338,7 +352,7 @@ pub fn fit_star(
         let mut jtr = vec![0.0; np];
         let mut chi2 = 0.0;
         for &(i, px, py) in &pix {
-            let (psi, gx, gy) = epsf.eval(px - p[0], py - p[1]);
+            let (psi, gx, gy) = epsf.eval_at(i, px, py, p[0], p[1]);
             let mu = p[2] * psi + p[3];
             let w = 1.0 / pixel_variance(mu, p[2] * psi, img.var_floor_e2, img.flat_sigma);
             let r = img.e[i] - mu;

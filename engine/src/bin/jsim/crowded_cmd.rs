@@ -56,10 +56,7 @@ pub fn crowded(a: &CrowdedArgs) -> Result<()> {
     let telemetry_quality = plan
         .countermeasures
         .iter()
-        .find_map(|c| match c {
-            engine::analysis::countermeasures::Countermeasure::Telemetry(q) => Some(*q),
-            _ => None,
-        })
+        .find_map(|c| c.telemetry_quality())
         .unwrap_or(engine::analysis::countermeasures::TelemetryQuality::DEFAULT);
     let mut outputs = crate::outputs::Outputs::in_dir(&a.out)?;
     for name in [

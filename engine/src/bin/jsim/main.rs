@@ -129,8 +129,9 @@ enum Command {
         mags: Vec<f64>,
         /// Countermeasures (comma separated): none, yzones[:K], yzones-shared[:K], plate-affine[@R],
         /// plate-poly:N[@R] (R, the plate model's reference: stack — the stare's own, default —, catalogue — the
-        /// survey's reference catalogue —, oracle — the truth, a control), telemetry, exact-epsf (control fit
-        /// with the exact ePSF, static ACE only).
+        /// survey's reference catalogue —, oracle — the truth, a control), telemetry (the shift the
+        /// telemetry predicts), telemetry-model (each star refitted through the jitter the telemetry records
+        /// over its pixels' windows), exact-epsf (control fit with the exact ePSF, static ACE only).
         #[arg(long, default_value = "none,yzones", value_delimiter = ',')]
         countermeasures: Vec<String>,
         #[command(flatten)]
@@ -240,8 +241,8 @@ impl SurveyArgs {
 #[derive(Args, Clone, Debug)]
 pub struct CountermeasureArgs {
     /// none, yzones[:K], yzones-shared[:K], plate-affine[@R], plate-poly:N[@R] (R: stack, catalogue — the
-    /// reference catalogue product —, oracle — the truth, a control), telemetry (with the telemetry
-    /// product) or exact-epsf (a control: the image's own simulation). A single image is a stare of one:
+    /// reference catalogue product —, oracle — the truth, a control), telemetry or telemetry-model (with the
+    /// telemetry product) or exact-epsf (a control: the image's own simulation). A single image is a stare of one:
     /// the stack corrects nothing.
     #[arg(long, default_value = "none")]
     pub countermeasure: String,
