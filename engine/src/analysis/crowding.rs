@@ -4,9 +4,10 @@
 //! `Auto` (the default) decides from the image's measured source density.
 //!
 //! **The automatic choice.** The peaks of the image (local 3 × 3 maxima above `analysis.detect_sigma` ×
-//! the robust noise; a peak within [`SAME_STAR_PX`] of a brighter one is that star's, as the isolated
-//! detection has it: a star smeared by a large jitter shows several) are found, and those with another peak
-//! within the link radius r of the grouped fits ([`crate::analysis::crowded::link_radius_px`]) counted. Above [`CROWDED_NEIGHBOUR_FRACTION`] of the
+//! the robust noise) are found, one per source — a peak within [`SAME_STAR_PX`] of a brighter one, or joined
+//! to one by a ridge (no [`SADDLE_DEPTH`] valley between them), is that star's: a star smeared along a large
+//! jitter track shows several — and those with another within the link radius r of the grouped fits
+//! ([`crate::analysis::crowded::link_radius_px`]) counted. Above [`CROWDED_NEIGHBOUR_FRACTION`] of the
 //! peaks with a neighbour, the isolated analysis would fit a measurable share of its stars with a
 //! neighbour's light unmodelled, so the field is crowded. For stars scattered at random with ρ peaks per
 //! pixel the fraction is `1 − exp(−ρπr²)` (Poisson; reported beside it): the paper's 400-star grid has
@@ -66,10 +67,12 @@ pub fn density(img: &AnalysisImage, cfg: &AnalysisCfg) -> Density {
         })
         .collect();
     peaks.sort_by(|a, b| b.0.total_cmp(&a.0));
-    let peaks = drop_close(peaks.into_iter().map(|(_, x, y)| (x, y)), SAME_STAR_PX);
+    let close = drop_close(peaks.iter().map(|&(_, x, y)| (x, y)), SAME_STAR_PX);
+    let value = |x: f64, y: f64| img.e[y as usize * nx + x as usize];
+    let r = crate::analysis::crowded::link_radius_px(cfg);
+    let peaks = one_per_source(img, sky, &close, &value, r);
     let good = img.bad.iter().filter(|b| !**b).count().max(1);
     let per_px = peaks.len() as f64 / good as f64;
-    let r = crate::analysis::crowded::link_radius_px(cfg);
     let nb = Neighbours::new(&peaks);
     let with_neighbour = peaks
         .iter()
@@ -85,6 +88,57 @@ pub fn density(img: &AnalysisImage, cfg: &AnalysisCfg) -> Density {
             with_neighbour as f64 / peaks.len() as f64
         },
     }
+}
+
+/// Fraction of the fainter peak's height above the sky that the image must fall between two peaks for them to
+/// be two sources: a star smeared along its jitter track shows maxima joined by a ridge (a shallow saddle),
+/// two stars a valley (two PSF cores 2 px apart dip to ≈ 20 % between them).
+pub const SADDLE_DEPTH: f64 = 0.5;
+
+/// Of peaks sorted brightest first, one per source: a peak joined to a brighter one within `reach_px` by a
+/// ridge — the image between them never falls below [`SADDLE_DEPTH`] of the fainter's height above `sky` (its
+/// nearest pixels sampled every ½ px along the segment) — is that source's. O(N) with a grid of `reach_px`
+/// cells.
+fn one_per_source(
+    img: &AnalysisImage,
+    sky: f64,
+    sorted: &[(f64, f64)],
+    value: &dyn Fn(f64, f64) -> f64,
+    reach_px: f64,
+) -> Vec<(f64, f64)> {
+    let ridge = |p: (f64, f64), q: (f64, f64)| {
+        let fainter = value(p.0, p.1).min(value(q.0, q.1));
+        let steps = ((q.0 - p.0).hypot(q.1 - p.1) * 2.0).ceil().max(1.0) as usize;
+        let lowest = (1..steps)
+            .map(|k| {
+                let t = k as f64 / steps as f64;
+                let (x, y) = (p.0 + t * (q.0 - p.0), p.1 + t * (q.1 - p.1));
+                let i = y.round() as usize * img.nx + x.round() as usize;
+                if img.bad[i] { fainter } else { img.e[i] }
+            })
+            .fold(fainter, f64::min);
+        fainter - lowest < (1.0 - SADDLE_DEPTH) * (fainter - sky)
+    };
+    let cell = reach_px.max(1.0);
+    let mut grid: std::collections::HashMap<(i64, i64), Vec<(f64, f64)>> =
+        std::collections::HashMap::new();
+    let mut kept = Vec::new();
+    for &p in sorted {
+        let (cx, cy) = ((p.0 / cell).floor() as i64, (p.1 / cell).floor() as i64);
+        let joined = (cy - 1..=cy + 1).any(|gy| {
+            (cx - 1..=cx + 1).any(|gx| {
+                grid.get(&(gx, gy)).is_some_and(|v| {
+                    v.iter()
+                        .any(|&q| (q.0 - p.0).hypot(q.1 - p.1) <= reach_px && ridge(p, q))
+                })
+            })
+        });
+        if !joined {
+            grid.entry((cx, cy)).or_default().push(p);
+            kept.push(p);
+        }
+    }
+    kept
 }
 
 /// Whether the image is analysed as a crowded field, and the density measured (with `Auto` only).
@@ -171,6 +225,77 @@ mod tests {
         let d = density(&image(400, &lobes), &cfg);
         assert_eq!(d.peaks, centres.len(), "{d:?}");
         assert!(!is_crowded(&image(400, &lobes), &cfg, Crowding::Auto).0);
+    }
+
+    /// Stars smeared along a 6-px jitter track that dwells at both ends (two local maxima ≈ 4 px apart,
+    /// beyond `SAME_STAR_PX`) are one source each: their maxima are joined by a ridge. Two PSF cores 4 px
+    /// apart are two.
+    #[test]
+    fn a_streak_is_one_source_and_a_pair_two() {
+        let cfg = crate::config::Config::default().analysis;
+        let n = 300;
+        let sigma: f64 = 0.8;
+        let mut e = vec![10.0; n * n];
+        let mut add = |cx: f64, cy: f64, f: f64| {
+            for py in (cy as usize).saturating_sub(5)..(cy as usize + 6).min(n) {
+                for px in (cx as usize).saturating_sub(5)..(cx as usize + 6).min(n) {
+                    let r2 = (px as f64 - cx).powi(2) + (py as f64 - cy).powi(2);
+                    e[py * n + px] += f * (-r2 / (2.0 * sigma * sigma)).exp();
+                }
+            }
+        };
+        let centres: Vec<(f64, f64)> = (0..5)
+            .flat_map(|j| (0..5).map(move |i| (30.0 + 55.0 * i as f64, 30.0 + 55.0 * j as f64)))
+            .collect();
+        for &(x, y) in &centres {
+            for k in 0..600 {
+                let t = k as f64 / 599.0;
+                // the track runs 6 px and dwells at both ends: two maxima ≈ 4 px apart on one ridge
+                let dwell =
+                    1.0 + 3.0 * ((-(t / 0.04).powi(2)).exp() + (-((t - 1.0) / 0.04).powi(2)).exp());
+                add(x + 5.75 * t, y + 1.7 * t, 4.0 * dwell);
+            }
+        }
+        let img = AnalysisImage {
+            nx: n,
+            ny: n,
+            e: e.clone(),
+            bad: vec![false; n * n],
+            var_floor_e2: 1.0,
+            flat_sigma: 0.0,
+            plate_scale_mas: 471.0,
+        };
+        // each streak has two local maxima, further apart than SAME_STAR_PX
+        let (sky, noise) = sky_and_noise(&img);
+        let maxima = (1..n - 1)
+            .flat_map(|y| (1..n - 1).map(move |x| (x, y)))
+            .filter(|&(x, y)| {
+                let p = e[y * n + x];
+                p > sky + cfg.detect_sigma * noise
+                    && (0..9).all(|k| {
+                        let (xx, yy) = (x + k % 3 - 1, y + k / 3 - 1);
+                        (xx, yy) == (x, y) || e[yy * n + xx] < p
+                    })
+            })
+            .count();
+        assert!(maxima >= 2 * centres.len(), "{maxima} maxima");
+        let d = density(&img, &cfg);
+        assert_eq!(d.peaks, centres.len(), "{d:?}");
+        assert!(!is_crowded(&img, &cfg, Crowding::Auto).0);
+        // a pair of cores 4 px apart: a valley between them, two sources
+        let mut e2 = vec![10.0; n * n];
+        for &(x, y) in &centres {
+            for (dx, f) in [(0.0, 3000.0), (4.0, 2000.0)] {
+                for py in (y as usize) - 5..(y as usize) + 6 {
+                    for px in (x as usize) - 5..(x as usize) + 10 {
+                        let r2 = (px as f64 - x - dx).powi(2) + (py as f64 - y).powi(2);
+                        e2[py * n + px] += f * (-r2 / (2.0 * sigma * sigma)).exp();
+                    }
+                }
+            }
+        }
+        let pairs = AnalysisImage { e: e2, ..img };
+        assert_eq!(density(&pairs, &cfg).peaks, 2 * centres.len());
     }
 
     /// Stars at random positions: the measured fraction with a neighbour is the Poisson

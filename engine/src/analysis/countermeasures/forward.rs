@@ -87,8 +87,7 @@ impl<'a> Forward<'a> {
         let g = nodes_per_px.max(1) as f64;
         let (a, b) = timing.shared_window_s(detector_px);
         let core = (b > a).then(|| {
-            let w = track.window(a, b);
-            let (nodes, weight) = deposit(track, &w, g);
+            let (nodes, weight) = deposit(track, &[track.window(a, b)], g);
             let half = (profile.half_nodes / profile.oversampling.max(1)).max(1);
             let psi = Epsf::from_fn(profile.oversampling, half, |x, y| {
                 nodes
@@ -144,17 +143,21 @@ impl<'a> Forward<'a> {
     fn group(&self, a: f64, b: f64, g: f64) -> Group {
         match &self.core {
             Some(c) if a <= c.a_s && b >= c.b_s => {
-                let (mut edge, wl) = deposit(self.track, &self.track.window(a, c.a_s), g);
-                let (hi, wh) = deposit(self.track, &self.track.window(c.b_s, b), g);
-                edge.extend(hi);
+                // the edges hold ≈ the frame sweep's share of the window (≈ 10 %), so a grid twice as coarse
+                // costs them no more than the core's grid costs the core, at a quarter of the nodes
+                let (edge, w) = deposit(
+                    self.track,
+                    &[self.track.window(a, c.a_s), self.track.window(c.b_s, b)],
+                    (g / 2.0).max(1.0),
+                );
                 Group {
                     edge,
                     with_core: true,
-                    norm: 1.0 / (c.weight + wl + wh).max(f64::MIN_POSITIVE),
+                    norm: 1.0 / (c.weight + w).max(f64::MIN_POSITIVE),
                 }
             }
             _ => {
-                let (edge, w) = deposit(self.track, &self.track.window(a, b), g);
+                let (edge, w) = deposit(self.track, &[self.track.window(a, b)], g);
                 Group {
                     edge,
                     with_core: false,
@@ -165,16 +168,21 @@ impl<'a> Forward<'a> {
     }
 }
 
-/// The track's samples in window `w`, deposited cloud-in-cell onto nodes `1/g` px apart: the occupied nodes
-/// with their raw weights, and the total weight.
-fn deposit(track: &Track, w: &WindowWeights, g: f64) -> (Vec<(f64, f64, f64)>, f64) {
-    let last = w.last.min(track.len().saturating_sub(1));
-    if track.is_empty() || w.first > last {
+/// The track's samples in the windows `ws` (disjoint), deposited cloud-in-cell onto nodes `1/g` px apart: the
+/// occupied nodes with their raw weights, and the total weight.
+fn deposit(track: &Track, ws: &[WindowWeights], g: f64) -> (Vec<(f64, f64, f64)>, f64) {
+    let n = track.len();
+    let samples = || {
+        ws.iter()
+            .filter(move |w| n > 0 && w.first <= w.last.min(n - 1))
+            .flat_map(move |w| (w.first..=w.last.min(n - 1)).map(move |j| (j, w.weight(j))))
+            .filter(|&(_, wj)| wj > 0.0)
+    };
+    if samples().next().is_none() {
         return (Vec::new(), 0.0);
     }
-    let samples = w.first..=last;
     let (mut lo_u, mut hi_u, mut lo_v, mut hi_v) = (i64::MAX, i64::MIN, i64::MAX, i64::MIN);
-    for j in samples.clone() {
+    for (j, _) in samples() {
         let (u, v) = (
             (track.dx_px[j] * g).floor() as i64,
             (track.dy_px[j] * g).floor() as i64,
@@ -185,11 +193,7 @@ fn deposit(track: &Track, w: &WindowWeights, g: f64) -> (Vec<(f64, f64, f64)>, f
     let (nu, nv) = ((hi_u - lo_u + 2) as usize, (hi_v - lo_v + 2) as usize);
     let mut acc = vec![0.0; nu * nv];
     let mut total = 0.0;
-    for j in samples {
-        let wj = w.weight(j);
-        if wj <= 0.0 {
-            continue;
-        }
+    for (j, wj) in samples() {
         let (u, v) = (track.dx_px[j] * g, track.dy_px[j] * g);
         let (fu, fv) = (u - u.floor(), v - v.floor());
         let (iu, iv) = (
