@@ -39,6 +39,7 @@ pub struct BenchArgs {
     /// Images for the ePSF-iteration rows.
     #[arg(long, default_value_t = 3)]
     pub epsf_images: usize,
+    /// Output directory (bench.csv, bench.png).
     #[arg(long, default_value = "out/bench")]
     pub out: PathBuf,
 }

@@ -31,6 +31,8 @@ pub struct CrowdedArgs {
     /// Also write each case's exposure (fp_000.fits under OUT/CASE/), e.g. for the photutils reference.
     #[arg(long)]
     pub save_images: bool,
+    /// Output directory (crowded_bins.csv, crowded_arrays.csv, stars_CASE.csv, accuracy_vs_mag.png, the
+    /// vector maps, and each case's exposure and products under CASE/ with --save-images).
     #[arg(long, default_value = "out/crowded")]
     pub out: PathBuf,
 }

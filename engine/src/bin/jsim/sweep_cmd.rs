@@ -15,6 +15,7 @@ pub struct SweepArgs {
     /// Sweep file (TOML): base config, parameter grid, countermeasures, exposures per point, seed.
     #[arg(long)]
     pub config: PathBuf,
+    /// Output directory (points.csv, shards/, sweep.json; merged.csv and report/ after merge and report).
     #[arg(long, default_value = "out/sweep")]
     pub out: PathBuf,
     /// Run only shard I of N (0-based, 0 ≤ I < N): the units u with u mod N = I. Default: all units (0/1).

@@ -316,9 +316,33 @@ pub fn report(dir: &Path, opts: &ReportOptions) -> Result<ReportSummary, SweepEr
         .collect();
     let span = xs.iter().copied().fold(f64::NEG_INFINITY, f64::max)
         - xs.iter().copied().fold(f64::INFINITY, f64::min);
-    // one grid point: nothing varies along x, so the series stand side by side one unit apart
+    // one grid point: nothing varies along x, so the series stand side by side one unit apart; grid points
+    // without a numeric x (e.g. readout orders) are categories one unit apart, their series side by side
+    // within ±0.4 of each
     let one_point = !(span > 0.0);
-    let dodge = if one_point { 1.0 } else { 0.01 * span };
+    let dodge = match (one_point, x_index) {
+        (true, _) => 1.0,
+        (false, None) => 0.8 / series_keys.len().max(1) as f64,
+        (false, Some(_)) => 0.01 * span,
+    };
+    let categories = {
+        let mut seen: Vec<(usize, String)> = Vec::new();
+        for r in &rows {
+            if !seen.iter().any(|(p, _)| *p == r.point) {
+                let what: Vec<String> = r
+                    .values
+                    .iter()
+                    .enumerate()
+                    .map(|(k, v)| format!("{}={v}", fields[k]))
+                    .collect();
+                seen.push((r.point, what.join(", ")));
+            }
+        }
+        seen.iter()
+            .map(|(p, w)| format!("{p}: {w}"))
+            .collect::<Vec<_>>()
+            .join("; ")
+    };
     let n_series = series_keys.len() as f64;
     let series: Vec<plot::Series> = series_keys
         .iter()
@@ -367,10 +391,10 @@ pub fn report(dir: &Path, opts: &ReportOptions) -> Result<ReportSummary, SweepEr
             "Exposures with {} ≤ {threshold} mas: 95 % Wilson intervals",
             opts.metric
         ),
-        match (x_index, one_point) {
-            (_, true) => "series side by side (one grid point; see the legend)",
-            (Some(k), false) => fields[k].as_str(),
-            (None, false) => "grid point",
+        &match (x_index, one_point) {
+            (_, true) => "series side by side (one grid point; see the legend)".to_string(),
+            (Some(k), false) => fields[k].clone(),
+            (None, false) => format!("grid point ({categories})"),
         },
         "fraction of exposures (measured, 95 % Wilson interval)",
         &series,
