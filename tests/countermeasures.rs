@@ -18,6 +18,15 @@ fn rms_mas(v: &[(f64, f64)], scale: f64) -> f64 {
     ((stats::std_dev(&x).powi(2) + stats::std_dev(&y).powi(2)) / 2.0).sqrt()
 }
 
+/// The accuracy (mas) of exposure 0 of `c` analysed with `cm` alone.
+fn accuracy(c: &engine::config::Config, cm: Countermeasure) -> f64 {
+    let sim = Simulator::new(c).expect("sim");
+    let plan = Plan::new(vec![cm]).expect("plan");
+    analyse_exposure(&sim, 0, &plan).expect("analysis").measured[0]
+        .report
+        .accuracy_mas
+}
+
 /// The small scene under a strong realistic ACE (450 mas) with the rolling readout, noise- and flat-free:
 /// the only position errors are what the jitter did.
 fn noise_free_rolling() -> engine::config::Config {
@@ -125,13 +134,6 @@ fn telemetry_predicts_the_measured_errors_of_a_noise_free_image() {
 #[test]
 fn telemetry_and_plate_model_fix_a_noise_free_rolling_image_and_sample_hold_needs_no_fix() {
     let c = noise_free_rolling();
-    let accuracy = |c: &engine::config::Config, cm: Countermeasure| -> f64 {
-        let sim = Simulator::new(c).expect("sim");
-        let plan = Plan::new(vec![cm]).expect("plan");
-        analyse_exposure(&sim, 0, &plan).expect("analysis").measured[0]
-            .report
-            .accuracy_mas
-    };
     let parse = |n: &str| -> Countermeasure { n.parse().expect("name") };
     let none = accuracy(&c, Countermeasure::None);
     // the upper limits: the true attitude, the true positions
@@ -272,13 +274,6 @@ fn every_countermeasure_does_what_it_should_on_a_small_scene() {
 #[test]
 fn the_telemetry_forward_model_reaches_the_sample_hold_floor() {
     let c = noise_free_rolling();
-    let accuracy = |c: &engine::config::Config, cm: Countermeasure| -> f64 {
-        let sim = Simulator::new(c).expect("sim");
-        let plan = Plan::new(vec![cm]).expect("plan");
-        analyse_exposure(&sim, 0, &plan).expect("analysis").measured[0]
-            .report
-            .accuracy_mas
-    };
     let tel = accuracy(&c, Countermeasure::Telemetry(TelemetryQuality::IDEAL));
     let model = accuracy(&c, Countermeasure::TelemetryModel(TelemetryQuality::IDEAL));
     let mut sh = c.clone();
