@@ -58,6 +58,10 @@ fn bad_values_are_named_errors_and_write_nothing() {
         (vec!["--set", "ace.sigma_mass=3"], "sigma_mass"),
         (vec!["--readout", "diagonal"], "readout.order"),
         (
+            vec!["--set", "analysis.telemetry_model_nodes_per_px=0"],
+            "analysis.telemetry_model_nodes_per_px",
+        ),
+        (
             vec!["--config", "/nonexistent/cfg.toml"],
             "/nonexistent/cfg.toml",
         ),
@@ -77,6 +81,15 @@ fn bad_values_are_named_errors_and_write_nothing() {
         assert!(err.matches("os error").count() <= 1, "{err}");
         assert!(!out_dir.exists(), "{args:?} created its output directory");
     }
+    // a bench part that does not exist is named, not skipped
+    let out = jsim()
+        .args(["bench", "--parts", "methods,nope", "--out"])
+        .arg(&out_dir)
+        .output()
+        .expect("run");
+    assert_eq!(out.status.code(), Some(1));
+    assert!(stderr_of(&out).contains("--parts nope"), "{}", stderr_of(&out));
+    assert!(!out_dir.exists());
     let out = jsim()
         .args(["analyze", "--image", "/nonexistent/img.fits", "--out"])
         .arg(dir.join("an"))

@@ -434,6 +434,7 @@ pub fn telemetry_for(
         &noise,
     )?;
     tel.profile = Some(epsf.clone());
+    tel.model_nodes_per_px = cfg.telemetry_model_nodes_per_px;
     Ok(Some(tel))
 }
 

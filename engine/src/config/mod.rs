@@ -874,6 +874,9 @@ pub struct Analysis {
     pub flat_field: FlatField,
     /// The PSF the telemetry correction's response is built from.
     pub telemetry_kernel: TelemetryKernel,
+    /// Nodes per pixel of the telemetry forward model's jitter histograms (`telemetry-model`; the knob of its
+    /// one approximation, benchmarked by `jsim bench --parts forward`).
+    pub telemetry_model_nodes_per_px: usize,
     /// Isolated-star or crowded-field analysis, or chosen from the measured source density.
     pub crowding: Crowding,
 }
@@ -915,6 +918,7 @@ impl Default for Analysis {
                 error: DEFAULT_CALIBRATION_FLAT_ERROR,
             },
             telemetry_kernel: TelemetryKernel::ModelPsf,
+            telemetry_model_nodes_per_px: 16,
             crowding: Crowding::Auto,
         }
     }

@@ -483,6 +483,12 @@ impl Config {
             ));
         }
         check_range_usize("analysis.epsf_zones", an.epsf_zones, 1, 64)?;
+        check_range_usize(
+            "analysis.telemetry_model_nodes_per_px",
+            an.telemetry_model_nodes_per_px,
+            1,
+            128,
+        )?;
         check_pos("analysis.detect_sigma", an.detect_sigma)?;
         check_pos("analysis.crowded_detect_sigma", an.crowded_detect_sigma)?;
         check_range_usize("analysis.fit_max_iter", an.fit_max_iter, 1, 10_000)?;

@@ -711,8 +711,9 @@ pub fn render_table(rows: &[BenchRow]) -> String {
         ));
     }
     s.push_str(
-        "pos [mas]: an integration setting's rms position shift against the exact frame; an analysis \
-         setting's (ePSF, crowded) accuracy against the truth\n",
+        "pos [mas]: an integration setting's rms position shift against the exact frame, the forward \
+         model's against its finest node spacing; an analysis setting's (ePSF, crowded) accuracy against \
+         the truth\n",
     );
     s
 }

@@ -3,6 +3,7 @@
 
 pub mod bench;
 pub mod bench_field;
+pub mod bench_forward;
 pub mod crowded;
 pub mod experiment;
 pub mod predict;

@@ -587,7 +587,7 @@ pub fn apply(
                 tel.profile.as_ref().unwrap_or(ctx.global),
                 &tel.track,
                 &tel.timing,
-                forward::DEFAULT_NODES_PER_PX,
+                tel.model_nodes_per_px,
                 ctx.img.nx,
             );
             // the pixels a fit may reach: its disc, grown around a saturated core, and a re-selection

@@ -22,6 +22,8 @@ pub struct Telemetry {
     /// The static profile the response was built from (the design model PSF or the image's ePSF), which the
     /// forward model ([`super::forward`]) sees through the telemetry; `None`: the image's global ePSF.
     pub profile: Option<crate::analysis::epsf::Epsf>,
+    /// Nodes per pixel of the forward model's jitter histograms.
+    pub model_nodes_per_px: usize,
 }
 
 /// When each pixel of an exposure integrated (its readout timing) and how its array is turned on the sky:
@@ -203,6 +205,7 @@ impl Telemetry {
             timing,
             response,
             profile: None,
+            model_nodes_per_px: super::forward::DEFAULT_NODES_PER_PX,
         })
     }
 

@@ -11,10 +11,10 @@ use std::path::PathBuf;
 pub struct BenchArgs {
     #[command(flatten)]
     pub cfg: ConfigArgs,
-    /// Parts to run (comma separated): methods, knobs, stars, epsf, bulge (the Galactic-centre field's
-    /// knobs and the focal-plane exposure against the number of stars), crowded (the crowded-field
-    /// analysis against the number of stars and its detection threshold); the last two are not in the
-    /// default set: minutes.
+    /// Parts to run (comma separated): methods, knobs, stars, epsf, forward (the telemetry forward model's
+    /// node spacing against time), bulge (the Galactic-centre field's knobs and the focal-plane exposure
+    /// against the number of stars), crowded (the crowded-field analysis against the number of stars and its
+    /// detection threshold); the last three are not in the default set: minutes.
     #[arg(
         long,
         default_value = "methods,knobs,stars,epsf",
@@ -36,7 +36,7 @@ pub struct BenchArgs {
     /// Detection thresholds of the crowded-analysis rows (part crowded), on the largest field.
     #[arg(long, default_value = "3,5,10", value_delimiter = ',')]
     pub crowded_sigmas: Vec<f64>,
-    /// Images for the ePSF-iteration rows.
+    /// Images for the ePSF-iteration and forward-model rows.
     #[arg(long, default_value_t = 3)]
     pub epsf_images: usize,
     /// Output directory (bench.csv, bench.png).
@@ -44,7 +44,15 @@ pub struct BenchArgs {
     pub out: PathBuf,
 }
 
+/// The parts `--parts` may name.
+pub const PARTS: [&str; 7] = [
+    "methods", "knobs", "stars", "epsf", "forward", "bulge", "crowded",
+];
+
 pub fn bench(a: &BenchArgs) -> Result<()> {
+    if let Some(p) = a.parts.iter().find(|p| !PARTS.contains(&p.as_str())) {
+        anyhow::bail!("--parts {p}: not a part (allowed: {})", PARTS.join(", "));
+    }
     let cfg = a.cfg.load()?;
     let mut outputs = crate::outputs::Outputs::in_dir(&a.out)?;
     for name in ["bench.csv", "bench.png"] {
@@ -78,6 +86,15 @@ pub fn bench(a: &BenchArgs) -> Result<()> {
     if has("epsf") {
         eprintln!("bench: ePSF iterations …");
         rows.extend(bench::epsf_iterations(&session, &cfg, a.epsf_images)?);
+        save(&rows)?;
+    }
+    if has("forward") {
+        eprintln!("bench: telemetry forward model …");
+        rows.extend(engine::studies::bench_forward::forward_model(
+            &session,
+            &cfg,
+            a.epsf_images,
+        )?);
         save(&rows)?;
     }
     if has("bulge") {
