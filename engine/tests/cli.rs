@@ -88,7 +88,11 @@ fn bad_values_are_named_errors_and_write_nothing() {
         .output()
         .expect("run");
     assert_eq!(out.status.code(), Some(1));
-    assert!(stderr_of(&out).contains("--parts nope"), "{}", stderr_of(&out));
+    assert!(
+        stderr_of(&out).contains("--parts nope"),
+        "{}",
+        stderr_of(&out)
+    );
     assert!(!out_dir.exists());
     let out = jsim()
         .args(["analyze", "--image", "/nonexistent/img.fits", "--out"])
