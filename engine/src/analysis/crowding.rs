@@ -16,7 +16,7 @@
 //! crowding explicitly there.
 
 use crate::analysis::crowded::neighbours::Neighbours;
-use crate::analysis::detection::{SAME_STAR_PX, drop_close, sky_and_noise};
+use crate::analysis::detection::{SAME_STAR_PX, drop_close, keep_first, sky_and_noise};
 use crate::analysis::image::AnalysisImage;
 use crate::config::Analysis as AnalysisCfg;
 use rayon::prelude::*;
@@ -97,8 +97,7 @@ pub const SADDLE_DEPTH: f64 = 0.5;
 
 /// Of peaks sorted brightest first, one per source: a peak joined to a brighter one within `reach_px` by a
 /// ridge — the image between them never falls below [`SADDLE_DEPTH`] of the fainter's height above `sky` (its
-/// nearest pixels sampled every ½ px along the segment) — is that source's. O(N) with a grid of `reach_px`
-/// cells.
+/// nearest pixels sampled every ½ px along the segment) — is that source's ([`keep_first`]: O(N)).
 fn one_per_source(
     img: &AnalysisImage,
     sky: f64,
@@ -119,26 +118,9 @@ fn one_per_source(
             .fold(fainter, f64::min);
         fainter - lowest < (1.0 - SADDLE_DEPTH) * (fainter - sky)
     };
-    let cell = reach_px.max(1.0);
-    let mut grid: std::collections::HashMap<(i64, i64), Vec<(f64, f64)>> =
-        std::collections::HashMap::new();
-    let mut kept = Vec::new();
-    for &p in sorted {
-        let (cx, cy) = ((p.0 / cell).floor() as i64, (p.1 / cell).floor() as i64);
-        let joined = (cy - 1..=cy + 1).any(|gy| {
-            (cx - 1..=cx + 1).any(|gx| {
-                grid.get(&(gx, gy)).is_some_and(|v| {
-                    v.iter()
-                        .any(|&q| (q.0 - p.0).hypot(q.1 - p.1) <= reach_px && ridge(p, q))
-                })
-            })
-        });
-        if !joined {
-            grid.entry((cx, cy)).or_default().push(p);
-            kept.push(p);
-        }
-    }
-    kept
+    keep_first(sorted.iter().copied(), reach_px.max(1.0), |p, q| {
+        (q.0 - p.0).hypot(q.1 - p.1) <= reach_px && ridge(p, q)
+    })
 }
 
 /// Whether the image is analysed as a crowded field, and the density measured (with `Auto` only).

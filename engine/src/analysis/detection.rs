@@ -10,26 +10,36 @@ use rayon::prelude::*;
 /// Two peaks closer than this are one star's (a jitter-smeared star can show several), px.
 pub const SAME_STAR_PX: f64 = 3.0;
 
-/// Of positions sorted brightest first, those not within `d_px` of a brighter one kept before: O(N) with a
-/// grid of `d_px` cells (each position looks at its own cell and the eight around it).
+/// Of positions sorted brightest first, those not within `d_px` of a brighter one kept before.
 pub fn drop_close(sorted: impl IntoIterator<Item = (f64, f64)>, d_px: f64) -> Vec<(f64, f64)> {
-    let cell = d_px.max(1e-9);
+    keep_first(sorted, d_px, |p, q| {
+        (p.0 - q.0).powi(2) + (p.1 - q.1).powi(2) < d_px * d_px
+    })
+}
+
+/// Of positions sorted brightest first, those that `same` ties to no brighter one kept before, where `same`
+/// is only asked of pairs within `reach_px`: O(N) with a grid of `reach_px` cells (each position looks at its
+/// own cell and the eight around it).
+pub fn keep_first(
+    sorted: impl IntoIterator<Item = (f64, f64)>,
+    reach_px: f64,
+    same: impl Fn((f64, f64), (f64, f64)) -> bool,
+) -> Vec<(f64, f64)> {
+    let cell = reach_px.max(1e-9);
     let mut grid: std::collections::HashMap<(i64, i64), Vec<(f64, f64)>> =
         std::collections::HashMap::new();
     let mut kept = Vec::new();
-    for (x, y) in sorted {
-        let (cx, cy) = ((x / cell).floor() as i64, (y / cell).floor() as i64);
-        let near = (cy - 1..=cy + 1).any(|gy| {
+    for p in sorted {
+        let (cx, cy) = ((p.0 / cell).floor() as i64, (p.1 / cell).floor() as i64);
+        let tied = (cy - 1..=cy + 1).any(|gy| {
             (cx - 1..=cx + 1).any(|gx| {
-                grid.get(&(gx, gy)).is_some_and(|v| {
-                    v.iter()
-                        .any(|(kx, ky)| (kx - x).powi(2) + (ky - y).powi(2) < d_px * d_px)
-                })
+                grid.get(&(gx, gy))
+                    .is_some_and(|v| v.iter().any(|&q| same(p, q)))
             })
         });
-        if !near {
-            grid.entry((cx, cy)).or_default().push((x, y));
-            kept.push((x, y));
+        if !tied {
+            grid.entry((cx, cy)).or_default().push(p);
+            kept.push(p);
         }
     }
     kept

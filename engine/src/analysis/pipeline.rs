@@ -1,7 +1,8 @@
 //! The per-image analysis pipeline: detect → global ePSF → fits → each countermeasure of a [`Plan`] →
 //! report. No truth enters: scoring the fits against one is the next layer's (`scoring::image`). `jsim
-//! analyze`, `jsim experiment`, the sweeps and the explorer all run [`analyse_image`]; the pieces ([`analyze_prepared`], [`with_countermeasure`], [`analyze`]) are public for
-//! the tests and for studies that need one step alone.
+//! analyze`, `jsim experiment`, the sweeps and the explorer all run [`analyse_image`]; the pieces
+//! ([`analyze_prepared`], [`with_countermeasure`], [`analyze`]) are public for the tests and for studies that
+//! need one step alone.
 
 use crate::analysis::AnalysisError;
 use crate::analysis::countermeasures::TelemetryQuality;

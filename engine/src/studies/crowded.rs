@@ -11,10 +11,10 @@
 
 use crate::analysis::AnalysisError;
 use crate::analysis::countermeasures::Plan;
-use crate::analysis::pipeline::{analyse_crowded_image, offered_in_crowded_field};
+use crate::analysis::pipeline::offered_in_crowded_field;
+use crate::config::Crowding;
 use crate::scoring::crowded as report;
 use crate::scoring::image::{ScoredImage, score_image};
-use crate::session::source::oracle_reference;
 use crate::session::{Source, SourceError, analysis_image};
 use crate::simulate::{FocalPlaneExposure, FocalPlaneSimulator};
 use std::time::Instant;
@@ -35,9 +35,10 @@ pub fn check_plan(plan: &Plan) -> Result<(), AnalysisError> {
 }
 
 /// Analyse one focal-plane exposure under every countermeasure of `plan`, binning accuracy by true Hw at
-/// `edges`: each array's image through the pipeline's crowded analysis ([`analyse_crowded_image`], as
-/// `jsim analyze` runs it on the exposure's file) with the products its simulated instrument delivers
-/// (calibration flat, design model PSF, reference catalogue, telemetry); the truth only scores.
+/// `edges`: each array's image through the pipeline's crowded analysis (`Source::analyse` with crowding on,
+/// as `jsim analyze` runs it on the exposure's file) with the products its simulated instrument delivers
+/// (calibration flat, design model PSF, reference catalogue, telemetry); the truth only scores (and is the
+/// `@oracle` control's reference).
 pub fn analyse_focal_plane(
     fps: &FocalPlaneSimulator,
     exp: &FocalPlaneExposure,
@@ -51,15 +52,15 @@ pub fn analyse_focal_plane(
     let mut per_array: Vec<ScoredImage> = Vec::with_capacity(fps.arrays.len());
     for (sim, e) in fps.arrays.iter().zip(&exp.arrays) {
         let img = analysis_image(sim, &e.image);
-        let products = Source {
+        // the array's own configuration with the study's analysis, crowded by design
+        let mut c = sim.cfg.clone();
+        c.analysis = cfg.clone();
+        c.analysis.crowding = Crowding::On;
+        let analysis = Source {
             sim,
             index: exp.index,
         }
-        .products(plan, cfg)?;
-        let oracle = oracle_reference(plan, Some(&e.truth));
-        let mut supplied = products.supplied(None);
-        supplied.oracle_reference = oracle.as_deref();
-        let analysis = analyse_crowded_image(&img, cfg, plan, &supplied)?;
+        .analyse(&img, Some(&e.truth), &c, plan, &Default::default())?;
         per_array.push(score_image(&analysis, Some(&e.truth), scale));
     }
     let analyse_s = t0.elapsed().as_secs_f64();
