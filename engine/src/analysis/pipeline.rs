@@ -6,7 +6,9 @@
 
 use crate::analysis::AnalysisError;
 use crate::analysis::countermeasures::TelemetryQuality;
-use crate::analysis::countermeasures::telemetry::{ExposureReadout, TelemetryRecord};
+use crate::analysis::countermeasures::telemetry::{
+    ExposureReadout, Smoothing, TelemetryRecord, resample,
+};
 use crate::analysis::countermeasures::{self, Context, Countermeasure, Plan, Telemetry, stack};
 use crate::analysis::crowded::CrowdedSummary;
 use crate::analysis::detection::{detect, starts};
@@ -16,7 +18,7 @@ use crate::analysis::epsf::fit::{FitOptions, StarFit, fit_star, flags};
 use crate::analysis::image::AnalysisImage;
 use crate::analysis::report::{Report, StarResult, star_results};
 use crate::analysis::response::FitNoise;
-use crate::config::{Analysis as AnalysisCfg, TelemetryKernel};
+use crate::config::{Analysis as AnalysisCfg, TelemetryFilter, TelemetryKernel};
 use crate::integrate::kernel::PixelKernel;
 use rayon::prelude::*;
 use std::sync::Arc;
@@ -236,8 +238,8 @@ pub fn with_countermeasure(
 
 /// Whether a countermeasure acts in a crowded field: on the fitted positions alone (a plate model referenced
 /// to a catalogue or, `@oracle`, to the truth; the telemetry correction). Those that refit single stars
-/// (`yzones`, `exact-epsf`, `telemetry-model`: not yet with grouped fits) and a stack reference (a stare's) do
-/// not.
+/// (`yzones`, `exact-epsf`, `telemetry-model`, `telemetry-model+plate-…`: not yet with grouped fits) and a stack
+/// reference (a stare's) do not.
 pub fn offered_in_crowded_field(cm: &Countermeasure) -> bool {
     !matches!(
         cm,
@@ -246,6 +248,10 @@ pub fn offered_in_crowded_field(cm: &Countermeasure) -> bool {
             | Countermeasure::TelemetryModel(_)
             | Countermeasure::Plate {
                 reference: countermeasures::Reference::Stack,
+                ..
+            }
+            | Countermeasure::Plate {
+                forward: Some(_),
                 ..
             }
     )
@@ -436,6 +442,18 @@ pub fn telemetry_for(
     )?;
     tel.profile = Some(epsf.clone());
     tel.model_nodes_per_px = cfg.telemetry_model_nodes_per_px;
+    if cfg.telemetry_filter == TelemetryFilter::Auto {
+        let smoothing = Smoothing::choose(rec);
+        if smoothing.half_width > 0 {
+            tel.model_track = Some(resample(
+                &rec.smoothed(&smoothing),
+                0.0,
+                &ro.timing,
+                img.plate_scale_mas,
+                ro.rotation_deg,
+            ));
+        }
+    }
     Ok(Some(tel))
 }
 
@@ -501,6 +519,13 @@ pub fn analyse_image(
                     }
                 }
             }
+            // the forward model, then the plate model on its refits (a static ACE: the plate model alone)
+            Countermeasure::Plate {
+                forward: Some(q), ..
+            } => {
+                let tel = telemetry_for(q, supplied, img, &plain, cfg)?;
+                with_countermeasure(img, &plain, &prepared, cm, tel.as_ref(), reference)?
+            }
             other => with_countermeasure(img, &plain, &prepared, other, None, reference)?,
         };
         measured.push((*cm, analysis));
@@ -514,18 +539,25 @@ pub fn analyse_image(
 
 /// Finish the analyses of a stare's exposures (`images[k]`): every plate model
 /// of the plan referenced to the stack is fitted over all of them ([`stack::stack_plate`], from each image's
-/// global fits) and replaces each image's stare-of-one result. A stare of one exposure is left as it is.
+/// global fits, or for `telemetry-model+plate-…` from its forward-model refits) and replaces each image's
+/// stare-of-one result. A stare of one exposure is left as it is.
 pub fn finish_stare(images: &mut [ImageAnalysis], plan: &Plan) -> Result<(), AnalysisError> {
     if images.len() < 2 {
         return Ok(());
     }
     let n = images.len();
     for cm in plan.countermeasures.iter().filter(|c| c.needs_stare()) {
-        let Countermeasure::Plate { model, .. } = cm else {
+        let Countermeasure::Plate { model, forward, .. } = cm else {
             continue;
         };
-        let mut stars: Vec<Vec<StarResult>> =
-            images.iter().map(|im| im.global.stars.clone()).collect();
+        // the fits the plates correct: the global ones, or the forward model's (the stare-of-one result)
+        let mut stars: Vec<Vec<StarResult>> = images
+            .iter()
+            .map(|im| match (forward, im.of(cm)) {
+                (Some(_), Some(a)) => a.stars.clone(),
+                _ => im.global.stars.clone(),
+            })
+            .collect();
         let out = stack::stack_plate(&mut stars, *model, &cm.to_string())?;
         for (im, st) in images.iter_mut().zip(stars) {
             let mut report = countermeasure_report(&im.global.report, cm);

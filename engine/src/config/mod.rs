@@ -804,6 +804,19 @@ pub enum TelemetryKernel {
     Epsf,
 }
 
+/// How the telemetry forward model (`telemetry-model`) filters the attitude telemetry before it sees each star
+/// through it (`analysis::countermeasures::telemetry::Smoothing`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum TelemetryFilter {
+    /// A boxcar chosen per record to minimise the model's blur error: the white noise it leaves against
+    /// the jitter it removes (default).
+    #[default]
+    Auto,
+    /// The samples as recorded (every sample's noise blurs the model: for comparison).
+    Off,
+}
+
 /// How the analysis pipeline treats crowding (`analysis::crowding`: the automatic choice from the measured
 /// source density).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
@@ -877,6 +890,8 @@ pub struct Analysis {
     /// Nodes per pixel of the telemetry forward model's jitter histograms (`telemetry-model`; the knob of its
     /// one approximation, benchmarked by `jsim bench --parts forward`).
     pub telemetry_model_nodes_per_px: usize,
+    /// How the forward model filters the telemetry.
+    pub telemetry_filter: TelemetryFilter,
     /// Isolated-star or crowded-field analysis, or chosen from the measured source density.
     pub crowding: Crowding,
 }
@@ -919,6 +934,7 @@ impl Default for Analysis {
             },
             telemetry_kernel: TelemetryKernel::ModelPsf,
             telemetry_model_nodes_per_px: 16,
+            telemetry_filter: TelemetryFilter::Auto,
             crowding: Crowding::Auto,
         }
     }

@@ -664,6 +664,8 @@ pub fn read_telemetry(
             x_mas: cols[1].clone(),
             y_mas: cols[2].clone(),
             exposure_start_s: start,
+            // optional: an outside tool's product may not state it (the filter then estimates it)
+            stated_noise_mas: key("NOISEMAS").ok().filter(|v| v.is_finite() && *v >= 0.0),
         },
         idx as usize,
     ))

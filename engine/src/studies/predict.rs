@@ -17,7 +17,9 @@
 //! Cost: the bound is cached per 5-mas blur step (≈ 30 ms each); each realistic image costs one fit-response
 //! table (≈ 30 ms).
 
-use crate::analysis::countermeasures::{Countermeasure, CountermeasureError, Reference, Telemetry};
+use crate::analysis::countermeasures::{
+    Countermeasure, CountermeasureError, Reference, Telemetry, TelemetryQuality,
+};
 use crate::analysis::epsf::fit::pixel_variance;
 use crate::analysis::response::{FitNoise, FitResponse};
 use crate::config::AceCase;
@@ -52,6 +54,8 @@ pub struct Predictor {
     images: Vec<ImageInputs>,
     bound_cache: Mutex<HashMap<(i64, i64), f64>>,
     disp_cache: Mutex<HashMap<usize, Arc<Vec<(f64, f64)>>>>,
+    /// What the telemetry of a quality leaves of each image's displacements, by (image, quality).
+    telemetry_cache: Mutex<HashMap<(usize, String), Arc<Vec<(f64, f64)>>>>,
 }
 
 fn rms2(v: &[(f64, f64)]) -> f64 {
@@ -115,6 +119,7 @@ impl Predictor {
             images,
             bound_cache: Mutex::new(HashMap::new()),
             disp_cache: Mutex::new(HashMap::new()),
+            telemetry_cache: Mutex::new(HashMap::new()),
         })
     }
 
@@ -222,6 +227,51 @@ impl Predictor {
         v
     }
 
+    /// The displacement (px) of every star in image `i` a plate model is fitted to: the ACE's, or with `forward`
+    /// what the telemetry of that quality leaves of it (the displacement minus the telemetry's own prediction:
+    /// its noise, rate and latency).
+    fn before_plate(
+        &self,
+        i: usize,
+        forward: Option<&TelemetryQuality>,
+    ) -> Result<Arc<Vec<(f64, f64)>>, PredictError> {
+        let d = self.displacements(i);
+        let (Some(q), Some(series), Some(im)) = (forward, &self.series, self.images.get(i)) else {
+            return Ok(d);
+        };
+        let key = (i, format!("{q:?}"));
+        if let Some(v) = self
+            .telemetry_cache
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .get(&key)
+        {
+            return Ok(v.clone());
+        }
+        let tel = Telemetry::from_series(
+            series,
+            self.timing,
+            im.start_s,
+            self.cfg.instrument.plate_scale_mas(),
+            0.0,
+            q,
+            self.cfg.seed,
+            &self.kernel,
+            &self.noise,
+        )?;
+        let r: Arc<Vec<(f64, f64)>> = Arc::new(
+            d.iter()
+                .zip(tel.predicted_px(&self.stars))
+                .map(|(a, b)| (a.0 - b.0, a.1 - b.1))
+                .collect(),
+        );
+        self.telemetry_cache
+            .lock()
+            .unwrap_or_else(|e| e.into_inner())
+            .insert(key, r.clone());
+        Ok(r)
+    }
+
     /// Per-axis rms (px) of what a countermeasure leaves of image `i`'s displacements, and the parameters it
     /// absorbs.
     fn residual_displacement(
@@ -229,14 +279,18 @@ impl Predictor {
         i: usize,
         cm: &Countermeasure,
     ) -> Result<(f64, usize), PredictError> {
-        let d = self.displacements(i);
         match cm {
-            Countermeasure::Plate { model, reference } => {
+            Countermeasure::Plate {
+                model,
+                reference,
+                forward,
+            } => {
+                let d = self.before_plate(i, forward.as_ref())?;
                 // against a fixed reference the plate removes what the model holds of the displacement:
                 // r = d − P d. Against the stare's stack it can only remove the departure from the stare's
                 // mean field d̄, which stays (stack::stack_plate's fixed point): r = d − P (d − d̄).
                 let mean = match reference {
-                    Reference::Stack => Some(self.mean_displacements()),
+                    Reference::Stack => Some(self.mean_before_plate(forward.as_ref())?),
                     _ => None,
                 };
                 let fitted = |v: &[f64]| -> Result<Vec<f64>, PredictError> {
@@ -265,43 +319,27 @@ impl Predictor {
             // the forward model is predicted by its linear part, the shift the telemetry's errors leave (the
             // shape change it models beyond that is not in the predictor)
             Countermeasure::Telemetry(q) | Countermeasure::TelemetryModel(q) => {
-                let (Some(series), Some(im)) = (&self.series, self.images.get(i)) else {
-                    return Ok((rms2(&d), 0));
-                };
-                let tel = Telemetry::from_series(
-                    series,
-                    self.timing,
-                    im.start_s,
-                    self.cfg.instrument.plate_scale_mas(),
-                    0.0,
-                    q,
-                    self.cfg.seed,
-                    &self.kernel,
-                    &self.noise,
-                )?;
-                let pred = tel.predicted_px(&self.stars);
-                let r: Vec<(f64, f64)> = d
-                    .iter()
-                    .zip(pred)
-                    .map(|(a, b)| (a.0 - b.0, a.1 - b.1))
-                    .collect();
-                Ok((rms2(&r), 0))
+                Ok((rms2(&self.before_plate(i, Some(q))?), 0))
             }
-            _ => Ok((rms2(&d), 0)),
+            _ => Ok((rms2(&self.displacements(i)), 0)),
         }
     }
 
-    /// The stare's mean fit displacement per star over all the predictor's images, px (the stack's field).
-    fn mean_displacements(&self) -> Vec<(f64, f64)> {
+    /// The stare's mean, over all the predictor's images, of what each star's plate model is fitted to
+    /// ([`Self::before_plate`]), px: the stack's field.
+    fn mean_before_plate(
+        &self,
+        forward: Option<&TelemetryQuality>,
+    ) -> Result<Vec<(f64, f64)>, PredictError> {
         let n = self.images.len().max(1) as f64;
         let mut m = vec![(0.0, 0.0); self.stars.len()];
         for i in 0..self.images.len() {
-            for (a, d) in m.iter_mut().zip(self.displacements(i).iter()) {
+            for (a, d) in m.iter_mut().zip(self.before_plate(i, forward)?.iter()) {
                 a.0 += d.0 / n;
                 a.1 += d.1 / n;
             }
         }
-        m
+        Ok(m)
     }
 
     /// Predicted per-image accuracy (mas) of image `i` under a countermeasure.

@@ -48,8 +48,12 @@ use std::fmt;
 use std::str::FromStr;
 
 /// Every countermeasure name, as the CLI, the sweep files and the CSVs spell them.
-pub const NAMES: &str = "none, yzones[:K], yzones-shared[:K], plate-affine[@R], plate-poly:N[@R] \
-     (R: stack (default), catalogue, oracle), telemetry, telemetry-model, exact-epsf";
+pub const NAMES: &str = "none, yzones[:K], yzones-shared[:K], [telemetry-model+]plate-affine[@R], \
+     [telemetry-model+]plate-poly:N[@R] (R: stack (default), catalogue, oracle), telemetry, telemetry-model, \
+     exact-epsf";
+
+/// The prefix of a plate model fitted after the telemetry forward model.
+pub const FORWARD_PREFIX: &str = "telemetry-model+";
 
 /// Default error of an external reference catalogue, mas: a Gaia-DR3-like star of G ≈ 17–18 propagated
 /// ~15 years to the 2030s (position ≈ 0.1–0.3 mas at 2016 plus ≈ 0.1–0.2 mas/yr of proper-motion error;
@@ -200,10 +204,14 @@ pub enum Countermeasure {
     /// Y-zoned ePSFs: `zones` (default: the analysis configuration's `epsf_zones`), re-centred per zone or
     /// held in the global frame (`shared`).
     YZones { zones: Option<usize>, shared: bool },
-    /// A per-exposure plate model against a reference.
+    /// A per-exposure plate model against a reference, fitted to the global fits or, with `forward`, to the
+    /// telemetry forward model's refits at that telemetry quality (`telemetry-model+plate-…`: the forward model
+    /// removes what the telemetry sees, the plate model what it cannot — its correlated error — as one
+    /// countermeasure).
     Plate {
         model: PlateModel,
         reference: Reference,
+        forward: Option<TelemetryQuality>,
     },
     /// The telemetry correction.
     Telemetry(TelemetryQuality),
@@ -227,7 +235,7 @@ pub enum Reference {
 
 impl Countermeasure {
     /// The countermeasures the explorer offers, with their default parameters.
-    pub const OFFERED: [Countermeasure; 6] = [
+    pub const OFFERED: [Countermeasure; 7] = [
         Countermeasure::None,
         Countermeasure::YZones {
             zones: None,
@@ -236,13 +244,20 @@ impl Countermeasure {
         Countermeasure::Plate {
             model: PlateModel::Affine,
             reference: Reference::Stack,
+            forward: None,
         },
         Countermeasure::Plate {
             model: PlateModel::PolyY(3),
             reference: Reference::Stack,
+            forward: None,
         },
         Countermeasure::Telemetry(TelemetryQuality::DEFAULT),
         Countermeasure::TelemetryModel(TelemetryQuality::DEFAULT),
+        Countermeasure::Plate {
+            model: PlateModel::PolyY(3),
+            reference: Reference::Stack,
+            forward: Some(TelemetryQuality::DEFAULT),
+        },
     ];
 
     /// The same countermeasure with the given telemetry quality and catalogue error (for the variants that
@@ -253,12 +268,17 @@ impl Countermeasure {
             Countermeasure::TelemetryModel(_) => Countermeasure::TelemetryModel(telemetry),
             Countermeasure::Plate {
                 model,
-                reference: Reference::Catalogue { .. },
+                reference,
+                forward,
             } => Countermeasure::Plate {
                 model,
-                reference: Reference::Catalogue {
-                    error_mas: catalogue_error_mas,
+                reference: match reference {
+                    Reference::Catalogue { .. } => Reference::Catalogue {
+                        error_mas: catalogue_error_mas,
+                    },
+                    other => other,
                 },
+                forward: forward.map(|_| telemetry),
             },
             other => other,
         }
@@ -276,10 +296,21 @@ impl Countermeasure {
     }
 
     /// The telemetry quality of a countermeasure that corrects with telemetry (`telemetry`,
-    /// `telemetry-model`).
+    /// `telemetry-model`, `telemetry-model+plate-…`).
     pub fn telemetry_quality(&self) -> Option<TelemetryQuality> {
         match self {
             Countermeasure::Telemetry(q) | Countermeasure::TelemetryModel(q) => Some(*q),
+            Countermeasure::Plate { forward, .. } => *forward,
+            _ => None,
+        }
+    }
+
+    /// The telemetry quality of a countermeasure that refits each star with the telemetry forward model
+    /// (`telemetry-model`, `telemetry-model+plate-…`).
+    pub fn forward_model(&self) -> Option<TelemetryQuality> {
+        match self {
+            Countermeasure::TelemetryModel(q) => Some(*q),
+            Countermeasure::Plate { forward, .. } => *forward,
             _ => None,
         }
     }
@@ -307,7 +338,14 @@ impl Countermeasure {
             Countermeasure::YZones { zones: Some(k), .. } if !(2..=64).contains(&k) => {
                 bad(format!("{k} zones: allowed 2..=64"))
             }
-            Countermeasure::Plate { model, reference } => {
+            Countermeasure::Plate {
+                model,
+                reference,
+                forward,
+            } => {
+                if let Some(q) = forward {
+                    q.validate()?;
+                }
                 if let PlateModel::PolyY(n) = model
                     && !(1..=plate::MAX_PLATE_ORDER).contains(&n)
                 {
@@ -340,7 +378,14 @@ impl fmt::Display for Countermeasure {
                     None => Ok(()),
                 }
             }
-            Countermeasure::Plate { model, reference } => {
+            Countermeasure::Plate {
+                model,
+                reference,
+                forward,
+            } => {
+                if forward.is_some() {
+                    write!(f, "{FORWARD_PREFIX}")?;
+                }
                 match model {
                     PlateModel::Affine => write!(f, "plate-affine")?,
                     PlateModel::PolyY(n) => write!(f, "plate-poly:{n}")?,
@@ -365,6 +410,29 @@ impl FromStr for Countermeasure {
     /// check it.
     fn from_str(s: &str) -> Result<Self, Self::Err> {
         let s = s.trim();
+        if let Some(plate) = s.strip_prefix(FORWARD_PREFIX) {
+            return match plate.parse::<Countermeasure>() {
+                Ok(Countermeasure::Plate {
+                    model,
+                    reference,
+                    forward: None,
+                }) => Ok(Countermeasure::Plate {
+                    model,
+                    reference,
+                    forward: Some(TelemetryQuality::DEFAULT),
+                }),
+                Ok(_) | Err(CountermeasureError::Unknown(_)) => {
+                    Err(CountermeasureError::Unknown(s.to_string()))
+                }
+                Err(CountermeasureError::BadParameter { name, why }) => {
+                    Err(CountermeasureError::BadParameter {
+                        name: format!("{FORWARD_PREFIX}{name}"),
+                        why,
+                    })
+                }
+                Err(e) => Err(e),
+            };
+        }
         let unknown = || CountermeasureError::Unknown(s.to_string());
         let (name, reference) = match s.split_once('@') {
             None => (s, Reference::Stack),
@@ -400,10 +468,12 @@ impl FromStr for Countermeasure {
             ("plate-affine", None) => Countermeasure::Plate {
                 model: PlateModel::Affine,
                 reference,
+                forward: None,
             },
             ("plate-poly", Some(a)) => Countermeasure::Plate {
                 model: PlateModel::PolyY(number(a)?),
                 reference,
+                forward: None,
             },
             ("yzones" | "yzones-shared", a) => Countermeasure::YZones {
                 zones: a.map(number).transpose()?,
@@ -517,6 +587,40 @@ fn take_refits(stars: &mut [StarResult], refits: Vec<crate::analysis::epsf::fit:
     }
 }
 
+/// Refit every star with the telemetry forward model ([`forward`]) of the context's telemetry (none: a static
+/// ACE, nothing to refit).
+fn forward_refit(ctx: &Context<'_>, stars: &mut [StarResult]) {
+    let Some(tel) = ctx.telemetry else {
+        return;
+    };
+    let pd = ctx.img.pixels();
+    let model = forward::Forward::new(
+        tel.profile.as_ref().unwrap_or(ctx.global),
+        tel.model_track.as_ref().unwrap_or(&tel.track),
+        &tel.timing,
+        tel.model_nodes_per_px,
+        ctx.img.nx,
+    );
+    // the pixels a fit may reach: its disc, grown around a saturated core, and a re-selection
+    let reach = ctx.build.fit.radius_px + crate::analysis::epsf::fit::MAX_RADIUS_GROWTH_PX + 1.0;
+    let refits: Vec<_> = stars
+        .par_iter()
+        .map(|s| {
+            let profile = model.star(s.x, s.y, reach, ctx.img.nx, ctx.img.ny);
+            fit_star(
+                &pd,
+                &profile,
+                s.x,
+                s.y,
+                s.flux_e.max(1.0),
+                s.sky_e,
+                &ctx.build.fit,
+            )
+        })
+        .collect();
+    take_refits(stars, refits);
+}
+
 /// Apply a correction to the star results of an image; returns the parameters absorbed per exposure.
 pub fn apply(
     cm: &Countermeasure,
@@ -558,57 +662,32 @@ pub fn apply(
             take_refits(stars, refits);
             Ok(0)
         }
-        // the stack reference of a stare of one exposure is that exposure: nothing to correct (a stare is
-        // corrected by `stack::stack_plate`, which the stare's analysis runs over all its exposures)
-        Countermeasure::Plate {
-            reference: Reference::Stack,
-            ..
-        } => Ok(0),
         Countermeasure::Plate {
             model,
-            reference: Reference::Catalogue { .. },
-        } => match ctx.reference {
-            Some(r) => plate::plate_fit_to_catalogue(stars, r, model, &cm.to_string()),
-            None => Err(CountermeasureError::NeedsReference(cm.to_string())),
-        },
-        // the oracle: the same fit onto the true positions, handed over as a reference named so
-        Countermeasure::Plate {
-            model,
-            reference: Reference::Oracle,
-        } => match ctx.reference {
-            Some(r) => plate::plate_fit_to_catalogue(stars, r, model, &cm.to_string()),
-            None => Err(CountermeasureError::NeedsTruth(cm.to_string())),
-        },
+            reference,
+            forward,
+        } => {
+            if forward.is_some() {
+                forward_refit(ctx, stars);
+            }
+            match reference {
+                // the stack reference of a stare of one exposure is that exposure: nothing to correct (a
+                // stare is corrected by `stack::stack_plate`, which the stare's analysis runs over all its
+                // exposures)
+                Reference::Stack => Ok(0),
+                // a catalogue; or the oracle: the same fit onto the true positions, handed over as a
+                // reference named so
+                Reference::Catalogue { .. } | Reference::Oracle => match ctx.reference {
+                    Some(r) => plate::plate_fit_to_catalogue(stars, r, model, &cm.to_string()),
+                    None if reference == Reference::Oracle => {
+                        Err(CountermeasureError::NeedsTruth(cm.to_string()))
+                    }
+                    None => Err(CountermeasureError::NeedsReference(cm.to_string())),
+                },
+            }
+        }
         Countermeasure::TelemetryModel(_) => {
-            let Some(tel) = ctx.telemetry else {
-                return Ok(0);
-            };
-            let model = forward::Forward::new(
-                tel.profile.as_ref().unwrap_or(ctx.global),
-                &tel.track,
-                &tel.timing,
-                tel.model_nodes_per_px,
-                ctx.img.nx,
-            );
-            // the pixels a fit may reach: its disc, grown around a saturated core, and a re-selection
-            let reach =
-                ctx.build.fit.radius_px + crate::analysis::epsf::fit::MAX_RADIUS_GROWTH_PX + 1.0;
-            let refits: Vec<_> = stars
-                .par_iter()
-                .map(|s| {
-                    let profile = model.star(s.x, s.y, reach, ctx.img.nx, ctx.img.ny);
-                    fit_star(
-                        &pd,
-                        &profile,
-                        s.x,
-                        s.y,
-                        s.flux_e.max(1.0),
-                        s.sky_e,
-                        &ctx.build.fit,
-                    )
-                })
-                .collect();
-            take_refits(stars, refits);
+            forward_refit(ctx, stars);
             Ok(0)
         }
         Countermeasure::Telemetry(_) => {
@@ -642,6 +721,8 @@ mod tests {
             "plate-poly:3@oracle",
             "telemetry",
             "telemetry-model",
+            "telemetry-model+plate-poly:3",
+            "telemetry-model+plate-affine@catalogue",
             "exact-epsf",
         ] {
             let c: Countermeasure = name.parse().expect(name);
@@ -660,6 +741,9 @@ mod tests {
             "plate-poly:3@truth",
             "none@oracle",
             "telemetry-model@oracle",
+            "telemetry-model+none",
+            "telemetry-model+telemetry",
+            "telemetry-model+plate-poly:0",
         ] {
             let e = bad.parse::<Countermeasure>().expect_err(bad);
             assert!(
@@ -702,7 +786,8 @@ mod tests {
             p.countermeasures[1],
             Countermeasure::Plate {
                 model: PlateModel::PolyY(3),
-                reference: Reference::Catalogue { error_mas: 5.0 }
+                reference: Reference::Catalogue { error_mas: 5.0 },
+                forward: None,
             }
         );
         // the default reference is the stack, and the stack takes no catalogue error
@@ -710,10 +795,23 @@ mod tests {
             p.countermeasures[3],
             Countermeasure::Plate {
                 model: PlateModel::Affine,
-                reference: Reference::Stack
+                reference: Reference::Stack,
+                forward: None,
             }
         );
         assert!(p.needs_stare());
+        // the forward model before a plate model takes the plan's telemetry quality
+        let f = Plan::parse(&["telemetry-model+plate-affine@catalogue"], q, 5.0).expect("plan");
+        assert_eq!(
+            f.countermeasures[0],
+            Countermeasure::Plate {
+                model: PlateModel::Affine,
+                reference: Reference::Catalogue { error_mas: 5.0 },
+                forward: Some(q),
+            }
+        );
+        assert_eq!(f.countermeasures[0].telemetry_quality(), Some(q));
+        assert!(!f.needs_stare());
         // a catalogue without error would be the truth under another name
         let e = Plan::parse(&["plate-affine@catalogue"], q, 0.0).expect_err("zero error");
         assert!(e.to_string().contains("@oracle"), "{e}");

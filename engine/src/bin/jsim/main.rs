@@ -131,7 +131,8 @@ enum Command {
         /// plate-poly:N[@R] (R, the plate model's reference: stack — the stare's own, default —, catalogue — the
         /// survey's reference catalogue —, oracle — the truth, a control), telemetry (the shift the
         /// telemetry predicts), telemetry-model (each star refitted through the jitter the telemetry records
-        /// over its pixels' windows), exact-epsf (control fit with the exact ePSF, static ACE only).
+        /// over its pixels' windows), telemetry-model+plate-…[@R] (the forward model, then a plate model on its
+        /// fits), exact-epsf (control fit with the exact ePSF, static ACE only).
         #[arg(long, default_value = "none,yzones", value_delimiter = ',')]
         countermeasures: Vec<String>,
         #[command(flatten)]
