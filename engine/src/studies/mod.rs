@@ -7,4 +7,5 @@ pub mod bench_forward;
 pub mod crowded;
 pub mod experiment;
 pub mod predict;
+pub mod predict_shape;
 pub mod sweep;

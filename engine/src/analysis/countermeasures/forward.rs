@@ -87,15 +87,7 @@ impl<'a> Forward<'a> {
         let g = nodes_per_px.max(1) as f64;
         let (a, b) = timing.shared_window_s(detector_px);
         let core = (b > a).then(|| {
-            let (nodes, weight) = deposit(track, &[track.window(a, b)], g);
-            let half = (profile.half_nodes / profile.oversampling.max(1)).max(1);
-            let psi = Epsf::from_fn(profile.oversampling, half, |x, y| {
-                nodes
-                    .iter()
-                    .map(|&(ux, uy, c)| c * profile.value(x - ux, y - uy))
-                    .sum::<f64>()
-                    / weight.max(f64::MIN_POSITIVE)
-            });
+            let (psi, weight) = seen_through(profile, track, &[track.window(a, b)], &[], g);
             Core {
                 a_s: a,
                 b_s: b,
@@ -148,6 +140,7 @@ impl<'a> Forward<'a> {
                 let (edge, w) = deposit(
                     self.track,
                     &[self.track.window(a, c.a_s), self.track.window(c.b_s, b)],
+                    &[],
                     (g / 2.0).max(1.0),
                 );
                 Group {
@@ -157,7 +150,7 @@ impl<'a> Forward<'a> {
                 }
             }
             _ => {
-                let (edge, w) = deposit(self.track, &[self.track.window(a, b)], g);
+                let (edge, w) = deposit(self.track, &[self.track.window(a, b)], &[], g);
                 Group {
                     edge,
                     with_core: false,
@@ -168,33 +161,64 @@ impl<'a> Forward<'a> {
     }
 }
 
-/// The track's samples in the windows `ws` (disjoint), deposited cloud-in-cell onto nodes `1/g` px apart: the
-/// occupied nodes with their raw weights, and the total weight.
-fn deposit(track: &Track, ws: &[WindowWeights], g: f64) -> (Vec<(f64, f64, f64)>, f64) {
+/// The profile seen through the jitter of windows, `(1/W) Σ_u H(u) ψ(· − u)` on ψ's grid (the track's samples in
+/// the windows deposited on nodes `1/g` px apart; overlapping windows add), and the windows' total weight W.
+/// `offsets[k]` (px; missing: 0) is taken from window k's samples, so the windows' profiles can be averaged on
+/// their own centres (as an ePSF built from stars at their fitted positions averages them).
+pub fn seen_through(
+    profile: &Epsf,
+    track: &Track,
+    windows: &[WindowWeights],
+    offsets: &[(f64, f64)],
+    g: f64,
+) -> (Epsf, f64) {
+    let (nodes, weight) = deposit(track, windows, offsets, g);
+    let half = (profile.half_nodes / profile.oversampling.max(1)).max(1);
+    let psi = Epsf::from_fn(profile.oversampling, half, |x, y| {
+        nodes
+            .iter()
+            .map(|&(ux, uy, c)| c * profile.value(x - ux, y - uy))
+            .sum::<f64>()
+            / weight.max(f64::MIN_POSITIVE)
+    });
+    (psi, weight)
+}
+
+/// The track's samples in the windows `ws` (overlapping windows add), each window's less its offset
+/// (`offsets[k]`, px; none: 0), deposited cloud-in-cell onto nodes `1/g` px apart: the occupied nodes with
+/// their raw weights, and the total weight.
+fn deposit(
+    track: &Track,
+    ws: &[WindowWeights],
+    offsets: &[(f64, f64)],
+    g: f64,
+) -> (Vec<(f64, f64, f64)>, f64) {
     let n = track.len();
     let samples = || {
         ws.iter()
-            .filter(move |w| n > 0 && w.first <= w.last.min(n - 1))
-            .flat_map(move |w| (w.first..=w.last.min(n - 1)).map(move |j| (j, w.weight(j))))
-            .filter(|&(_, wj)| wj > 0.0)
+            .enumerate()
+            .filter(move |(_, w)| n > 0 && w.first <= w.last.min(n - 1))
+            .flat_map(move |(k, w)| {
+                let (ox, oy) = offsets.get(k).copied().unwrap_or((0.0, 0.0));
+                (w.first..=w.last.min(n - 1))
+                    .map(move |j| (track.dx_px[j] - ox, track.dy_px[j] - oy, w.weight(j)))
+            })
+            .filter(|&(_, _, wj)| wj > 0.0)
     };
     if samples().next().is_none() {
         return (Vec::new(), 0.0);
     }
     let (mut lo_u, mut hi_u, mut lo_v, mut hi_v) = (i64::MAX, i64::MIN, i64::MAX, i64::MIN);
-    for (j, _) in samples() {
-        let (u, v) = (
-            (track.dx_px[j] * g).floor() as i64,
-            (track.dy_px[j] * g).floor() as i64,
-        );
+    for (x, y, _) in samples() {
+        let (u, v) = ((x * g).floor() as i64, (y * g).floor() as i64);
         (lo_u, hi_u, lo_v, hi_v) = (lo_u.min(u), hi_u.max(u), lo_v.min(v), hi_v.max(v));
     }
     // a dense grid over the samples' extent (+1 node for the cloud-in-cell's far corner)
     let (nu, nv) = ((hi_u - lo_u + 2) as usize, (hi_v - lo_v + 2) as usize);
     let mut acc = vec![0.0; nu * nv];
     let mut total = 0.0;
-    for (j, wj) in samples() {
-        let (u, v) = (track.dx_px[j] * g, track.dy_px[j] * g);
+    for (x, y, wj) in samples() {
+        let (u, v) = (x * g, y * g);
         let (fu, fv) = (u - u.floor(), v - v.floor());
         let (iu, iv) = (
             (u.floor() as i64 - lo_u) as usize,
