@@ -236,25 +236,35 @@ pub fn with_countermeasure(
     })
 }
 
-/// Whether a countermeasure acts in a crowded field: on the fitted positions alone (a plate model referenced
-/// to a catalogue or, `@oracle`, to the truth; the telemetry correction). Those that refit single stars
-/// (`yzones`, `exact-epsf`, `telemetry-model`, `telemetry-model+plate-…`: not yet with grouped fits) and a stack
-/// reference (a stare's) do not.
+/// Whether a countermeasure acts in a crowded field: on the fitted positions (a plate model referenced to a
+/// catalogue or, `@oracle`, to the truth; the telemetry correction), or refitting every star in its group
+/// through its own forward-model profile (`telemetry-model`, `telemetry-model+plate-…@catalogue`). Those that
+/// refit single stars with another ePSF (`yzones`, `exact-epsf`) and a stack reference (a stare's) do not.
 pub fn offered_in_crowded_field(cm: &Countermeasure) -> bool {
     !matches!(
         cm,
         Countermeasure::YZones { .. }
             | Countermeasure::ExactEpsf
-            | Countermeasure::TelemetryModel(_)
             | Countermeasure::Plate {
                 reference: countermeasures::Reference::Stack,
                 ..
             }
-            | Countermeasure::Plate {
-                forward: Some(_),
-                ..
-            }
     )
+}
+
+/// What is left of a forward-model countermeasure once its refits are done: its plate model (`none` for
+/// `telemetry-model`).
+fn plate_after_forward(cm: &Countermeasure) -> Countermeasure {
+    match *cm {
+        Countermeasure::Plate {
+            model, reference, ..
+        } => Countermeasure::Plate {
+            model,
+            reference,
+            forward: None,
+        },
+        _ => Countermeasure::None,
+    }
 }
 
 /// The crowded-field analysis of one image ([`crate::analysis::crowded::analyse`]) under every countermeasure
@@ -286,7 +296,7 @@ pub fn analyse_crowded_image(
         n_detected: c.fits.len(),
         epsf_iterations: c.epsf_iterations,
         epsf_stars: c.epsf_stars,
-        epsf_fallback: c.fallback,
+        epsf_fallback: c.fallback.clone(),
         countermeasure: Countermeasure::None.to_string(),
         crowded: true,
         ..Default::default()
@@ -295,7 +305,7 @@ pub fn analyse_crowded_image(
     let plain = Analysis {
         report,
         stars,
-        epsf: c.epsf,
+        epsf: c.epsf.clone(),
     };
     let build = build_options(cfg);
     let mut measured = Vec::with_capacity(plan.countermeasures.len());
@@ -304,11 +314,9 @@ pub fn analyse_crowded_image(
             measured.push((*cm, plain.clone()));
             continue;
         }
-        let telemetry = match cm {
-            Countermeasure::Telemetry(q) | Countermeasure::TelemetryModel(q) => {
-                telemetry_for(q, supplied, img, &plain, cfg)?
-            }
-            _ => None,
+        let telemetry = match cm.telemetry_quality() {
+            Some(q) => telemetry_for(&q, supplied, img, &plain, cfg)?,
+            None => None,
         };
         let ctx = Context {
             img,
@@ -323,7 +331,24 @@ pub fn analyse_crowded_image(
         let mut stars = plain.stars.clone();
         let mut report = countermeasure_report(&plain.report, cm);
         report.crowded = true;
-        report.dof_absorbed = countermeasures::apply(cm, &ctx, &mut stars)?;
+        // the forward model refits the groups (each member through its own windows), then its plate model
+        let cm_after = match (cm.forward_model(), &telemetry) {
+            (Some(_), Some(tel)) => {
+                let forward = countermeasures::forward::Forward::new(
+                    tel.profile.as_ref().unwrap_or(&plain.epsf),
+                    tel.model_track.as_ref().unwrap_or(&tel.track),
+                    &tel.timing,
+                    tel.model_nodes_per_px,
+                    img.nx,
+                );
+                let fits = crate::analysis::crowded::refit_forward(img, &c, cfg, &forward);
+                stars = star_results(&fits);
+                plate_after_forward(cm)
+            }
+            (Some(_), None) => plate_after_forward(cm),
+            (None, _) => *cm,
+        };
+        report.dof_absorbed = countermeasures::apply(&cm_after, &ctx, &mut stars)?;
         report.count(&stars);
         measured.push((
             *cm,

@@ -10,7 +10,9 @@
 //! neighbours' parameters free — the bound of a star in a blend.
 
 use crate::analysis::epsf::Epsf;
-use crate::analysis::epsf::fit::{FitOptions, PixelData, StarFit, flags, pixel_variance, select};
+use crate::analysis::epsf::fit::{
+    FitOptions, PixelData, Profile, StarFit, flags, pixel_variance, select,
+};
 use crate::numerics::linalg;
 
 /// Largest group fitted simultaneously. A larger connected group (a dense knot) is fitted star by star
@@ -106,6 +108,23 @@ pub fn fit_group(
     node_error: f64,
     opt: &FitOptions,
 ) -> Vec<StarFit> {
+    fit_group_with::<Epsf>(img, epsf, None, members, outsiders, sky, node_error, opt)
+}
+
+/// [`fit_group`] with each member's own profile (`profiles[k]`, e.g. the telemetry forward model of its
+/// pixels' windows, [`crate::analysis::countermeasures::forward`]) in place of the shared ePSF; the outsiders
+/// stay modelled by `epsf`.
+#[allow(clippy::too_many_arguments)]
+pub fn fit_group_with<P: Profile>(
+    img: &PixelData<'_>,
+    epsf: &Epsf,
+    profiles: Option<&[P]>,
+    members: &[Member],
+    outsiders: &Outsiders<'_>,
+    sky: f64,
+    node_error: f64,
+    opt: &FitOptions,
+) -> Vec<StarFit> {
     let n = members.len();
     if n == 0 {
         return Vec::new();
@@ -140,7 +159,7 @@ pub fn fit_group(
     let sky_of = |p: &[f64]| if opt.fit_sky { p[3 * n] } else { sky };
     let h = epsf.half_px();
     // model of pixel (px, py): (Σ f ψ, its saturated members' model error; the nonzero Jacobian entries)
-    let eval = |p: &[f64], px: f64, py: f64, jac: &mut Vec<(usize, f64)>| -> (f64, f64) {
+    let eval = |p: &[f64], i: usize, px: f64, py: f64, jac: &mut Vec<(usize, f64)>| -> (f64, f64) {
         jac.clear();
         let (mut star, mut sat) = (0.0, 0.0);
         for k in 0..n {
@@ -148,7 +167,10 @@ pub fn fit_group(
             if dx.abs() >= h || dy.abs() >= h {
                 continue;
             }
-            let (psi, gx, gy) = epsf.eval(dx, dy);
+            let (psi, gx, gy) = match profiles {
+                Some(pr) => pr[k].eval_at(i, px, py, p[3 * k], p[3 * k + 1]),
+                None => epsf.eval(dx, dy),
+            };
             let f = p[3 * k + 2];
             star += f * psi;
             if saturated[k] {
@@ -173,7 +195,7 @@ pub fn fit_group(
         all.iter()
             .zip(other.iter().zip(&other_sat))
             .map(|(&(i, px, py), (o, os))| {
-                let (star, sat) = eval(p, px, py, &mut j);
+                let (star, sat) = eval(p, i, px, py, &mut j);
                 let mu = star + s + o;
                 (img.e[i] - mu).powi(2) / variance(mu, star, sat + os)
             })
@@ -187,7 +209,7 @@ pub fn fit_group(
         let mut chi2 = 0.0;
         let mut jac = Vec::with_capacity(3 * n + 1);
         for (&(i, px, py), (o, os)) in all.iter().zip(other.iter().zip(&other_sat)) {
-            let (star, sat) = eval(p, px, py, &mut jac);
+            let (star, sat) = eval(p, i, px, py, &mut jac);
             let mu = star + s + o;
             let w = 1.0 / variance(mu, star, sat + os);
             let r = img.e[i] - mu;
@@ -342,7 +364,7 @@ pub fn fit_group(
                 .map(|i| {
                     let q = index_of[i];
                     let (_, px, py) = all[q];
-                    let (star, sat) = eval(&p, px, py, &mut jac);
+                    let (star, sat) = eval(&p, *i, px, py, &mut jac);
                     let mu = star + s + other[q];
                     (img.e[*i] - mu).powi(2) / variance(mu, star, sat + other_sat[q])
                 })

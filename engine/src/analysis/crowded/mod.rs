@@ -83,6 +83,41 @@ pub struct Crowded {
     /// Groups of more than one star in the final pass, and the largest group.
     pub n_groups: usize,
     pub largest_group: usize,
+    /// Every star of the final model (reported or not: an unconfirmed detection and a bright star's wing
+    /// still model light), at its final fit, and which of them each reported fit is.
+    pub model: Vec<Member>,
+    pub reported: Vec<usize>,
+    /// The ePSF's node error the saturated stars' fits carry ([`group_fit::node_error`]).
+    pub node_error: f64,
+}
+
+/// Refit the stars of a crowded analysis `c` in their groups, each through its own profile from the telemetry
+/// forward model `forward` (neighbours subtracted with the image's ePSF), in `c.fits`' order: the
+/// `telemetry-model` countermeasure of a crowded field. Flags of the analysis (blended, found in the
+/// residual) are kept; poor fits are marked again.
+pub fn refit_forward(
+    img: &AnalysisImage,
+    c: &Crowded,
+    cfg: &AnalysisCfg,
+    forward: &crate::analysis::countermeasures::forward::Forward<'_>,
+) -> Vec<StarFit> {
+    if c.model.is_empty() {
+        return c.fits.clone();
+    }
+    let (all, _) = pass::fit_pass_with(img, &c.epsf, &c.model, c.node_error, cfg, Some(forward));
+    let keep = flags::BLENDED | flags::RESIDUAL_FOUND;
+    let mut fits: Vec<StarFit> = c
+        .reported
+        .iter()
+        .zip(&c.fits)
+        .map(|(&k, old)| {
+            let mut f = all[k];
+            f.flags = (f.flags & !flags::POOR_FIT) | (old.flags & keep);
+            f
+        })
+        .collect();
+    flags::mark_poor_fits(&mut fits);
+    fits
 }
 
 /// Drop the stars that are not stars after a pass: a residual detection fitted to no flux, and the fainter
@@ -185,6 +220,9 @@ pub fn analyse(img: &AnalysisImage, cfg: &AnalysisCfg, model_epsf: Option<&Epsf>
             n_residual: 0,
             n_groups: 0,
             largest_group: 0,
+            model: Vec::new(),
+            reported: Vec::new(),
+            node_error,
         };
     }
     // fit, look for what the model misses, fit again with the companions
@@ -258,6 +296,11 @@ pub fn analyse(img: &AnalysisImage, cfg: &AnalysisCfg, model_epsf: Option<&Epsf>
             f.flags |= flags::RESIDUAL_FOUND;
         }
     }
+    let model: Vec<Member> = members_of(&fits, &stars, img.nx, img.ny)
+        .into_iter()
+        .zip(&wing)
+        .map(|(m, w)| Member { fixed: *w, ..m })
+        .collect();
     // a neighbour is a neighbour whether or not its own fit is reported — but a bright star's wing is not
     let mut stars_only: Vec<StarFit> = (0..fits.len())
         .filter(|&k| !wing[k])
@@ -278,6 +321,7 @@ pub fn analyse(img: &AnalysisImage, cfg: &AnalysisCfg, model_epsf: Option<&Epsf>
                 || (f.crlb_flux.is_finite() && f.flux >= MIN_REPORT_SNR * f.crlb_flux))
         })
         .collect();
+    let reported: Vec<usize> = (0..fits.len()).filter(|&k| confirmed[k]).collect();
     let from_residual: Vec<bool> = (0..fits.len())
         .filter(|&k| confirmed[k])
         .map(|k| from_residual[k])
@@ -298,6 +342,9 @@ pub fn analyse(img: &AnalysisImage, cfg: &AnalysisCfg, model_epsf: Option<&Epsf>
         fallback,
         n_groups: groups.groups,
         largest_group: groups.largest,
+        model,
+        reported,
+        node_error,
     }
 }
 

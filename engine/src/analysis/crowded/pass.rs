@@ -1,10 +1,12 @@
 //! One pass of the crowded-field fits: the model image of the stars found so far, and every star fitted
 //! in its group with the light of the stars outside it subtracted ([`fit_pass`]).
 
-use super::group_fit::{MAX_GROUP_STARS, Member, Outsiders, fit_group};
+use super::group_fit::{MAX_GROUP_STARS, Member, Outsiders, fit_group, fit_group_with};
 use super::link_radius_px;
 use super::neighbours::{self, Neighbours};
+use crate::analysis::countermeasures::forward::Forward;
 use crate::analysis::epsf::Epsf;
+use crate::analysis::epsf::fit::MAX_RADIUS_GROWTH_PX;
 use crate::analysis::epsf::fit::{PixelData, StarFit, annulus_sky, flags};
 use crate::analysis::image::AnalysisImage;
 use crate::analysis::pipeline::build_options;
@@ -60,7 +62,53 @@ pub fn fit_pass(
     node_error: f64,
     cfg: &AnalysisCfg,
 ) -> (Vec<StarFit>, GroupStats) {
+    fit_pass_with(img, epsf, stars, node_error, cfg, None)
+}
+
+/// [`fit_pass`] with each star fitted through its own profile from the telemetry forward model `forward`
+/// (the profile of its pixels' windows at its current position; [`fit_group_with`]); the neighbours'
+/// light, subtracted, stays modelled by `epsf`.
+pub fn fit_pass_with(
+    img: &AnalysisImage,
+    epsf: &Epsf,
+    stars: &[Member],
+    node_error: f64,
+    cfg: &AnalysisCfg,
+    forward: Option<&Forward<'_>>,
+) -> (Vec<StarFit>, GroupStats) {
     let opts = build_options(cfg);
+    // the pixels a member's fit may reach (its disc, grown around a saturated core, a step)
+    let profile_reach = opts.fit.radius_px + MAX_RADIUS_GROWTH_PX + 1.0;
+    let group = |members: &[Member], o: &[Member], sky: f64| -> Vec<StarFit> {
+        let outsiders = Outsiders { stars: o };
+        match forward {
+            Some(fw) => {
+                let profiles: Vec<_> = members
+                    .iter()
+                    .map(|m| fw.star(m.x, m.y, profile_reach, img.nx, img.ny))
+                    .collect();
+                fit_group_with(
+                    &img.pixels(),
+                    epsf,
+                    Some(&profiles),
+                    members,
+                    &outsiders,
+                    sky,
+                    node_error,
+                    &opts.fit,
+                )
+            }
+            None => fit_group(
+                &img.pixels(),
+                epsf,
+                members,
+                &outsiders,
+                sky,
+                node_error,
+                &opts.fit,
+            ),
+        }
+    };
     let pd = img.pixels();
     let model = model_image(epsf, stars, img.nx, img.ny);
     let resid: Vec<f64> = img.e.iter().zip(&model).map(|(e, m)| e - m).collect();
@@ -99,31 +147,13 @@ pub fn fit_pass(
             };
             if g.len() <= MAX_GROUP_STARS {
                 let members: Vec<Member> = g.iter().map(|&k| stars[k]).collect();
-                let o = outside(g);
-                let fits = fit_group(
-                    &pd,
-                    epsf,
-                    &members,
-                    &Outsiders { stars: &o },
-                    sky,
-                    node_error,
-                    &opts.fit,
-                );
+                let fits = group(&members, &outside(g), sky);
                 g.iter().copied().zip(fits).collect()
             } else {
                 // a knot too large to fit at once: star by star, everything else subtracted
                 g.iter()
                     .map(|&k| {
-                        let o = outside(&[k]);
-                        let mut f = fit_group(
-                            &pd,
-                            epsf,
-                            &[stars[k]],
-                            &Outsiders { stars: &o },
-                            sky,
-                            node_error,
-                            &opts.fit,
-                        )[0];
+                        let mut f = group(&[stars[k]], &outside(&[k]), sky)[0];
                         f.flags |= flags::GROUPED;
                         (k, f)
                     })
