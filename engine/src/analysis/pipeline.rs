@@ -432,7 +432,8 @@ impl Supplied<'_> {
 }
 
 /// The telemetry of quality `q` for an image, its fit response built from the PSF `cfg.telemetry_kernel`
-/// names — the design model PSF product (the PSF before the jitter) or the analysis' own ePSF — and the
+/// names — the design model PSF product (the PSF before the jitter), the analysis' own ePSF, or that ePSF
+/// deconvolved of each star's own jitter ([`countermeasures::forward_epsf`]) — and the
 /// measured fluxes and sky of its stars ([`FitNoise::of_stars`]); `None` without a record (a static ACE, or
 /// nothing recorded: nothing to correct).
 pub fn telemetry_for(
@@ -452,9 +453,10 @@ pub fn telemetry_for(
         (TelemetryKernel::ModelPsf, Some(m)) => m,
         _ => &plain.epsf,
     };
-    let half_px = epsf.half_px().floor() as usize;
-    let kernel =
-        crate::integrate::kernel::PixelKernel::tabulated(8, half_px, |x, y| epsf.value(x, y));
+    let kernel_of = |e: &Epsf| {
+        let half_px = e.half_px().floor() as usize;
+        crate::integrate::kernel::PixelKernel::tabulated(8, half_px, |x, y| e.value(x, y))
+    };
     let noise = FitNoise::of_stars(&plain.stars, img.var_floor_e2, cfg.fit_radius_px);
     let mut tel = Telemetry::from_record(
         rec,
@@ -462,7 +464,7 @@ pub fn telemetry_for(
         ro.timing,
         img.plate_scale_mas,
         ro.rotation_deg,
-        &kernel,
+        &kernel_of(epsf),
         &noise,
     )?;
     tel.profile = Some(epsf.clone());
@@ -478,6 +480,29 @@ pub fn telemetry_for(
                 ro.rotation_deg,
             ));
         }
+    }
+    if cfg.telemetry_kernel == TelemetryKernel::EpsfDeconvolved {
+        // the image's own static profile, through the (filtered) telemetry; the shift correction's
+        // response is rebuilt from it
+        let profile = countermeasures::forward_epsf::build_deconvolved(
+            img,
+            &plain.stars,
+            &plain.epsf,
+            &tel,
+            &build_options(cfg),
+            cfg.telemetry_deconvolution_iterations,
+        );
+        let nominal = tel.track.window(
+            ro.timing.t_overhead_s,
+            ro.timing.t_overhead_s + ro.timing.exposure_s,
+        );
+        tel.response = crate::analysis::response::FitResponse::build(
+            &kernel_of(&profile),
+            &tel.track,
+            &nominal,
+            &noise,
+        );
+        tel.profile = Some(profile);
     }
     Ok(Some(tel))
 }

@@ -802,6 +802,10 @@ pub enum TelemetryKernel {
     /// The image's own ePSF, which already holds the exposure's mean jitter blur (blurred twice: on the paper
     /// grid 3.65 ± 0.15 mas against 3.51 ± 0.13 with the model PSF).
     Epsf,
+    /// The image's own stars' static profile: the ePSF rebuilt with each star modelled through the jitter
+    /// of its own pixels' windows (deconvolved; `analysis::countermeasures::forward_epsf`), started from the
+    /// image's ePSF — no design model needed.
+    EpsfDeconvolved,
 }
 
 /// How the telemetry forward model (`telemetry-model`) filters the attitude telemetry before it sees each star
@@ -892,6 +896,9 @@ pub struct Analysis {
     pub telemetry_model_nodes_per_px: usize,
     /// How the forward model filters the telemetry.
     pub telemetry_filter: TelemetryFilter,
+    /// Iterations of the deconvolved ePSF build (`telemetry_kernel = "epsf-deconvolved"`; its knob: the
+    /// error left falls slowly with it, benchmarked in docs/equations.md §9.4).
+    pub telemetry_deconvolution_iterations: usize,
     /// Isolated-star or crowded-field analysis, or chosen from the measured source density.
     pub crowding: Crowding,
 }
@@ -935,6 +942,7 @@ impl Default for Analysis {
             telemetry_kernel: TelemetryKernel::ModelPsf,
             telemetry_model_nodes_per_px: 16,
             telemetry_filter: TelemetryFilter::Auto,
+            telemetry_deconvolution_iterations: 8,
             crowding: Crowding::Auto,
         }
     }

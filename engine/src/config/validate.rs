@@ -489,6 +489,12 @@ impl Config {
             1,
             128,
         )?;
+        check_range_usize(
+            "analysis.telemetry_deconvolution_iterations",
+            an.telemetry_deconvolution_iterations,
+            1,
+            50,
+        )?;
         check_pos("analysis.detect_sigma", an.detect_sigma)?;
         check_pos("analysis.crowded_detect_sigma", an.crowded_detect_sigma)?;
         check_range_usize("analysis.fit_max_iter", an.fit_max_iter, 1, 10_000)?;

@@ -29,6 +29,7 @@
 //! The names are typed ([`Countermeasure`], `FromStr`/`Display`); [`Plan`] is a validated list of them.
 
 pub mod forward;
+pub mod forward_epsf;
 pub mod plate;
 pub mod stack;
 pub mod telemetry;

@@ -132,10 +132,25 @@ pub fn gaussian_seed(
 
 /// Residual samples of one star: (node index, residual).
 fn samples(img: &PixelData<'_>, epsf: &Epsf, fit: &StarFit, x: f64, y: f64) -> Vec<(usize, f64)> {
-    let n = epsf.n() as i64;
-    let os = epsf.oversampling as f64;
-    let h = epsf.half_nodes as i64;
-    let r = epsf.half_px() - 0.5;
+    residual_samples(img, epsf, epsf, x, y, fit.flux, fit.sky)
+}
+
+/// Residual samples `(P − s)/f − model` of a star at (x, y) over `grid`'s reach, each binned to `grid`'s
+/// nearest node: (node index, residual). `model` is the grid itself for the plain build, or the star's own
+/// profile (the telemetry forward model's, for a deconvolved build).
+pub fn residual_samples<P: super::fit::Profile + ?Sized>(
+    img: &PixelData<'_>,
+    grid: &Epsf,
+    model: &P,
+    x: f64,
+    y: f64,
+    flux: f64,
+    sky: f64,
+) -> Vec<(usize, f64)> {
+    let n = grid.n() as i64;
+    let os = grid.oversampling as f64;
+    let h = grid.half_nodes as i64;
+    let r = grid.half_px() - 0.5;
     let mut out = Vec::new();
     for py in (y - r).ceil() as i64..=(y + r).floor() as i64 {
         for px in (x - r).ceil() as i64..=(x + r).floor() as i64 {
@@ -151,8 +166,8 @@ fn samples(img: &PixelData<'_>, epsf: &Epsf, fit: &StarFit, x: f64, y: f64) -> V
             if u < 0 || v < 0 || u >= n || v >= n {
                 continue;
             }
-            let resid = (img.e[i] - fit.sky) / fit.flux - epsf.value(dx, dy);
-            out.push(((v * n + u) as usize, resid));
+            let m = model.eval_at(i, px as f64, py as f64, x, y).0;
+            out.push(((v * n + u) as usize, (img.e[i] - sky) / flux - m));
         }
     }
     out
