@@ -25,6 +25,7 @@
 //! Cost: the bound is cached per 5-mas blur step (≈ 30 ms each); each realistic image costs one fit-response
 //! table (≈ 30 ms) and the shape term (≈ 0.7 s for 400 stars on 2 cores).
 
+use crate::analysis::countermeasures::telemetry::{Smoothing, TelemetryRecord};
 use crate::analysis::countermeasures::{
     Countermeasure, CountermeasureError, Reference, Telemetry, TelemetryQuality,
 };
@@ -33,6 +34,7 @@ use crate::analysis::epsf::build::BuildOptions;
 use crate::analysis::epsf::fit::pixel_variance;
 use crate::analysis::response::{FitNoise, FitResponse};
 use crate::config::AceCase;
+use crate::config::TelemetryFilter;
 use crate::integrate::kernel::{IntraPixelMap, PixelKernel, subpixel_sum};
 use crate::integrate::track::Track;
 use crate::jitter::AceSeries;
@@ -325,7 +327,9 @@ impl Predictor {
         let (Some(series), Some(im)) = (&self.series, self.images.get(i)) else {
             return Ok((Arc::new(base), scatter));
         };
-        let key = (i, format!("{q:?}"));
+        // the forward model sees the telemetry filtered as the analysis filters it
+        let filtered = !shape && self.cfg.analysis.telemetry_filter == TelemetryFilter::Auto;
+        let key = (i, format!("{q:?} {filtered}"));
         let cached = self
             .telemetry_cache
             .lock()
@@ -335,14 +339,23 @@ impl Predictor {
         let pred = match cached {
             Some(p) => p,
             None => {
-                let tel = Telemetry::from_series(
+                let rec = TelemetryRecord::record(
                     series,
-                    self.timing,
+                    self.timing.span_s(),
                     im.start_s,
-                    self.cfg.instrument.plate_scale_mas(),
-                    0.0,
                     &q,
                     self.cfg.seed,
+                )?;
+                let rec = match filtered {
+                    true => rec.smoothed(&Smoothing::choose(&rec)),
+                    false => rec,
+                };
+                let tel = Telemetry::from_record(
+                    &rec,
+                    series.dt_s,
+                    self.timing,
+                    self.cfg.instrument.plate_scale_mas(),
+                    0.0,
                     &self.kernel,
                     &self.noise,
                 )?;
