@@ -3,11 +3,11 @@
 
 mod common;
 
-use common::{pooled_accuracy_over_bound, small_config};
+use common::{noise_free_rolling, pooled_accuracy_over_bound, small_config};
 use engine::analysis::AnalysisImage;
 use engine::analysis::countermeasures::{Countermeasure, Plan, Telemetry, TelemetryQuality};
 use engine::analysis::pipeline::Options;
-use engine::config::{AceCase, FlatField, ReadoutOrder};
+use engine::config::{AceCase, ReadoutOrder};
 use engine::numerics::stats;
 use engine::simulate::Simulator;
 use engine::studies::experiment::analyse_exposure;
@@ -25,23 +25,6 @@ fn accuracy(c: &engine::config::Config, cm: Countermeasure) -> f64 {
     analyse_exposure(&sim, 0, &plan).expect("analysis").measured[0]
         .report
         .accuracy_mas
-}
-
-/// The small scene under a strong realistic ACE (450 mas) with the rolling readout, noise- and flat-free:
-/// the only position errors are what the jitter did.
-fn noise_free_rolling() -> engine::config::Config {
-    let mut c = small_config();
-    c.ace.sigma_mas = 450.0;
-    c.detector.shot_noise = false;
-    c.detector.read_noise = false;
-    c.detector.digitise = false;
-    c.detector.inter_pixel_flat_sigma = 0.0;
-    // no flat, so no calibration flat either (its 0.2 % error would be the only noise)
-    c.analysis.flat_field = FlatField::Uncalibrated;
-    // the isolated-star analysis: without noise every ripple of a star's wings is a significant peak, so the
-    // automatic choice (which measures the density of peaks above the noise) would call the grid crowded
-    c.analysis.crowding = engine::config::Crowding::Off;
-    c
 }
 
 /// The telemetry's predictions against what the fit actually measured: the position errors of a noise-free,

@@ -64,14 +64,7 @@ fn predictor_agrees_with_simulations() {
 fn the_shape_term_predicts_what_the_shift_correction_leaves() {
     use engine::analysis::countermeasures::{Countermeasure, TelemetryQuality};
     use engine::studies::predict::Predictor;
-    let mut c = small_config();
-    c.ace.sigma_mas = 450.0;
-    c.detector.shot_noise = false;
-    c.detector.read_noise = false;
-    c.detector.digitise = false;
-    c.detector.inter_pixel_flat_sigma = 0.0;
-    c.analysis.flat_field = engine::config::FlatField::Uncalibrated;
-    c.analysis.crowding = engine::config::Crowding::Off;
+    let mut c = common::noise_free_rolling();
     c.fidelity.images = 3;
     let shift = Countermeasure::Telemetry(TelemetryQuality::IDEAL);
     let model = Countermeasure::TelemetryModel(TelemetryQuality::IDEAL);

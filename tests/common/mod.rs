@@ -131,3 +131,20 @@ pub fn analyze_scored(
         img.plate_scale_mas,
     ))
 }
+
+/// The small scene under a strong realistic ACE (450 mas) with the rolling readout, noise- and flat-free:
+/// the only position errors are what the jitter did.
+pub fn noise_free_rolling() -> engine::config::Config {
+    let mut c = small_config();
+    c.ace.sigma_mas = 450.0;
+    c.detector.shot_noise = false;
+    c.detector.read_noise = false;
+    c.detector.digitise = false;
+    c.detector.inter_pixel_flat_sigma = 0.0;
+    // no flat, so no calibration flat either (its 0.2 % error would be the only noise)
+    c.analysis.flat_field = engine::config::FlatField::Uncalibrated;
+    // the isolated-star analysis: without noise every ripple of a star's wings is a significant peak, so the
+    // automatic choice (which measures the density of peaks above the noise) would call the grid crowded
+    c.analysis.crowding = engine::config::Crowding::Off;
+    c
+}
