@@ -299,11 +299,6 @@ impl Predictor {
         v
     }
 
-    /// The fit displacement (px) the ACE predicts for every star in image `i`, the shape term included.
-    pub fn displacement_px(&self, i: usize) -> Vec<(f64, f64)> {
-        self.displacements(i).full(&self.stars)
-    }
-
     /// The displacement (px) of every star in image `i` that a plate model is fitted to, or that is left
     /// without one, and the scatter from star to star beside it (px², per axis: the shape term's spread over
     /// pixel phases, where the shape is not modelled).
