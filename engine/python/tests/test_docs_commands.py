@@ -8,7 +8,8 @@ sweep files and Python scripts), producers before consumers, each one exactly as
 reductions below, which make the whole page set run in a few minutes:
 
 * every command that simulates (or reads a configuration to predict) gets `--set` overrides for a 256-px array, a 4 × 4 grid, coarse
-  optics and 2 images (`REDUCED`), except for the keys the command sets itself;
+  optics and 2 images (`REDUCED`; a command's own `--images` is capped at 2), except for the keys the command sets
+  itself;
 * `jsim bench` gets `--quick` and small star counts (its own star-count options are replaced);
 * the sweep files are copied with the same reduced `[base]` and 4 exposures in stares of 2;
 * `crowded_image.py` writes a 256-px array of 1500 stars instead of 1968 px and 10⁵ stars,
@@ -125,6 +126,11 @@ def reduce(words, jsim_bin="jsim"):
             else:
                 words += [opt] if value is None else [opt, value]
     if name in TAKES_SET:
+        # a command's own image count is reduced too (the reduced ACE series covers the reduced count)
+        if "--images" in words:
+            k = words.index("--images") + 1
+            if k < len(words) and words[k].isdigit():
+                words[k] = str(min(int(words[k]), int(REDUCED["fidelity.images"])))
         given = " ".join(words)
         for key, value in REDUCED.items():
             if key in given or (SHORTCUT.get(key) and SHORTCUT[key] in words):
