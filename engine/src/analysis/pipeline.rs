@@ -6,9 +6,7 @@
 
 use crate::analysis::AnalysisError;
 use crate::analysis::countermeasures::TelemetryQuality;
-use crate::analysis::countermeasures::telemetry::{
-    ExposureReadout, Smoothing, TelemetryRecord, resample,
-};
+use crate::analysis::countermeasures::telemetry::{ExposureReadout, TelemetryRecord, resample};
 use crate::analysis::countermeasures::{self, Context, Countermeasure, Plan, Telemetry, stack};
 use crate::analysis::crowded::CrowdedSummary;
 use crate::analysis::detection::{detect, starts};
@@ -18,7 +16,7 @@ use crate::analysis::epsf::fit::{FitOptions, StarFit, fit_star, flags};
 use crate::analysis::image::AnalysisImage;
 use crate::analysis::report::{Report, StarResult, star_results};
 use crate::analysis::response::FitNoise;
-use crate::config::{Analysis as AnalysisCfg, TelemetryFilter, TelemetryKernel};
+use crate::config::{Analysis as AnalysisCfg, TelemetryKernel};
 use crate::integrate::kernel::PixelKernel;
 use rayon::prelude::*;
 use std::sync::Arc;
@@ -334,13 +332,7 @@ pub fn analyse_crowded_image(
         // the forward model refits the groups (each member through its own windows), then its plate model
         let cm_after = match (cm.forward_model(), &telemetry) {
             (Some(_), Some(tel)) => {
-                let forward = countermeasures::forward::Forward::new(
-                    tel.profile.as_ref().unwrap_or(&plain.epsf),
-                    tel.model_track.as_ref().unwrap_or(&tel.track),
-                    &tel.timing,
-                    tel.model_nodes_per_px,
-                    img.nx,
-                );
+                let forward = tel.forward(tel.profile.as_ref().unwrap_or(&plain.epsf), img.nx);
                 let fits = crate::analysis::crowded::refit_forward(img, &c, cfg, &forward);
                 stars = star_results(&fits);
                 plate_after_forward(cm)
@@ -469,18 +461,9 @@ pub fn telemetry_for(
     )?;
     tel.profile = Some(epsf.clone());
     tel.model_nodes_per_px = cfg.telemetry_model_nodes_per_px;
-    if cfg.telemetry_filter == TelemetryFilter::Auto {
-        let smoothing = Smoothing::choose(rec);
-        if smoothing.half_width > 0 {
-            tel.model_track = Some(resample(
-                &rec.smoothed(&smoothing),
-                0.0,
-                &ro.timing,
-                img.plate_scale_mas,
-                ro.rotation_deg,
-            ));
-        }
-    }
+    tel.model_track = rec
+        .model_record(cfg.telemetry_filter)
+        .map(|r| resample(&r, 0.0, &ro.timing, img.plate_scale_mas, ro.rotation_deg));
     if cfg.telemetry_kernel == TelemetryKernel::EpsfDeconvolved {
         // the image's own static profile, through the (filtered) telemetry; the shift correction's
         // response is rebuilt from it

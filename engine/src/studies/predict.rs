@@ -25,7 +25,7 @@
 //! Cost: the bound is cached per 5-mas blur step (≈ 30 ms each); each realistic image costs one fit-response
 //! table (≈ 30 ms) and the shape term (≈ 0.7 s for 400 stars on 2 cores).
 
-use crate::analysis::countermeasures::telemetry::{Smoothing, TelemetryRecord};
+use crate::analysis::countermeasures::telemetry::TelemetryRecord;
 use crate::analysis::countermeasures::{
     Countermeasure, CountermeasureError, Reference, Telemetry, TelemetryQuality,
 };
@@ -323,8 +323,11 @@ impl Predictor {
             return Ok((Arc::new(base), scatter));
         };
         // the forward model sees the telemetry filtered as the analysis filters it
-        let filtered = !shape && self.cfg.analysis.telemetry_filter == TelemetryFilter::Auto;
-        let key = (i, format!("{q:?} {filtered}"));
+        let filter = match shape {
+            true => TelemetryFilter::Off,
+            false => self.cfg.analysis.telemetry_filter,
+        };
+        let key = (i, format!("{q:?} {filter:?}"));
         let cached = self
             .telemetry_cache
             .lock()
@@ -341,10 +344,7 @@ impl Predictor {
                     &q,
                     self.cfg.seed,
                 )?;
-                let rec = match filtered {
-                    true => rec.smoothed(&Smoothing::choose(&rec)),
-                    false => rec,
-                };
+                let rec = rec.model_record(filter).unwrap_or(rec);
                 let tel = Telemetry::from_record(
                     &rec,
                     series.dt_s,

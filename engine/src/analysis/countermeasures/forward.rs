@@ -15,7 +15,7 @@
 //! (the knob [`Forward::nodes_per_px`], benchmarked against the per-sample sum in the tests).
 
 use crate::analysis::epsf::Epsf;
-use crate::analysis::epsf::fit::Profile;
+use crate::analysis::epsf::fit::{FitOptions, MAX_RADIUS_GROWTH_PX, Profile};
 use crate::integrate::track::{Track, WindowWeights};
 use crate::readout::ReadoutTiming;
 use std::collections::HashMap;
@@ -28,6 +28,12 @@ pub const DEFAULT_NODES_PER_PX: usize = 16;
 /// row in one readout channel (their windows differ by the pixel time, ≤ 1.3 ms in all). What that ignores is
 /// ≤ ½ ms of a 12.5-s window, a weight of ≤ 4e-5: ≤ 4e-5 of the track's excursion, ≪ 0.1 mas.
 pub const WINDOW_TOLERANCE_S: f64 = 1e-3;
+
+/// The pixels a fit with options `fit` may reach around its star, px: its disc, grown around a saturated core
+/// ([`MAX_RADIUS_GROWTH_PX`]), and a pixel of slack for a step — how far a star's forward profile is made.
+pub fn fit_reach_px(fit: &FitOptions) -> f64 {
+    fit.radius_px + MAX_RADIUS_GROWTH_PX + 1.0
+}
 
 /// The forward model of an exposure: the static profile, the telemetry's track, the readout timing, and the
 /// profile already seen through the window every pixel shares (the frame's core, made once per image).

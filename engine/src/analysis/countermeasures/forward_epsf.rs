@@ -12,7 +12,6 @@
 //! amplified the noise: 5.1 ± 1.4 mas against 4.2 ± 0.5 on the paper grid, so the step is 1).
 
 use super::Telemetry;
-use super::forward::Forward;
 use crate::analysis::epsf::Epsf;
 use crate::analysis::epsf::build::{BuildOptions, residual_samples, update};
 use crate::analysis::epsf::fit::{fit_star, flags};
@@ -32,7 +31,6 @@ pub fn build_deconvolved(
     iterations: usize,
 ) -> Epsf {
     let pd = img.pixels();
-    let track = tel.model_track.as_ref().unwrap_or(&tel.track);
     let chosen: Vec<&StarResult> = stars
         .iter()
         .filter(|s| {
@@ -45,7 +43,7 @@ pub fn build_deconvolved(
     let mut psi = init.clone();
     let reach = psi.half_px() + 1.0;
     for _ in 0..iterations.max(1) {
-        let forward = Forward::new(&psi, track, &tel.timing, tel.model_nodes_per_px, img.nx);
+        let forward = tel.forward(&psi, img.nx);
         let per_star: Vec<Vec<(usize, f64)>> = chosen
             .par_iter()
             .map(|s| {

@@ -595,15 +595,8 @@ fn forward_refit(ctx: &Context<'_>, stars: &mut [StarResult]) {
         return;
     };
     let pd = ctx.img.pixels();
-    let model = forward::Forward::new(
-        tel.profile.as_ref().unwrap_or(ctx.global),
-        tel.model_track.as_ref().unwrap_or(&tel.track),
-        &tel.timing,
-        tel.model_nodes_per_px,
-        ctx.img.nx,
-    );
-    // the pixels a fit may reach: its disc, grown around a saturated core, and a re-selection
-    let reach = ctx.build.fit.radius_px + crate::analysis::epsf::fit::MAX_RADIUS_GROWTH_PX + 1.0;
+    let model = tel.forward(tel.profile.as_ref().unwrap_or(ctx.global), ctx.img.nx);
+    let reach = forward::fit_reach_px(&ctx.build.fit);
     let refits: Vec<_> = stars
         .par_iter()
         .map(|s| {

@@ -4,6 +4,7 @@
 
 use super::{CountermeasureError, TelemetryQuality};
 use crate::analysis::response::{FitNoise, FitResponse};
+use crate::config::TelemetryFilter;
 use crate::integrate::kernel::PixelKernel;
 use crate::integrate::track::Track;
 use crate::jitter::AceSeries;
@@ -136,6 +137,16 @@ impl TelemetryRecord {
             y_mas: boxcar(&self.y_mas, smoothing.half_width),
             ..self.clone()
         }
+    }
+
+    /// The record the forward model sees under `filter`: low-pass filtered by the boxcar [`Smoothing::choose`]
+    /// picks; `None` where that is the record itself (`off`, or a boxcar of one sample).
+    pub fn model_record(&self, filter: TelemetryFilter) -> Option<Self> {
+        if filter == TelemetryFilter::Off {
+            return None;
+        }
+        let smoothing = Smoothing::choose(self);
+        (smoothing.half_width > 0).then(|| self.smoothed(&smoothing))
     }
 }
 
@@ -289,6 +300,22 @@ impl Telemetry {
             model_nodes_per_px: super::forward::DEFAULT_NODES_PER_PX,
             model_track: None,
         })
+    }
+
+    /// The forward model of an image `detector_px` wide that sees `profile` through this telemetry (its filtered
+    /// track where there is one, [`Telemetry::model_track`]).
+    pub fn forward<'a>(
+        &'a self,
+        profile: &'a crate::analysis::epsf::Epsf,
+        detector_px: usize,
+    ) -> super::forward::Forward<'a> {
+        super::forward::Forward::new(
+            profile,
+            self.model_track.as_ref().unwrap_or(&self.track),
+            &self.timing,
+            self.model_nodes_per_px,
+            detector_px,
+        )
     }
 
     /// The fit displacement (px) telemetry predicts for stars at these positions.

@@ -322,15 +322,8 @@ pub fn analyse(img: &AnalysisImage, cfg: &AnalysisCfg, model_epsf: Option<&Epsf>
         })
         .collect();
     let reported: Vec<usize> = (0..fits.len()).filter(|&k| confirmed[k]).collect();
-    let from_residual: Vec<bool> = (0..fits.len())
-        .filter(|&k| confirmed[k])
-        .map(|k| from_residual[k])
-        .collect();
-    let fits: Vec<StarFit> = (0..fits.len())
-        .filter(|&k| confirmed[k])
-        .map(|k| fits[k])
-        .collect();
-    let mut fits = fits;
+    let from_residual: Vec<bool> = reported.iter().map(|&k| from_residual[k]).collect();
+    let mut fits: Vec<StarFit> = reported.iter().map(|&k| fits[k]).collect();
     flags::mark_poor_fits(&mut fits);
     Crowded {
         n_first: fits.len() - from_residual.iter().filter(|r| **r).count(),

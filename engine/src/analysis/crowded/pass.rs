@@ -4,9 +4,8 @@
 use super::group_fit::{MAX_GROUP_STARS, Member, Outsiders, fit_group, fit_group_with};
 use super::link_radius_px;
 use super::neighbours::{self, Neighbours};
-use crate::analysis::countermeasures::forward::Forward;
+use crate::analysis::countermeasures::forward::{Forward, fit_reach_px};
 use crate::analysis::epsf::Epsf;
-use crate::analysis::epsf::fit::MAX_RADIUS_GROWTH_PX;
 use crate::analysis::epsf::fit::{PixelData, StarFit, annulus_sky, flags};
 use crate::analysis::image::AnalysisImage;
 use crate::analysis::pipeline::build_options;
@@ -77,8 +76,7 @@ pub fn fit_pass_with(
     forward: Option<&Forward<'_>>,
 ) -> (Vec<StarFit>, GroupStats) {
     let opts = build_options(cfg);
-    // the pixels a member's fit may reach (its disc, grown around a saturated core, a step)
-    let profile_reach = opts.fit.radius_px + MAX_RADIUS_GROWTH_PX + 1.0;
+    let profile_reach = fit_reach_px(&opts.fit);
     let group = |members: &[Member], o: &[Member], sky: f64| -> Vec<StarFit> {
         let outsiders = Outsiders { stars: o };
         match forward {
