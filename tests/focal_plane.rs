@@ -13,9 +13,12 @@ use engine::simulate::FocalPlaneSimulator;
 use engine::sky;
 use std::path::PathBuf;
 
-/// The small test configuration on the quad focal plane, still and noise-free.
+/// The small test configuration on the quad focal plane, still and noise-free, stars at their catalogue
+/// place (these tests pin the geometry with positions made through the arrays' WCS; the apparent place is
+/// tested against astropy in `engine/python/tests/test_focal_plane.py`).
 fn quad() -> Config {
     let mut c = small_config();
+    c.observation.apparent_place = false;
     c.focal_plane.layout = Layout::Quad;
     c.focal_plane.gap_px = 60.0;
     c.ace.case = AceCase::None;

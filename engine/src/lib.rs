@@ -59,6 +59,7 @@ pub mod sky;
 pub mod studies;
 #[cfg(any(test, feature = "testkit"))]
 pub mod testkit;
+pub mod time;
 pub mod truth;
 
 pub use config::Config;

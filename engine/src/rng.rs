@@ -25,6 +25,8 @@ pub enum Stream {
     Bulge = 11,
     /// Each array's own flat and noise streams (a derived seed per array of the quad focal plane).
     Array = 12,
+    /// The mock bulge's distances and proper motions (apart from its positions and magnitudes).
+    BulgeMotion = 13,
     Test = 99,
 }
 

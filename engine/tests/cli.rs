@@ -65,6 +65,22 @@ fn bad_values_are_named_errors_and_write_nothing() {
             vec!["--config", "/nonexistent/cfg.toml"],
             "/nonexistent/cfg.toml",
         ),
+        (
+            vec!["--set", "observation.start_utc=\"2031-02-30T00:00:00\""],
+            "observation.start_utc",
+        ),
+        (
+            vec!["--set", "observation.orbit_altitude_km=50"],
+            "observation.orbit_altitude_km",
+        ),
+        (
+            vec!["--set", "observation.catalogue_epoch_jyear=1000"],
+            "observation.catalogue_epoch_jyear",
+        ),
+        (
+            vec!["--set", "scene.bulge.distance_kpc=30"],
+            "scene.bulge.distance_kpc",
+        ),
     ] {
         let out = jsim()
             .arg("simulate")

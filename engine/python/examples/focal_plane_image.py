@@ -51,7 +51,7 @@ def main(path, out, binning=4):
     # the check: mosaic positions of bright stars against a TAN projection of the whole focal plane
     plane = WCS(naxis=2)
     plane.wcs.ctype = ["RA---TAN", "DEC--TAN"]
-    plane.wcs.crval = [p["RA_PNT"], p["DEC_PNT"]]
+    plane.wcs.crval = [p.get("RA_AXIS", p["RA_PNT"]), p.get("DEC_AXIS", p["DEC_PNT"])]  # the apparent axis
     plane.wcs.crpix = [origin + 1, origin + 1]
     s = hdrs[0]["PLTSCALE"] / 3.6e6
     rho = np.radians(p["PA_PNT"])

@@ -9,7 +9,7 @@
 mod sky;
 mod text;
 mod validate;
-pub use sky::{Bulge, FocalPlaneLayout, Layout, SipTerm, Sky};
+pub use sky::{Bulge, FocalPlaneLayout, Layout, Observation, SipTerm, Sky};
 pub use validate::MAX_ACE_SIGMA_MAS;
 
 pub use text::DEFAULT_TOML;
@@ -58,6 +58,7 @@ pub struct Config {
     pub photometry: Photometry,
     pub scene: Scene,
     pub sky: Sky,
+    pub observation: Observation,
     pub focal_plane: FocalPlaneLayout,
     pub fidelity: Fidelity,
     pub analysis: Analysis,
@@ -76,6 +77,7 @@ impl Default for Config {
             photometry: Photometry::default(),
             scene: Scene::default(),
             sky: Sky::default(),
+            observation: Observation::default(),
             focal_plane: FocalPlaneLayout::default(),
             fidelity: Fidelity::default(),
             analysis: Analysis::default(),

@@ -26,6 +26,43 @@ impl Default for Sky {
     }
 }
 
+/// When the exposures are taken, from where, and whether the stars are seen at their apparent place
+/// (`engine::time`, `sky::orbit`, `sky::apparent`).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Observation {
+    /// UTC of the ACE series' t = 0, ISO 8601 (`YYYY-MM-DDThh:mm:ss[.fff]`): image i starts `TSTART`
+    /// seconds later. The default, the March equinox of 2031, is a date in JASMINE's planned mission when
+    /// the Galactic centre is 90° from the Sun (the bulge is observed in spring and autumn) — a choice.
+    pub start_utc: String,
+    /// Julian epoch (TDB) of the scene's sky positions: a catalogue's reference epoch (2016.0 for Gaia
+    /// DR3), and the epoch the mock bulge is drawn at.
+    pub catalogue_epoch_jyear: f64,
+    /// Stars of a sky scene at their apparent place at image 0's mid-exposure: proper motion, parallax
+    /// (from the spacecraft), light deflection by the Sun and aberration; the pointing is the apparent
+    /// direction of `sky.ra_deg, dec_deg`. Off: the catalogue place, unmoved (the earlier behaviour).
+    pub apparent_place: bool,
+    /// The spacecraft's circular sun-synchronous orbit: height above the equator, km (JASMINE: 600).
+    pub orbit_altitude_km: f64,
+    /// Local time of the orbit's ascending node, hours (JASMINE: 6, a dawn-dusk orbit).
+    pub orbit_ltan_h: f64,
+    /// Argument of latitude at `start_utc`, degrees.
+    pub orbit_phase_deg: f64,
+}
+
+impl Default for Observation {
+    fn default() -> Self {
+        Self {
+            start_utc: "2031-03-21T00:00:00".into(),
+            catalogue_epoch_jyear: 2031.0,
+            apparent_place: true,
+            orbit_altitude_km: 600.0,
+            orbit_ltan_h: 6.0,
+            orbit_phase_deg: 0.0,
+        }
+    }
+}
+
 /// How many arrays the focal plane holds.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, Hash)]
 #[serde(rename_all = "kebab-case")]
@@ -90,6 +127,14 @@ impl Default for FocalPlaneLayout {
 ///   red giants (≈ 0.7) plus the Galactic-centre reddening E(J − H) ≈ 1–2.3 (Nogueras-Lara et al. 2018,
 ///   A&A 610, A83).
 ///
+/// * Motion (drawn from its own stream: positions and magnitudes do not change with it): distances normal
+///   around 8.2 kpc (the Sun–Galactic-centre distance of the Koshimoto et al. 2021 model) with σ 1.0 kpc,
+///   clipped to 5 … 12 kpc (the bar's depth along the line of sight; a choice), parallax = 1/d; proper
+///   motions normal in Galactic (µl*, µb) around Sgr A*'s apparent motion (−6.41, −0.22) mas/yr (Reid &
+///   Brunthaler 2020, ApJ 892, 39: the reflex of the Sun's motion, which the bulge shares on average) with
+///   σ 3.0 and 2.5 mas/yr (the bar's ≈ 150/78/82 km/s dispersions of Koshimoto et al. 2021 projected at
+///   8.2 kpc, 1 mas/yr = 38.9 km/s). No disc foreground: a bulge-only field.
+///
 /// Every field is a knob: an astronomer's own field is a catalogue (`scene.kind = "catalogue"`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -104,6 +149,18 @@ pub struct Bulge {
     pub jh_sigma: f64,
     pub jh_min: f64,
     pub jh_max: f64,
+    /// Mean distance, kpc.
+    pub distance_kpc: f64,
+    /// Its spread (normal, clipped to 5 … 12 kpc), kpc.
+    pub distance_sigma_kpc: f64,
+    /// Mean proper motion in Galactic longitude, µl* = µl cos b, mas/yr.
+    pub pm_l_mean_mas_per_yr: f64,
+    /// Mean proper motion in Galactic latitude, mas/yr.
+    pub pm_b_mean_mas_per_yr: f64,
+    /// Proper-motion dispersion in µl*, mas/yr.
+    pub pm_l_sigma_mas_per_yr: f64,
+    /// Proper-motion dispersion in µb, mas/yr.
+    pub pm_b_sigma_mas_per_yr: f64,
 }
 
 impl Default for Bulge {
@@ -117,6 +174,12 @@ impl Default for Bulge {
             jh_sigma: 0.35,
             jh_min: 1.5,
             jh_max: 3.0,
+            distance_kpc: 8.2,
+            distance_sigma_kpc: 1.0,
+            pm_l_mean_mas_per_yr: -6.41,
+            pm_b_mean_mas_per_yr: -0.22,
+            pm_l_sigma_mas_per_yr: 3.0,
+            pm_b_sigma_mas_per_yr: 2.5,
         }
     }
 }

@@ -325,6 +325,31 @@ impl Config {
             ));
         }
         check_finite("sky.pa_deg", sky.pa_deg)?;
+        let obs = &self.observation;
+        crate::time::Epoch::from_utc_iso(&obs.start_utc)
+            .map_err(|why| invalid("observation.start_utc", &obs.start_utc, &why))?;
+        if !(1900.0..=2100.0).contains(&obs.catalogue_epoch_jyear) {
+            return Err(invalid(
+                "observation.catalogue_epoch_jyear",
+                obs.catalogue_epoch_jyear,
+                "must be in 1900 … 2100 (Julian years)",
+            ));
+        }
+        if !(200.0..=100_000.0).contains(&obs.orbit_altitude_km) {
+            return Err(invalid(
+                "observation.orbit_altitude_km",
+                obs.orbit_altitude_km,
+                "must be in 200 … 100000 km",
+            ));
+        }
+        if !(0.0..=24.0).contains(&obs.orbit_ltan_h) {
+            return Err(invalid(
+                "observation.orbit_ltan_h",
+                obs.orbit_ltan_h,
+                "must be in 0 … 24 hours",
+            ));
+        }
+        check_finite("observation.orbit_phase_deg", obs.orbit_phase_deg)?;
 
         let fp = &self.focal_plane;
         check_nonneg("focal_plane.gap_px", fp.gap_px)?;
@@ -419,6 +444,32 @@ impl Config {
             }
         }
         check_nonneg("scene.bulge.jh_sigma", b.jh_sigma)?;
+        if !(5.0..=12.0).contains(&b.distance_kpc) {
+            return Err(invalid(
+                "scene.bulge.distance_kpc",
+                b.distance_kpc,
+                "must be in 5 … 12 kpc",
+            ));
+        }
+        for (field, v) in [
+            ("scene.bulge.distance_sigma_kpc", b.distance_sigma_kpc),
+            ("scene.bulge.pm_l_sigma_mas_per_yr", b.pm_l_sigma_mas_per_yr),
+            ("scene.bulge.pm_b_sigma_mas_per_yr", b.pm_b_sigma_mas_per_yr),
+        ] {
+            check_nonneg(field, v)?;
+            if v > 100.0 {
+                return Err(invalid(field, v, "must be ≤ 100"));
+            }
+        }
+        for (field, v) in [
+            ("scene.bulge.pm_l_mean_mas_per_yr", b.pm_l_mean_mas_per_yr),
+            ("scene.bulge.pm_b_mean_mas_per_yr", b.pm_b_mean_mas_per_yr),
+        ] {
+            check_finite(field, v)?;
+            if v.abs() > 1000.0 {
+                return Err(invalid(field, v, "must be in -1000 … 1000 mas/yr"));
+            }
+        }
         if b.jh_min > b.jh_max {
             return Err(invalid(
                 "scene.bulge.jh_min",

@@ -25,37 +25,59 @@ pub fn truth_name(index: usize) -> String {
     format!("truth_{index:03}.csv")
 }
 
-/// The epoch an exposure's time stamps count from until observation sequences set real ones: MJD 62867.0 =
-/// 2031-01-01T00:00:00 TT (a date in JASMINE's planned mission; a choice, not a schedule). `DATE-OBS` and
-/// `MJD-OBS` are this epoch plus the exposure's start in the ACE series (`TSTART`), in TT (`TIMESYS`): a
-/// future UTC needs leap seconds nobody knows yet.
-pub const DEFAULT_EPOCH_MJD: f64 = 62_867.0;
-
-/// `YYYY-MM-DDThh:mm:ss.sss` of `mjd` days plus `plus_s` seconds, in a uniform time scale (TT: days of
-/// 86 400 s, no leap seconds).
-pub fn iso_utc(mjd: f64, plus_s: f64) -> String {
-    let total_ms = ((mjd * 86_400.0 + plus_s) * 1e3).round() as i64;
-    let (days, ms) = (
-        total_ms.div_euclid(86_400_000),
-        total_ms.rem_euclid(86_400_000),
-    );
-    // MJD 0 = 1858-11-17; civil date from days since 1970-01-01 (MJD 40587), H. Hinnant's algorithm
-    let z = days - 40_587 + 719_468;
-    let era = z.div_euclid(146_097);
-    let doe = z.rem_euclid(146_097);
-    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
-    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
-    let mp = (5 * doy + 2) / 153;
-    let d = doy - (153 * mp + 2) / 5 + 1;
-    let m = if mp < 10 { mp + 3 } else { mp - 9 };
-    let y = yoe + era * 400 + i64::from(m <= 2);
-    format!(
-        "{y:04}-{m:02}-{d:02}T{:02}:{:02}:{:02}.{:03}",
-        ms / 3_600_000,
-        ms / 60_000 % 60,
-        ms / 1000 % 60,
-        ms % 1000
-    )
+/// The time and place cards of an exposure starting `t_start_s` into the ACE series: `TIMESYS` (UTC),
+/// `DATE-OBS` and `MJD-OBS` (UTC of `observation.start_utc` + `TSTART`), `MJD-TDB`; and where the stars
+/// were placed: `APPLACE` (1: apparent place, 0: catalogue place), `APPMJD` (the instant of that place,
+/// image 0's mid-exposure, MJD UTC), `CATEPOCH` (the catalogue positions' Julian epoch, TDB), the
+/// spacecraft's geocentric position `SCGCRSX/Y/Z` (km) and velocity `SCGCRSVX/VY/VZ` (km/s), GCRS, at
+/// `APPMJD` — the orbit ephemeris an outside tool needs to repeat the apparent place (astropy's `GCRS`
+/// frame with `obsgeoloc`, `obsgeovel`).
+pub fn observation_cards(cfg: &crate::config::Config, t_start_s: f64) -> Vec<Card> {
+    let (Ok(start), Ok(scene), Ok(orbit)) = (
+        crate::sky::exposure_epoch(cfg, t_start_s),
+        crate::sky::scene_epoch(cfg),
+        crate::sky::orbit(cfg),
+    ) else {
+        // validation refuses a bad start_utc before anything is written
+        return Vec::new();
+    };
+    let ob = orbit.observer(&scene);
+    let mut cards = vec![
+        Card::s("TIMESYS", "UTC", "time scale of DATE-OBS, MJD-OBS"),
+        Card::s("DATE-OBS", start.utc_iso(), "exposure start (UTC)"),
+        Card::f("MJD-OBS", start.utc_mjd(), "[d] exposure start, MJD (UTC)"),
+        Card::f("MJD-TDB", start.tdb_mjd(), "[d] exposure start, MJD (TDB)"),
+        Card::i(
+            "APPLACE",
+            i64::from(cfg.observation.apparent_place),
+            "1: stars at their apparent place, 0: catalogue",
+        ),
+        Card::f(
+            "APPMJD",
+            scene.utc_mjd(),
+            "[d] instant of that place, MJD (UTC)",
+        ),
+        Card::f(
+            "CATEPOCH",
+            cfg.observation.catalogue_epoch_jyear,
+            "[yr] catalogue positions' Julian epoch (TDB)",
+        ),
+    ];
+    for (k, axis) in ["X", "Y", "Z"].iter().enumerate() {
+        cards.push(Card::f(
+            &format!("SCGCRS{axis}"),
+            ob.gcrs_position_km[k],
+            "[km] spacecraft at APPMJD, GCRS",
+        ));
+    }
+    for (k, axis) in ["X", "Y", "Z"].iter().enumerate() {
+        cards.push(Card::f(
+            &format!("SCGCRSV{axis}"),
+            ob.gcrs_velocity_km_s[k],
+            "[km/s] its velocity, GCRS",
+        ));
+    }
+    cards
 }
 
 /// The provenance headers of an exposure.
@@ -144,17 +166,9 @@ pub fn headers(sim: &Simulator, exp: &Exposure) -> Vec<Card> {
             ),
         ),
         Card::s("FILTER", "Hw", "band: 1.0-1.6 um (the Hw magnitude system)"),
-        Card::s("TIMESYS", "TT", "time scale of DATE-OBS, MJD-OBS"),
-        Card::s(
-            "DATE-OBS",
-            iso_utc(DEFAULT_EPOCH_MJD, exp.t_start_s),
-            "exposure start (default epoch + TSTART)",
-        ),
-        Card::f(
-            "MJD-OBS",
-            DEFAULT_EPOCH_MJD + exp.t_start_s / 86_400.0,
-            "[d] exposure start, MJD (TT)",
-        ),
+    ];
+    cards.extend(observation_cards(c, exp.t_start_s));
+    cards.extend([
         Card::s("READOUT", c.readout.order.name(), "readout order"),
         Card::i("NCHAN", c.readout.channels as i64, "readout channels"),
         Card::f("PIXTIME", c.readout.pixel_time_us, "[us] pixel read time"),
@@ -236,7 +250,7 @@ pub fn headers(sim: &Simulator, exp: &Exposure) -> Vec<Card> {
         ),
         Card::s("METHOD", c.fidelity.method.name(), "integration method"),
         Card::s("BACKEND", exp.backend.clone(), "integration device"),
-    ];
+    ]);
     if c.scene.kind == crate::config::SceneKind::Grid {
         // the grid's one magnitude and colour (a bulge or catalogue scene has many: see the truth)
         cards.push(Card::f(
@@ -498,19 +512,31 @@ pub fn write_exposure(
 #[cfg(test)]
 mod time_tests {
     use super::*;
+    use crate::io::fits::Value;
 
-    /// Known dates: MJD 51544 = 2000-01-01 (the J2000 day), 40587 = 1970-01-01, the default epoch
-    /// 62867 = 2031-01-01, a leap day, and seconds carried into the next day.
+    /// `DATE-OBS` and `MJD-OBS` are the configured start plus `TSTART`, in UTC, and agree.
     #[test]
-    fn iso_dates_of_known_mjds() {
-        assert_eq!(iso_utc(51_544.0, 0.0), "2000-01-01T00:00:00.000");
-        assert_eq!(iso_utc(40_587.0, 0.0), "1970-01-01T00:00:00.000");
-        assert_eq!(iso_utc(DEFAULT_EPOCH_MJD, 0.0), "2031-01-01T00:00:00.000");
-        assert_eq!(iso_utc(51_603.0, 0.0), "2000-02-29T00:00:00.000");
-        assert_eq!(iso_utc(51_544.0, 86_399.5), "2000-01-01T23:59:59.500");
+    fn time_cards_are_the_start_plus_tstart() {
+        let cfg = crate::config::Config::default();
+        let cards = observation_cards(&cfg, 86_400.0 + 3_723.25);
+        let get = |k: &str| cards.iter().find(|c| c.key == k).map(|c| c.value.clone());
+        assert_eq!(get("TIMESYS"), Some(Value::S("UTC".into())));
         assert_eq!(
-            iso_utc(51_544.0, 86_400.0 + 3_723.25),
-            "2000-01-02T01:02:03.250"
+            get("DATE-OBS"),
+            Some(Value::S("2031-03-22T01:02:03.250".into()))
         );
+        let Some(Value::F(mjd)) = get("MJD-OBS") else {
+            panic!("MJD-OBS")
+        };
+        assert!((mjd - (62_947.0 + 3_723.25 / 86_400.0)).abs() * 86_400.0 < 1e-4);
+        let Some(Value::F(tdb)) = get("MJD-TDB") else {
+            panic!("MJD-TDB")
+        };
+        // TDB − UTC = 69.184 s + (TDB − TT, ≤ 1.7 ms)
+        assert!(((tdb - mjd) * 86_400.0 - 69.184).abs() < 2e-3);
+        let Some(Value::F(x)) = get("SCGCRSX") else {
+            panic!("SCGCRSX")
+        };
+        assert!(x.abs() <= 6_978.2);
     }
 }

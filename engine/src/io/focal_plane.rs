@@ -24,6 +24,8 @@ pub fn focal_plane_name(index: usize) -> String {
 /// The primary header of a focal-plane file.
 fn primary_cards(fps: &FocalPlaneSimulator, exp: &FocalPlaneExposure) -> Vec<Card> {
     let c = &fps.cfg;
+    // the validated configuration always has a pointing; the configured one stands in otherwise
+    let axis = crate::sky::pointing(c).unwrap_or_else(|_| crate::sky::Pointing::from(&c.sky));
     let mut cards = vec![
         Card::i("SEED", c.seed as i64, "master random seed"),
         Card::i("IMAGEIDX", exp.index as i64, "image index in the dataset"),
@@ -33,14 +35,34 @@ fn primary_cards(fps: &FocalPlaneSimulator, exp: &FocalPlaneExposure) -> Vec<Car
             "arrays: extensions ARRAY1..",
         ),
         Card::f("GAPPX", c.focal_plane.gap_px, "[pix] gap between arrays"),
-        Card::f("RA_PNT", c.sky.ra_deg, "[deg] optical axis RA (ICRS)"),
-        Card::f("DEC_PNT", c.sky.dec_deg, "[deg] optical axis Dec (ICRS)"),
+        Card::f(
+            "RA_PNT",
+            c.sky.ra_deg,
+            "[deg] target at the axis, RA (ICRS)",
+        ),
+        Card::f(
+            "DEC_PNT",
+            c.sky.dec_deg,
+            "[deg] target at the axis, Dec (ICRS)",
+        ),
+        Card::f(
+            "RA_AXIS",
+            axis.ra_deg,
+            "[deg] optical axis in the images, RA (apparent)",
+        ),
+        Card::f(
+            "DEC_AXIS",
+            axis.dec_deg,
+            "[deg] optical axis in the images, Dec (apparent)",
+        ),
         Card::f(
             "PA_PNT",
             c.sky.pa_deg,
             "[deg] focal plane +y, east of north",
         ),
     ];
+    let t_start_s = exp.arrays.first().map(|a| a.t_start_s).unwrap_or(0.0);
+    cards.extend(super::exposure::observation_cards(c, t_start_s));
     cards.extend(provenance_cards(c));
     if let Some(counts) = &exp.counts {
         cards.extend(counts_cards(counts));

@@ -1,10 +1,12 @@
 //! The mock Galactic-bulge field (`scene.kind = "bulge"`): stars uniform on the sky over the focal plane,
 //! Hw from a power-law luminosity function, J − H from a clipped normal reddening distribution, all from
-//! the bulge stream of the run seed. Parameters and their sources: [`crate::config::Bulge`].
+//! the bulge stream of the run seed; distances and proper motions from a stream of their own.
+//! Parameters and their sources: [`crate::config::Bulge`].
 
 use super::{MAX_CATALOGUE_STARS, SceneError, SkyStar};
-use crate::config::{Config, Layout};
+use crate::config::{Bulge, Config, Layout};
 use crate::rng::{self, Stream};
+use crate::sky::apparent::Motion;
 use rand::RngExt;
 use rand_distr::{Distribution, StandardNormal};
 
@@ -35,6 +37,38 @@ pub fn luminosity_function_draw(u: f64, lo: f64, hi: f64, alpha: f64) -> f64 {
     (a + u * (b - a)).log10() / alpha
 }
 
+/// The unit vectors of increasing Galactic longitude and latitude at (α, δ), as (α*, δ) components: the
+/// turn between Galactic and equatorial proper motions (SOFA `icrs2g`/`g2icrs`, by a 10⁻⁶-rad step).
+pub fn galactic_axes(ra_deg: f64, dec_deg: f64) -> ([f64; 2], [f64; 2]) {
+    use sofars::coords::{g2icrs, icrs2g};
+    let (ra, dec) = (ra_deg.to_radians(), dec_deg.to_radians());
+    let (l, b) = icrs2g(ra, dec);
+    let step = 1e-6;
+    let axis = |dl: f64, db: f64| {
+        let (a, d) = g2icrs(l + dl, b + db);
+        let da = (a - ra + std::f64::consts::PI).rem_euclid(2.0 * std::f64::consts::PI)
+            - std::f64::consts::PI;
+        let v = [da * dec.cos(), d - dec];
+        let n = v[0].hypot(v[1]);
+        [v[0] / n, v[1] / n]
+    };
+    (axis(step / b.cos(), 0.0), axis(0.0, step))
+}
+
+/// One star's distance and proper motion, drawn from `r`.
+fn draw_motion(b: &Bulge, ra_deg: f64, dec_deg: f64, r: &mut impl rand::Rng) -> Motion {
+    let z: [f64; 3] = std::array::from_fn(|_| StandardNormal.sample(&mut *r));
+    let d_kpc = (b.distance_kpc + b.distance_sigma_kpc * z[0]).clamp(5.0, 12.0);
+    let mu_l = b.pm_l_mean_mas_per_yr + b.pm_l_sigma_mas_per_yr * z[1];
+    let mu_b = b.pm_b_mean_mas_per_yr + b.pm_b_sigma_mas_per_yr * z[2];
+    let (el, eb) = galactic_axes(ra_deg, dec_deg);
+    Motion {
+        pmra_mas_per_yr: mu_l * el[0] + mu_b * eb[0],
+        pmdec_mas_per_yr: mu_l * el[1] + mu_b * eb[1],
+        parallax_mas: 1.0 / d_kpc,
+    }
+}
+
 /// Draw the field's stars (ids in drawing order).
 pub fn draw(cfg: &Config) -> Result<Vec<SkyStar>, SceneError> {
     let b = &cfg.scene.bulge;
@@ -50,6 +84,7 @@ pub fn draw(cfg: &Config) -> Result<Vec<SkyStar>, SceneError> {
     let h = half_side_px(cfg);
     let projection = crate::sky::focal_plane_projection(cfg).map_err(SceneError::Invalid)?;
     let mut r = rng::stream(cfg.seed, Stream::Bulge, 0);
+    let mut kinematics = rng::stream(cfg.seed, Stream::BulgeMotion, 0);
     let mut stars = Vec::with_capacity(n);
     for id in 0..n {
         let (fx, fy) = (
@@ -76,6 +111,7 @@ pub fn draw(cfg: &Config) -> Result<Vec<SkyStar>, SceneError> {
             dec_deg: dec,
             mag_hw: hw,
             j_minus_h: jh,
+            motion: draw_motion(b, ra, dec, &mut kinematics),
         });
     }
     Ok(stars)
@@ -149,5 +185,68 @@ mod tests {
         assert_eq!(luminosity_function_draw(0.0, 8.0, 17.0, 0.3), 8.0);
         assert!((luminosity_function_draw(1.0, 8.0, 17.0, 0.3) - 17.0).abs() < 1e-12);
         assert!((luminosity_function_draw(0.5, 8.0, 17.0, 0.0) - 12.5).abs() < 1e-12);
+    }
+
+    #[test]
+    fn galactic_north_at_the_galactic_centre_is_at_position_angle_minus_58_6() {
+        // spherical trigonometry to the north Galactic pole (α 192.859°, δ 27.128°; ICRS, Hipparcos' frame):
+        // PA = atan2(sin Δα cos δp, cos δ sin δp − sin δ cos δp cos Δα) = −58.6° at Sgr A*
+        let (ra, dec): (f64, f64) = (266.4168, -29.0078);
+        let (ap, dp) = (192.859_48_f64.to_radians(), 27.128_25_f64.to_radians());
+        let da = ap - ra.to_radians();
+        let d = dec.to_radians();
+        let pa = (da.sin() * dp.cos()).atan2(d.cos() * dp.sin() - d.sin() * dp.cos() * da.cos());
+        let (el, eb) = galactic_axes(ra, dec);
+        assert!(
+            (eb[0] - pa.sin()).abs() < 1e-5 && (eb[1] - pa.cos()).abs() < 1e-5,
+            "{eb:?}"
+        );
+        assert!((pa.to_degrees() + 58.6).abs() < 0.1, "{}", pa.to_degrees());
+        // the axes are orthonormal and right-handed on the sky (l grows to the east of b's north)
+        assert!((el[0] * eb[0] + el[1] * eb[1]).abs() < 1e-5);
+        assert!((el[0].hypot(el[1]) - 1.0).abs() < 1e-12);
+        assert!((el[0] * eb[1] - el[1] * eb[0] - 1.0).abs() < 1e-5);
+    }
+
+    #[test]
+    fn motions_follow_the_kinematic_model_and_leave_the_field_unchanged() {
+        let mut c = bulge_cfg();
+        c.scene.bulge.density_per_arcmin2 = 20.0;
+        let s = draw(&c).expect("draw");
+        let n = s.len() as f64;
+        let (mut mu_l, mut mu_b, mut plx) = (Vec::new(), Vec::new(), Vec::new());
+        for t in &s {
+            let (el, eb) = galactic_axes(t.ra_deg, t.dec_deg);
+            let m = &t.motion;
+            mu_l.push(m.pmra_mas_per_yr * el[0] + m.pmdec_mas_per_yr * el[1]);
+            mu_b.push(m.pmra_mas_per_yr * eb[0] + m.pmdec_mas_per_yr * eb[1]);
+            plx.push(m.parallax_mas);
+        }
+        let b = &c.scene.bulge;
+        for (v, mean, sigma) in [
+            (&mu_l, b.pm_l_mean_mas_per_yr, b.pm_l_sigma_mas_per_yr),
+            (&mu_b, b.pm_b_mean_mas_per_yr, b.pm_b_sigma_mas_per_yr),
+        ] {
+            let (m, sd) = (stats::mean(v), stats::std_dev(v));
+            assert!((m - mean).abs() < 4.0 * sigma / n.sqrt(), "{m} vs {mean}");
+            // the sample σ of a normal: σ/√(2n) of its own
+            assert!(
+                (sd - sigma).abs() < 4.0 * sigma / (2.0 * n).sqrt(),
+                "{sd} vs {sigma}"
+            );
+        }
+        // parallax 1/d with d ~ N(8.2, 1.0) kpc clipped to [5, 12]: mean 1/8.2 · (1 + (1/8.2)² + …) = 0.1238
+        assert!(plx.iter().all(|p| (1.0 / 12.0..=1.0 / 5.0).contains(p)));
+        let m = stats::mean(&plx);
+        assert!((m - 0.1238).abs() < 0.0015, "{m}");
+        // the motions come from their own stream: positions and magnitudes are those of a field without them
+        let mut still = c.clone();
+        still.scene.bulge.pm_l_sigma_mas_per_yr = 0.0;
+        let t = draw(&still).expect("draw");
+        assert!(
+            s.iter()
+                .zip(&t)
+                .all(|(a, b)| a.ra_deg == b.ra_deg && a.mag_hw == b.mag_hw)
+        );
     }
 }

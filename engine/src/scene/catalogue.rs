@@ -6,10 +6,13 @@
 //! `j-h`), or `j − h` when `j, h` are given; optional `a_hw`, an extinction in Hw magnitudes added to each
 //! star's Hw (for catalogues of intrinsic magnitudes). A CSV without a header line is read positionally as
 //! `x, y[, hw[, j_h]]` (the original format). Missing magnitudes and colours take `scene.mag_hw` and
-//! `scene.j_minus_h`. Every value is range-checked, naming the line (CSV) or row (FITS) and the column.
+//! `scene.j_minus_h`. Sky catalogues may give each star's motion: `pmra` (µα* = µα cos δ, mas/yr, the Gaia
+//! convention), `pmdec` (mas/yr) and `parallax` (mas), at `observation.catalogue_epoch_jyear`; missing
+//! ones are 0. Every value is range-checked, naming the line (CSV) or row (FITS) and the column.
 
 use super::{HW_RANGE, JH_RANGE, MAX_CATALOGUE_STARS, SceneError, SkyStar, Star};
 use crate::photometry;
+use crate::sky::apparent::Motion;
 use std::path::Path;
 
 /// A catalogue's stars, in the coordinates it gave.
@@ -23,8 +26,9 @@ pub enum Catalogue {
 
 /// The column names a catalogue header may hold (any case): positions (`ra, dec` in degrees or `x, y` in
 /// pixels), the Hw magnitude, the colour (`j_h`, or `j` and `h` for 2MASS magnitudes), the extinction `a_hw`,
-/// and identifiers that are read past (`id`, `name`, `source_id`). Any other column is an error.
-pub const KNOWN_COLUMNS: [&str; 20] = [
+/// identifiers that are read past (`id`, `name`, `source_id`), and a sky star's motion (`pmra`, `pmdec`,
+/// `parallax`). Any other column is an error.
+pub const KNOWN_COLUMNS: [&str; 23] = [
     "ra",
     "ra_deg",
     "dec",
@@ -45,7 +49,25 @@ pub const KNOWN_COLUMNS: [&str; 20] = [
     "id",
     "name",
     "source_id",
+    "pmra",
+    "pmdec",
+    "parallax",
 ];
+
+/// Allowed proper motion per axis, mas/yr (Barnard's star: 10 400).
+pub const PM_RANGE_MAS_PER_YR: (f64, f64) = (-2.0e4, 2.0e4);
+/// Allowed parallax, mas (negative: a catalogue's noisy distant star; Proxima: 768).
+pub const PARALLAX_RANGE_MAS: (f64, f64) = (-100.0, 1000.0);
+
+/// One row's values.
+#[derive(Debug, Clone, Copy)]
+struct Row {
+    p0: f64,
+    p1: f64,
+    hw: f64,
+    jh: f64,
+    motion: Motion,
+}
 
 /// Where each value of a row comes from.
 struct Layout {
@@ -55,6 +77,8 @@ struct Layout {
     jh: Option<usize>,
     j_h_2mass: Option<[usize; 2]>,
     a_hw: Option<usize>,
+    /// pmra, pmdec, parallax.
+    motion: [Option<usize>; 3],
 }
 
 impl Layout {
@@ -122,6 +146,7 @@ impl Layout {
             jh: find(&["j_h", "jh", "j-h", "j_minus_h"]),
             j_h_2mass,
             a_hw: find(&["a_hw"]),
+            motion: [find(&["pmra"]), find(&["pmdec"]), find(&["parallax"])],
         })
     }
 
@@ -134,6 +159,7 @@ impl Layout {
             jh: Some(3),
             j_h_2mass: None,
             a_hw: None,
+            motion: [None; 3],
         }
     }
 }
@@ -151,7 +177,7 @@ fn star_of(
     lay: &Layout,
     lim: &Limits,
     at: &dyn Fn(String) -> SceneError,
-) -> Result<(f64, f64, f64, f64), SceneError> {
+) -> Result<Row, SceneError> {
     let check = |v: Option<f64>, name: &str, (lo, hi): (f64, f64), inf_ok: bool| match v {
         Some(x) if (lo..=hi).contains(&x) || (inf_ok && x == f64::INFINITY) => Ok(x),
         Some(x) => Err(at(format!(
@@ -196,14 +222,34 @@ fn star_of(
     if let Some(a) = lay.a_hw.and_then(get) {
         hw += check(Some(a), "a_hw", (0.0, 30.0), false)?;
     }
-    Ok((p0, p1, hw, jh))
+    let motion = |k: usize, name: &str, range: (f64, f64)| match lay.motion[k].and_then(get) {
+        Some(v) => check(Some(v), name, range, false),
+        None => Ok(0.0),
+    };
+    let pmra = motion(0, "pmra", PM_RANGE_MAS_PER_YR)?;
+    let pmdec = motion(1, "pmdec", PM_RANGE_MAS_PER_YR)?;
+    let parallax = motion(2, "parallax", PARALLAX_RANGE_MAS)?;
+    if !lay.sky && (pmra != 0.0 || pmdec != 0.0 || parallax != 0.0) {
+        return Err(at(
+            "pmra, pmdec, parallax describe a star on the sky: give ra, dec (a catalogue in pixels \
+             places its stars where they are)"
+                .into(),
+        ));
+    }
+    Ok(Row {
+        p0,
+        p1,
+        hw,
+        jh,
+        motion: Motion {
+            pmra_mas_per_yr: pmra,
+            pmdec_mas_per_yr: pmdec,
+            parallax_mas: parallax,
+        },
+    })
 }
 
-fn collect(
-    rows: Vec<(f64, f64, f64, f64)>,
-    sky: bool,
-    path: &str,
-) -> Result<Catalogue, SceneError> {
+fn collect(rows: Vec<Row>, sky: bool, path: &str) -> Result<Catalogue, SceneError> {
     if rows.is_empty() {
         return Err(SceneError::Empty { path: path.into() });
     }
@@ -211,12 +257,13 @@ fn collect(
         Catalogue::Sky(
             rows.into_iter()
                 .enumerate()
-                .map(|(id, (ra, dec, hw, jh))| SkyStar {
+                .map(|(id, r)| SkyStar {
                     id,
-                    ra_deg: ra,
-                    dec_deg: dec,
-                    mag_hw: hw,
-                    j_minus_h: jh,
+                    ra_deg: r.p0,
+                    dec_deg: r.p1,
+                    mag_hw: r.hw,
+                    j_minus_h: r.jh,
+                    motion: r.motion,
                 })
                 .collect(),
         )
@@ -224,12 +271,12 @@ fn collect(
         Catalogue::Pixels(
             rows.into_iter()
                 .enumerate()
-                .map(|(id, (x, y, hw, jh))| Star {
+                .map(|(id, r)| Star {
                     id,
-                    x_px: x,
-                    y_px: y,
-                    mag_hw: hw,
-                    j_minus_h: jh,
+                    x_px: r.p0,
+                    y_px: r.p1,
+                    mag_hw: r.hw,
+                    j_minus_h: r.jh,
                     in_truth: true,
                 })
                 .collect(),

@@ -46,6 +46,8 @@ pub struct SkyStar {
     pub dec_deg: f64,
     pub mag_hw: f64,
     pub j_minus_h: f64,
+    /// Proper motion and parallax at `observation.catalogue_epoch_jyear` (zero: a star that stays put).
+    pub motion: crate::sky::apparent::Motion,
 }
 
 /// The stars each array simulates, and where a sky scene's stars fell.
@@ -212,6 +214,30 @@ mod tests {
                 "{m}"
             );
         }
+        // a sky star's motion: read, range-checked; a pixel catalogue has none
+        let f = dir.join("motion.csv");
+        std::fs::write(
+            &f,
+            "ra,dec,pmra,pmdec,parallax\n266.4,-29.0,-2.5,-5.5,0.125\n",
+        )
+        .expect("write");
+        let Ok(catalogue::Catalogue::Sky(sky)) = catalogue::read(&f, 13.0, 2.0, 1968.0) else {
+            panic!("a sky catalogue")
+        };
+        let m = sky[0].motion;
+        assert_eq!(
+            (m.pmra_mas_per_yr, m.pmdec_mas_per_yr, m.parallax_mas),
+            (-2.5, -5.5, 0.125)
+        );
+        std::fs::write(&f, "ra,dec,pmra\n266.4,-29.0,1e6\n").expect("write");
+        let e = catalogue::read(&f, 13.0, 2.0, 1968.0).expect_err("pm range");
+        assert!(
+            e.to_string().contains("column pmra = 1000000.0: allowed"),
+            "{e}"
+        );
+        std::fs::write(&f, "x,y,parallax\n10,10,1.0\n").expect("write");
+        let e = catalogue::read(&f, 13.0, 2.0, 1968.0).expect_err("pixels");
+        assert!(e.to_string().contains("give ra, dec"), "{e}");
         // Hw = inf is a star without light
         let f = dir.join("dark.csv");
         std::fs::write(&f, "10,10,inf,2\n").expect("write");

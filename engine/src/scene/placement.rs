@@ -6,6 +6,10 @@
 //! photosensitive pixels. Every catalogue row is counted exactly once: duplicate (an exact repeat of an
 //! earlier row: dropped, so its light is not doubled), photosensitive, border (on an array's dead border),
 //! gap (between the arrays of the quad) or off (outside the focal plane, or 90° or more from the axis).
+//!
+//! With `observation.apparent_place` each star is first carried to its apparent place at image 0's
+//! mid-exposure (`sky::apparent`: proper motion, parallax, light deflection, aberration), and the arrays'
+//! WCS points at the apparent axis (`sky::pointing`).
 
 use super::{Scene, SceneError, SkyStar, Star};
 use crate::config::{AceCase, Config, Layout};
@@ -78,7 +82,9 @@ pub fn place(cfg: &Config, stars: &[SkyStar]) -> Result<Scene, SceneError> {
         .collect::<Result<Vec<_>, _>>()
         .map_err(SceneError::Invalid)?;
     let plane = crate::sky::focal_plane(cfg);
-    let projection = crate::sky::focal_plane_projection(cfg).map_err(SceneError::Invalid)?;
+    let pointing = crate::sky::pointing(cfg).map_err(SceneError::Invalid)?;
+    let projection = crate::sky::projection_at(cfg, &pointing).map_err(SceneError::Invalid)?;
+    let place = crate::sky::scene_place(cfg).map_err(SceneError::Invalid)?;
     let n = cfg.instrument.detector_px as f64;
     let border = (cfg.instrument.detector_px - cfg.instrument.photosensitive_px) as f64 / 2.0;
     let margin = margin_px(cfg);
@@ -100,18 +106,21 @@ pub fn place(cfg: &Config, stars: &[SkyStar]) -> Result<Scene, SceneError> {
         })
         .collect();
     counts.duplicates = keep.iter().filter(|k| !**k).count();
-    // each star's pixel position on each array (None: the projection has none)
-    let pixels: Vec<Vec<Option<(f64, f64)>>> = stars
+    // where each star appears, and its pixel position on each array (None: the projection has none)
+    let seen: Vec<(f64, f64)> = stars
         .par_iter()
-        .map(|s| {
-            wcs.iter()
-                .map(|w| w.sky_to_pixel(s.ra_deg, s.dec_deg))
-                .collect()
+        .map(|s| match &place {
+            Some(p) => crate::sky::apparent::direction(s.ra_deg, s.dec_deg, &s.motion, p),
+            None => (s.ra_deg, s.dec_deg),
         })
+        .collect();
+    let pixels: Vec<Vec<Option<(f64, f64)>>> = seen
+        .par_iter()
+        .map(|&(ra, dec)| wcs.iter().map(|w| w.sky_to_pixel(ra, dec)).collect())
         .collect();
     let inside = |v: f64, lo: f64| v >= lo - 0.5 && v < n - lo - 0.5;
     let mut out: Vec<Vec<Star>> = vec![Vec::new(); arrays];
-    for ((s, px), keep) in stars.iter().zip(&pixels).zip(&keep) {
+    for (((s, px), keep), &(ra, dec)) in stars.iter().zip(&pixels).zip(&keep).zip(&seen) {
         if !keep {
             continue;
         }
@@ -143,7 +152,7 @@ pub fn place(cfg: &Config, stars: &[SkyStar]) -> Result<Scene, SceneError> {
                 // a star the distortion moves off an edge counts as in the gap), else off the plane
                 let in_gap = cfg.focal_plane.layout == Layout::Quad
                     && projection
-                        .sky_to_pixel(s.ra_deg, s.dec_deg)
+                        .sky_to_pixel(ra, dec)
                         .is_some_and(|(fx, fy)| !matches!(plane.locate(fx, fy), Placement::Off));
                 if in_gap {
                     counts.gap += 1;

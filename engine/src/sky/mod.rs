@@ -5,8 +5,14 @@
 //! ([`wcs::ArrayWcs`]): a gnomonic (TAN) projection — computed by the CDS `wcs`/`mapproj` crates from the very
 //! header cards the image files carry — with optional SIP distortion polynomials (Shupe et al. 2005) on the
 //! pixel side. Angles are degrees in the configuration and the headers, radians inside.
+//!
+//! When ([`crate::time`]) and from where ([`orbit`]) the exposures are taken set where the stars appear
+//! ([`apparent`]): a sky scene's stars and the pointing are carried to their apparent place at image 0's
+//! mid-exposure ([`scene_place`]), so the images' WCS maps pixels to the directions the spacecraft sees.
 
+pub mod apparent;
 pub mod focal_plane;
+pub mod orbit;
 pub mod wcs;
 
 use crate::config::{Config, Layout};
@@ -54,10 +60,79 @@ pub fn distortion(cfg: &Config) -> Option<Sip> {
     })
 }
 
+/// UTC of the ACE series' t = 0 (`observation.start_utc`).
+pub fn start_epoch(cfg: &Config) -> Result<crate::time::Epoch, String> {
+    crate::time::Epoch::from_utc_iso(&cfg.observation.start_utc)
+        .map_err(|why| format!("observation.start_utc = {why}"))
+}
+
+/// The instant an image starts: the series' t = 0 plus its `TSTART` (`t_start_s`).
+pub fn exposure_epoch(cfg: &Config, t_start_s: f64) -> Result<crate::time::Epoch, String> {
+    Ok(start_epoch(cfg)?.plus_s(t_start_s))
+}
+
+/// The spacecraft's orbit of `cfg` (its phase counted from the series' t = 0).
+pub fn orbit(cfg: &Config) -> Result<orbit::Orbit, String> {
+    let o = &cfg.observation;
+    Ok(orbit::Orbit {
+        altitude_km: o.orbit_altitude_km,
+        ltan_h: o.orbit_ltan_h,
+        phase_deg: o.orbit_phase_deg,
+        phase_epoch: start_epoch(cfg)?,
+    })
+}
+
+/// The instant of a sky scene's apparent place: image 0's mid-exposure (its start plus half the exposure
+/// time). The images of one dataset share the scene: over a few minutes the differential aberration
+/// changes by < 0.01 px.
+pub fn scene_epoch(cfg: &Config) -> Result<crate::time::Epoch, String> {
+    exposure_epoch(
+        cfg,
+        cfg.ace.first_exposure_start_s + cfg.detector.exposure_s / 2.0,
+    )
+}
+
+/// Where a sky scene's catalogue place is carried to ([`apparent::direction`]), or `None` with
+/// `observation.apparent_place` off (the catalogue place as it is).
+pub fn scene_place(cfg: &Config) -> Result<Option<apparent::Place>, String> {
+    if !cfg.observation.apparent_place {
+        return Ok(None);
+    }
+    let t = scene_epoch(cfg)?;
+    Ok(Some(apparent::Place {
+        years: t.julian_year_tdb() - cfg.observation.catalogue_epoch_jyear,
+        observer: orbit(cfg)?.observer(&t),
+        apparent: true,
+    }))
+}
+
+/// Where the optical axis points in the images: the apparent direction of the configured axis (no motion
+/// of its own) with `observation.apparent_place`, else the configured axis.
+pub fn pointing(cfg: &Config) -> Result<Pointing, String> {
+    let configured = Pointing::from(&cfg.sky);
+    Ok(match scene_place(cfg)? {
+        Some(place) => {
+            let (ra_deg, dec_deg) = apparent::direction(
+                configured.ra_deg,
+                configured.dec_deg,
+                &apparent::Motion::default(),
+                &place,
+            );
+            Pointing {
+                ra_deg,
+                dec_deg,
+                pa_deg: configured.pa_deg,
+            }
+        }
+        None => configured,
+    })
+}
+
 /// The WCS of array k of `cfg`: the single array with the optical axis at its centre, or array k of the
-/// 2 × 2 focal plane; the configured distortion turned into the array's axes.
+/// 2 × 2 focal plane; the configured distortion turned into the array's axes; the axis at
+/// [`pointing`].
 pub fn array_wcs(cfg: &Config, k: usize) -> Result<ArrayWcs, String> {
-    let pointing = Pointing::from(&cfg.sky);
+    let pointing = pointing(cfg)?;
     let scale = cfg.instrument.plate_scale_mas();
     let sip = distortion(cfg).map(|s| s.rotated(array_rotation_deg(cfg, k)));
     match cfg.focal_plane.layout {
@@ -75,10 +150,16 @@ pub fn single_array_wcs(cfg: &Config) -> Result<ArrayWcs, String> {
     array_wcs(cfg, 0)
 }
 
-/// The undistorted gnomonic projection with focal-plane pixels (from the optical axis) as its pixels.
+/// The undistorted gnomonic projection with focal-plane pixels (from the optical axis) as its pixels, at
+/// the configured (catalogue) pointing: where a mock field is drawn.
 pub fn focal_plane_projection(cfg: &Config) -> Result<ArrayWcs, String> {
+    projection_at(cfg, &Pointing::from(&cfg.sky))
+}
+
+/// The undistorted gnomonic projection with focal-plane pixels at `pointing`.
+pub fn projection_at(cfg: &Config, pointing: &Pointing) -> Result<ArrayWcs, String> {
     ArrayWcs::new(
-        &Pointing::from(&cfg.sky),
+        pointing,
         0.0,
         cfg.instrument.plate_scale_mas(),
         [0.0, 0.0],
