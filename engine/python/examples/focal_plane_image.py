@@ -48,7 +48,9 @@ def main(path, out, binning=4):
         x0, y0 = min(x0, to_mosaic(k, n - 1, n - 1)[0]), min(y0, to_mosaic(k, n - 1, n - 1)[1])
         mosaic[int(round(y0)) : int(round(y0)) + n, int(round(x0)) : int(round(x0)) + n] = turned
 
-    # the check: mosaic positions of bright stars against a TAN projection of the whole focal plane
+    # the check: mosaic positions of bright stars against a TAN projection of the whole focal plane (the
+    # mosaic draws each array at its nominal place: its assembly offset, ≤ 11 px with the defaults, its small
+    # turn, ≤ 2 px at its edge, and the distortion, ≤ 3 px at the corner, are not drawn)
     plane = WCS(naxis=2)
     plane.wcs.ctype = ["RA---TAN", "DEC--TAN"]
     plane.wcs.crval = [p.get("RA_AXIS", p["RA_PNT"]), p.get("DEC_AXIS", p["DEC_PNT"])]  # the apparent axis
@@ -63,7 +65,7 @@ def main(path, out, binning=4):
         star = mine[np.argmin(mine["mag_hw"])]
         mx, my = to_mosaic(k, star["x"], star["y"])
         px, py = plane.all_world2pix([[star["ra_deg"], star["dec_deg"]]], 0)[0]
-        assert np.hypot(mx - px, my - py) < 1.0, (k, mx, my, px, py)
+        assert np.hypot(mx - px, my - py) < 16.0, (k, mx, my, px, py)
 
     usable = side // binning * binning
     blocks = mosaic[:usable, :usable].reshape(usable // binning, binning, usable // binning, binning)

@@ -156,17 +156,39 @@ def test_the_catalogue_place_is_kept_with_the_apparent_place_off(jsim_bin, tmp_p
             assert np.hypot(pix[:, 0] - mine["x"], pix[:, 1] - mine["y"]).max() < 1e-3
 
 
+NOMINAL = ["focal_plane.array_offsets_px=[[0.0,0.0],[0.0,0.0],[0.0,0.0],[0.0,0.0]]",
+           "focal_plane.array_rotation_errors_deg=[0.0,0.0,0.0,0.0]"]
+
+
 def test_the_arrays_sit_in_their_places_on_the_sky(jsim_bin, tmp_path):
-    # array 1 lower left, 2 lower right, 3 upper left, 4 upper right on a north-up, east-left sky (PA 0)
-    path = simulate(jsim_bin, tmp_path / "layout", "bulge", "scene.bulge.density_per_arcmin2=0")
-    with fits.open(path) as h:
-        c = (N - 1) / 2
-        centre = {k: array_wcs(h, k).all_pix2world([[c, c]], 0)[0] for k in range(1, 5)}
-        rotation = {k: h[f"ARRAY{k}"].header["ROTATION"] for k in range(1, 5)}
-    assert rotation == {1: 0.0, 2: 90.0, 3: 180.0, 4: 270.0}
+    # array 1 lower left, 2 lower right, 3 upper left, 4 upper right on a north-up, east-left sky (PA 0);
+    # as designed, then as assembled: each array displaced by its offset and turned by its small rotation
     east = lambda a, b: (a[0] - b[0]) * np.cos(np.radians(b[1])) * 3.6e6 / 472.1  # noqa: E731
     north = lambda a, b: (a[1] - b[1]) * 3.6e6 / 472.1  # noqa: E731
-    step = N + GAP  # pixels between neighbouring array centres (the distortion moves them < 1 px)
-    assert abs(east(centre[2], centre[1]) + step) < 2.0 and abs(north(centre[2], centre[1])) < 2.0
-    assert abs(north(centre[3], centre[1]) - step) < 2.0 and abs(east(centre[3], centre[1])) < 2.0
-    assert abs(east(centre[4], centre[3]) + step) < 2.0
+    c = (N - 1) / 2
+    centres = {}
+    for name, extra in [("nominal", NOMINAL), ("assembled", [])]:
+        path = simulate(jsim_bin, tmp_path / name, "bulge", "scene.bulge.density_per_arcmin2=0", *extra)
+        with fits.open(path) as h:
+            ws = {k: array_wcs(h, k) for k in range(1, 5)}
+            centres[name] = {k: ws[k].all_pix2world([[c, c]], 0)[0] for k in range(1, 5)}
+            rotation = {k: h[f"ARRAY{k}"].header["ROTATION"] for k in range(1, 5)}
+            # each array's +y on the sky: the position angle of its CD matrix's second column
+            pa = {k: np.degrees(np.arctan2(ws[k].wcs.cd[0, 1], ws[k].wcs.cd[1, 1])) % 360 for k in ws}
+        assert rotation == {1: 0.0, 2: 90.0, 3: 180.0, 4: 270.0}
+        if name == "nominal":
+            centre = centres[name]
+            step = N + GAP  # pixels between neighbouring array centres (the distortion moves them < 1 px)
+            assert abs(east(centre[2], centre[1]) + step) < 2.0 and abs(north(centre[2], centre[1])) < 2.0
+            assert abs(north(centre[3], centre[1]) - step) < 2.0 and abs(east(centre[3], centre[1])) < 2.0
+            assert abs(east(centre[4], centre[3]) + step) < 2.0
+            nominal_pa = pa
+    # as assembled: array k's centre moved by its configured offset (focal-plane +x is west at PA 0, so east
+    # is −x), its position angle by its rotation error (the distortion moves the centres < 0.1 px more)
+    offsets = [[4.2, -7.9], [-6.3, 2.1], [9.4, 5.6], [-1.8, -10.7]]
+    errors = [0.06, -0.11, 0.03, -0.08]
+    for k in range(1, 5):
+        a, b = centres["assembled"][k], centres["nominal"][k]
+        assert abs(-east(a, b) - offsets[k - 1][0]) < 0.2 and abs(north(a, b) - offsets[k - 1][1]) < 0.2, k
+        turn = (pa[k] - nominal_pa[k] + 180) % 360 - 180
+        assert abs(turn - errors[k - 1]) < 1e-6, (k, turn)

@@ -93,12 +93,26 @@ pub struct FocalPlaneLayout {
     /// Each array's rotation on the sky (0, 90, 180 or 270°; array 0 lower left, 1 lower right, 2 upper
     /// left, 3 upper right): its rows, channels and rolling readout run along a different direction.
     pub rotations_deg: [f64; 4],
-    /// Forward SIP distortion (Shupe et al. 2005) in focal-plane pixel axes: the true position of a star
-    /// is (u + A(u, v), v + B(u, v)) through the linear WCS. Empty: no distortion (the default);
-    /// `engine/configs/focal_plane_sip.toml` is a documented example. Orders 2 … 9.
+    /// Forward SIP distortion (Shupe et al. 2005) in focal-plane pixel axes from the optical axis: the true
+    /// position of a star is (u + A(u, v), v + B(u, v)) through the linear WCS. Orders 2 … 9; empty: none.
+    /// The default is a third-order radial distortion, `A = k(u³ + u v²)`, `B = k(u² v + v³)`, with
+    /// k = 1.1 × 10⁻¹⁰ px⁻²: 3 px (1.4″, 0.1 % of the radius) at the focal plane's corner (r ≈ 3000 px), 0.3 px
+    /// at the single array's. The leading term of a rotationally symmetric telescope's distortion at an
+    /// amplitude typical of a three-mirror anastigmat; JASMINE's own design figure was not found — a choice,
+    /// to be replaced by the optical design's coefficients.
     pub sip_a: Vec<SipTerm>,
     pub sip_b: Vec<SipTerm>,
+    /// Each array's displacement from its nominal place as assembled, focal-plane pixels (quad only;
+    /// within ±gap_px/2). The default is one fixed draw of σ = 10 px per axis (100 µm: the prior of the
+    /// mission's plate model for a detector offset, JASMINE-Mission/jasmine_warpfield) — a choice.
+    pub array_offsets_px: [[f64; 2]; 4],
+    /// Each array's further turn as assembled, degrees (quad only; within ±1°). The default is one fixed
+    /// draw of σ = 0.1° (the same plate model's prior) — a choice.
+    pub array_rotation_errors_deg: [f64; 4],
 }
+
+/// The default distortion's coefficient k, px⁻² (see [`FocalPlaneLayout::sip_a`]).
+pub const DEFAULT_RADIAL_DISTORTION_PER_PX2: f64 = 1.1e-10;
 
 impl Default for FocalPlaneLayout {
     fn default() -> Self {
@@ -106,8 +120,32 @@ impl Default for FocalPlaneLayout {
             layout: Layout::Single,
             gap_px: 300.0,
             rotations_deg: [0.0, 90.0, 180.0, 270.0],
-            sip_a: Vec::new(),
-            sip_b: Vec::new(),
+            sip_a: vec![
+                SipTerm {
+                    p: 3,
+                    q: 0,
+                    value: DEFAULT_RADIAL_DISTORTION_PER_PX2,
+                },
+                SipTerm {
+                    p: 1,
+                    q: 2,
+                    value: DEFAULT_RADIAL_DISTORTION_PER_PX2,
+                },
+            ],
+            sip_b: vec![
+                SipTerm {
+                    p: 2,
+                    q: 1,
+                    value: DEFAULT_RADIAL_DISTORTION_PER_PX2,
+                },
+                SipTerm {
+                    p: 0,
+                    q: 3,
+                    value: DEFAULT_RADIAL_DISTORTION_PER_PX2,
+                },
+            ],
+            array_offsets_px: [[4.2, -7.9], [-6.3, 2.1], [9.4, 5.6], [-1.8, -10.7]],
+            array_rotation_errors_deg: [0.06, -0.11, 0.03, -0.08],
         }
     }
 }

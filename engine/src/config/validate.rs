@@ -369,6 +369,30 @@ impl Config {
                 ));
             }
         }
+        for (k, o) in fp.array_offsets_px.iter().enumerate() {
+            if !o
+                .iter()
+                .all(|v| v.is_finite() && v.abs() <= fp.gap_px / 2.0)
+            {
+                return Err(invalid(
+                    &format!("focal_plane.array_offsets_px[{k}]"),
+                    format!("{o:?}"),
+                    &format!(
+                        "each must be within ±gap_px/2 = ±{} px (arrays may not overlap)",
+                        fp.gap_px / 2.0
+                    ),
+                ));
+            }
+        }
+        for (k, e) in fp.array_rotation_errors_deg.iter().enumerate() {
+            if !(e.is_finite() && e.abs() <= 1.0) {
+                return Err(invalid(
+                    &format!("focal_plane.array_rotation_errors_deg[{k}]"),
+                    e,
+                    "must be within ±1 degree",
+                ));
+            }
+        }
         for (name, terms) in [
             ("focal_plane.sip_a", &fp.sip_a),
             ("focal_plane.sip_b", &fp.sip_b),

@@ -7,6 +7,11 @@
 //! counter-clockwise in the focal-plane frame): a point at offset d from the array's centre is at array pixel
 //! R(−r_k)·d + (N − 1)/2 — so its rows, channels and rolling readout run along a different direction on the
 //! sky on each array — and its WCS has position angle PA + r_k ([`FocalPlane::array_wcs`]).
+//!
+//! As assembled, each array also sits `offsets_px[k]` from its nominal centre and is turned a further
+//! `rotation_errors_deg[k]` (a small angle): where stars land and the WCS follow the array as built; the
+//! jitter and the PSF are turned into the array by its nominal quarter turn (a ≤ 0.1° error turns them by
+//! ≤ 0.2 % of their size), and a display turns the image by that quarter turn too.
 
 use super::Pointing;
 use super::wcs::{ArrayWcs, Sip};
@@ -35,6 +40,10 @@ pub struct FocalPlane {
     pub gap_px: f64,
     /// Each array's rotation, degrees: 0, 90, 180 or 270.
     pub rotations_deg: [f64; 4],
+    /// Each array's displacement from its nominal centre as assembled, focal-plane pixels.
+    pub offsets_px: [[f64; 2]; 4],
+    /// Each array's further turn as assembled, degrees (small).
+    pub rotation_errors_deg: [f64; 4],
 }
 
 /// Quadrant signs of array k: (−,−), (+,−), (−,+), (+,+).
@@ -59,13 +68,45 @@ impl FocalPlane {
                 ));
             }
         }
+        let limit = self.gap_px / 2.0;
+        for (k, o) in self.offsets_px.iter().enumerate() {
+            if !o.iter().all(|v| v.is_finite() && v.abs() <= limit.max(0.0)) {
+                return Err(format!(
+                    "array_offsets_px[{k}] = {o:?}: each must be within ±gap_px/2 ({limit} px): arrays may not overlap"
+                ));
+            }
+        }
+        for (k, e) in self.rotation_errors_deg.iter().enumerate() {
+            if !(e.is_finite() && e.abs() <= 1.0) {
+                return Err(format!(
+                    "array_rotation_errors_deg[{k}] = {e}: must be within ±1°"
+                ));
+            }
+        }
         Ok(())
     }
 
-    /// The centre of array k in focal-plane pixels.
+    /// The centre of array k in focal-plane pixels, as assembled.
     pub fn centre(&self, k: usize) -> (f64, f64) {
         let c = (self.array_px as f64 + self.gap_px) / 2.0;
-        (SIGNS[k].0 * c, SIGNS[k].1 * c)
+        (
+            SIGNS[k].0 * c + self.offsets_px[k][0],
+            SIGNS[k].1 * c + self.offsets_px[k][1],
+        )
+    }
+
+    /// Array k's turn as assembled: its quarter turn plus its rotation error, degrees.
+    pub fn rotation_deg(&self, k: usize) -> f64 {
+        self.rotations_deg[k] + self.rotation_errors_deg[k]
+    }
+
+    /// The same focal plane as designed: no offsets, no rotation errors.
+    pub fn nominal(&self) -> FocalPlane {
+        FocalPlane {
+            offsets_px: [[0.0; 2]; 4],
+            rotation_errors_deg: [0.0; 4],
+            ..self.clone()
+        }
     }
 
     fn half(&self) -> f64 {
@@ -76,7 +117,7 @@ impl FocalPlane {
     pub fn to_array(&self, k: usize, fx: f64, fy: f64) -> (f64, f64) {
         let (cx, cy) = self.centre(k);
         let (dx, dy) = (fx - cx, fy - cy);
-        let (s, c) = (-self.rotations_deg[k]).to_radians().sin_cos();
+        let (s, c) = (-self.rotation_deg(k)).to_radians().sin_cos();
         (c * dx - s * dy + self.half(), s * dx + c * dy + self.half())
     }
 
@@ -84,14 +125,18 @@ impl FocalPlane {
     pub fn to_focal_plane(&self, k: usize, x: f64, y: f64) -> (f64, f64) {
         let (cx, cy) = self.centre(k);
         let (dx, dy) = (x - self.half(), y - self.half());
-        let (s, c) = self.rotations_deg[k].to_radians().sin_cos();
+        let (s, c) = self.rotation_deg(k).to_radians().sin_cos();
         (cx + c * dx - s * dy, cy + s * dx + c * dy)
     }
 
     /// Array k's image (row-major, `array_px` square) turned into focal-plane axes: element `v·N + u` is the
     /// array pixel at focal-plane position `(c_x − h + u, c_y − h + v)` (c the array's centre, h = (N − 1)/2),
-    /// an exact permutation for turns of 90°. What a display of the focal plane draws.
+    /// an exact permutation for turns of 90°. What a display of the focal plane draws: the nominal layout
+    /// (an assembly's offsets and small turns are not drawn).
     pub fn in_focal_plane_axes<T: Copy>(&self, k: usize, image: &[T]) -> Vec<T> {
+        if self.offsets_px != [[0.0; 2]; 4] || self.rotation_errors_deg != [0.0; 4] {
+            return self.nominal().in_focal_plane_axes(k, image);
+        }
         let n = self.array_px;
         let (cx, cy) = self.centre(k);
         let h = self.half();
@@ -141,7 +186,7 @@ impl FocalPlane {
         let (ax, ay) = self.to_array(k, 0.0, 0.0);
         ArrayWcs::new(
             pointing,
-            self.rotations_deg[k],
+            self.rotation_deg(k),
             scale_mas,
             [ax, ay],
             [self.array_px, self.array_px],
@@ -161,6 +206,8 @@ mod tests {
             photosensitive_px: 6,
             gap_px: 2.0,
             rotations_deg: [0.0, 90.0, 180.0, 270.0],
+            offsets_px: [[0.0; 2]; 4],
+            rotation_errors_deg: [0.0; 4],
         };
         let image: Vec<usize> = (0..36).collect();
         for k in 0..4 {
@@ -186,6 +233,8 @@ mod tests {
             photosensitive_px: 1952,
             gap_px: 300.0,
             rotations_deg: [0.0, 90.0, 180.0, 270.0],
+            offsets_px: [[0.0; 2]; 4],
+            rotation_errors_deg: [0.0; 4],
         }
     }
 

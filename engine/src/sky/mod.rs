@@ -34,6 +34,8 @@ pub fn focal_plane(cfg: &Config) -> FocalPlane {
         photosensitive_px: cfg.instrument.photosensitive_px,
         gap_px: cfg.focal_plane.gap_px,
         rotations_deg: cfg.focal_plane.rotations_deg,
+        offsets_px: cfg.focal_plane.array_offsets_px,
+        rotation_errors_deg: cfg.focal_plane.array_rotation_errors_deg,
     }
 }
 
