@@ -27,6 +27,8 @@ pub enum Stream {
     Array = 12,
     /// The mock bulge's distances and proper motions (apart from its positions and magnitudes).
     BulgeMotion = 13,
+    /// A sequence's per-stare pointing and roll errors.
+    Sequence = 14,
     Test = 99,
 }
 

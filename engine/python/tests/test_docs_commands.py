@@ -11,6 +11,7 @@ reductions below, which make the whole page set run in a few minutes:
   optics and 2 images (`REDUCED`; a command's own `--images` is capped at 2), except for the keys the command sets
   itself;
 * `jsim bench` gets `--quick` and small star counts (its own star-count options are replaced);
+* `jsim sequence` runs at most 2 exposures (`--exposures`);
 * the sweep files are copied with the same reduced `[base]` and 4 exposures in stares of 2;
 * `crowded_image.py` writes a 256-px array of 1500 stars instead of 1968 px and 10⁵ stars,
   `photutils_catalogue.py` cuts 128 px instead of 512, and `simulate_reference.py` runs the reduced configuration
@@ -51,14 +52,14 @@ REDUCED = {
 }
 # the command-line shortcut that sets each reduced key (the command's own value is kept)
 SHORTCUT = {"fidelity.images": "--images", "fidelity.backend": "--backend"}
-TAKES_SET = {"psf", "ace", "simulate", "experiment", "crowded", "bench", "predict"}
+TAKES_SET = {"psf", "ace", "simulate", "experiment", "crowded", "bench", "predict", "sequence"}
 BENCH = {"--quick": None, "--stars": "50,100", "--bulge-stars": "50,100", "--ref-stars": "5",
          "--epsf-images": "1"}
 # a placeholder word (`DIR`, `F.fits`, `fidelity.images=K`, `$VAR`, `…`), or an option in a list (`--a, --b`)
 PLACEHOLDER = re.compile(r"(…|<|\$|^[A-Z]{1,4}(\.[a-z]+)?$|=[A-Z]{1,4}$|^(DIR|PATH)$|NNN|^/$|^--[a-z-]+,$)")
 # producers before consumers; within a rank, the pages' order
 RANK = {"config": 0, "psf": 1, "ace": 1, "predict": 1, "simulate": 2, "crowded_image.py": 3, "crowded": 3,
-        "experiment": 4, "bench": 4, "analyze": 5, "photutils_catalogue.py": 6, "focal_plane_image.py": 6,
+        "experiment": 4, "bench": 4, "sequence": 4, "analyze": 5, "photutils_catalogue.py": 6, "focal_plane_image.py": 6,
         "crowded_photutils.py": 6, "simulate_reference.py": 6, "score": 7, "sweep": 8, "merge": 9, "report": 10}
 
 
@@ -125,6 +126,13 @@ def reduce(words, jsim_bin="jsim"):
                     words[words.index(opt) + 1] = value
             else:
                 words += [opt] if value is None else [opt, value]
+    if name == "sequence" and "--plan-only" not in words:
+        # a sequence runs at most 2 of its exposures (each shard its share of them)
+        if "--exposures" in words:
+            k = words.index("--exposures") + 1
+            words[k] = str(min(int(words[k]), 2))
+        else:
+            words += ["--exposures", "2"]
     if name in TAKES_SET:
         # a command's own image count is reduced too (the reduced ACE series covers the reduced count)
         if "--images" in words:

@@ -69,10 +69,22 @@ fn draw_motion(b: &Bulge, ra_deg: f64, dec_deg: f64, r: &mut impl rand::Rng) -> 
     }
 }
 
-/// Draw the field's stars (ids in drawing order).
+/// Draw the field's stars (ids in drawing order) over the focal plane ([`half_side_px`]).
 pub fn draw(cfg: &Config) -> Result<Vec<SkyStar>, SceneError> {
+    draw_square(cfg, half_side_px(cfg))
+}
+
+/// Draw the field's stars over a square of ±`h` focal-plane pixels around the configured pointing (its
+/// sides along the focal plane's axes at `sky.pa_deg`): a sequence's whole region.
+pub fn draw_square(cfg: &Config, h: f64) -> Result<Vec<SkyStar>, SceneError> {
     let b = &cfg.scene.bulge;
-    let count = star_count(cfg).round();
+    if !(h.is_finite() && h > 0.0) {
+        return Err(SceneError::Invalid(format!(
+            "the bulge field's half side {h} px: must be > 0"
+        )));
+    }
+    let side_arcmin = 2.0 * h * cfg.instrument.plate_scale_mas() / 6.0e4;
+    let count = (b.density_per_arcmin2 * side_arcmin * side_arcmin).round();
     if count > MAX_CATALOGUE_STARS as f64 {
         return Err(SceneError::Invalid(format!(
             "scene.bulge.density_per_arcmin2 = {} gives {count:.0} stars over the focal plane: at most {} \
@@ -81,7 +93,6 @@ pub fn draw(cfg: &Config) -> Result<Vec<SkyStar>, SceneError> {
         )));
     }
     let n = count as usize;
-    let h = half_side_px(cfg);
     let projection = crate::sky::focal_plane_projection(cfg).map_err(SceneError::Invalid)?;
     let mut r = rng::stream(cfg.seed, Stream::Bulge, 0);
     let mut kinematics = rng::stream(cfg.seed, Stream::BulgeMotion, 0);

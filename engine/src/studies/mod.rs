@@ -8,4 +8,5 @@ pub mod crowded;
 pub mod experiment;
 pub mod predict;
 pub mod predict_shape;
+pub mod sequence;
 pub mod sweep;

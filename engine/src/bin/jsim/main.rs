@@ -14,6 +14,7 @@ mod cmd;
 mod crowded_cmd;
 mod options;
 mod outputs;
+mod sequence_cmd;
 mod sweep_cmd;
 
 pub use options::{
@@ -143,6 +144,9 @@ enum Command {
     },
     /// Accuracy against magnitude from one crowded exposure of the focal plane (default: the mock bulge).
     Crowded(crowded_cmd::CrowdedArgs),
+    /// A step-stare observation sequence: its plan and coverage map, and each exposure simulated and analysed
+    /// (resumable, shardable), the catalogues gathered into one FITS table.
+    Sequence(sequence_cmd::SequenceArgs),
     /// Monte Carlo sweep over a parameter grid (resumable, shardable; --emit-slurm for a cluster).
     Sweep(sweep_cmd::SweepArgs),
     /// Merge the shards of a sweep.
@@ -377,6 +381,7 @@ fn run(cli: Cli) -> Result<()> {
         }
         Command::Score(a) => cmd::score(&a),
         Command::Crowded(a) => crowded_cmd::crowded(&a),
+        Command::Sequence(a) => sequence_cmd::sequence(&a),
         Command::Sweep(a) => sweep_cmd::sweep(&a),
         Command::Merge(a) => sweep_cmd::merge(&a),
         Command::Report(a) => sweep_cmd::report(&a),

@@ -9,16 +9,19 @@
 //!
 //! Shared here: the font, the atomic PNG output, colours, the axis (linear or log, with its ticks),
 //! markers, legends and the mesh. One file per kind of figure: `line` ([`line_plot`], [`scatter`]),
-//! `vectors` ([`vector_map`]), `histogram` ([`histogram_cdf`]) and `image` ([`image_png`]).
+//! `vectors` ([`vector_map`]), `histogram` ([`histogram_cdf`]), `image` ([`image_png`]) and `map`
+//! ([`count_map`]).
 
 mod histogram;
 mod image;
 mod line;
+mod map;
 mod vectors;
 
 pub use histogram::histogram_cdf;
 pub use image::image_png;
 pub use line::{line_plot, scatter};
+pub use map::{CountGrid, count_map};
 pub use vectors::{vector_map, vector_map_on_axes};
 
 use super::IoError;

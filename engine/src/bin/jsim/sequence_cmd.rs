@@ -1,0 +1,229 @@
+//! `jsim sequence`: a step-stare observation sequence — its plan (stares, exposures, times), the coverage
+//! it gives, and (unless `--plan-only`) each exposure simulated and analysed, resumable and shardable,
+//! the catalogues gathered into one table. Engine side: [`engine::studies::sequence`].
+
+use crate::TelemetryArgs;
+use crate::options::CrowdedConfigArgs;
+use anyhow::{Result, bail};
+use clap::Args;
+use engine::io::csv::Cell;
+use engine::studies::sequence::{self, run};
+use engine::studies::sweep::Shard;
+use std::path::PathBuf;
+use std::time::Instant;
+
+#[derive(Args, Clone, Debug)]
+pub struct SequenceArgs {
+    #[command(flatten)]
+    pub cfg: CrowdedConfigArgs,
+    /// The sequence file (`[sequence]`: region, stares, exposures per stare, visits, pointing errors);
+    /// default: the built-in sequence (3 × 2 stares at the Galactic centre, 26 exposures each, spring and
+    /// autumn: 312 exposures).
+    #[arg(long)]
+    pub spec: Option<PathBuf>,
+    /// Plan only: the plan, the coverage map and its numbers; nothing simulated.
+    #[arg(long)]
+    pub plan_only: bool,
+    /// Run only the first N exposures of the plan (the rest stay planned).
+    #[arg(long)]
+    pub exposures: Option<usize>,
+    /// Run only shard I of N (0-based): the exposures e with e mod N = I (a Slurm array task each).
+    #[arg(long)]
+    pub shard: Option<String>,
+    /// The countermeasure of every exposure's analysis.
+    #[arg(long, default_value = "telemetry")]
+    pub countermeasure: String,
+    #[command(flatten)]
+    pub tel: TelemetryArgs,
+    /// Coverage map cell, degrees.
+    #[arg(long, default_value_t = 0.01)]
+    pub cell_deg: f64,
+    /// Output directory: plan.csv, coverage.csv, coverage.png, sequence.json, field.csv, exposures/, and
+    /// catalogue.fits once every exposure asked for has run. A rerun resumes: exposures already written are
+    /// kept.
+    #[arg(long, default_value = "out/sequence")]
+    pub out: PathBuf,
+}
+
+pub fn sequence(a: &SequenceArgs) -> Result<()> {
+    let cfg = a.cfg.load()?;
+    let spec = match &a.spec {
+        Some(p) => sequence::Spec::load(p).map_err(anyhow::Error::msg)?,
+        None => sequence::Spec::default(),
+    };
+    let plan = sequence::plan(&spec, &cfg).map_err(anyhow::Error::msg)?;
+    let n_run = a.exposures.unwrap_or(plan.exposures.len());
+    if n_run == 0 || n_run > plan.exposures.len() {
+        bail!(
+            "--exposures {n_run}: allowed 1 … {} (the plan's exposures)",
+            plan.exposures.len()
+        );
+    }
+    let shard = match &a.shard {
+        Some(s) => Shard::parse(s)?,
+        None => Shard::ALL,
+    };
+    let cm = a.tel.plan(&[a.countermeasure.as_str()])?;
+    engine::studies::crowded::check_plan(&cm)?;
+    let t = Instant::now();
+    let coverage = sequence::coverage(&plan, &cfg, a.cell_deg).map_err(anyhow::Error::msg)?;
+    let coverage_s = t.elapsed().as_secs_f64();
+    // the plan's files: made again identically on a rerun (same spec, same seed)
+    let mut outputs = crate::outputs::Outputs::in_dir(&a.out)?;
+    let plan_rows: Vec<Vec<Cell>> = plan
+        .exposures
+        .iter()
+        .map(|e| {
+            let s = &plan.stares[e.stare];
+            vec![
+                Cell::I(e.index as i64),
+                Cell::I(e.stare as i64),
+                Cell::I(s.visit as i64),
+                Cell::F(s.l_deg),
+                Cell::F(s.b_deg),
+                Cell::F(s.ra_deg),
+                Cell::F(s.dec_deg),
+                Cell::F(s.pa_deg),
+                Cell::S(e.start.utc_iso()),
+                Cell::F(e.start.tdb_mjd()),
+                Cell::I(e.seed as i64),
+            ]
+        })
+        .collect();
+    engine::io::csv::write(
+        &outputs.path("plan.csv"),
+        &[
+            "exposure", "stare", "visit", "l_deg", "b_deg", "ra_deg", "dec_deg", "pa_deg",
+            "date_obs", "mjd_tdb", "seed",
+        ],
+        &plan_rows,
+    )?;
+    let cov_rows: Vec<Vec<Cell>> = (0..coverage.rows)
+        .flat_map(|j| (0..coverage.columns).map(move |i| (i, j)))
+        .map(|(i, j)| {
+            let (l, b) = coverage.centre(i, j);
+            vec![
+                Cell::F(l),
+                Cell::F(b),
+                Cell::I(i64::from(coverage.counts[j * coverage.columns + i])),
+            ]
+        })
+        .collect();
+    engine::io::csv::write(
+        &outputs.path("coverage.csv"),
+        &["l_deg", "b_deg", "exposures"],
+        &cov_rows,
+    )?;
+    let max = coverage.counts.iter().copied().max().unwrap_or(0);
+    engine::io::plot::count_map(
+        &outputs.path("coverage.png"),
+        &format!(
+            "{} exposures: {} stares × {} per stare × {} visits",
+            plan.exposures.len(),
+            plan.stares.len() / spec.visits_utc.len(),
+            spec.exposures_per_stare,
+            spec.visits_utc.len()
+        ),
+        "Galactic longitude l [deg]",
+        "Galactic latitude b [deg]",
+        engine::io::plot::CountGrid {
+            counts: &coverage.counts,
+            columns: coverage.columns,
+            rows: coverage.rows,
+            x0: coverage.l0_deg,
+            y0: coverage.b0_deg,
+            cell: coverage.cell_deg,
+            x_reversed: true,
+        },
+    )?;
+    let covered: Vec<u32> = coverage.counts.iter().copied().filter(|c| *c > 0).collect();
+    let mut sorted = covered.clone();
+    sorted.sort_unstable();
+    let median = sorted.get(sorted.len() / 2).copied().unwrap_or(0);
+    let area = covered.len() as f64 * a.cell_deg * a.cell_deg;
+    eprintln!(
+        "sequence: {} exposures in {} stares over {:.3} deg²; a covered cell gets {median} exposures \
+         (median), at most {max}; coverage in {coverage_s:.1} s",
+        plan.exposures.len(),
+        plan.stares.len(),
+        area
+    );
+    let summary = serde_json::json!({
+        "spec": spec,
+        "exposures": plan.exposures.len(),
+        "stares": plan.stares.len(),
+        "field_deg": plan.field_deg,
+        "covered_deg2": area,
+        "median_exposures_per_covered_cell": median,
+        "max_exposures_per_cell": max,
+        "coverage_cell_deg": a.cell_deg,
+    });
+    engine::io::write_atomic(
+        &outputs.path("sequence.json"),
+        serde_json::to_string_pretty(&summary)?.as_bytes(),
+    )?;
+    if a.plan_only {
+        outputs.keep();
+        return Ok(());
+    }
+    // the field: drawn once (the same seed draws it again identically on a rerun)
+    let field = a.out.join(run::FIELD_NAME);
+    if !field.exists() {
+        outputs.add(&field);
+        run::write_field(&plan, &cfg, &a.out)?;
+    }
+    // from here on, what is written is kept: each exposure whole, so a rerun resumes
+    outputs.keep();
+    let session = engine::session::Session::new();
+    let mine: Vec<_> = plan.exposures[..n_run]
+        .iter()
+        .filter(|e| shard.contains(e.index))
+        .collect();
+    let (mut sim_s, mut an_s, mut done) = (0.0, 0.0, 0usize);
+    for (k, e) in mine.iter().enumerate() {
+        crate::outputs::interrupted()?;
+        let r = run::run_exposure(&session, &plan, &cfg, &field, e, &cm, &a.out)?;
+        if r.skipped {
+            eprintln!(
+                "exposure {} ({}/{}): already written",
+                e.index,
+                k + 1,
+                mine.len()
+            );
+        } else {
+            done += 1;
+            sim_s += r.simulate_s;
+            an_s += r.analyse_s;
+            eprintln!(
+                "exposure {} ({}/{}): {} stars; simulated in {:.1} s, analysed in {:.1} s",
+                e.index,
+                k + 1,
+                mine.len(),
+                r.stars,
+                r.simulate_s,
+                r.analyse_s
+            );
+        }
+    }
+    if done > 0 {
+        eprintln!(
+            "ran {done} exposures: {:.1} s simulating and {:.1} s analysing per exposure",
+            sim_s / done as f64,
+            an_s / done as f64
+        );
+    }
+    let all_there = plan.exposures[..n_run]
+        .iter()
+        .all(|e| run::exposure_path(&a.out, e.index).exists());
+    if all_there {
+        let mut sub = plan.clone();
+        sub.exposures.truncate(n_run);
+        let path = run::merge(&sub, &a.out)?;
+        eprintln!("wrote {}", path.display());
+    } else {
+        eprintln!(
+            "not every exposure has run yet: rerun (or the other shards) to gather catalogue.fits"
+        );
+    }
+    Ok(())
+}

@@ -1,0 +1,303 @@
+//! The exposures a sequence takes: stare centres on a grid in Galactic (l, b) a step apart, visited in a
+//! boustrophedon (each row of stares walked the other way from the last; each visit's pattern shifted by
+//! `visit_dither_px` in l and b), M exposures per stare at the
+//! readout's cadence, a manoeuvre between stares; every stare pointed with its own error (a seeded draw)
+//! and the focal plane's +y to Galactic north.
+//!
+//! Each exposure becomes a configuration of its own ([`exposure_config`]): the quad focal plane at the
+//! stare's pointing, its UTC start (`observation.start_utc`, the orbit's phase carried on), and its own seed
+//! for the jitter and the noise (derived from the master seed and its index).
+
+use super::spec::Spec;
+use crate::config::{Config, Layout};
+use crate::rng::{self, Stream};
+use crate::time::Epoch;
+use rand_distr::{Distribution, StandardNormal};
+
+/// One stare: where the telescope points for its exposures.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Stare {
+    /// In observing order over all visits.
+    pub index: usize,
+    pub visit: usize,
+    /// Its place in the pattern (column along l, row along b).
+    pub column: usize,
+    pub row: usize,
+    /// The planned centre, Galactic degrees.
+    pub l_deg: f64,
+    pub b_deg: f64,
+    /// Where it points, with its pointing error: ICRS degrees and the position angle of the focal plane's
+    /// +y (east of north) with its roll error.
+    pub ra_deg: f64,
+    pub dec_deg: f64,
+    pub pa_deg: f64,
+}
+
+/// One exposure of the sequence.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PlannedExposure {
+    /// In observing order, from 0.
+    pub index: usize,
+    /// Its stare ([`Plan::stares`]).
+    pub stare: usize,
+    /// Its UTC start.
+    pub start: Epoch,
+    /// Its seed (jitter, noise, flat errors).
+    pub seed: u64,
+    /// The orbit's argument of latitude at its start, degrees.
+    pub orbit_phase_deg: f64,
+}
+
+/// The planned sequence.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Plan {
+    pub spec: Spec,
+    pub stares: Vec<Stare>,
+    pub exposures: Vec<PlannedExposure>,
+    /// The focal plane's side on the sky, degrees.
+    pub field_deg: f64,
+}
+
+/// Galactic (l, b) → ICRS (α, δ), degrees (SOFA `g2icrs`).
+pub fn galactic_to_icrs(l_deg: f64, b_deg: f64) -> (f64, f64) {
+    let (ra, dec) = sofars::coords::g2icrs(l_deg.to_radians(), b_deg.to_radians());
+    (ra.to_degrees().rem_euclid(360.0), dec.to_degrees())
+}
+
+/// The position angle (east of north) of Galactic north at (α, δ), degrees.
+pub fn galactic_north_pa_deg(ra_deg: f64, dec_deg: f64) -> f64 {
+    let (_, eb) = crate::scene::bulge::galactic_axes(ra_deg, dec_deg);
+    eb[0].atan2(eb[1]).to_degrees()
+}
+
+/// The focal plane's side on the sky, degrees: 2N + gap pixels (quad).
+pub fn field_deg(cfg: &Config) -> f64 {
+    (2.0 * cfg.instrument.detector_px as f64 + cfg.focal_plane.gap_px)
+        * cfg.instrument.plate_scale_mas()
+        / 3.6e6
+}
+
+/// Plan `spec` with the instrument of `cfg` (its cadence, focal plane, orbit and master seed).
+pub fn plan(spec: &Spec, cfg: &Config) -> Result<Plan, String> {
+    spec.validate()?;
+    let field = field_deg(cfg);
+    let step = spec.step_fields * field;
+    let cadence = cfg.exposure_cadence_s();
+    let stare_span = spec.exposures_per_stare as f64 * cadence + spec.manoeuvre_s;
+    let period = crate::sky::orbit(cfg)?.period_s();
+    let visits: Vec<Epoch> = spec
+        .visits_utc
+        .iter()
+        .map(|v| Epoch::from_utc_iso(v))
+        .collect::<Result<_, _>>()?;
+    let first = visits[0];
+    let mut stares = Vec::new();
+    let mut exposures = Vec::new();
+    let dither_deg = spec.visit_dither_px * cfg.instrument.plate_scale_mas() / 3.6e6;
+    for (v, start) in visits.iter().enumerate() {
+        let mut s_in_visit = 0;
+        let shift = v as f64 * dither_deg;
+        for row in 0..spec.stares_b {
+            for k in 0..spec.stares_l {
+                let column = if row % 2 == 0 {
+                    k
+                } else {
+                    spec.stares_l - 1 - k
+                };
+                let l = spec.centre_l_deg
+                    + (column as f64 - (spec.stares_l as f64 - 1.0) / 2.0) * step
+                    + shift;
+                let b = spec.centre_b_deg
+                    + (row as f64 - (spec.stares_b as f64 - 1.0) / 2.0) * step
+                    + shift;
+                let (ra0, dec0) = galactic_to_icrs(l, b);
+                let index = stares.len();
+                let mut r = rng::stream(cfg.seed, Stream::Sequence, index as u64);
+                let z: [f64; 3] = std::array::from_fn(|_| StandardNormal.sample(&mut r));
+                let e = spec.pointing_error_arcsec / 3600.0;
+                let dec = (dec0 + z[1] * e).clamp(-90.0, 90.0);
+                let ra = (ra0 + z[0] * e / dec0.to_radians().cos().max(1e-6)).rem_euclid(360.0);
+                let pa = galactic_north_pa_deg(ra0, dec0) + z[2] * spec.roll_error_arcsec / 3600.0;
+                stares.push(Stare {
+                    index,
+                    visit: v,
+                    column,
+                    row,
+                    l_deg: l,
+                    b_deg: b,
+                    ra_deg: ra,
+                    dec_deg: dec,
+                    pa_deg: pa,
+                });
+                let stare_start = start.plus_s(s_in_visit as f64 * stare_span);
+                for m in 0..spec.exposures_per_stare {
+                    let t = stare_start.plus_s(m as f64 * cadence);
+                    let i = exposures.len();
+                    exposures.push(PlannedExposure {
+                        index: i,
+                        stare: index,
+                        start: t,
+                        seed: rng::derive_seed(cfg.seed, &[0x5E9, i as u64]),
+                        orbit_phase_deg: (cfg.observation.orbit_phase_deg
+                            + 360.0 * t.seconds_since(&first) / period)
+                            .rem_euclid(360.0),
+                    });
+                }
+                s_in_visit += 1;
+            }
+        }
+    }
+    Ok(Plan {
+        spec: spec.clone(),
+        stares,
+        exposures,
+        field_deg: field,
+    })
+}
+
+/// The configuration of exposure `e` of `plan`: `base` on the quad focal plane at its stare's pointing,
+/// its start (the ACE series' t = 0 set so that its image 0 starts at `e.start`), the orbit's phase then,
+/// one image, its own seed.
+pub fn exposure_config(base: &Config, plan: &Plan, e: &PlannedExposure) -> Config {
+    let s = &plan.stares[e.stare];
+    let mut c = base.clone();
+    c.focal_plane.layout = Layout::Quad;
+    c.sky.ra_deg = s.ra_deg;
+    c.sky.dec_deg = s.dec_deg;
+    c.sky.pa_deg = s.pa_deg;
+    let t0 = e.start.plus_s(-base.ace.first_exposure_start_s);
+    c.observation.start_utc = t0.utc_iso();
+    c.observation.orbit_phase_deg = e.orbit_phase_deg;
+    c.seed = e.seed;
+    c.fidelity.images = 1;
+    c
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn stares_step_half_a_field_and_exposures_follow_the_cadence() {
+        let cfg = Config::default();
+        let spec = Spec {
+            pointing_error_arcsec: 0.0,
+            roll_error_arcsec: 0.0,
+            ..Spec::default()
+        };
+        let p = plan(&spec, &cfg).expect("plan");
+        assert_eq!(p.exposures.len(), 3 * 2 * 26 * 2);
+        assert_eq!(p.stares.len(), 12);
+        // the field: (2 · 1968 + 300) px × 472.1 mas = 0.5555°; neighbours half of it apart on the sky
+        assert!((p.field_deg - 0.5555).abs() < 1e-3, "{}", p.field_deg);
+        let sep = |a: &Stare, b: &Stare| {
+            crate::sky::apparent::separation_mas((a.ra_deg, a.dec_deg), (b.ra_deg, b.dec_deg))
+                / 3.6e6
+        };
+        assert!((sep(&p.stares[0], &p.stares[1]) - p.field_deg / 2.0).abs() < 1e-6);
+        // boustrophedon: row 1 is walked back, so stare 2 and 3 are neighbours in b
+        assert_eq!((p.stares[2].column, p.stares[3].column), (2, 2));
+        assert!((sep(&p.stares[2], &p.stares[3]) - p.field_deg / 2.0).abs() < 1e-6);
+        // the pattern is centred on (l, b) = (0, 0) and the focal plane's +y is Galactic north (PA −58.6°)
+        let l_mean: f64 = p.stares[..6].iter().map(|s| s.l_deg).sum::<f64>() / 6.0;
+        assert!(l_mean.abs() < 1e-12);
+        assert!(
+            (p.stares[0].pa_deg + 58.6).abs() < 0.2,
+            "{}",
+            p.stares[0].pa_deg
+        );
+        // exposures back to back at the cadence, a manoeuvre between stares, visits at their dates
+        let cadence = cfg.exposure_cadence_s();
+        let e = &p.exposures;
+        assert!((e[1].start.seconds_since(&e[0].start) - cadence).abs() < 1e-6);
+        assert!((e[26].start.seconds_since(&e[25].start) - cadence - 115.0).abs() < 1e-6);
+        assert_eq!(e[156].start.utc_iso(), "2031-09-22T00:00:00.000");
+        assert_eq!((e[155].stare, e[156].stare), (5, 6));
+        // each exposure its own seed; its configuration starts its image 0 at its start
+        assert_ne!(e[0].seed, e[1].seed);
+        let c = exposure_config(&cfg, &p, &e[30]);
+        assert_eq!(c.observation.start_utc, e[30].start.utc_iso());
+        assert_eq!(c.focal_plane.layout, Layout::Quad);
+        assert!(c.validate().is_ok());
+    }
+
+    #[test]
+    fn pointing_errors_have_their_size() {
+        let cfg = Config::default();
+        let spec = Spec {
+            stares_l: 20,
+            stares_b: 20,
+            exposures_per_stare: 1,
+            visits_utc: vec!["2031-03-21T00:00:00".into()],
+            ..Spec::default()
+        };
+        let errs = plan(&spec, &cfg).expect("plan");
+        let exact = plan(
+            &Spec {
+                pointing_error_arcsec: 0.0,
+                roll_error_arcsec: 0.0,
+                ..spec.clone()
+            },
+            &cfg,
+        )
+        .expect("plan");
+        let (mut d2, mut r2) = (0.0, 0.0);
+        for (a, b) in errs.stares.iter().zip(&exact.stares) {
+            let (dx, dy) =
+                crate::sky::apparent::offset_mas((b.ra_deg, b.dec_deg), (a.ra_deg, a.dec_deg));
+            d2 += (dx * dx + dy * dy) / 2.0;
+            r2 += (a.pa_deg - b.pa_deg).powi(2);
+        }
+        let n = errs.stares.len() as f64;
+        // 400 stares: the rms within 4σ of its own sampling error (σ/√(2n) per axis pair)
+        let rms = (d2 / n).sqrt() / 1e3;
+        assert!(
+            (rms - 2.0).abs() < 4.0 * 2.0 / (2.0 * 2.0 * n).sqrt(),
+            "{rms}″"
+        );
+        let roll = (r2 / n).sqrt() * 3600.0;
+        assert!(
+            (roll - 10.0).abs() < 4.0 * 10.0 / (2.0 * n).sqrt(),
+            "{roll}″"
+        );
+    }
+
+    #[test]
+    fn bad_specs_are_named() {
+        let cfg = Config::default();
+        for (spec, needle) in [
+            (
+                Spec {
+                    stares_l: 0,
+                    ..Spec::default()
+                },
+                "sequence.stares_l = 0",
+            ),
+            (
+                Spec {
+                    visits_utc: vec!["2031-02-30".into()],
+                    ..Spec::default()
+                },
+                "sequence.visits_utc[0]",
+            ),
+            (
+                Spec {
+                    step_fields: -1.0,
+                    ..Spec::default()
+                },
+                "sequence.step_fields",
+            ),
+            (
+                Spec {
+                    exposures_per_stare: 10_000,
+                    stares_l: 100,
+                    ..Spec::default()
+                },
+                "at most 100000",
+            ),
+        ] {
+            let e = plan(&spec, &cfg).expect_err(needle);
+            assert!(e.contains(needle), "{e}");
+        }
+    }
+}

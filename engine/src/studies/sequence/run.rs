@@ -1,0 +1,261 @@
+//! Running a sequence: the field's stars drawn once over the whole region (the mock bulge, written as the
+//! sky catalogue `field.csv` every exposure reads), then each exposure simulated on the quad focal plane and
+//! analysed as one crowded exposure with the instrument's products (`studies::crowded`), its catalogue
+//! written to `exposures/NNNNN.csv` — written whole or not at all, so a run that stops resumes where it
+//! stopped — and the scoring's match to the truth beside it (`exposures/NNNNN_truth.csv`: only scoring
+//! reads it). [`merge`] gathers the exposures' catalogues into one FITS table, `catalogue.fits`.
+
+use super::plan::{
+    Plan, PlannedExposure, exposure_config, galactic_north_pa_deg, galactic_to_icrs,
+};
+use crate::analysis::countermeasures::Plan as Countermeasures;
+use crate::config::{Config, SceneKind};
+use crate::io::csv::Cell;
+use crate::io::fits::{self, Card, Column, Hdu};
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// The field's sky catalogue in the output directory.
+pub const FIELD_NAME: &str = "field.csv";
+/// The gathered catalogue of every exposure.
+pub const CATALOGUE_NAME: &str = "catalogue.fits";
+
+/// The measured columns of an exposure's catalogue (and of `catalogue.fits`).
+pub const CATALOGUE_HEADER: [&str; 12] = [
+    "exposure",
+    "stare",
+    "array",
+    "x_px",
+    "y_px",
+    "flux_e",
+    "crlb_x_px",
+    "crlb_y_px",
+    "flags",
+    "ra_deg",
+    "dec_deg",
+    "mjd_tdb",
+];
+
+/// A sequence run failed.
+#[derive(Debug, thiserror::Error)]
+pub enum SequenceError {
+    #[error("sequence: {0}")]
+    Invalid(String),
+    #[error(transparent)]
+    Io(#[from] crate::io::IoError),
+    #[error(transparent)]
+    Scene(#[from] crate::scene::SceneError),
+    #[error(transparent)]
+    Simulation(#[from] crate::simulate::SimError),
+    #[error(transparent)]
+    Source(#[from] crate::session::source::SourceError),
+}
+
+/// The file of exposure `index`'s catalogue.
+pub fn exposure_path(dir: &Path, index: usize) -> PathBuf {
+    dir.join("exposures").join(format!("{index:05}.csv"))
+}
+
+/// Draw the mock bulge over the whole region of `plan` (every stare's field, its pointing error and the
+/// reach of a star's light) and write it as a sky catalogue with each star's motion; `base.scene.bulge`
+/// and the master seed decide the stars.
+pub fn write_field(plan: &Plan, base: &Config, dir: &Path) -> Result<PathBuf, SequenceError> {
+    let (l_lo, l_hi, b_lo, b_hi) = plan.stares.iter().fold(
+        (f64::MAX, f64::MIN, f64::MAX, f64::MIN),
+        |(a, b, c, d), s| {
+            (
+                a.min(s.l_deg),
+                b.max(s.l_deg),
+                c.min(s.b_deg),
+                d.max(s.b_deg),
+            )
+        },
+    );
+    let (l, b) = ((l_lo + l_hi) / 2.0, (b_lo + b_hi) / 2.0);
+    let scale_deg = base.instrument.plate_scale_mas() / 3.6e6;
+    let margin_deg = 3.0 * plan.spec.pointing_error_arcsec / 3600.0
+        + crate::scene::placement::margin_px(base) * scale_deg;
+    // the field's diagonal turn (its PA at the region's centre is Galactic north): a square covering it
+    let half_deg = (l_hi - l_lo).max(b_hi - b_lo) / 2.0 + plan.field_deg / 2.0 * 1.42 + margin_deg;
+    let mut c = base.clone();
+    let (ra, dec) = galactic_to_icrs(l, b);
+    (c.sky.ra_deg, c.sky.dec_deg, c.sky.pa_deg) = (ra, dec, galactic_north_pa_deg(ra, dec));
+    let stars = crate::scene::bulge::draw_square(&c, half_deg / scale_deg)?;
+    let rows: Vec<Vec<Cell>> = stars
+        .iter()
+        .map(|s| {
+            vec![
+                Cell::F(s.ra_deg),
+                Cell::F(s.dec_deg),
+                Cell::F(s.mag_hw),
+                Cell::F(s.j_minus_h),
+                Cell::F(s.motion.pmra_mas_per_yr),
+                Cell::F(s.motion.pmdec_mas_per_yr),
+                Cell::F(s.motion.parallax_mas),
+            ]
+        })
+        .collect();
+    crate::io::ensure_dir(dir)?;
+    let path = dir.join(FIELD_NAME);
+    crate::io::csv::write(
+        &path,
+        &["ra", "dec", "hw", "j_h", "pmra", "pmdec", "parallax"],
+        &rows,
+    )?;
+    Ok(path)
+}
+
+/// What one exposure's run did.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ExposureRun {
+    pub index: usize,
+    /// Stars reported over the four arrays.
+    pub stars: usize,
+    pub simulate_s: f64,
+    pub analyse_s: f64,
+    /// Its catalogue was there already (a resumed run).
+    pub skipped: bool,
+}
+
+/// Simulate and analyse exposure `e` (unless its catalogue exists), reading the field at `field`, with the
+/// countermeasure of `cm` (its first).
+pub fn run_exposure(
+    session: &crate::session::Session,
+    plan: &Plan,
+    base: &Config,
+    field: &Path,
+    e: &PlannedExposure,
+    cm: &Countermeasures,
+    dir: &Path,
+) -> Result<ExposureRun, SequenceError> {
+    let path = exposure_path(dir, e.index);
+    if path.exists() {
+        return Ok(ExposureRun {
+            index: e.index,
+            stars: 0,
+            simulate_s: 0.0,
+            analyse_s: 0.0,
+            skipped: true,
+        });
+    }
+    let mut c = exposure_config(base, plan, e);
+    c.scene.kind = SceneKind::Catalogue;
+    c.scene.catalogue = Some(field.to_path_buf());
+    let t = Instant::now();
+    let fps = session.new_focal_plane(&c)?;
+    let exp = fps.exposure(0)?;
+    let simulate_s = t.elapsed().as_secs_f64();
+    let t = Instant::now();
+    let (lo, hi) = (base.scene.bulge.hw_min, base.scene.bulge.hw_max);
+    let edges = crate::scoring::crowded::edges(lo, hi, 1.0);
+    let analyses = crate::studies::crowded::analyse_focal_plane(&fps, &exp, cm, &edges)?;
+    let analyse_s = t.elapsed().as_secs_f64();
+    let first = analyses
+        .first()
+        .ok_or_else(|| SequenceError::Invalid("no countermeasure to run".into()))?;
+    let mjd_tdb = e.start.plus_s(c.detector.exposure_s / 2.0).tdb_mjd();
+    let scale = c.instrument.plate_scale_mas();
+    let (mut rows, mut truth_rows) = (Vec::new(), Vec::new());
+    for (a, sim) in first.arrays.iter().zip(&fps.arrays) {
+        let wcs = sim.wcs();
+        for s in &a.stars {
+            let f = &s.fit;
+            let (ra, dec) = wcs
+                .and_then(|w| w.pixel_to_sky(f.x, f.y))
+                .unwrap_or((f64::NAN, f64::NAN));
+            rows.push(vec![
+                Cell::I(e.index as i64),
+                Cell::I(e.stare as i64),
+                Cell::I(a.index as i64 + 1),
+                Cell::F(f.x),
+                Cell::F(f.y),
+                Cell::F(f.flux_e),
+                Cell::F(f.crlb_x_px),
+                Cell::F(f.crlb_y_px),
+                Cell::I(i64::from(f.flags)),
+                Cell::F(ra),
+                Cell::F(dec),
+                Cell::F(mjd_tdb),
+            ]);
+            truth_rows.push(vec![
+                Cell::I(e.index as i64),
+                Cell::I(a.index as i64 + 1),
+                Cell::I(s.truth.map(|t| a.truth[t].id as i64).unwrap_or(-1)),
+                Cell::F(s.dx_px * scale),
+                Cell::F(s.dy_px * scale),
+            ]);
+        }
+    }
+    crate::io::ensure_dir(&dir.join("exposures"))?;
+    // the truth first: a catalogue on disk always has its scoring beside it
+    crate::io::csv::write(
+        &dir.join("exposures")
+            .join(format!("{:05}_truth.csv", e.index)),
+        &["exposure", "array", "truth_id", "dx_mas", "dy_mas"],
+        &truth_rows,
+    )?;
+    crate::io::csv::write(&path, &CATALOGUE_HEADER, &rows)?;
+    Ok(ExposureRun {
+        index: e.index,
+        stars: rows.len(),
+        simulate_s,
+        analyse_s,
+        skipped: false,
+    })
+}
+
+/// Gather every exposure's catalogue of `plan` into `catalogue.fits` (a binary table `CATALOGUE` with
+/// [`CATALOGUE_HEADER`]'s columns; the primary header names the sequence's size). Every exposure must have
+/// run: a missing one is named.
+pub fn merge(plan: &Plan, dir: &Path) -> Result<PathBuf, SequenceError> {
+    let mut cols: Vec<Vec<f64>> = vec![Vec::new(); CATALOGUE_HEADER.len()];
+    for e in &plan.exposures {
+        let path = exposure_path(dir, e.index);
+        if !path.exists() {
+            return Err(SequenceError::Invalid(format!(
+                "exposure {} has not run ({} is missing): run the sequence (or its shards) first",
+                e.index,
+                path.display()
+            )));
+        }
+        let (h, rows) = crate::io::csv::read(&path)?;
+        for (k, name) in CATALOGUE_HEADER.iter().enumerate() {
+            cols[k].extend(crate::io::csv::column_f64(&path, &h, &rows, name)?);
+        }
+    }
+    let integer = ["exposure", "stare", "array", "flags"];
+    let columns = CATALOGUE_HEADER
+        .iter()
+        .zip(cols)
+        .map(|(name, v)| {
+            if integer.contains(name) {
+                Column::I64((*name).into(), v.iter().map(|x| *x as i64).collect())
+            } else {
+                Column::F64((*name).into(), v)
+            }
+        })
+        .collect();
+    let path = dir.join(CATALOGUE_NAME);
+    fits::write(
+        &path,
+        &[
+            Hdu::Header {
+                cards: vec![
+                    Card::i("NEXPOSE", plan.exposures.len() as i64, "exposures"),
+                    Card::i("NSTARES", plan.stares.len() as i64, "stares"),
+                    Card::s(
+                        "CONTENT",
+                        "jsim sequence: every exposure's measured stars",
+                        "",
+                    ),
+                ],
+            },
+            Hdu::Table {
+                name: "CATALOGUE",
+                columns,
+                cards: Vec::new(),
+            },
+        ],
+    )?;
+    Ok(path)
+}

@@ -1,0 +1,165 @@
+//! `jsim sequence` as a user meets it: a small step-stare sequence planned, every exposure simulated and
+//! analysed, the catalogues gathered into one FITS table; a rerun resumes (nothing redone, a lost exposure
+//! redone identically), two shards give the same table as one run, and bad input is named.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn jsim() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_jsim"))
+}
+
+fn temp(name: &str) -> PathBuf {
+    let d = std::env::temp_dir().join(format!("jsim-seq-{name}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).expect("tmp");
+    d
+}
+
+/// Small arrays, a static Gaussian ACE, a sparse field: seconds per exposure.
+const SMALL: [&str; 15] = [
+    "ace.case=\"gaussian\"",
+    "instrument.detector_px=256",
+    "instrument.photosensitive_px=240",
+    "readout.channels=2",
+    "readout.channel_width_px=128",
+    "optics.pupil_samples=64",
+    "optics.psf_oversampling=8",
+    "optics.psf_radius_px=8",
+    "band.wavelength_step_um=0.1",
+    "fidelity.subpixels=4",
+    "fidelity.stamp_radius_px=8",
+    "fidelity.backend=\"cpu\"",
+    "ace.span_s=60.0",
+    "focal_plane.gap_px=40.0",
+    "scene.bulge.density_per_arcmin2=40.0",
+];
+
+fn spec(dir: &Path) -> PathBuf {
+    let p = dir.join("seq.toml");
+    std::fs::write(
+        &p,
+        "[sequence]\nstares_l = 2\nstares_b = 1\nexposures_per_stare = 2\nvisits_utc = [\"2031-03-21T00:00:00\"]\n\
+         visit_dither_px = 0.0\n",
+    )
+    .expect("write");
+    p
+}
+
+fn run(out: &Path, spec: &Path, extra: &[&str]) -> std::process::Output {
+    let mut c = jsim();
+    c.args(["sequence", "--countermeasure", "none", "--spec"])
+        .arg(spec);
+    for s in SMALL {
+        c.args(["--set", s]);
+    }
+    c.args(extra).arg("--out").arg(out).output().expect("run")
+}
+
+fn stderr(o: &std::process::Output) -> String {
+    String::from_utf8_lossy(&o.stderr).to_string()
+}
+
+fn table(path: &Path) -> Vec<Vec<f64>> {
+    engine::io::fits::read_table(
+        path,
+        "CATALOGUE",
+        &engine::studies::sequence::run::CATALOGUE_HEADER,
+    )
+    .expect("catalogue.fits")
+}
+
+#[test]
+fn a_sequence_runs_resumes_and_shards_to_the_same_catalogue() {
+    let dir = temp("run");
+    let spec = spec(&dir);
+    let out = dir.join("all");
+    let o = run(&out, &spec, &[]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let plan = std::fs::read_to_string(out.join("plan.csv")).expect("plan");
+    assert_eq!(plan.lines().count(), 1 + 4, "{plan}");
+    let t = table(&out.join("catalogue.fits"));
+    let exposure = &t[0];
+    assert!(exposure.len() > 50, "{} stars", exposure.len());
+    for e in 0..4 {
+        assert!(exposure.contains(&(e as f64)), "exposure {e} has stars");
+    }
+    // the measured sky positions are where the field's stars are: the scoring's matched errors are
+    // mas-level (the stars are Hw 8 … 17 in a sparse field)
+    let truth = std::fs::read_to_string(out.join("exposures/00000_truth.csv")).expect("truth");
+    let dx: Vec<f64> = truth
+        .lines()
+        .skip(1)
+        .filter_map(|l| {
+            let c: Vec<&str> = l.split(',').collect();
+            (c[2] != "-1").then(|| c[3].parse::<f64>().ok()).flatten()
+        })
+        .collect();
+    let median = engine::numerics::stats::median(&dx.iter().map(|v| v.abs()).collect::<Vec<_>>());
+    assert!(
+        dx.len() > 20 && median < 50.0,
+        "{} matched, median |dx| {median} mas",
+        dx.len()
+    );
+    // a rerun redoes nothing; a lost exposure is redone, identically (its own seed)
+    let kept = std::fs::read_to_string(out.join("exposures/00002.csv")).expect("exposure 2");
+    let o = run(&out, &spec, &[]);
+    assert!(o.status.success());
+    assert_eq!(
+        stderr(&o).matches("already written").count(),
+        4,
+        "{}",
+        stderr(&o)
+    );
+    std::fs::remove_file(out.join("exposures/00002.csv")).expect("rm");
+    let o = run(&out, &spec, &[]);
+    assert_eq!(
+        stderr(&o).matches("already written").count(),
+        3,
+        "{}",
+        stderr(&o)
+    );
+    assert_eq!(
+        std::fs::read_to_string(out.join("exposures/00002.csv")).expect("redone"),
+        kept
+    );
+    // two shards (two Slurm array tasks) into one directory: the same table
+    let sharded = dir.join("sharded");
+    let o = run(&sharded, &spec, &["--shard", "0/2"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stderr(&o).contains("not every exposure has run yet"));
+    assert!(!sharded.join("catalogue.fits").exists());
+    let o = run(&sharded, &spec, &["--shard", "1/2"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(table(&sharded.join("catalogue.fits")), t);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn bad_sequences_are_named_and_write_nothing() {
+    let dir = temp("bad");
+    let out = dir.join("out");
+    let bad = dir.join("bad.toml");
+    for (text, needle) in [
+        ("[sequence]\nstares_l = 0\n", "sequence.stares_l = 0"),
+        (
+            "[sequence]\nvisits_utc = [\"2031-13-01\"]\n",
+            "sequence.visits_utc[0]",
+        ),
+        ("[sequence]\nstars_l = 2\n", "stars_l"),
+    ] {
+        std::fs::write(&bad, text).expect("write");
+        let o = run(&out, &bad, &["--plan-only"]);
+        assert_eq!(o.status.code(), Some(1), "{text}");
+        assert!(stderr(&o).contains(needle), "{text}: {}", stderr(&o));
+        assert!(!stderr(&o).contains("panicked"));
+        assert!(!out.exists(), "{text}: wrote its output directory");
+    }
+    let o = run(&out, &spec(&dir), &["--exposures", "0"]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(stderr(&o).contains("--exposures 0"), "{}", stderr(&o));
+    let o = run(&out, &spec(&dir), &["--shard", "2/2"]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(!out.exists());
+    let _ = std::fs::remove_dir_all(&dir);
+}
