@@ -29,6 +29,8 @@ pub enum Stream {
     BulgeMotion = 13,
     /// A sequence's per-stare pointing and roll errors.
     Sequence = 14,
+    /// Each image's cosmic-ray hits.
+    CosmicRays = 15,
     Test = 99,
 }
 

@@ -81,6 +81,10 @@ fn bad_values_are_named_errors_and_write_nothing() {
             vec!["--set", "scene.bulge.distance_kpc=30"],
             "scene.bulge.distance_kpc",
         ),
+        (
+            vec!["--set", "detector.cosmic_ray_rate_per_cm2_s=-1"],
+            "detector.cosmic_ray_rate_per_cm2_s",
+        ),
     ] {
         let out = jsim()
             .arg("simulate")

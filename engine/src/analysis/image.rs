@@ -31,7 +31,7 @@ impl AnalysisImage {
     /// Electrons, mask and noise floor, not flat-fielded.
     pub fn from_detector_unflattened(cfg: &Config, img: &DetectorImage) -> Self {
         let g = cfg.detector.gain_e_per_adu;
-        let bad_bits = dq::BORDER | dq::SATURATED | dq::ADC_HIGH;
+        let bad_bits = dq::UNUSABLE;
         Self {
             nx: img.n,
             ny: img.n,

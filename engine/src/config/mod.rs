@@ -375,6 +375,13 @@ pub struct Detector {
     pub shot_noise: bool,
     pub read_noise: bool,
     pub digitise: bool,
+    /// Cosmic-ray hits per cm² per second (`detector::cosmic_rays`); 0 switches them off (the default).
+    /// 4 is a suggested value for a 600-km sun-synchronous orbit outside the South Atlantic Anomaly.
+    pub cosmic_ray_rate_per_cm2_s: f64,
+    /// Charge a cosmic ray leaves per µm of path, e⁻ (a choice of order a minimum-ionising particle's).
+    pub cosmic_ray_e_per_um: f64,
+    /// Thickness of the absorbing layer, µm (a choice: JASMINE's InGaAs figure was not found).
+    pub absorber_thickness_um: f64,
 }
 
 impl Default for Detector {
@@ -393,6 +400,9 @@ impl Default for Detector {
             shot_noise: true,
             read_noise: true,
             digitise: true,
+            cosmic_ray_rate_per_cm2_s: 0.0,
+            cosmic_ray_e_per_um: 100.0,
+            absorber_thickness_um: 10.0,
         }
     }
 }

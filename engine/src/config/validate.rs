@@ -309,6 +309,33 @@ impl Config {
             self.photometry.zero_point_e_per_s,
         )?;
 
+        let d = &self.detector;
+        for (field, v, hi) in [
+            (
+                "detector.cosmic_ray_rate_per_cm2_s",
+                d.cosmic_ray_rate_per_cm2_s,
+                1.0e4,
+            ),
+            ("detector.cosmic_ray_e_per_um", d.cosmic_ray_e_per_um, 1.0e5),
+            (
+                "detector.absorber_thickness_um",
+                d.absorber_thickness_um,
+                1.0e3,
+            ),
+        ] {
+            check_nonneg(field, v)?;
+            if v > hi {
+                return Err(invalid(field, v, &format!("must be ≤ {hi}")));
+            }
+        }
+        if d.absorber_thickness_um <= 0.0 {
+            return Err(invalid(
+                "detector.absorber_thickness_um",
+                d.absorber_thickness_um,
+                "must be > 0",
+            ));
+        }
+
         let sky = &self.sky;
         if !(sky.ra_deg >= 0.0 && sky.ra_deg < 360.0) {
             return Err(invalid(

@@ -44,7 +44,7 @@ pub fn analysis_image(
     }
     let g = facts.gain_e_per_adu;
     let sat = facts.saturation_adu.unwrap_or(f64::INFINITY);
-    let bad_bits = dq::BORDER | dq::SATURATED | dq::ADC_HIGH;
+    let bad_bits = dq::UNUSABLE;
     // a non-finite pixel is masked whether or not a DQ plane flags it
     let bad = match dq {
         Some(d) => d

@@ -5,13 +5,16 @@
 //!    reset: later rows integrate up to one frame sweep longer) — only the photosensitive region sees
 //!    light; the border of `(detector_px − photosensitive_px)/2` pixels holds no signal and is read for
 //!    noise only;
-//! 3. Poisson shot noise on the total; charge clipped at the full well (flagged);
+//! 3. Poisson shot noise on the total, plus the charge of cosmic rays ([`cosmic_rays`], off by default);
+//!    charge clipped at the full well (flagged);
 //! 4. plus Gaussian read noise of the image: √2 × the per-read noise for CDS (two reads differenced),
 //!    √(2/N) × for Fowler-N ([`crate::config::Detector::image_read_noise_e`]);
 //! 5. ÷ gain + bias, rounded, clipped to `[0, 2^bits − 1]` ADU (flagged).
 //!
 //! Every stage can be switched off (`shot_noise`, `read_noise`, `digitise`, σ_flat = 0). Noise streams are
 //! per image and per row, so the result does not depend on threading.
+
+pub mod cosmic_rays;
 
 use crate::config::Config;
 use crate::readout::ReadoutTiming;
@@ -29,6 +32,10 @@ pub mod dq {
     pub const ADC_HIGH: u8 = 4;
     /// ADC clipped at zero.
     pub const ADC_LOW: u8 = 8;
+    /// A cosmic ray left more than 5 × the read noise ([`super::cosmic_rays`]).
+    pub const COSMIC_RAY: u8 = 16;
+    /// The bits that make a pixel unusable for the analysis.
+    pub const UNUSABLE: u8 = BORDER | SATURATED | ADC_HIGH | COSMIC_RAY;
 }
 
 /// The simulated detector image of one exposure.
@@ -98,6 +105,8 @@ pub fn expose(
     let d = &cfg.detector;
     let adc_max = (2f64.powi(d.adc_bits as i32) - 1.0).min(f32::MAX as f64);
     let read = Normal::new(0.0, d.image_read_noise_e().max(0.0)).ok();
+    let cosmic = cosmic_rays::deposits(cfg, image_index);
+    let cosmic_flag_e = cosmic_rays::flag_threshold_e(cfg);
     let mut adu = vec![0.0f32; n * n];
     let mut dqv = vec![0u8; n * n];
     adu.par_chunks_mut(n)
@@ -124,6 +133,13 @@ pub fn expose(
                 } else {
                     mean_e
                 };
+                if let Some(c) = &cosmic {
+                    let hit = c[i] as f64;
+                    e += hit;
+                    if hit > cosmic_flag_e {
+                        flags |= dq::COSMIC_RAY;
+                    }
+                }
                 if e >= d.full_well_e {
                     e = d.full_well_e;
                     flags |= dq::SATURATED;
