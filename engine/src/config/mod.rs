@@ -382,6 +382,11 @@ pub struct Detector {
     pub cosmic_ray_e_per_um: f64,
     /// Thickness of the absorbing layer, µm (a choice: JASMINE's InGaAs figure was not found).
     pub absorber_thickness_um: f64,
+    /// Inter-pixel capacitance to each edge neighbour (`detector::ipc`); 0 (the default) switches it off,
+    /// ≈ 0.015 for HgCdTe.
+    pub ipc_alpha: f64,
+    /// … and to each corner neighbour (≈ 0.002 for HgCdTe).
+    pub ipc_alpha_diagonal: f64,
 }
 
 impl Default for Detector {
@@ -403,6 +408,8 @@ impl Default for Detector {
             cosmic_ray_rate_per_cm2_s: 0.0,
             cosmic_ray_e_per_um: 100.0,
             absorber_thickness_um: 10.0,
+            ipc_alpha: 0.0,
+            ipc_alpha_diagonal: 0.0,
         }
     }
 }

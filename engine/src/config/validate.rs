@@ -328,6 +328,15 @@ impl Config {
                 return Err(invalid(field, v, &format!("must be ≤ {hi}")));
             }
         }
+        for (field, v) in [
+            ("detector.ipc_alpha", d.ipc_alpha),
+            ("detector.ipc_alpha_diagonal", d.ipc_alpha_diagonal),
+        ] {
+            check_nonneg(field, v)?;
+            if v > 0.1 {
+                return Err(invalid(field, v, "must be ≤ 0.1"));
+            }
+        }
         if d.absorber_thickness_um <= 0.0 {
             return Err(invalid(
                 "detector.absorber_thickness_um",

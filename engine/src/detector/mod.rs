@@ -7,14 +7,17 @@
 //!    noise only;
 //! 3. Poisson shot noise on the total, plus the charge of cosmic rays ([`cosmic_rays`], off by default);
 //!    charge clipped at the full well (flagged);
-//! 4. plus Gaussian read noise of the image: √2 × the per-read noise for CDS (two reads differenced),
+//! 4. inter-pixel capacitance ([`ipc`], off by default): each pixel's node sees a fraction of its
+//!    neighbours' charge;
+//! 5. plus Gaussian read noise of the image: √2 × the per-read noise for CDS (two reads differenced),
 //!    √(2/N) × for Fowler-N ([`crate::config::Detector::image_read_noise_e`]);
-//! 5. ÷ gain + bias, rounded, clipped to `[0, 2^bits − 1]` ADU (flagged).
+//! 6. ÷ gain + bias, rounded, clipped to `[0, 2^bits − 1]` ADU (flagged).
 //!
 //! Every stage can be switched off (`shot_noise`, `read_noise`, `digitise`, σ_flat = 0). Noise streams are
 //! per image and per row, so the result does not depend on threading.
 
 pub mod cosmic_rays;
+pub mod ipc;
 
 use crate::config::Config;
 use crate::readout::ReadoutTiming;
@@ -107,15 +110,16 @@ pub fn expose(
     let read = Normal::new(0.0, d.image_read_noise_e().max(0.0)).ok();
     let cosmic = cosmic_rays::deposits(cfg, image_index);
     let cosmic_flag_e = cosmic_rays::flag_threshold_e(cfg);
-    let mut adu = vec![0.0f32; n * n];
+    let stream_index = |y: usize| image_index.wrapping_mul(1 << 20) + y as u64;
+    // the charge each pixel collects: signal and dark with shot noise, cosmic rays, the full well
+    let mut charge = vec![0.0f64; n * n];
     let mut dqv = vec![0u8; n * n];
-    adu.par_chunks_mut(n)
+    charge
+        .par_chunks_mut(n)
         .zip(dqv.par_chunks_mut(n))
         .enumerate()
         .for_each(|(y, (out, dq_row))| {
-            let stream_index = image_index.wrapping_mul(1 << 20) + y as u64;
-            let mut shot_rng = rng::stream(cfg.seed, Stream::ShotNoise, stream_index);
-            let mut read_rng = rng::stream(cfg.seed, Stream::ReadNoise, stream_index);
+            let mut shot_rng = rng::stream(cfg.seed, Stream::ShotNoise, stream_index(y));
             for x in 0..n {
                 let i = y * n + x;
                 let mut flags = 0u8;
@@ -144,6 +148,23 @@ pub fn expose(
                     e = d.full_well_e;
                     flags |= dq::SATURATED;
                 }
+                out[x] = e;
+                dq_row[x] = flags;
+            }
+        });
+    // what each pixel's node sees of its neighbours' charge
+    if d.ipc_alpha > 0.0 || d.ipc_alpha_diagonal > 0.0 {
+        charge = ipc::couple(&charge, n, d.ipc_alpha, d.ipc_alpha_diagonal);
+    }
+    // read noise, gain, bias, the ADC
+    let mut adu = vec![0.0f32; n * n];
+    adu.par_chunks_mut(n)
+        .zip(dqv.par_chunks_mut(n))
+        .enumerate()
+        .for_each(|(y, (out, dq_row))| {
+            let mut read_rng = rng::stream(cfg.seed, Stream::ReadNoise, stream_index(y));
+            for x in 0..n {
+                let mut e = charge[y * n + x];
                 if let (true, Some(rn)) = (d.read_noise, &read) {
                     e += rn.sample(&mut read_rng);
                 }
@@ -152,15 +173,14 @@ pub fn expose(
                     v = v.round();
                     if v >= adc_max {
                         v = adc_max;
-                        flags |= dq::ADC_HIGH;
+                        dq_row[x] |= dq::ADC_HIGH;
                     }
                     if v <= 0.0 {
                         v = 0.0;
-                        flags |= dq::ADC_LOW;
+                        dq_row[x] |= dq::ADC_LOW;
                     }
                 }
                 out[x] = v as f32;
-                dq_row[x] = flags;
             }
         });
     DetectorImage { n, adu, dq: dqv }
