@@ -136,6 +136,65 @@ fn a_sequence_runs_resumes_and_shards_to_the_same_catalogue() {
 }
 
 #[test]
+fn the_slurm_scripts_run_the_same_sequence() {
+    // --emit-slurm writes the configuration, the sequence file, the field and the scripts; running the
+    // array script as tasks 0 and 1 (what Slurm would do) and then the gathering job gives the table of one
+    // local run
+    let dir = temp("slurm");
+    let spec = spec(&dir);
+    let local = dir.join("local");
+    assert!(run(&local, &spec, &[]).status.success());
+    let out = dir.join("cluster");
+    let o = run(
+        &out,
+        &spec,
+        &["--emit-slurm", "--shards", "2", "--time", "10:00"],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    for f in [
+        "config.toml",
+        "sequence.toml",
+        "field.csv",
+        "slurm/array.sbatch",
+        "slurm/gather.sbatch",
+        "slurm/submit.sh",
+    ] {
+        assert!(out.join(f).exists(), "{f}");
+    }
+    assert!(!out.join("exposures").exists(), "nothing ran");
+    for task in ["0", "1"] {
+        let o = Command::new("bash")
+            .arg(out.join("slurm/array.sbatch"))
+            .env("SLURM_ARRAY_TASK_ID", task)
+            .output()
+            .expect("task");
+        assert!(o.status.success(), "task {task}: {}", stderr(&o));
+    }
+    let o = Command::new("bash")
+        .arg(out.join("slurm/gather.sbatch"))
+        .output()
+        .expect("gather");
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(
+        table(&out.join("catalogue.fits")),
+        table(&local.join("catalogue.fits"))
+    );
+    // bad cluster options are named, nothing written
+    let bad = dir.join("bad");
+    for (extra, needle) in [
+        (vec!["--emit-slurm", "--shards", "0"], "--shards 0"),
+        (vec!["--emit-slurm", "--time", "soon"], "--time"),
+        (vec!["--emit-slurm", "--exposures", "2"], "drop --exposures"),
+    ] {
+        let o = run(&bad, &spec, &extra);
+        assert_eq!(o.status.code(), Some(1), "{extra:?}");
+        assert!(stderr(&o).contains(needle), "{extra:?}: {}", stderr(&o));
+        assert!(!bad.join("slurm").exists(), "{extra:?}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
 fn bad_sequences_are_named_and_write_nothing() {
     let dir = temp("bad");
     let out = dir.join("out");

@@ -11,7 +11,7 @@ reductions below, which make the whole page set run in a few minutes:
   optics and 2 images (`REDUCED`; a command's own `--images` is capped at 2), except for the keys the command sets
   itself;
 * `jsim bench` gets `--quick` and small star counts (its own star-count options are replaced);
-* `jsim sequence` runs at most 2 exposures (`--exposures`);
+* `jsim sequence` runs at most 2 exposures (`--exposures`; its Slurm scripts are only written);
 * the sweep files are copied with the same reduced `[base]` and 4 exposures in stares of 2;
 * `crowded_image.py` writes a 256-px array of 1500 stars instead of 1968 px and 10⁵ stars,
   `photutils_catalogue.py` cuts 128 px instead of 512, and `simulate_reference.py` runs the reduced configuration
@@ -126,7 +126,7 @@ def reduce(words, jsim_bin="jsim"):
                     words[words.index(opt) + 1] = value
             else:
                 words += [opt] if value is None else [opt, value]
-    if name == "sequence" and "--plan-only" not in words:
+    if name == "sequence" and "--plan-only" not in words and "--emit-slurm" not in words:
         # a sequence runs at most 2 of its exposures (each shard its share of them)
         if "--exposures" in words:
             k = words.index("--exposures") + 1

@@ -35,6 +35,22 @@ pub struct SequenceArgs {
     pub countermeasure: String,
     #[command(flatten)]
     pub tel: TelemetryArgs,
+    /// Write Slurm job scripts (slurm/array.sbatch, gather.sbatch, submit.sh) for --shards array tasks, with
+    /// the configuration and sequence file beside them and the field drawn, instead of running.
+    #[arg(long)]
+    pub emit_slurm: bool,
+    /// Array tasks of the Slurm job.
+    #[arg(long, default_value_t = 4)]
+    pub shards: usize,
+    /// Slurm partition.
+    #[arg(long)]
+    pub partition: Option<String>,
+    /// Wall-clock limit per task.
+    #[arg(long, default_value = "04:00:00")]
+    pub time: String,
+    /// CPUs per task.
+    #[arg(long, default_value_t = 2)]
+    pub cpus_per_task: usize,
     /// Coverage map cell, degrees.
     #[arg(long, default_value_t = 0.01)]
     pub cell_deg: f64,
@@ -164,6 +180,37 @@ pub fn sequence(a: &SequenceArgs) -> Result<()> {
     )?;
     if a.plan_only {
         outputs.keep();
+        return Ok(());
+    }
+    if a.emit_slurm {
+        if a.exposures.is_some() || a.shard.is_some() {
+            bail!(
+                "--emit-slurm runs every exposure in --shards tasks: drop --exposures and --shard"
+            );
+        }
+        let dir = std::path::absolute(&a.out)?;
+        let job = sequence::slurm::SlurmJob {
+            shards: a.shards,
+            partition: a.partition.clone(),
+            time: a.time.clone(),
+            cpus_per_task: a.cpus_per_task,
+            jsim: std::env::current_exe()?,
+        };
+        for name in ["config.toml", "sequence.toml", run::FIELD_NAME] {
+            outputs.add(&dir.join(name));
+        }
+        let scripts = sequence::slurm::emit(&plan, &cfg, &dir, &job).map_err(anyhow::Error::msg)?;
+        // the field drawn once here, so that the tasks only read it
+        run::write_field(&plan, &cfg, &a.out)?;
+        for p in &scripts {
+            outputs.add(p);
+        }
+        outputs.keep();
+        eprintln!(
+            "wrote {} (submit with {})",
+            dir.join("slurm").display(),
+            scripts[2].display()
+        );
         return Ok(());
     }
     // the field: drawn once (the same seed draws it again identically on a rerun)

@@ -6,6 +6,7 @@
 pub mod coverage;
 pub mod plan;
 pub mod run;
+pub mod slurm;
 pub mod spec;
 
 pub use coverage::{Coverage, coverage};
