@@ -583,3 +583,47 @@ fn the_model_psf_product_round_trips_and_is_normalised() {
     assert!(e.to_string().contains("square"), "{e}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn the_linearity_correction_of_the_header_is_applied_and_a_bad_one_named() {
+    // NLCORR (the pipeline's β̂) turns a measured 98 000 e⁻ (32 666.67 ADU at 3 e⁻/ADU) back into the
+    // 100 000 e⁻ that bent to it under N − 2e-7·N²; absent, the detector is linear; out of range, named
+    use engine::io::analysis_input::{AnalysisInput, ImageParts};
+    let keys = |nl: Option<f64>| {
+        fits::ImageFacts::from_keys(
+            |k| match k {
+                "GAIN" => Some(3.0),
+                "RDNOISE" => Some(20.0),
+                "BIASADU" => Some(0.0),
+                "EXPTIME" => Some(12.5),
+                "NLCORR" => nl,
+                _ => None,
+            },
+            |_| None,
+        )
+    };
+    let n = 8;
+    let data = vec![(98_000.0 / 3.0) as f32; n * n];
+    for (nl, expect) in [(Some(2e-7), 100_000.0), (None, 98_000.0)] {
+        let facts = keys(nl).expect("facts");
+        let input = AnalysisInput::from_parts(
+            ImageParts {
+                nx: n,
+                ny: n,
+                data: &data,
+                dq: None,
+                facts,
+                plate_scale_header_mas: Some(472.1),
+            },
+            None,
+            None,
+            None,
+            &engine::Config::default(),
+        )
+        .expect("input");
+        let e = input.img.e[3 * n + 3];
+        assert!((e - expect).abs() < 0.1, "{nl:?}: {e} vs {expect}");
+    }
+    let e = keys(Some(-1.0)).expect_err("negative");
+    assert!(e.contains("NLCORR"), "{e}");
+}

@@ -32,13 +32,15 @@ impl AnalysisImage {
     pub fn from_detector_unflattened(cfg: &Config, img: &DetectorImage) -> Self {
         let g = cfg.detector.gain_e_per_adu;
         let bad_bits = dq::UNUSABLE;
+        // the pipeline's linearity correction, with its calibration's error (the NLCORR header)
+        let beta_hat = cfg.detector.nonlinearity_correction_per_e();
         Self {
             nx: img.n,
             ny: img.n,
             e: img
                 .adu
                 .iter()
-                .map(|v| (*v as f64 - cfg.detector.bias_adu) * g)
+                .map(|v| detector::linearize((*v as f64 - cfg.detector.bias_adu) * g, beta_hat))
                 .collect(),
             bad: img.dq.iter().map(|d| d & bad_bits != 0).collect(),
             var_floor_e2: cfg.detector.noise_floor_e2(),

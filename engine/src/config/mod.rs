@@ -387,6 +387,13 @@ pub struct Detector {
     pub ipc_alpha: f64,
     /// … and to each corner neighbour (≈ 0.002 for HgCdTe).
     pub ipc_alpha_diagonal: f64,
+    /// Nonlinearity of the pixel response, β in e⁻⁻¹: measured = N − β N² (`detector::expose`); 0 (the
+    /// default) switches it off. 2 × 10⁻⁷ is romanisim's example (6 × 10⁻⁷ per ADU at 3 e⁻/ADU): 2 % at
+    /// 10⁵ e⁻; JASMINE's InGaAs figure was not found.
+    pub nonlinearity_per_e: f64,
+    /// Relative error of the linearity calibration: the correction the pipeline applies (the `NLCORR`
+    /// header) is β (1 + this) — a choice of 5 %.
+    pub nonlinearity_calibration_error: f64,
 }
 
 impl Default for Detector {
@@ -410,6 +417,8 @@ impl Default for Detector {
             absorber_thickness_um: 10.0,
             ipc_alpha: 0.0,
             ipc_alpha_diagonal: 0.0,
+            nonlinearity_per_e: 0.0,
+            nonlinearity_calibration_error: 0.05,
         }
     }
 }
@@ -456,6 +465,11 @@ impl Sampling {
 }
 
 impl Detector {
+    /// The linearity correction the pipeline holds, β̂ = β (1 + calibration error), e⁻⁻¹.
+    pub fn nonlinearity_correction_per_e(&self) -> f64 {
+        self.nonlinearity_per_e * (1.0 + self.nonlinearity_calibration_error)
+    }
+
     /// Read noise of an image (e⁻): √2 σ_read for CDS, σ_read √(2/N) for Fowler-N.
     pub fn image_read_noise_e(&self) -> f64 {
         self.sampling.image_read_noise_e(self.read_noise_per_read_e)

@@ -337,6 +337,25 @@ impl Config {
                 return Err(invalid(field, v, "must be ≤ 0.1"));
             }
         }
+        check_nonneg("detector.nonlinearity_per_e", d.nonlinearity_per_e)?;
+        if d.nonlinearity_per_e * d.full_well_e > 0.2 {
+            return Err(invalid(
+                "detector.nonlinearity_per_e",
+                d.nonlinearity_per_e,
+                "β × full_well_e must be ≤ 0.2 (a response that turns over is not a detector)",
+            ));
+        }
+        check_finite(
+            "detector.nonlinearity_calibration_error",
+            d.nonlinearity_calibration_error,
+        )?;
+        if d.nonlinearity_calibration_error.abs() > 1.0 {
+            return Err(invalid(
+                "detector.nonlinearity_calibration_error",
+                d.nonlinearity_calibration_error,
+                "must be in -1 … 1",
+            ));
+        }
         if d.absorber_thickness_um <= 0.0 {
             return Err(invalid(
                 "detector.absorber_thickness_um",

@@ -64,7 +64,10 @@ pub fn analysis_image(
             .iter()
             .map(|v| {
                 if v.is_finite() {
-                    (*v as f64 - facts.bias_adu) * g
+                    crate::detector::linearize(
+                        (*v as f64 - facts.bias_adu) * g,
+                        facts.nonlinearity_per_e,
+                    )
                 } else {
                     0.0
                 }

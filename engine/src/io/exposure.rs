@@ -106,6 +106,11 @@ pub fn headers(sim: &Simulator, exp: &Exposure) -> Vec<Card> {
         ),
         Card::f("GAIN", d.gain_e_per_adu, "[e-/ADU] conversion gain"),
         Card::f(
+            "NLCORR",
+            d.nonlinearity_correction_per_e(),
+            "[1/e-] linearity correction: meas = N - NLCORR N^2",
+        ),
+        Card::f(
             "RDNOISE",
             d.image_read_noise_e(),
             "[e-] read noise of this image (all reads)",

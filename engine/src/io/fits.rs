@@ -371,6 +371,9 @@ pub struct ImageFacts {
     pub bias_adu: f64,
     pub exposure_s: f64,
     pub saturation_adu: Option<f64>,
+    /// The linearity correction's coefficient β̂ (`NLCORR`, e⁻⁻¹: measured = true − β̂·true²); 0, the
+    /// default when the header is silent, is a linear detector.
+    pub nonlinearity_per_e: f64,
     /// What was assumed because the header did not say (one sentence each; empty for a jsim image).
     pub assumed: Vec<String>,
 }
@@ -427,6 +430,7 @@ impl ImageFacts {
         let bias = key("BIASADU", 0.0);
         let exposure_s = key("EXPTIME", 1.0);
         let saturation_adu = values.get("SATURATE").copied();
+        let nonlinearity_per_e = values.get("NLCORR").copied().unwrap_or(0.0);
         let bad = |k: &str, v: f64, allowed: &str| Err(format!("header {k} = {v}: {allowed}"));
         if !(gain > 0.0 && gain.is_finite()) {
             return bad("GAIN", gain, "must be a finite number > 0 [e-/ADU]");
@@ -445,20 +449,24 @@ impl ImageFacts {
         {
             return bad("SATURATE", s, "must be > 0 [ADU]");
         }
+        if !(0.0..=1e-3).contains(&nonlinearity_per_e) {
+            return bad("NLCORR", nonlinearity_per_e, "must be in [0, 1e-3] [1/e-]");
+        }
         Ok(Self {
             gain_e_per_adu: gain,
             read_noise_e: rn,
             bias_adu: bias,
             exposure_s,
             saturation_adu,
+            nonlinearity_per_e,
             assumed,
         })
     }
 }
 
 /// The numeric header cards the analysis reads ([`ImageFacts::from_keys`]).
-pub const NUMERIC_KEYS: [&str; 6] = [
-    "RNREAD", "GAIN", "RDNOISE", "BIASADU", "EXPTIME", "SATURATE",
+pub const NUMERIC_KEYS: [&str; 7] = [
+    "RNREAD", "GAIN", "RDNOISE", "BIASADU", "EXPTIME", "SATURATE", "NLCORR",
 ];
 
 /// What a numeric card of [`NUMERIC_KEYS`] holds, for messages.
@@ -468,6 +476,7 @@ fn numeric_key_meaning(key: &str) -> &'static str {
         "GAIN" => "gain [e-/ADU]",
         "RDNOISE" => "read noise [e-]",
         "BIASADU" => "bias [ADU]",
+        "NLCORR" => "linearity correction coefficient [1/e-]",
         "EXPTIME" => "exposure [s]",
         "SATURATE" => "saturation level [ADU]",
         _ => "a number",
