@@ -57,15 +57,24 @@ pub fn inter_pixel_flat(cfg: &Config) -> Vec<f32> {
     let sigma = cfg.detector.inter_pixel_flat_sigma;
     let mut flat = vec![1.0f32; n * n];
     if sigma > 0.0 {
-        flat.par_chunks_mut(n).enumerate().for_each(|(y, row)| {
-            let mut r = rng::stream(cfg.seed, Stream::InterPixelFlat, y as u64);
-            for v in row.iter_mut() {
-                let z: f64 = StandardNormal.sample(&mut r);
-                *v = (1.0 + sigma * z).max(0.0) as f32;
-            }
+        perturb(cfg, Stream::InterPixelFlat, &mut flat, |v, z| {
+            (v as f64 * (1.0 + sigma * z)).max(0.0) as f32
         });
     }
     flat
+}
+
+/// Each pixel `v` of the `n × n` image replaced by `f(v, z)`, z ~ N(0, 1) from `stream`'s row of the run
+/// seed (rows in parallel, the result independent of threading).
+fn perturb(cfg: &Config, stream: Stream, image: &mut [f32], f: impl Fn(f32, f64) -> f32 + Sync) {
+    let n = cfg.instrument.detector_px;
+    image.par_chunks_mut(n).enumerate().for_each(|(y, row)| {
+        let mut r = rng::stream(cfg.seed, stream, y as u64);
+        for v in row.iter_mut() {
+            let z: f64 = StandardNormal.sample(&mut r);
+            *v = f(*v, z);
+        }
+    });
 }
 
 /// The calibration flat a pipeline would hold: the true flat with its own relative error `error` (1σ,
@@ -76,15 +85,10 @@ pub fn calibration_flat(cfg: &Config, error: f64) -> Vec<f32> {
 
 /// [`calibration_flat`] from the true flat already at hand.
 pub fn calibration_flat_of(cfg: &Config, true_flat: Vec<f32>, error: f64) -> Vec<f32> {
-    let n = cfg.instrument.detector_px;
     let mut flat = true_flat;
     if error > 0.0 {
-        flat.par_chunks_mut(n).enumerate().for_each(|(y, row)| {
-            let mut r = rng::stream(cfg.seed, Stream::CalibrationFlat, y as u64);
-            for v in row.iter_mut() {
-                let z: f64 = StandardNormal.sample(&mut r);
-                *v = (*v as f64 * (1.0 + error * z)).max(1e-6) as f32;
-            }
+        perturb(cfg, Stream::CalibrationFlat, &mut flat, |v, z| {
+            (v as f64 * (1.0 + error * z)).max(1e-6) as f32
         });
     }
     flat

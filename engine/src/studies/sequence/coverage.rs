@@ -42,17 +42,7 @@ pub fn coverage(plan: &Plan, base: &Config, cell_deg: f64) -> Result<Coverage, S
     if !(cell_deg > 1e-4 && cell_deg <= 1.0) {
         return Err(format!("coverage cell = {cell_deg}°: allowed (1e-4, 1]"));
     }
-    let (l_lo, l_hi, b_lo, b_hi) = plan.stares.iter().fold(
-        (f64::MAX, f64::MIN, f64::MAX, f64::MIN),
-        |(a, b, c, d), s| {
-            (
-                a.min(s.l_deg),
-                b.max(s.l_deg),
-                c.min(s.b_deg),
-                d.max(s.b_deg),
-            )
-        },
-    );
+    let (l_lo, l_hi, b_lo, b_hi) = plan.extent_deg();
     let half = plan.field_deg / 2.0 * 1.05;
     let (l0, b0) = (l_lo - half, b_lo - half);
     let columns = (((l_hi + half - l0) / cell_deg).ceil() as usize).max(1);

@@ -58,6 +58,23 @@ pub struct Plan {
     pub field_deg: f64,
 }
 
+impl Plan {
+    /// The stares' centres' extent, Galactic degrees: (l_min, l_max, b_min, b_max).
+    pub fn extent_deg(&self) -> (f64, f64, f64, f64) {
+        self.stares.iter().fold(
+            (f64::MAX, f64::MIN, f64::MAX, f64::MIN),
+            |(a, b, c, d), s| {
+                (
+                    a.min(s.l_deg),
+                    b.max(s.l_deg),
+                    c.min(s.b_deg),
+                    d.max(s.b_deg),
+                )
+            },
+        )
+    }
+}
+
 /// Galactic (l, b) → ICRS (α, δ), degrees (SOFA `g2icrs`).
 pub fn galactic_to_icrs(l_deg: f64, b_deg: f64) -> (f64, f64) {
     let (ra, dec) = sofars::coords::g2icrs(l_deg.to_radians(), b_deg.to_radians());

@@ -60,17 +60,7 @@ pub fn exposure_path(dir: &Path, index: usize) -> PathBuf {
 /// reach of a star's light) and write it as a sky catalogue with each star's motion; `base.scene.bulge`
 /// and the master seed decide the stars.
 pub fn write_field(plan: &Plan, base: &Config, dir: &Path) -> Result<PathBuf, SequenceError> {
-    let (l_lo, l_hi, b_lo, b_hi) = plan.stares.iter().fold(
-        (f64::MAX, f64::MIN, f64::MAX, f64::MIN),
-        |(a, b, c, d), s| {
-            (
-                a.min(s.l_deg),
-                b.max(s.l_deg),
-                c.min(s.b_deg),
-                d.max(s.b_deg),
-            )
-        },
-    );
+    let (l_lo, l_hi, b_lo, b_hi) = plan.extent_deg();
     let (l, b) = ((l_lo + l_hi) / 2.0, (b_lo + b_hi) / 2.0);
     let scale_deg = base.instrument.plate_scale_mas() / 3.6e6;
     let margin_deg = 3.0 * plan.spec.pointing_error_arcsec / 3600.0
