@@ -219,6 +219,16 @@ mod tests {
         c
     }
 
+    /// An n × n detector without noise, rounding or dark: the signal alone.
+    fn signal_only(n: usize) -> Config {
+        let mut c = cfg(n);
+        c.detector.shot_noise = false;
+        c.detector.read_noise = false;
+        c.detector.digitise = false;
+        c.detector.dark_e_per_s = 0.0;
+        c
+    }
+
     fn expose(c: &Config, star_e: &[f64], flat: &[f32], index: u64) -> DetectorImage {
         super::expose(c, &ReadoutTiming::new(c), star_e, flat, index)
     }
@@ -306,11 +316,7 @@ mod tests {
     #[test]
     fn flux_conserved_before_noise() {
         let n = 32;
-        let mut c = cfg(n);
-        c.detector.shot_noise = false;
-        c.detector.read_noise = false;
-        c.detector.digitise = false;
-        c.detector.dark_e_per_s = 0.0;
+        let c = signal_only(n);
         let star: Vec<f64> = (0..n * n).map(|i| (i % 7) as f64 * 3.0).collect();
         let img = expose(&c, &star, &vec![1.0; n * n], 0);
         let tot: f64 = img.adu.iter().map(|v| *v as f64 * 3.0).sum();
@@ -323,11 +329,7 @@ mod tests {
         // the full well); linearize with the same β gives N back to 1e-6 e⁻, with a 5 % wrong β̂ the
         // residual is 5 % of the bend (≈ 0.1 % at 1e5 e⁻)
         let n = 32;
-        let mut c = cfg(n);
-        c.detector.shot_noise = false;
-        c.detector.read_noise = false;
-        c.detector.digitise = false;
-        c.detector.dark_e_per_s = 0.0;
+        let mut c = signal_only(n);
         c.detector.nonlinearity_per_e = 2e-7;
         let star: Vec<f64> = (0..n * n)
             .map(|i| i as f64 / (n * n) as f64 * 1.5e5)
