@@ -85,6 +85,18 @@ fn bad_values_are_named_errors_and_write_nothing() {
             vec!["--set", "detector.cosmic_ray_rate_per_cm2_s=-1"],
             "detector.cosmic_ray_rate_per_cm2_s",
         ),
+        (
+            vec!["--set", "detector.persistence.rho=[1e-3, 2e-3]"],
+            "needs one density per time constant",
+        ),
+        (
+            vec!["--set", "detector.persistence.tau_s=[1, 10, 0, 1000, 10000]"],
+            "detector.persistence.tau_s",
+        ),
+        (
+            vec!["--set", "detector.persistence.lookback_s=1e6"],
+            "detector.persistence.lookback_s",
+        ),
     ] {
         let out = jsim()
             .arg("simulate")

@@ -222,3 +222,73 @@ fn bad_sequences_are_named_and_write_nothing() {
     assert!(!out.exists());
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn persistence_along_a_sequence_is_the_same_straight_or_sharded() {
+    // each exposure's persistence is what the earlier exposures' charge releases, that charge remade from
+    // the plan and the field where this process did not make it: two shards (each missing the other's
+    // exposures) give the table a straight run gives — with every star filling traps (the default
+    // threshold: a straight run keeps each exposure's own charge) and with the bright ones only (a higher
+    // threshold: a remake of those). The first exposure has nothing before it; the later ones collect what
+    // the earlier ones left.
+    let dir = temp("persistence");
+    let spec = spec(&dir);
+    let off = dir.join("off");
+    let o = run(&off, &spec, &[]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let without = table(&off.join("catalogue.fits"));
+    let rows = |t: &Vec<Vec<f64>>, e: f64| -> Vec<Vec<f64>> {
+        t.iter()
+            .map(|c| {
+                c.iter()
+                    .zip(&t[0])
+                    .filter(|(_, x)| **x == e)
+                    .map(|(v, _)| *v)
+                    .collect()
+            })
+            .collect()
+    };
+    for (name, threshold, bright_file) in [("all", "200.0", false), ("bright", "20000.0", true)] {
+        let set = format!("detector.persistence.threshold_e={threshold}");
+        let args = [
+            "--set",
+            "detector.persistence.enabled=true",
+            "--set",
+            set.as_str(),
+        ];
+        let out = dir.join(format!("{name}-straight"));
+        let o = run(&out, &spec, &args);
+        assert!(o.status.success(), "{}", stderr(&o));
+        // a straight run remakes nothing when it keeps its own charge; the bright stars' remakes else
+        assert_eq!(
+            stderr(&o).contains("the bright light of 3 exposures remade"),
+            bright_file,
+            "{name}: {}",
+            stderr(&o)
+        );
+        assert_eq!(out.join("field_bright.csv").exists(), bright_file, "{name}");
+        let with = table(&out.join("catalogue.fits"));
+        let sharded = dir.join(format!("{name}-sharded"));
+        for s in ["0/2", "1/2"] {
+            let mut a = args.to_vec();
+            a.extend(["--shard", s]);
+            let o = run(&sharded, &spec, &a);
+            assert!(o.status.success(), "{}", stderr(&o));
+            assert!(stderr(&o).contains("remade"), "{name} {s}: {}", stderr(&o));
+        }
+        assert_eq!(table(&sharded.join("catalogue.fits")), with, "{name}");
+        assert_eq!(
+            rows(&with, 0.0),
+            rows(&without, 0.0),
+            "{name}: exposure 0 has no past"
+        );
+        for e in 1..4 {
+            assert_ne!(
+                rows(&with, e as f64),
+                rows(&without, e as f64),
+                "{name}: exposure {e}"
+            );
+        }
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -3,7 +3,7 @@
 The commands are read from the Markdown itself (code blocks, and inline code that is a whole command), so a page
 that gains a command gains a test. Templates — a command with a placeholder such as `DIR`, `F.fits`, `…` or
 `$SLURM_ARRAY_TASK_ID` — and bare mentions (`jsim analyze`) are not commands and are left out; optional parts in
-brackets are dropped. They run in one scratch directory laid out like the repository (its catalogues, configs,
+brackets are dropped. They run in one scratch directory laid out like the repository (its catalogues, configs, sequence files,
 sweep files and Python scripts), producers before consumers, each one exactly as written except for the
 reductions below, which make the whole page set run in a few minutes:
 
@@ -60,7 +60,7 @@ PLACEHOLDER = re.compile(r"(…|<|\$|^[A-Z]{1,4}(\.[a-z]+)?$|=[A-Z]{1,4}$|^(DIR|
 # producers before consumers; within a rank, the pages' order
 RANK = {"config": 0, "psf": 1, "ace": 1, "predict": 1, "simulate": 2, "crowded_image.py": 3, "crowded": 3,
         "experiment": 4, "bench": 4, "sequence": 4, "analyze": 5, "photutils_catalogue.py": 6, "focal_plane_image.py": 6,
-        "crowded_photutils.py": 6, "simulate_reference.py": 6, "score": 7, "sweep": 8, "merge": 9, "report": 10}
+        "crowded_photutils.py": 6, "simulate_reference.py": 6, "persistence_cost.py": 6, "score": 7, "sweep": 8, "merge": 9, "report": 10}
 
 
 def pages():
@@ -195,7 +195,7 @@ def scratch(tmp_path_factory):
     """A directory laid out like the repository: catalogues and configs as they are, the sweep files reduced,
     the Python scripts linked."""
     d = tmp_path_factory.mktemp("docs")
-    for sub in ["catalogues", "configs"]:
+    for sub in ["catalogues", "configs", "sequences"]:
         shutil.copytree(os.path.join(REPO, "engine", sub), d / "engine" / sub)
     os.makedirs(d / "engine" / "sweeps")
     for f in glob.glob(os.path.join(REPO, "engine", "sweeps", "*.toml")):

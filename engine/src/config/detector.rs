@@ -1,6 +1,6 @@
 //! Configuration of the detector and its electronics (`[detector]`): exposure, dark, read noise and how an
 //! image is formed from reads, gain and ADC, flats, intra-pixel response, and the switches of the detector
-//! effects (cosmic rays, inter-pixel capacitance, nonlinearity).
+//! effects (cosmic rays, inter-pixel capacitance, nonlinearity, persistence).
 
 use serde::{Deserialize, Serialize};
 use std::path::PathBuf;
@@ -63,6 +63,38 @@ pub struct Detector {
     /// Relative error of the linearity calibration: the correction the pipeline applies (the `NLCORR`
     /// header) is β (1 + this) — a choice of 5 %.
     pub nonlinearity_calibration_error: f64,
+    /// The detector's memory of bright light (`detector::persistence`), off by default.
+    pub persistence: Persistence,
+}
+
+/// Persistence (`[detector.persistence]`): trap populations after Tulloch et al. (2019) with
+/// JASMINE-imagesim's parameters; it acts along a sequence (`jsim sequence`), where each exposure
+/// collects what the traps filled by the earlier ones release.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Persistence {
+    pub enabled: bool,
+    /// Time constants of the trap populations, s.
+    pub tau_s: Vec<f64>,
+    /// Their densities: the fraction of a pixel's charge each holds at equilibrium.
+    pub rho: Vec<f64>,
+    /// Pixels whose collected star charge is below this fill no traps, e⁻ (a speed knob: such a pixel
+    /// releases ≈ 7 × 10⁻⁴ of it into the next exposure, 0.14 e⁻ at the default).
+    pub threshold_e: f64,
+    /// Exposures that ended more than this before an exposure starts leave nothing in it, s (a speed knob).
+    pub lookback_s: f64,
+}
+
+impl Default for Persistence {
+    fn default() -> Self {
+        Self {
+            enabled: false,
+            tau_s: vec![1.0, 10.0, 100.0, 1.0e3, 1.0e4],
+            rho: vec![1.0e-3, 1.5e-3, 1.5e-3, 2.0e-3, 3.0e-3],
+            threshold_e: 200.0,
+            lookback_s: 600.0,
+        }
+    }
 }
 
 impl Default for Detector {
@@ -88,6 +120,7 @@ impl Default for Detector {
             ipc_alpha_diagonal: 0.0,
             nonlinearity_per_e: 0.0,
             nonlinearity_calibration_error: 0.05,
+            persistence: Persistence::default(),
         }
     }
 }

@@ -10,7 +10,7 @@ mod detector;
 mod sky;
 mod text;
 mod validate;
-pub use detector::{Detector, IntraPixel, Sampling, noise_floor_e2};
+pub use detector::{Detector, IntraPixel, Persistence, Sampling, noise_floor_e2};
 pub use sky::{Bulge, FocalPlaneLayout, Layout, Observation, SipTerm, Sky};
 pub use validate::MAX_ACE_SIGMA_MAS;
 

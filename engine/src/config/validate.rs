@@ -356,6 +356,47 @@ impl Config {
                 "must be in -1 … 1",
             ));
         }
+        let p = &d.persistence;
+        if p.tau_s.len() != p.rho.len() || p.tau_s.is_empty() || p.tau_s.len() > 16 {
+            return Err(invalid(
+                "detector.persistence.rho",
+                p.rho.len() as f64,
+                &format!(
+                    "needs one density per time constant (tau_s has {}), 1 … 16 trap populations",
+                    p.tau_s.len()
+                ),
+            ));
+        }
+        for tau in &p.tau_s {
+            check_pos("detector.persistence.tau_s", *tau)?;
+            if *tau > 1.0e7 {
+                return Err(invalid(
+                    "detector.persistence.tau_s",
+                    *tau,
+                    "must be ≤ 1e7 s",
+                ));
+            }
+        }
+        for rho in &p.rho {
+            check_nonneg("detector.persistence.rho", *rho)?;
+        }
+        let rho_sum: f64 = p.rho.iter().sum();
+        if rho_sum > 0.1 {
+            return Err(invalid(
+                "detector.persistence.rho",
+                rho_sum,
+                "the densities must sum to ≤ 0.1 (a tenth of the charge trapped)",
+            ));
+        }
+        check_nonneg("detector.persistence.threshold_e", p.threshold_e)?;
+        check_nonneg("detector.persistence.lookback_s", p.lookback_s)?;
+        if p.lookback_s > 86_400.0 {
+            return Err(invalid(
+                "detector.persistence.lookback_s",
+                p.lookback_s,
+                "must be ≤ 86400 s (a day)",
+            ));
+        }
         if d.absorber_thickness_um <= 0.0 {
             return Err(invalid(
                 "detector.absorber_thickness_um",

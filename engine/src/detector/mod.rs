@@ -5,6 +5,8 @@
 //!    reset: later rows integrate up to one frame sweep longer) — only the photosensitive region sees
 //!    light; the border of `(detector_px − photosensitive_px)/2` pixels holds no signal and is read for
 //!    noise only;
+//!    plus the charge traps release from earlier exposures' bright light ([`persistence`], along a
+//!    sequence; not flat-fielded: it is released in the pixel itself);
 //! 3. Poisson shot noise on the total, plus the charge of cosmic rays ([`cosmic_rays`], off by default);
 //!    charge clipped at the full well (flagged);
 //! 4. inter-pixel capacitance ([`ipc`], off by default): each pixel's node sees a fraction of its
@@ -19,6 +21,7 @@
 
 pub mod cosmic_rays;
 pub mod ipc;
+pub mod persistence;
 
 use crate::config::Config;
 use crate::readout::ReadoutTiming;
@@ -112,12 +115,14 @@ pub fn photosensitive(cfg: &Config, x: usize, y: usize) -> bool {
     x >= b && y >= b && x < n - b && y < n - b
 }
 
-/// Turn noise-free star electrons into a detector image. `image_index` selects the noise streams.
+/// Turn noise-free star electrons into a detector image. `image_index` selects the noise streams;
+/// `released_e` is the persistence each pixel collects (e⁻, row-major), if any.
 pub fn expose(
     cfg: &Config,
     timing: &ReadoutTiming,
     star_e: &[f64],
     flat: &[f32],
+    released_e: Option<&[f32]>,
     image_index: u64,
 ) -> DetectorImage {
     let n = cfg.instrument.detector_px;
@@ -142,6 +147,7 @@ pub fn expose(
                 let mean_e = if photosensitive(cfg, x, y) {
                     star_e[i].max(0.0) * flat[i] as f64
                         + d.dark_e_per_s * timing.window_length_s(x, y)
+                        + released_e.map_or(0.0, |r| r[i].max(0.0) as f64)
                 } else {
                     flags |= dq::BORDER;
                     0.0
@@ -230,7 +236,7 @@ mod tests {
     }
 
     fn expose(c: &Config, star_e: &[f64], flat: &[f32], index: u64) -> DetectorImage {
-        super::expose(c, &ReadoutTiming::new(c), star_e, flat, index)
+        super::expose(c, &ReadoutTiming::new(c), star_e, flat, None, index)
     }
 
     fn moments(img: &DetectorImage) -> (f64, f64) {

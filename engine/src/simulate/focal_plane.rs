@@ -93,10 +93,21 @@ impl FocalPlaneSimulator {
 
     /// Exposure `index` on every array.
     pub fn exposure(&self, index: usize) -> Result<FocalPlaneExposure, SimError> {
+        self.exposure_with(index, &[])
+    }
+
+    /// Exposure `index` on every array, array k with the persistence `released_e[k]` (none where the
+    /// slice is short): [`Simulator::exposure_with`].
+    pub fn exposure_with(
+        &self,
+        index: usize,
+        released_e: &[Vec<f32>],
+    ) -> Result<FocalPlaneExposure, SimError> {
         let arrays = self
             .arrays
             .iter()
-            .map(|a| a.exposure(index))
+            .enumerate()
+            .map(|(k, a)| a.exposure_with(index, released_e.get(k).map(Vec::as_slice)))
             .collect::<Result<Vec<_>, _>>()?;
         Ok(FocalPlaneExposure {
             index,

@@ -40,6 +40,8 @@ pub enum SimError {
          \"single\"; `jsim simulate` writes the quad's exposures)"
     )]
     NotSingleArray(&'static str),
+    #[error("a persistence map of {got} pixels for a {n} × {n} detector")]
+    PersistenceMap { got: usize, n: usize },
 }
 
 pub mod focal_plane;
@@ -592,6 +594,22 @@ impl Simulator {
 
     /// Simulate exposure `index` of the dataset.
     pub fn exposure(&self, index: usize) -> Result<Exposure, SimError> {
+        self.exposure_with(index, None)
+    }
+
+    /// Simulate exposure `index` with the persistence `released_e` (e⁻ per pixel, row-major: what the
+    /// traps filled by earlier exposures release into it, `detector::persistence`) added to its charge.
+    pub fn exposure_with(
+        &self,
+        index: usize,
+        released_e: Option<&[f32]>,
+    ) -> Result<Exposure, SimError> {
+        if let Some(r) = released_e {
+            let n = self.cfg.instrument.detector_px;
+            if r.len() != n * n {
+                return Err(SimError::PersistenceMap { got: r.len(), n });
+            }
+        }
         let jobs = self.jobs()?;
         let t0 = Instant::now();
         let (star_e, track) = self.integrate(index, &jobs)?;
@@ -601,6 +619,7 @@ impl Simulator {
             &self.timing,
             &star_e,
             &self.flat,
+            released_e,
             index as u64,
         );
         let t2 = Instant::now();
@@ -619,6 +638,22 @@ impl Simulator {
             },
             backend: self.backend_name(),
         })
+    }
+
+    /// The star charge exposure `index` collects in each pixel (noise-free electrons × the flat, before
+    /// dark and noise): what fills the traps of `detector::persistence`.
+    pub fn collected_star_e(&self, index: usize) -> Result<Vec<f64>, SimError> {
+        let (e, _) = self.integrate(index, &self.jobs()?)?;
+        Ok(self.collected(&e))
+    }
+
+    /// The charge noise-free star electrons `star_e` (an exposure's) leave in each pixel: × the flat.
+    pub fn collected(&self, star_e: &[f64]) -> Vec<f64> {
+        star_e
+            .iter()
+            .zip(&self.flat)
+            .map(|(v, f)| v * *f as f64)
+            .collect()
     }
 
     /// Truth rows for the jobs of an exposure: the stars in this array's truth (`Star::in_truth`).

@@ -39,6 +39,8 @@ pub enum BenchError {
     },
     #[error(transparent)]
     File(#[from] IoError),
+    #[error(transparent)]
+    Sequence(#[from] crate::studies::sequence::run::SequenceError),
 }
 
 /// One line of the benchmark.

@@ -4,6 +4,7 @@
 pub mod bench;
 pub mod bench_field;
 pub mod bench_forward;
+pub mod bench_persistence;
 pub mod crowded;
 pub mod experiment;
 pub mod predict;

@@ -14,7 +14,8 @@ pub struct BenchArgs {
     /// Parts to run (comma separated): methods, knobs, stars, epsf, forward (the telemetry forward model's
     /// node spacing against time), bulge (the Galactic-centre field's knobs and the focal-plane exposure
     /// against the number of stars), crowded (the crowded-field analysis against the number of stars and its
-    /// detection threshold); the last three are not in the default set: minutes.
+    /// detection threshold), persistence (its threshold and lookback against the exact setting, on a
+    /// two-stare sequence of the default field); the last four are not in the default set: minutes.
     #[arg(
         long,
         default_value = "methods,knobs,stars,epsf",
@@ -45,8 +46,15 @@ pub struct BenchArgs {
 }
 
 /// The parts `--parts` may name.
-pub const PARTS: [&str; 7] = [
-    "methods", "knobs", "stars", "epsf", "forward", "bulge", "crowded",
+pub const PARTS: [&str; 8] = [
+    "methods",
+    "knobs",
+    "stars",
+    "epsf",
+    "forward",
+    "bulge",
+    "crowded",
+    "persistence",
 ];
 
 pub fn bench(a: &BenchArgs) -> Result<()> {
@@ -126,6 +134,13 @@ pub fn bench(a: &BenchArgs) -> Result<()> {
             &cfg,
             &a.bulge_stars,
             &a.crowded_sigmas,
+        )?);
+        save(&rows)?;
+    }
+    if has("persistence") {
+        eprintln!("bench: persistence's threshold and lookback …");
+        rows.extend(engine::studies::bench_persistence::persistence_knobs(
+            &session, &cfg,
         )?);
         save(&rows)?;
     }

@@ -202,6 +202,8 @@ pub fn sequence(a: &SequenceArgs) -> Result<()> {
         let scripts = sequence::slurm::emit(&plan, &cfg, &dir, &job).map_err(anyhow::Error::msg)?;
         // the field drawn once here, so that the tasks only read it
         run::write_field(&plan, &cfg, &a.out)?;
+        outputs.add(&a.out.join(sequence::persistence::BRIGHT_FIELD_NAME));
+        sequence::persistence::Memory::new(&cfg, &a.out)?;
         for p in &scripts {
             outputs.add(p);
         }
@@ -219,6 +221,11 @@ pub fn sequence(a: &SequenceArgs) -> Result<()> {
         outputs.add(&field);
         run::write_field(&plan, &cfg, &a.out)?;
     }
+    let bright = a.out.join(sequence::persistence::BRIGHT_FIELD_NAME);
+    if !bright.exists() {
+        outputs.add(&bright);
+    }
+    let mut memory = sequence::persistence::Memory::new(&cfg, &a.out)?;
     // from here on, what is written is kept: each exposure whole, so a rerun resumes
     outputs.keep();
     let session = engine::session::Session::new();
@@ -229,7 +236,7 @@ pub fn sequence(a: &SequenceArgs) -> Result<()> {
     let (mut sim_s, mut an_s, mut done) = (0.0, 0.0, 0usize);
     for (k, e) in mine.iter().enumerate() {
         crate::outputs::interrupted()?;
-        let r = run::run_exposure(&session, &plan, &cfg, &field, e, &cm, &a.out)?;
+        let r = run::run_exposure(&session, &plan, &cfg, &field, e, &cm, &mut memory, &a.out)?;
         if r.skipped {
             eprintln!(
                 "exposure {} ({}/{}): already written",
@@ -258,6 +265,12 @@ pub fn sequence(a: &SequenceArgs) -> Result<()> {
             sim_s / done as f64,
             an_s / done as f64
         );
+        if memory.made > 0 {
+            eprintln!(
+                "persistence: the bright light of {} exposures remade (in the simulating time)",
+                memory.made
+            );
+        }
     }
     let all_there = plan.exposures[..n_run]
         .iter()

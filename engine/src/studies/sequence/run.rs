@@ -108,7 +108,8 @@ pub struct ExposureRun {
 }
 
 /// Simulate and analyse exposure `e` (unless its catalogue exists), reading the field at `field`, with the
-/// countermeasure of `cm` (its first).
+/// countermeasure of `cm` (its first) and the persistence `memory` holds of the exposures before it.
+#[allow(clippy::too_many_arguments)]
 pub fn run_exposure(
     session: &crate::session::Session,
     plan: &Plan,
@@ -116,6 +117,7 @@ pub fn run_exposure(
     field: &Path,
     e: &PlannedExposure,
     cm: &Countermeasures,
+    memory: &mut super::persistence::Memory,
     dir: &Path,
 ) -> Result<ExposureRun, SequenceError> {
     let path = exposure_path(dir, e.index);
@@ -132,8 +134,26 @@ pub fn run_exposure(
     c.scene.kind = SceneKind::Catalogue;
     c.scene.catalogue = Some(field.to_path_buf());
     let t = Instant::now();
+    let released = memory.released_e(session, plan, base, e)?;
     let fps = session.new_focal_plane(&c)?;
-    let exp = fps.exposure(0)?;
+    let exp = fps.exposure_with(0, &released)?;
+    if memory.remembers_own() {
+        let p = &base.detector.persistence;
+        let maps = exp
+            .arrays
+            .iter()
+            .zip(&fps.arrays)
+            .map(|(x, a)| {
+                let charge = a.collected(&x.star_e);
+                crate::detector::persistence::ChargeMap::bright(
+                    &charge,
+                    p,
+                    base.detector.full_well_e,
+                )
+            })
+            .collect();
+        memory.remember(e.index, maps);
+    }
     let simulate_s = t.elapsed().as_secs_f64();
     let t = Instant::now();
     let (lo, hi) = (base.scene.bulge.hw_min, base.scene.bulge.hw_max);
