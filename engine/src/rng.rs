@@ -31,6 +31,8 @@ pub enum Stream {
     Sequence = 14,
     /// Each image's cosmic-ray hits.
     CosmicRays = 15,
+    /// The synthetic sequences of the astrometric solution's benchmark.
+    Solution = 16,
     Test = 99,
 }
 

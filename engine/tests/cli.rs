@@ -90,7 +90,10 @@ fn bad_values_are_named_errors_and_write_nothing() {
             "needs one density per time constant",
         ),
         (
-            vec!["--set", "detector.persistence.tau_s=[1, 10, 0, 1000, 10000]"],
+            vec![
+                "--set",
+                "detector.persistence.tau_s=[1, 10, 0, 1000, 10000]",
+            ],
             "detector.persistence.tau_s",
         ),
         (

@@ -54,7 +54,7 @@ REDUCED = {
 SHORTCUT = {"fidelity.images": "--images", "fidelity.backend": "--backend"}
 TAKES_SET = {"psf", "ace", "simulate", "experiment", "crowded", "bench", "predict", "sequence"}
 BENCH = {"--quick": None, "--stars": "50,100", "--bulge-stars": "50,100", "--ref-stars": "5",
-         "--epsf-images": "1"}
+         "--epsf-images": "1", "--solution-sources": "300"}
 # a placeholder word (`DIR`, `F.fits`, `fidelity.images=K`, `$VAR`, `…`), or an option in a list (`--a, --b`)
 PLACEHOLDER = re.compile(r"(…|<|\$|^[A-Z]{1,4}(\.[a-z]+)?$|=[A-Z]{1,4}$|^(DIR|PATH)$|NNN|^/$|^--[a-z-]+,$)")
 # producers before consumers; within a rank, the pages' order

@@ -11,6 +11,7 @@ pub mod image;
 pub mod pipeline;
 pub mod report;
 pub mod response;
+pub mod solution;
 
 pub use image::AnalysisImage;
 pub use pipeline::{Analysis, ImageAnalysis, Options, Supplied, analyse_image};

@@ -41,6 +41,8 @@ pub enum BenchError {
     File(#[from] IoError),
     #[error(transparent)]
     Sequence(#[from] crate::studies::sequence::run::SequenceError),
+    #[error(transparent)]
+    Solution(#[from] crate::analysis::solution::SolutionError),
 }
 
 /// One line of the benchmark.

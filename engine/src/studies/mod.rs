@@ -5,6 +5,7 @@ pub mod bench;
 pub mod bench_field;
 pub mod bench_forward;
 pub mod bench_persistence;
+pub mod bench_solution;
 pub mod crowded;
 pub mod experiment;
 pub mod predict;

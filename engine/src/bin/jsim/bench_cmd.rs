@@ -15,7 +15,8 @@ pub struct BenchArgs {
     /// node spacing against time), bulge (the Galactic-centre field's knobs and the focal-plane exposure
     /// against the number of stars), crowded (the crowded-field analysis against the number of stars and its
     /// detection threshold), persistence (its threshold and lookback against the exact setting, on a
-    /// two-stare sequence of the default field); the last four are not in the default set: minutes.
+    /// two-stare sequence of the default field), solution (the astrometric solution of synthetic sequences of
+    /// --solution-sources × 100 exposures); the last five are not in the default set: minutes.
     #[arg(
         long,
         default_value = "methods,knobs,stars,epsf",
@@ -34,6 +35,9 @@ pub struct BenchArgs {
     /// Star counts of the focal-plane rows (part bulge).
     #[arg(long, default_value = "1000,10000,100000", value_delimiter = ',')]
     pub bulge_stars: Vec<usize>,
+    /// Source counts of the astrometric-solution rows (part solution), each with 100 exposures.
+    #[arg(long, default_value = "1000,10000,100000", value_delimiter = ',')]
+    pub solution_sources: Vec<usize>,
     /// Detection thresholds of the crowded-analysis rows (part crowded), on the largest field.
     #[arg(long, default_value = "3,5,10", value_delimiter = ',')]
     pub crowded_sigmas: Vec<f64>,
@@ -46,7 +50,7 @@ pub struct BenchArgs {
 }
 
 /// The parts `--parts` may name.
-pub const PARTS: [&str; 8] = [
+pub const PARTS: [&str; 9] = [
     "methods",
     "knobs",
     "stars",
@@ -55,6 +59,7 @@ pub const PARTS: [&str; 8] = [
     "bulge",
     "crowded",
     "persistence",
+    "solution",
 ];
 
 pub fn bench(a: &BenchArgs) -> Result<()> {
@@ -141,6 +146,14 @@ pub fn bench(a: &BenchArgs) -> Result<()> {
         eprintln!("bench: persistence's threshold and lookback …");
         rows.extend(engine::studies::bench_persistence::persistence_knobs(
             &session, &cfg,
+        )?);
+        save(&rows)?;
+    }
+    if has("solution") {
+        eprintln!("bench: the astrometric solution against its size …");
+        rows.extend(engine::studies::bench_solution::solution_scaling(
+            &a.solution_sources,
+            cfg.seed,
         )?);
         save(&rows)?;
     }

@@ -1,0 +1,229 @@
+//! The astrometric solution (issue #28's core): many exposures' measured positions of the same sources turned
+//! into each source's astrometric parameters and each exposure's attitude, anchored to a reference
+//! catalogue — from instrument products only (the analysis layer: it never sees the truth).
+//!
+//! **The model.** Everything lives on one tangent plane of the sequence, in mas. A source's place at an
+//! exposure's epoch t (years from the reference epoch) is
+//!
+//! ```text
+//! s = (ξ₀ + μ_ξ t, η₀ + μ_η t) + ϖ (P_ξ(t), P_η(t))
+//! ```
+//!
+//! with P the exposure's parallax factors (the displacement per mas of parallax, from the observer's
+//! barycentric position). The exposure sees it through its attitude, a similarity transform about its centre
+//! c — offset a, rotation θ and scale 1 + k, written exactly linearly as `o = c + A (s − c) + a` with
+//! `A = [[p, −q], [q, p]]`, p = (1 + k) cos θ, q = (1 + k) sin θ. Distortion and each array's own offsets are
+//! assumed already removed from the measured positions here (the design WCS); solving for them is the next
+//! step of the issue.
+//!
+//! **The solution** is block-iterative, like Gaia's AGIS: with the attitudes fixed every source is a small
+//! weighted least-squares fit of its own observations (plus its reference-catalogue entry as a prior, which
+//! anchors the frame); with the sources fixed every exposure's (p, q, a) is one too; the two alternate until
+//! nothing moves by more than the tolerance. Then observations beyond `clip_sigma` are rejected and it runs
+//! again. A source's covariance is its block's, the attitudes held fixed (with hundreds of sources per
+//! exposure the attitude's share is small; the χ² test in `tests` checks the pulls).
+//!
+//! **The frame.** A uniform shift, rotation or scale of every source — and for a sequence over time, a
+//! uniform proper motion or parallax — is absorbed by the attitudes: only the reference catalogue fixes
+//! them, so with several epochs its entries must carry proper motions and parallaxes (a survey such as Gaia's
+//! does), and at least two sources must be anchored.
+
+mod solve;
+
+pub use solve::solve;
+
+/// One measured position of a source in one exposure, on the tangent plane (mas), with its 1σ error per axis.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Observation {
+    pub exposure: usize,
+    pub source: usize,
+    pub xi_mas: f64,
+    pub eta_mas: f64,
+    pub sigma_mas: f64,
+}
+
+/// What the solution knows of an exposure (never its attitude error).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ExposureGeometry {
+    /// Its epoch, years from the reference epoch.
+    pub t_yr: f64,
+    /// (P_ξ, P_η): the displacement of a source on the plane per mas of parallax at this epoch.
+    pub parallax_factor: [f64; 2],
+    /// The point its attitude turns and scales about (its pointing), mas.
+    pub centre_mas: [f64; 2],
+}
+
+/// A reference-catalogue entry of a source: its parameters at the reference epoch with their 1σ errors
+/// ([`Params`]' order: ξ₀, η₀ mas; μ_ξ, μ_η mas/yr; ϖ mas). An error of 0 or ∞ leaves that parameter free.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Reference {
+    pub source: usize,
+    pub params: Params,
+    pub sigma: Params,
+}
+
+/// A source's astrometric parameters: [ξ₀, η₀, μ_ξ, μ_η, ϖ] (mas, mas, mas/yr, mas/yr, mas).
+pub type Params = [f64; 5];
+
+/// Which of a source's parameters are solved.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SourceModel {
+    /// Position only (one epoch, or a short sequence): ξ₀, η₀.
+    Position,
+    /// Position, proper motion and parallax.
+    Full,
+}
+
+impl SourceModel {
+    /// How many parameters a source has.
+    pub fn len(self) -> usize {
+        match self {
+            SourceModel::Position => 2,
+            SourceModel::Full => 5,
+        }
+    }
+
+    /// Never empty (for clippy's `len` rule).
+    pub fn is_empty(self) -> bool {
+        false
+    }
+}
+
+/// The solution's knobs.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Options {
+    pub model: SourceModel,
+    /// Alternations of the two blocks at most (per rejection round).
+    pub max_iterations: usize,
+    /// Stop when no source and no exposure's offset moves by more than this, mas.
+    pub tolerance_mas: f64,
+    /// Reject an observation whose normalised residual exceeds this (per axis, in its σ); 0 keeps all.
+    pub clip_sigma: f64,
+    /// Rounds of rejection at most.
+    pub max_rejection_rounds: usize,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Self {
+            model: SourceModel::Full,
+            max_iterations: 500,
+            tolerance_mas: 1e-7,
+            clip_sigma: 5.0,
+            max_rejection_rounds: 5,
+        }
+    }
+}
+
+/// An exposure's solved attitude: `o = c + A (s − c) + a`, A = [[p, −q], [q, p]].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Attitude {
+    pub p: f64,
+    pub q: f64,
+    pub offset_mas: [f64; 2],
+}
+
+impl Attitude {
+    pub const IDENTITY: Attitude = Attitude {
+        p: 1.0,
+        q: 0.0,
+        offset_mas: [0.0, 0.0],
+    };
+
+    /// The rotation, rad.
+    pub fn roll_rad(&self) -> f64 {
+        self.q.atan2(self.p)
+    }
+
+    /// The scale error k (1 + k = |A|^½).
+    pub fn scale_error(&self) -> f64 {
+        self.p.hypot(self.q) - 1.0
+    }
+
+    /// Where this exposure sees a source at `s` (mas), about centre `c`.
+    pub fn apply(&self, c: [f64; 2], s: [f64; 2]) -> [f64; 2] {
+        let (dx, dy) = (s[0] - c[0], s[1] - c[1]);
+        [
+            c[0] + self.p * dx - self.q * dy + self.offset_mas[0],
+            c[1] + self.q * dx + self.p * dy + self.offset_mas[1],
+        ]
+    }
+
+    /// The source position an observation `o` at centre `c` means (the inverse of [`Attitude::apply`]).
+    pub fn invert(&self, c: [f64; 2], o: [f64; 2]) -> [f64; 2] {
+        let (dx, dy) = (
+            o[0] - c[0] - self.offset_mas[0],
+            o[1] - c[1] - self.offset_mas[1],
+        );
+        let det = self.p * self.p + self.q * self.q;
+        [
+            c[0] + (self.p * dx + self.q * dy) / det,
+            c[1] + (-self.q * dx + self.p * dy) / det,
+        ]
+    }
+}
+
+/// A solved source.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SolvedSource {
+    /// Its parameters (those the model does not solve are 0, or its reference's).
+    pub params: Params,
+    /// Their 1σ errors (the block's covariance; 0 where not solved).
+    pub sigma: Params,
+    /// Observations used (after rejection).
+    pub observations: usize,
+    /// Σ of its normalised squared residuals.
+    pub chi2: f64,
+}
+
+/// The solution.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Solution {
+    pub sources: Vec<SolvedSource>,
+    pub attitudes: Vec<Attitude>,
+    /// Block alternations over all rounds.
+    pub iterations: usize,
+    /// The last round stopped at the tolerance (not at `max_iterations`).
+    pub converged: bool,
+    /// Observations rejected as outliers.
+    pub rejected: usize,
+    /// χ² of the observations kept over its degrees of freedom.
+    pub chi2_per_dof: f64,
+}
+
+/// A solution that cannot be made.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum SolutionError {
+    #[error("observation {index}: {field} is {value} (must be finite{extra})")]
+    NotFinite {
+        index: usize,
+        field: &'static str,
+        value: f64,
+        extra: &'static str,
+    },
+    #[error("observation {index}: {what} {value} is out of range (0 … {limit})")]
+    OutOfRange {
+        index: usize,
+        what: &'static str,
+        value: usize,
+        limit: usize,
+    },
+    #[error("source {source_id} is observed twice in exposure {exposure} (duplicate ids)")]
+    Duplicate { source_id: usize, exposure: usize },
+    #[error(
+        "exposure {0} shares fewer than 2 sources with the rest of the sequence and the reference catalogue: its \
+         attitude is undetermined (no overlap)"
+    )]
+    NoOverlap(usize),
+    #[error("{0} reference sources anchor the frame: at least 2 are needed")]
+    TooFewReferences(usize),
+    #[error(
+        "the sequence spans {span_yr:.3} yr: proper motions and parallaxes are unconstrained (degenerate); solve \
+         positions only (SourceModel::Position) or observe over more epochs"
+    )]
+    Degenerate { span_yr: f64 },
+    #[error(
+        "the reference catalogue must carry proper motions and parallaxes (with errors) to anchor {0}"
+    )]
+    FrameUnanchored(&'static str),
+}

@@ -1,0 +1,428 @@
+//! The block-iterative solution: validation, the two blocks, rejection (see the module's documentation).
+
+use super::{
+    Attitude, ExposureGeometry, Observation, Options, Params, Reference, Solution, SolutionError,
+    SolvedSource, SourceModel,
+};
+use crate::numerics::linalg::weighted_lstsq;
+use rayon::prelude::*;
+
+/// Solve `n_sources` sources and every exposure's attitude from `obs`, anchored by `refs`.
+pub fn solve(
+    obs: &[Observation],
+    exposures: &[ExposureGeometry],
+    refs: &[Reference],
+    n_sources: usize,
+    opt: &Options,
+) -> Result<Solution, SolutionError> {
+    validate(obs, exposures, refs, n_sources, opt)?;
+    let mut by_source = vec![Vec::new(); n_sources];
+    let mut by_exposure = vec![Vec::new(); exposures.len()];
+    for (i, o) in obs.iter().enumerate() {
+        by_source[o.source].push(i);
+        by_exposure[o.exposure].push(i);
+    }
+    let mut prior: Vec<Option<&Reference>> = vec![None; n_sources];
+    for r in refs {
+        prior[r.source] = Some(r);
+    }
+    let mut active = vec![true; obs.len()];
+    // start: every exposure's attitude from the reference sources alone (the frame right from the start)
+    let ref_params: Vec<Option<Params>> = prior.iter().map(|r| r.map(|r| r.params)).collect();
+    let mut attitudes: Vec<Attitude> = (0..exposures.len())
+        .map(|e| {
+            attitude_block(obs, &by_exposure[e], &exposures[e], &ref_params, &active)
+                .unwrap_or(Attitude::IDENTITY)
+        })
+        .collect();
+    let mut sources: Vec<SolvedSource> = vec![unsolved(); n_sources];
+    let (mut iterations, mut rejected) = (0, 0);
+    let mut converged = true;
+    for _round in 0..opt.max_rejection_rounds.max(1) {
+        let mut this_round = false;
+        for _ in 0..opt.max_iterations.max(1) {
+            iterations += 1;
+            let new_sources: Vec<SolvedSource> = (0..n_sources)
+                .into_par_iter()
+                .map(|s| {
+                    source_block(
+                        obs,
+                        &by_source[s],
+                        exposures,
+                        &attitudes,
+                        prior[s],
+                        &active,
+                        opt.model,
+                    )
+                })
+                .collect();
+            let params: Vec<Option<Params>> = new_sources
+                .iter()
+                .map(|s| s.params[0].is_finite().then_some(s.params))
+                .collect();
+            let new_attitudes: Vec<Attitude> = (0..exposures.len())
+                .into_par_iter()
+                .map(|e| {
+                    attitude_block(obs, &by_exposure[e], &exposures[e], &params, &active)
+                        .unwrap_or(attitudes[e])
+                })
+                .collect();
+            let moved_sources = sources
+                .iter()
+                .zip(&new_sources)
+                .map(|(a, b)| {
+                    (a.params[0] - b.params[0])
+                        .abs()
+                        .max((a.params[1] - b.params[1]).abs())
+                })
+                .fold(
+                    0.0f64,
+                    |m, v| if v.is_nan() { f64::INFINITY } else { m.max(v) },
+                );
+            let moved_attitudes = attitudes
+                .iter()
+                .zip(&new_attitudes)
+                .map(|(a, b)| {
+                    // how far the change moves the exposure's farthest-reaching point: its offset, and the
+                    // turn and scale over 10⁶ mas (a focal plane's reach)
+                    let dpq = (a.p - b.p).abs() + (a.q - b.q).abs();
+                    (a.offset_mas[0] - b.offset_mas[0]).abs()
+                        + (a.offset_mas[1] - b.offset_mas[1]).abs()
+                        + dpq * 1e6
+                })
+                .fold(0.0f64, f64::max);
+            sources = new_sources;
+            attitudes = new_attitudes;
+            if moved_sources.max(moved_attitudes) <= opt.tolerance_mas {
+                this_round = true;
+                break;
+            }
+        }
+        converged = this_round;
+        if opt.clip_sigma <= 0.0 {
+            break;
+        }
+        // each source's worst observation beyond the clip goes (one per round: an outlier drags its source,
+        // and with it the residuals of the source's good observations); a rejected one that now fits returns
+        let mut worst: Vec<Option<(usize, f64)>> = vec![None; n_sources];
+        let mut changed = 0;
+        for (i, o) in obs.iter().enumerate() {
+            let Some((rx, ry)) = residual(
+                o,
+                &exposures[o.exposure],
+                &attitudes[o.exposure],
+                &sources[o.source],
+            ) else {
+                continue;
+            };
+            let z = rx.abs().max(ry.abs()) / o.sigma_mas;
+            if !active[i] {
+                if z <= opt.clip_sigma {
+                    active[i] = true;
+                    rejected -= 1;
+                    changed += 1;
+                }
+            } else if z > opt.clip_sigma && worst[o.source].is_none_or(|(_, w)| z > w) {
+                worst[o.source] = Some((i, z));
+            }
+        }
+        for (i, _) in worst.into_iter().flatten() {
+            active[i] = false;
+            rejected += 1;
+            changed += 1;
+        }
+        if changed == 0 {
+            break;
+        }
+    }
+    // χ² per source and overall
+    let mut chi2_total = 0.0;
+    let mut n_terms = 0usize;
+    for (i, o) in obs.iter().enumerate() {
+        if !active[i] {
+            continue;
+        }
+        if let Some((rx, ry)) = residual(
+            o,
+            &exposures[o.exposure],
+            &attitudes[o.exposure],
+            &sources[o.source],
+        ) {
+            let c = (rx * rx + ry * ry) / (o.sigma_mas * o.sigma_mas);
+            sources[o.source].chi2 += c;
+            chi2_total += c;
+            n_terms += 2;
+        }
+    }
+    let priors: usize = refs
+        .iter()
+        .map(|r| r.sigma.iter().filter(|s| anchors(**s)).count())
+        .sum();
+    let unknowns = n_sources * opt.model.len() + 4 * exposures.len();
+    let dof = (n_terms + priors).saturating_sub(unknowns).max(1);
+    Ok(Solution {
+        sources,
+        attitudes,
+        iterations,
+        converged,
+        rejected,
+        chi2_per_dof: chi2_total / dof as f64,
+    })
+}
+
+/// Does a reference error `sigma` constrain its parameter?
+fn anchors(sigma: f64) -> bool {
+    sigma > 0.0 && sigma.is_finite()
+}
+
+fn unsolved() -> SolvedSource {
+    SolvedSource {
+        params: [f64::NAN; 5],
+        sigma: [0.0; 5],
+        observations: 0,
+        chi2: 0.0,
+    }
+}
+
+/// Where a source with parameters `p` is at exposure `g`'s epoch.
+fn place(p: &Params, g: &ExposureGeometry) -> [f64; 2] {
+    [
+        p[0] + p[2] * g.t_yr + p[4] * g.parallax_factor[0],
+        p[1] + p[3] * g.t_yr + p[4] * g.parallax_factor[1],
+    ]
+}
+
+/// Observed minus modelled, mas (None for an unsolved source).
+fn residual(
+    o: &Observation,
+    g: &ExposureGeometry,
+    a: &Attitude,
+    s: &SolvedSource,
+) -> Option<(f64, f64)> {
+    if !s.params[0].is_finite() {
+        return None;
+    }
+    let m = a.apply(g.centre_mas, place(&s.params, g));
+    Some((o.xi_mas - m[0], o.eta_mas - m[1]))
+}
+
+/// One source's parameters from its observations (each turned back through its exposure's attitude) and its
+/// reference entry; a source whose full model is singular (too few epochs) gets its position only, with the
+/// reference's (or zero) motion.
+fn source_block(
+    obs: &[Observation],
+    mine: &[usize],
+    exposures: &[ExposureGeometry],
+    attitudes: &[Attitude],
+    prior: Option<&Reference>,
+    active: &[bool],
+    model: SourceModel,
+) -> SolvedSource {
+    let fit = |model: SourceModel, fixed: &Params| -> Option<SolvedSource> {
+        let n = model.len();
+        let (mut design, mut y, mut w) = (Vec::new(), Vec::new(), Vec::new());
+        let mut used = 0;
+        for &i in mine.iter().filter(|i| active[**i]) {
+            let o = &obs[i];
+            let g = &exposures[o.exposure];
+            let a = &attitudes[o.exposure];
+            let s = a.invert(g.centre_mas, [o.xi_mas, o.eta_mas]);
+            let weight = (a.p * a.p + a.q * a.q) / (o.sigma_mas * o.sigma_mas);
+            for axis in 0..2 {
+                let full = [
+                    if axis == 0 { 1.0 } else { 0.0 },
+                    if axis == 1 { 1.0 } else { 0.0 },
+                    if axis == 0 { g.t_yr } else { 0.0 },
+                    if axis == 1 { g.t_yr } else { 0.0 },
+                    g.parallax_factor[axis],
+                ];
+                // the parameters this model does not solve are moved to the left-hand side
+                let known: f64 = (n..5).map(|k| full[k] * fixed[k]).sum();
+                design.extend_from_slice(&full[..n]);
+                y.push(s[axis] - known);
+                w.push(weight);
+            }
+            used += 1;
+        }
+        if let Some(r) = prior {
+            for k in 0..n {
+                if anchors(r.sigma[k]) {
+                    let mut row = [0.0; 5];
+                    row[k] = 1.0;
+                    design.extend_from_slice(&row[..n]);
+                    y.push(r.params[k]);
+                    w.push(1.0 / (r.sigma[k] * r.sigma[k]));
+                }
+            }
+        }
+        let (beta, cov) = weighted_lstsq(&design, &y, &w, n)?;
+        let mut params = *fixed;
+        let mut sigma = [0.0; 5];
+        for k in 0..n {
+            params[k] = beta[k];
+            sigma[k] = cov[k * n + k].max(0.0).sqrt();
+        }
+        Some(SolvedSource {
+            params,
+            sigma,
+            observations: used,
+            chi2: 0.0,
+        })
+    };
+    let fixed = prior.map_or([0.0; 5], |r| {
+        let mut f = [0.0; 5];
+        f[2..].copy_from_slice(&r.params[2..]);
+        f
+    });
+    fit(model, &fixed)
+        .or_else(|| {
+            (model == SourceModel::Full)
+                .then(|| fit(SourceModel::Position, &fixed))
+                .flatten()
+        })
+        .unwrap_or_else(unsolved)
+}
+
+/// One exposure's attitude from the sources it sees (those with parameters), by linear least squares in
+/// (p, q, a_ξ, a_η); the lever arms are scaled to order 1 for the conditioning.
+fn attitude_block(
+    obs: &[Observation],
+    mine: &[usize],
+    g: &ExposureGeometry,
+    params: &[Option<Params>],
+    active: &[bool],
+) -> Option<Attitude> {
+    let mut pairs = Vec::with_capacity(mine.len());
+    for &i in mine.iter().filter(|i| active[**i]) {
+        let o = &obs[i];
+        if let Some(p) = &params[o.source] {
+            let s = place(p, g);
+            pairs.push((
+                [s[0] - g.centre_mas[0], s[1] - g.centre_mas[1]],
+                [o.xi_mas - g.centre_mas[0], o.eta_mas - g.centre_mas[1]],
+                1.0 / (o.sigma_mas * o.sigma_mas),
+            ));
+        }
+    }
+    if pairs.len() < 2 {
+        return None;
+    }
+    let scale = pairs
+        .iter()
+        .map(|(d, _, _)| d[0].abs().max(d[1].abs()))
+        .fold(1.0f64, f64::max);
+    let (mut design, mut y, mut w) = (Vec::new(), Vec::new(), Vec::new());
+    for (d, o, weight) in &pairs {
+        let (dx, dy) = (d[0] / scale, d[1] / scale);
+        design.extend_from_slice(&[dx, -dy, 1.0, 0.0]);
+        y.push(o[0]);
+        w.push(*weight);
+        design.extend_from_slice(&[dy, dx, 0.0, 1.0]);
+        y.push(o[1]);
+        w.push(*weight);
+    }
+    let (beta, _) = weighted_lstsq(&design, &y, &w, 4)?;
+    Some(Attitude {
+        p: beta[0] / scale,
+        q: beta[1] / scale,
+        offset_mas: [beta[2], beta[3]],
+    })
+}
+
+/// Every input checked before anything is solved.
+fn validate(
+    obs: &[Observation],
+    exposures: &[ExposureGeometry],
+    refs: &[Reference],
+    n_sources: usize,
+    opt: &Options,
+) -> Result<(), SolutionError> {
+    let mut seen = std::collections::HashSet::with_capacity(obs.len());
+    let mut epochs_of = vec![0usize; n_sources];
+    for (index, o) in obs.iter().enumerate() {
+        for (field, value) in [("xi_mas", o.xi_mas), ("eta_mas", o.eta_mas)] {
+            if !value.is_finite() {
+                return Err(SolutionError::NotFinite {
+                    index,
+                    field,
+                    value,
+                    extra: "",
+                });
+            }
+        }
+        if !(o.sigma_mas.is_finite() && o.sigma_mas > 0.0) {
+            return Err(SolutionError::NotFinite {
+                index,
+                field: "sigma_mas",
+                value: o.sigma_mas,
+                extra: " and > 0",
+            });
+        }
+        if o.exposure >= exposures.len() {
+            return Err(SolutionError::OutOfRange {
+                index,
+                what: "exposure",
+                value: o.exposure,
+                limit: exposures.len().saturating_sub(1),
+            });
+        }
+        if o.source >= n_sources {
+            return Err(SolutionError::OutOfRange {
+                index,
+                what: "source",
+                value: o.source,
+                limit: n_sources.saturating_sub(1),
+            });
+        }
+        if !seen.insert((o.exposure, o.source)) {
+            return Err(SolutionError::Duplicate {
+                source_id: o.source,
+                exposure: o.exposure,
+            });
+        }
+        epochs_of[o.source] += 1;
+    }
+    let anchored: Vec<bool> = {
+        let mut a = vec![false; n_sources];
+        for r in refs {
+            if r.source < n_sources && anchors(r.sigma[0]) && anchors(r.sigma[1]) {
+                a[r.source] = true;
+            }
+        }
+        a
+    };
+    let n_anchored = anchored.iter().filter(|a| **a).count();
+    if n_anchored < 2 {
+        return Err(SolutionError::TooFewReferences(n_anchored));
+    }
+    // each exposure must see ≥ 2 sources tied to something beyond it
+    let mut tied = vec![0usize; exposures.len()];
+    for o in obs {
+        if anchored[o.source] || epochs_of[o.source] >= 2 {
+            tied[o.exposure] += 1;
+        }
+    }
+    if let Some(e) = tied.iter().position(|n| *n < 2) {
+        return Err(SolutionError::NoOverlap(e));
+    }
+    if opt.model == SourceModel::Full {
+        let (lo, hi) = exposures
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), g| {
+                (lo.min(g.t_yr), hi.max(g.t_yr))
+            });
+        if !(hi - lo > 1e-3) {
+            return Err(SolutionError::Degenerate { span_yr: hi - lo });
+        }
+        let with_motion = refs
+            .iter()
+            .filter(|r| (2..5).all(|k| anchors(r.sigma[k])))
+            .count();
+        if with_motion < 2 {
+            return Err(SolutionError::FrameUnanchored(
+                "the proper motions and parallaxes of a multi-epoch solution",
+            ));
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,199 @@
+//! The astrometric solution's cost against its size (`jsim bench --parts solution`), and the synthetic
+//! sequences it runs on (the solution's tests draw theirs here too): N sources × 100 exposures (5 × 5
+//! pointings a third of a field apart over four epochs, half a year apart; attitude errors of 200 mas, 10″
+//! and 2 ppm; 1-mas measurements; every 8th source in a reference catalogue with a survey's errors), each
+//! solved with the default options. Each row's time is the solution's; its
+//! error the rms of the solved positions against the synthetic truth over the rms of their own σ (1 when the
+//! covariance describes the scatter), the note the observations, iterations and memory of the inputs.
+
+use super::bench::{BenchError, BenchRow};
+use crate::analysis::solution::{
+    Attitude, ExposureGeometry, Observation, Options, Params, Reference, solve,
+};
+use crate::rng::{self, Stream};
+use rand::RngExt;
+use rand_distr::{Distribution, Normal};
+use std::time::Instant;
+
+/// How a synthetic sequence is drawn.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SyntheticSpec {
+    pub sources: usize,
+    /// Pointings per side of the square pattern, a third of a field (±0.125°) apart.
+    pub pointings_per_side: usize,
+    /// Epochs, half a year apart; each observes the whole pattern.
+    pub epochs: usize,
+    /// Measurement noise per axis, mas (0: exact; the σ the solution is told is then 1 mas).
+    pub obs_sigma_mas: f64,
+    /// The reference catalogue's errors (every 8th source), in `Params`' order.
+    pub ref_sigma: Params,
+    pub seed: u64,
+}
+
+impl SyntheticSpec {
+    /// The benchmark's sequences: 5 × 5 pointings over four epochs (100 exposures), 1-mas measurements, a
+    /// reference catalogue with 0.3 mas, 0.1 mas/yr and 0.05 mas errors.
+    pub fn bench(sources: usize, seed: u64) -> Self {
+        Self {
+            sources,
+            pointings_per_side: 5,
+            epochs: 4,
+            obs_sigma_mas: 1.0,
+            ref_sigma: [0.3, 0.3, 0.1, 0.1, 0.05],
+            seed,
+        }
+    }
+}
+
+/// A synthetic sequence and the truth it was drawn from.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Synthetic {
+    pub params: Vec<Params>,
+    pub attitudes: Vec<Attitude>,
+    pub exposures: Vec<ExposureGeometry>,
+    pub obs: Vec<Observation>,
+    pub refs: Vec<Reference>,
+}
+
+/// Draw a synthetic sequence: sources uniform over the pattern's reach (never beyond a field's edge), proper
+/// motions N(0, 5 mas/yr), parallaxes U(0.05, 1) mas; parallax factors (sin 2πt, 0.4 cos 2πt); attitude
+/// errors of 200 mas per axis, 10″ roll and 2 ppm scale (1σ); each source measured in every exposure whose
+/// field holds it.
+pub fn synthetic(spec: &SyntheticSpec) -> Synthetic {
+    let mut r = rng::stream(spec.seed, Stream::Solution, 0);
+    let unit = Normal::new(0.0, 1.0).ok();
+    let gauss = |r: &mut rand_chacha::ChaCha8Rng, s: f64| unit.map_or(0.0, |d| d.sample(r)) * s;
+    let half_field = 0.125 * 3.6e6;
+    let step = 2.0 * half_field / 3.0;
+    let side = spec.pointings_per_side.max(1);
+    let reach = (side - 1) as f64 * step / 2.0;
+    let half_region = reach + half_field * 0.9;
+    let params: Vec<Params> = (0..spec.sources)
+        .map(|_| {
+            [
+                r.random_range(-half_region..half_region),
+                r.random_range(-half_region..half_region),
+                gauss(&mut r, 5.0),
+                gauss(&mut r, 5.0),
+                r.random_range(0.05..1.0),
+            ]
+        })
+        .collect();
+    let mut exposures = Vec::new();
+    for epoch in 0..spec.epochs {
+        for k in 0..side * side {
+            let t = 0.5 * epoch as f64 + 0.002 * k as f64;
+            let phase = std::f64::consts::TAU * t;
+            exposures.push(ExposureGeometry {
+                t_yr: t,
+                parallax_factor: [phase.sin(), 0.4 * phase.cos()],
+                centre_mas: [
+                    (k % side) as f64 * step - reach,
+                    (k / side) as f64 * step - reach,
+                ],
+            });
+        }
+    }
+    let attitudes: Vec<Attitude> = exposures
+        .iter()
+        .map(|_| {
+            let roll = gauss(&mut r, 10.0 / 206_264.8);
+            let k = gauss(&mut r, 2e-6);
+            Attitude {
+                p: (1.0 + k) * roll.cos(),
+                q: (1.0 + k) * roll.sin(),
+                offset_mas: [gauss(&mut r, 200.0), gauss(&mut r, 200.0)],
+            }
+        })
+        .collect();
+    let mut obs = Vec::new();
+    for (e, g) in exposures.iter().enumerate() {
+        for (s, p) in params.iter().enumerate() {
+            let place = [
+                p[0] + p[2] * g.t_yr + p[4] * g.parallax_factor[0],
+                p[1] + p[3] * g.t_yr + p[4] * g.parallax_factor[1],
+            ];
+            if (place[0] - g.centre_mas[0]).abs() > half_field
+                || (place[1] - g.centre_mas[1]).abs() > half_field
+            {
+                continue;
+            }
+            let o = attitudes[e].apply(g.centre_mas, place);
+            obs.push(Observation {
+                exposure: e,
+                source: s,
+                xi_mas: o[0] + gauss(&mut r, spec.obs_sigma_mas),
+                eta_mas: o[1] + gauss(&mut r, spec.obs_sigma_mas),
+                sigma_mas: if spec.obs_sigma_mas > 0.0 {
+                    spec.obs_sigma_mas
+                } else {
+                    1.0
+                },
+            });
+        }
+    }
+    let refs = (0..spec.sources)
+        .step_by(8)
+        .map(|s| {
+            let mut p = params[s];
+            for (k, v) in p.iter_mut().enumerate() {
+                *v += gauss(&mut r, spec.ref_sigma[k]);
+            }
+            Reference {
+                source: s,
+                params: p,
+                sigma: spec.ref_sigma.map(|v| v.max(1e-6)),
+            }
+        })
+        .collect();
+    Synthetic {
+        params,
+        attitudes,
+        exposures,
+        obs,
+        refs,
+    }
+}
+
+/// The rows: one per source count.
+pub fn solution_scaling(counts: &[usize], seed: u64) -> Result<Vec<BenchRow>, BenchError> {
+    let mut rows = Vec::new();
+    for &n in counts {
+        let syn = synthetic(&SyntheticSpec::bench(n, seed));
+        let (truth, exposures, obs) = (&syn.params, &syn.exposures, &syn.obs);
+        let t0 = Instant::now();
+        let sol = solve(obs, exposures, &syn.refs, n, &Options::default())?;
+        let time_s = t0.elapsed().as_secs_f64();
+        let (mut err2, mut sig2, mut m) = (0.0, 0.0, 0usize);
+        for (s, p) in sol.sources.iter().zip(truth) {
+            if s.params[0].is_finite() && s.observations > 0 {
+                err2 += (s.params[0] - p[0]).powi(2) + (s.params[1] - p[1]).powi(2);
+                sig2 += s.sigma[0].powi(2) + s.sigma[1].powi(2);
+                m += 1;
+            }
+        }
+        let ratio = (err2 / sig2.max(f64::MIN_POSITIVE)).sqrt();
+        let input_mib = (obs.len() * std::mem::size_of::<Observation>()) as f64 / 1048576.0;
+        rows.push(BenchRow {
+            rms_err: ratio,
+            astro_mas: (err2 / (2 * m.max(1)) as f64).sqrt(),
+            ..BenchRow::timing(
+                "astrometric solution",
+                format!("{n} sources × {} exposures", exposures.len()),
+                "cpu".into(),
+                n,
+                time_s,
+                &format!(
+                    "{} observations ({input_mib:.0} MiB), {} iterations{}, {} rejected, χ²/dof {:.3}; \
+                     rms error / rms σ of the positions in rms_err, their rms error (mas) in pos",
+                    obs.len(),
+                    sol.iterations,
+                    if sol.converged { "" } else { " (not converged)" },
+                    sol.rejected,
+                    sol.chi2_per_dof
+                ),
+            )
+        });
+    }
+    Ok(rows)
+}
