@@ -37,7 +37,7 @@ pub struct Memory {
 
 impl Memory {
     /// The memory of a sequence written in `dir` (its field already there). With persistence on, the
-    /// field's stars that can fill traps are written to [`BRIGHT_FIELD_NAME`] (unless there already).
+    /// field's stars that can fill traps are written to [`BRIGHT_FIELD_NAME`] (unless that is every star).
     pub fn new(base: &Config, dir: &Path) -> Result<Self, SequenceError> {
         Self::from_field(base, &dir.join(FIELD_NAME), &dir.join(BRIGHT_FIELD_NAME))
     }
@@ -53,36 +53,31 @@ impl Memory {
                 made: 0,
             });
         }
-        if !bright.exists() {
-            let (h, rows) = crate::io::csv::read(field)?;
-            let hw = crate::io::csv::column_f64(field, &h, &rows, "hw")?;
-            let min_flux_e = p.threshold_e / PEAK_FRACTION_BOUND;
-            let zp = base.photometry.zero_point_e_per_s;
-            let keep: Vec<Vec<Cell>> = rows
-                .iter()
-                .zip(&hw)
-                .filter(|(_, m)| {
-                    crate::photometry::electrons_per_s(**m, zp) * base.detector.exposure_s
-                        >= min_flux_e
-                })
-                .map(|(r, _)| r.iter().map(|v| Cell::S(v.clone())).collect())
-                .collect();
-            if keep.len() == rows.len() {
-                // every star: the field itself, in its own order (so a remake is the exposure's own charge)
-                return Ok(Self {
-                    bright_field: (!rows.is_empty()).then(|| field.to_path_buf()),
-                    whole_field: true,
-                    maps: BTreeMap::new(),
-                    made: 0,
-                });
-            }
+        // made afresh on every run: a rerun with another threshold must not read the last run's selection
+        let (h, rows) = crate::io::csv::read(field)?;
+        let hw = crate::io::csv::column_f64(field, &h, &rows, "hw")?;
+        let min_flux_e = p.threshold_e / PEAK_FRACTION_BOUND;
+        let zp = base.photometry.zero_point_e_per_s;
+        let keep: Vec<Vec<Cell>> = rows
+            .iter()
+            .zip(&hw)
+            .filter(|(_, m)| {
+                crate::photometry::electrons_per_s(**m, zp) * base.detector.exposure_s >= min_flux_e
+            })
+            .map(|(r, _)| r.iter().map(|v| Cell::S(v.clone())).collect())
+            .collect();
+        // every star: the field itself, in its own order (so a remake is the exposure's own charge)
+        let whole_field = keep.len() == rows.len();
+        let source = if whole_field {
+            field.to_path_buf()
+        } else {
             let header: Vec<&str> = h.iter().map(String::as_str).collect();
             crate::io::csv::write(bright, &header, &keep)?;
-        }
-        let (_, rows) = crate::io::csv::read(bright)?;
+            bright.to_path_buf()
+        };
         Ok(Self {
-            bright_field: (!rows.is_empty()).then(|| bright.to_path_buf()),
-            whole_field: false,
+            bright_field: (!keep.is_empty()).then_some(source),
+            whole_field,
             maps: BTreeMap::new(),
             made: 0,
         })
