@@ -93,6 +93,17 @@ pub fn offset_mas(a: (f64, f64), b: (f64, f64)) -> (f64, f64) {
     (xi * MAS_PER_RAD, eta * MAS_PER_RAD)
 }
 
+/// The parallax factors of a star at (α, δ) seen from `observer_au` (barycentric, ICRS axes, au): the
+/// displacement (Δα*, Δδ) on the tangent plane per mas of parallax, to first order —
+/// `Δα* = X sin α − Y cos α`, `Δδ = X cos α sin δ + Y sin α sin δ − Z cos δ` (the star is seen away from the
+/// observer's position). What an astrometric solution multiplies ϖ by (`analysis::solution`).
+pub fn parallax_factors(ra_deg: f64, dec_deg: f64, observer_au: [f64; 3]) -> [f64; 2] {
+    let (sa, ca) = ra_deg.to_radians().sin_cos();
+    let (sd, cd) = dec_deg.to_radians().sin_cos();
+    let [x, y, z] = observer_au;
+    [x * sa - y * ca, x * ca * sd + y * sa * sd - z * cd]
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -221,5 +232,37 @@ mod tests {
             "{err_uas:?} µas(/yr)"
         );
         assert!(beta[0].abs() < 1e-3 && beta[1].abs() < 1e-3, "{beta:?}");
+    }
+
+    #[test]
+    fn parallax_factors_are_what_pmpx_displaces() {
+        // SOFA's pmpx with ϖ = 1 mas against ϖ = 0, on the tangent plane: the factors to 1 µas, at four
+        // dates around the year (the first-order formula's error is ≈ ϖ² ≪ 1 µas)
+        let c = (266.4168, -29.0078);
+        for date in [
+            "2031-03-21T00:00:00",
+            "2031-06-21T06:00:00",
+            "2031-09-22T12:00:00",
+            "2031-12-21T18:00:00",
+        ] {
+            let p = place(date, false);
+            let none = direction(c.0, c.1, &Motion::default(), &p);
+            let with = direction(
+                c.0,
+                c.1,
+                &Motion {
+                    parallax_mas: 1.0,
+                    ..Motion::default()
+                },
+                &p,
+            );
+            let (dx, dy) = offset_mas(none, with);
+            let f = parallax_factors(c.0, c.1, p.observer.position_au);
+            assert!(
+                (dx - f[0]).abs() < 1e-3 && (dy - f[1]).abs() < 1e-3,
+                "{date}: ({dx}, {dy}) vs {f:?}"
+            );
+            assert!(f[0].hypot(f[1]) > 0.05 && f[0].hypot(f[1]) < 1.02, "{f:?}");
+        }
     }
 }
