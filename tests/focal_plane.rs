@@ -23,11 +23,7 @@ fn quad() -> Config {
     c.focal_plane.gap_px = 60.0;
     c.ace.case = AceCase::None;
     c.fidelity.images = 1;
-    c.detector.shot_noise = false;
-    c.detector.read_noise = false;
-    c.detector.digitise = false;
-    c.detector.dark_e_per_s = 0.0;
-    c.detector.inter_pixel_flat_sigma = 0.0;
+    engine::testkit::signal_only(&mut c);
     c
 }
 

@@ -18,11 +18,7 @@ fn quiet(dir: &std::path::Path, stars: &[(f64, f64, f64)]) -> Config {
     c.readout.channels = 1;
     c.readout.channel_width_px = 64;
     c.fidelity.images = 1;
-    c.detector.shot_noise = false;
-    c.detector.read_noise = false;
-    c.detector.digitise = false;
-    c.detector.dark_e_per_s = 0.0;
-    c.detector.inter_pixel_flat_sigma = 0.0;
+    engine::testkit::signal_only(&mut c);
     c.detector.persistence.enabled = true;
     let path = dir.join(format!("stars{}.csv", stars.len()));
     let mut text = String::from("x,y,hw,j_h\n");

@@ -34,6 +34,16 @@ pub fn small_config() -> Config {
     c
 }
 
+/// Switch off every noise of the detector — shot and read noise, rounding, dark, the flat's scatter — so
+/// that a pixel holds the signal alone.
+pub fn signal_only(c: &mut Config) {
+    c.detector.shot_noise = false;
+    c.detector.read_noise = false;
+    c.detector.digitise = false;
+    c.detector.dark_e_per_s = 0.0;
+    c.detector.inter_pixel_flat_sigma = 0.0;
+}
+
 /// A synthetic, asymmetric PSF table (`os` cells per pixel, `half_px` pixels each side, unit sum): an
 /// elliptical Gaussian core (σ 0.7 px, y squeezed by 0.7) tilted by a linear ramp in x, plus a faint
 /// exponential halo — no symmetry a method could exploit by accident.
