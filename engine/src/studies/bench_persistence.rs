@@ -31,7 +31,6 @@ pub fn persistence_knobs(session: &Session, base: &Config) -> Result<Vec<BenchRo
     let per_stare = spec.exposures_per_stare;
     let plan = plan(&spec, &c).map_err(|m| run::SequenceError::Invalid(m.to_string()))?;
     let dir = std::env::temp_dir().join(format!("jsim-bench-persistence-{}", std::process::id()));
-    let field = run::write_field(&plan, &c, &dir)?;
     // the second exposure after the second step: the one before it ≈ 1 s earlier on the same pointing,
     // the earlier stares' exposures from 2 to 15 minutes earlier elsewhere
     let Some(target) = plan.exposures.get(2 * per_stare + 1) else {
@@ -60,23 +59,30 @@ pub fn persistence_knobs(session: &Session, base: &Config) -> Result<Vec<BenchRo
         EXACT.0,
         EXACT.1,
     ));
-    let mut runs = Vec::new();
-    for (k, (label, threshold_e, lookback_s)) in settings.iter().enumerate() {
-        let mut s = c.clone();
-        s.detector.persistence.threshold_e = *threshold_e;
-        s.detector.persistence.lookback_s = *lookback_s;
-        let bright = dir.join(format!("bright{k}.csv"));
-        let t0 = Instant::now();
-        let mut memory = Memory::from_field(&s, &field, &bright)?;
-        let maps = memory.released_e(session, &plan, &s, target)?;
-        runs.push((label.clone(), t0.elapsed().as_secs_f64(), memory.made, maps));
-    }
+    let made_runs = (|| -> Result<Vec<(String, f64, usize, Vec<Vec<f32>>)>, BenchError> {
+        let field = run::write_field(&plan, &c, &dir)?;
+        let mut runs = Vec::new();
+        for (k, (label, threshold_e, lookback_s)) in settings.iter().enumerate() {
+            let mut s = c.clone();
+            s.detector.persistence.threshold_e = *threshold_e;
+            s.detector.persistence.lookback_s = *lookback_s;
+            let bright = dir.join(format!("bright{k}.csv"));
+            let t0 = Instant::now();
+            let mut memory = Memory::from_field(&s, &field, &bright)?;
+            let maps = memory.released_e(session, &plan, &s, target)?;
+            runs.push((label.clone(), t0.elapsed().as_secs_f64(), memory.made, maps));
+        }
+        Ok(runs)
+    })();
+    // the scratch directory goes whether or not the runs succeeded
     let _ = std::fs::remove_dir_all(&dir);
-    let Some((_, _, _, exact)) = runs.last().cloned() else {
+    let runs = made_runs?;
+    let Some((_, _, _, exact)) = runs.last() else {
         return Ok(Vec::new());
     };
+    let peak = exact.iter().flatten().fold(0.0f32, |a, b| a.max(*b));
     Ok(runs
-        .into_iter()
+        .iter()
         .map(|(label, time_s, made, maps)| {
             let (mut max, mut sum2, mut n) = (0.0f64, 0.0, 0usize);
             for (k, x) in exact.iter().enumerate() {
@@ -92,19 +98,20 @@ pub fn persistence_knobs(session: &Session, base: &Config) -> Result<Vec<BenchRo
                     }
                 }
             }
-            let peak = exact
-                .iter()
-                .flatten()
-                .fold(0.0f32, |a, b| a.max(*b));
             BenchRow {
                 max_err: max,
-                rms_err: (sum2 / n.max(1) as f64).sqrt(),
+                // no pixel released anything in the exact setting: no error to report
+                rms_err: if n > 0 {
+                    (sum2 / n as f64).sqrt()
+                } else {
+                    f64::NAN
+                },
                 ..BenchRow::timing(
                     "persistence",
-                    label,
+                    label.clone(),
                     "cpu".into(),
                     0,
-                    time_s,
+                    *time_s,
                     &format!(
                         "{made} earlier exposures remade; errors in e⁻ per pixel (the exact map peaks at {peak:.0} e⁻)"
                     ),

@@ -168,7 +168,7 @@ impl Attitude {
 pub struct SolvedSource {
     /// Its parameters (those the model does not solve are 0, or its reference's).
     pub params: Params,
-    /// Their 1σ errors (the block's covariance; 0 where not solved).
+    /// Their 1σ errors (the block's covariance; NaN where not solved).
     pub sigma: Params,
     /// Observations used (after rejection).
     pub observations: usize,
@@ -187,7 +187,7 @@ pub struct Solution {
     pub converged: bool,
     /// Observations rejected as outliers.
     pub rejected: usize,
-    /// χ² of the observations kept over its degrees of freedom.
+    /// χ² of the observations kept over its degrees of freedom (NaN when none are left).
     pub chi2_per_dof: f64,
 }
 

@@ -159,14 +159,19 @@ pub fn solve(
         .map(|r| r.sigma.iter().filter(|s| anchors(**s)).count())
         .sum();
     let unknowns = n_sources * opt.model.len() + 4 * exposures.len();
-    let dof = (n_terms + priors).saturating_sub(unknowns).max(1);
+    // no degree of freedom left: no χ² to report
+    let dof = (n_terms + priors).saturating_sub(unknowns);
     Ok(Solution {
         sources,
         attitudes,
         iterations,
         converged,
         rejected,
-        chi2_per_dof: chi2_total / dof as f64,
+        chi2_per_dof: if dof > 0 {
+            chi2_total / dof as f64
+        } else {
+            f64::NAN
+        },
     })
 }
 
@@ -178,7 +183,7 @@ fn anchors(sigma: f64) -> bool {
 fn unsolved() -> SolvedSource {
     SolvedSource {
         params: [f64::NAN; 5],
-        sigma: [0.0; 5],
+        sigma: [f64::NAN; 5],
         observations: 0,
         chi2: 0.0,
     }
@@ -257,7 +262,7 @@ fn source_block(
         }
         let (beta, cov) = weighted_lstsq(&design, &y, &w, n)?;
         let mut params = *fixed;
-        let mut sigma = [0.0; 5];
+        let mut sigma = [f64::NAN; 5];
         for k in 0..n {
             params[k] = beta[k];
             sigma[k] = cov[k * n + k].max(0.0).sqrt();
@@ -338,7 +343,7 @@ fn validate(
     opt: &Options,
 ) -> Result<(), SolutionError> {
     let mut seen = std::collections::HashSet::with_capacity(obs.len());
-    let mut epochs_of = vec![0usize; n_sources];
+    let mut observed = vec![0usize; n_sources];
     for (index, o) in obs.iter().enumerate() {
         for (field, value) in [("xi_mas", o.xi_mas), ("eta_mas", o.eta_mas)] {
             if !value.is_finite() {
@@ -380,7 +385,7 @@ fn validate(
                 exposure: o.exposure,
             });
         }
-        epochs_of[o.source] += 1;
+        observed[o.source] += 1;
     }
     let anchored: Vec<bool> = {
         let mut a = vec![false; n_sources];
@@ -398,7 +403,7 @@ fn validate(
     // each exposure must see ≥ 2 sources tied to something beyond it
     let mut tied = vec![0usize; exposures.len()];
     for o in obs {
-        if anchored[o.source] || epochs_of[o.source] >= 2 {
+        if anchored[o.source] || observed[o.source] >= 2 {
             tied[o.exposure] += 1;
         }
     }

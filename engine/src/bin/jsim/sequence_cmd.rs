@@ -202,8 +202,6 @@ pub fn sequence(a: &SequenceArgs) -> Result<()> {
         let scripts = sequence::slurm::emit(&plan, &cfg, &dir, &job).map_err(anyhow::Error::msg)?;
         // the field drawn once here, so that the tasks only read it
         run::write_field(&plan, &cfg, &a.out)?;
-        outputs.add(&a.out.join(sequence::persistence::BRIGHT_FIELD_NAME));
-        sequence::persistence::Memory::new(&cfg, &a.out)?;
         for p in &scripts {
             outputs.add(p);
         }

@@ -13,6 +13,7 @@ use crate::config::{Config, SceneKind};
 use crate::detector::persistence::{ChargeMap, released_e};
 use crate::io::csv::Cell;
 use crate::session::Session;
+use crate::simulate::{FocalPlaneExposure, FocalPlaneSimulator};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
@@ -58,13 +59,13 @@ impl Memory {
         let hw = crate::io::csv::column_f64(field, &h, &rows, "hw")?;
         let min_flux_e = p.threshold_e / PEAK_FRACTION_BOUND;
         let zp = base.photometry.zero_point_e_per_s;
-        let keep: Vec<Vec<Cell>> = rows
+        let keep: Vec<&Vec<String>> = rows
             .iter()
             .zip(&hw)
             .filter(|(_, m)| {
                 crate::photometry::electrons_per_s(**m, zp) * base.detector.exposure_s >= min_flux_e
             })
-            .map(|(r, _)| r.iter().map(|v| Cell::S(v.clone())).collect())
+            .map(|(r, _)| r)
             .collect();
         // every star: the field itself, in its own order (so a remake is the exposure's own charge)
         let whole_field = keep.len() == rows.len();
@@ -72,7 +73,11 @@ impl Memory {
             field.to_path_buf()
         } else {
             let header: Vec<&str> = h.iter().map(String::as_str).collect();
-            crate::io::csv::write(bright, &header, &keep)?;
+            let cells: Vec<Vec<Cell>> = keep
+                .iter()
+                .map(|r| r.iter().map(|v| Cell::S(v.clone())).collect())
+                .collect();
+            crate::io::csv::write(bright, &header, &cells)?;
             bright.to_path_buf()
         };
         Ok(Self {
@@ -83,17 +88,25 @@ impl Memory {
         })
     }
 
-    /// Does a run hand this memory each exposure's own charge ([`Memory::remember`])?
-    pub fn remembers_own(&self) -> bool {
-        self.whole_field
-    }
-
-    /// Exposure `index`'s own trap-filling charge, per array — kept when every star of the field fills
-    /// traps (then it is what a remake would give, to the bit), ignored otherwise.
-    pub fn remember(&mut self, index: usize, maps: Vec<ChargeMap>) {
-        if self.whole_field {
-            self.maps.insert(index, maps);
+    /// Keep exposure `index`'s own trap-filling charge (`fps` simulated `exp`) when every star of the field
+    /// fills traps — then it is what a remake would give, to the bit; otherwise nothing is done.
+    pub fn remember(
+        &mut self,
+        index: usize,
+        fps: &FocalPlaneSimulator,
+        exp: &FocalPlaneExposure,
+        base: &Config,
+    ) {
+        if !self.whole_field {
+            return;
         }
+        let maps = fps
+            .arrays
+            .iter()
+            .zip(&exp.arrays)
+            .map(|(a, x)| charge_map(base, &a.collected(&x.star_e)))
+            .collect();
+        self.maps.insert(index, maps);
     }
 
     /// The persistence exposure `e` of `plan` collects on each array, e⁻ per pixel (empty when
@@ -117,8 +130,7 @@ impl Memory {
             .map(|q| (q.index, e.start.seconds_since(&q.start) - t))
             .take_while(|(_, gap)| *gap <= p.lookback_s)
             .collect();
-        self.maps
-            .retain(|k, _| *k == e.index || earlier.iter().any(|(q, _)| q == k));
+        self.maps.retain(|k, _| earlier.iter().any(|(q, _)| q == k));
         for (q, _) in &earlier {
             if !self.maps.contains_key(q) {
                 let maps = charge_maps(session, plan, base, &plan.exposures[*q], &bright)?;
@@ -152,15 +164,17 @@ fn charge_maps(
     c.scene.kind = SceneKind::Catalogue;
     c.scene.catalogue = Some(bright.to_path_buf());
     let fps = session.new_focal_plane(&c)?;
-    let p = &base.detector.persistence;
     fps.arrays
         .iter()
-        .map(|a| {
-            Ok(ChargeMap::bright(
-                &a.collected_star_e(0)?,
-                p,
-                base.detector.full_well_e,
-            ))
-        })
+        .map(|a| Ok(charge_map(base, &a.collected_star_e(0)?)))
         .collect()
+}
+
+/// The pixels of an array's collected star charge that fill traps.
+fn charge_map(base: &Config, charge_e: &[f64]) -> ChargeMap {
+    ChargeMap::bright(
+        charge_e,
+        &base.detector.persistence,
+        base.detector.full_well_e,
+    )
 }

@@ -137,23 +137,7 @@ pub fn run_exposure(
     let released = memory.released_e(session, plan, base, e)?;
     let fps = session.new_focal_plane(&c)?;
     let exp = fps.exposure_with(0, &released)?;
-    if memory.remembers_own() {
-        let p = &base.detector.persistence;
-        let maps = exp
-            .arrays
-            .iter()
-            .zip(&fps.arrays)
-            .map(|(x, a)| {
-                let charge = a.collected(&x.star_e);
-                crate::detector::persistence::ChargeMap::bright(
-                    &charge,
-                    p,
-                    base.detector.full_well_e,
-                )
-            })
-            .collect();
-        memory.remember(e.index, maps);
-    }
+    memory.remember(e.index, &fps, &exp, base);
     let simulate_s = t.elapsed().as_secs_f64();
     let t = Instant::now();
     let (lo, hi) = (base.scene.bulge.hw_min, base.scene.bulge.hw_max);
