@@ -6,7 +6,8 @@
 //! at 4σ of their sampling error); outliers are rejected; bad input is named.
 
 use engine::analysis::solution::{
-    ExposureGeometry, Observation, Options, Params, Reference, SolutionError, SourceModel, solve,
+    CalibrationModel, ExposureGeometry, Observation, Options, Params, Reference, SolutionError,
+    SourceModel, solve,
 };
 use engine::studies::bench_solution::{Synthetic, SyntheticSpec, synthetic};
 
@@ -20,6 +21,7 @@ fn sequence(n: usize, obs_sigma_mas: f64, ref_sigma: Params, seed: u64) -> Synth
         epochs: 4,
         obs_sigma_mas,
         ref_sigma,
+        calibration: CalibrationModel::NONE,
         seed,
     })
 }
@@ -146,6 +148,7 @@ fn bad_input_is_named() {
         t_yr: 0.2,
         parallax_factor: [0.0, 0.0],
         centre_mas: [5e6, 5e6],
+        to_plane: [1.0, 0.0, 0.0, 1.0],
     });
     for k in 0..5 {
         lonely.push(Observation {
@@ -154,6 +157,8 @@ fn bad_input_is_named() {
             xi_mas: 5e6 + k as f64,
             eta_mas: 5e6,
             sigma_mas: 1.0,
+            array: 0,
+            focal_px: [0.0, 0.0],
         });
     }
     // sources 190… are seen elsewhere too: give the lonely exposure fresh ones instead
@@ -191,4 +196,128 @@ fn bad_input_is_named() {
         run(&t.obs, &t.exposures, &no_motion, &opt),
         Some(SolutionError::FrameUnanchored(_))
     ));
+}
+
+/// Four arrays with offsets of 10 px and turns of 0.1° (the plate model's priors) and a third-order
+/// distortion of 1 px terms, on the 3 × 3 pattern.
+const CALIBRATED: CalibrationModel = CalibrationModel {
+    arrays: 4,
+    distortion_order: 3,
+};
+
+#[test]
+fn noise_free_it_recovers_the_arrays_offsets_and_the_distortion() {
+    let t = synthetic(&SyntheticSpec {
+        sources: 600,
+        pointings_per_side: 3,
+        epochs: 4,
+        obs_sigma_mas: 0.0,
+        ref_sigma: [0.0; 5],
+        calibration: CALIBRATED,
+        seed: 4,
+    });
+    let opt = Options {
+        calibration: CALIBRATED,
+        max_iterations: 5000,
+        ..Options::default()
+    };
+    // without the calibration unknowns the sources are wrong by the arrays' offsets (mas …)
+    let plain = solve(&t.obs, &t.exposures, &t.refs, 600, &Options::default()).expect("plain");
+    let worst = |sol: &engine::analysis::solution::Solution| {
+        sol.sources
+            .iter()
+            .zip(&t.params)
+            .map(|(s, p)| (s.params[0] - p[0]).abs().max((s.params[1] - p[1]).abs()))
+            .fold(0.0f64, f64::max)
+    };
+    assert!(worst(&plain) > 100.0, "{}", worst(&plain));
+    // … with them, right to the solver's tolerance
+    let sol = solve(&t.obs, &t.exposures, &t.refs, 600, &opt).expect("solved");
+    assert!(sol.converged, "{} iterations", sol.iterations);
+    for (s, truth) in sol.sources.iter().zip(&t.params) {
+        for k in 0..5 {
+            assert!(
+                (s.params[k] - truth[k]).abs() < 1e-4,
+                "parameter {k}: {} vs {}",
+                s.params[k],
+                truth[k]
+            );
+        }
+    }
+    // the calibration against the drawn one, both in the gauge the attitudes leave (px)
+    let mut truth = t.calibration.clone();
+    truth.remove_gauge();
+    for (a, b) in sol.calibration.arrays.iter().zip(&truth.arrays) {
+        for i in 0..6 {
+            assert!(
+                (a[i] - b[i]).abs() < 1e-6,
+                "array term {i}: {} vs {}",
+                a[i],
+                b[i]
+            );
+        }
+    }
+    for axis in 0..2 {
+        for (a, b) in sol.calibration.distortion[axis]
+            .iter()
+            .zip(&truth.distortion[axis])
+        {
+            assert!((a - b).abs() < 1e-6, "distortion: {a} vs {b}");
+        }
+    }
+}
+
+#[test]
+fn a_distortion_a_single_pointing_cannot_see_is_named() {
+    let t = synthetic(&SyntheticSpec {
+        sources: 200,
+        pointings_per_side: 1,
+        epochs: 2,
+        obs_sigma_mas: 0.0,
+        ref_sigma: [0.0; 5],
+        calibration: CALIBRATED,
+        seed: 5,
+    });
+    let opt = Options {
+        calibration: CALIBRATED,
+        ..Options::default()
+    };
+    let e = solve(&t.obs, &t.exposures, &t.refs, 200, &opt).err();
+    assert!(
+        matches!(e, Some(SolutionError::DistortionUnconstrained { .. })),
+        "{e:?}"
+    );
+    // an array index beyond the model, a distortion order of 1
+    let mut bad = t.obs.clone();
+    bad[3].array = 4;
+    let arrays_only = Options {
+        calibration: CalibrationModel {
+            arrays: 4,
+            distortion_order: 0,
+        },
+        ..Options::default()
+    };
+    let e = solve(&bad, &t.exposures, &t.refs, 200, &arrays_only).err();
+    assert!(
+        matches!(e, Some(SolutionError::OutOfRange { what: "array", .. })),
+        "{e:?}"
+    );
+    let order1 = Options {
+        calibration: CalibrationModel {
+            arrays: 4,
+            distortion_order: 1,
+        },
+        ..Options::default()
+    };
+    let e = solve(&t.obs, &t.exposures, &t.refs, 200, &order1).err();
+    assert!(
+        matches!(
+            e,
+            Some(SolutionError::CalibrationModel {
+                field: "distortion_order",
+                ..
+            })
+        ),
+        "{e:?}"
+    );
 }

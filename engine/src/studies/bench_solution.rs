@@ -8,7 +8,8 @@
 
 use super::bench::{BenchError, BenchRow};
 use crate::analysis::solution::{
-    Attitude, ExposureGeometry, Observation, Options, Params, Reference, solve,
+    Attitude, Calibration, CalibrationModel, ExposureGeometry, Observation, Options, Params,
+    Reference, solve,
 };
 use crate::rng::{self, Stream};
 use rand::RngExt;
@@ -27,6 +28,9 @@ pub struct SyntheticSpec {
     pub obs_sigma_mas: f64,
     /// The reference catalogue's errors (every 8th source), in `Params`' order.
     pub ref_sigma: Params,
+    /// The instrument's calibration the observations carry (drawn: array offsets of 10 px and turns of
+    /// 0.1° — the mission's plate-model priors — and distortion terms of 1 px, 1σ); NONE: none.
+    pub calibration: CalibrationModel,
     pub seed: u64,
 }
 
@@ -40,6 +44,7 @@ impl SyntheticSpec {
             epochs: 4,
             obs_sigma_mas: 1.0,
             ref_sigma: [0.3, 0.3, 0.1, 0.1, 0.05],
+            calibration: CalibrationModel::NONE,
             seed,
         }
     }
@@ -53,7 +58,13 @@ pub struct Synthetic {
     pub exposures: Vec<ExposureGeometry>,
     pub obs: Vec<Observation>,
     pub refs: Vec<Reference>,
+    /// The calibration the observations carry.
+    pub calibration: Calibration,
 }
+
+/// The synthetic focal plane's scale, mas per px (JASMINE's), and its map to the plane: east to the left.
+pub const SYNTHETIC_MAS_PER_PX: f64 = 472.1;
+const TO_PLANE: [f64; 4] = [-SYNTHETIC_MAS_PER_PX, 0.0, 0.0, SYNTHETIC_MAS_PER_PX];
 
 /// Draw a synthetic sequence: sources uniform over the pattern's reach (never beyond a field's edge), proper
 /// motions N(0, 5 mas/yr), parallaxes U(0.05, 1) mas; parallax factors (sin 2πt, 0.4 cos 2πt); attitude
@@ -91,6 +102,7 @@ pub fn synthetic(spec: &SyntheticSpec) -> Synthetic {
                     (k % side) as f64 * step - reach,
                     (k / side) as f64 * step - reach,
                 ],
+                to_plane: TO_PLANE,
             });
         }
     }
@@ -106,6 +118,24 @@ pub fn synthetic(spec: &SyntheticSpec) -> Synthetic {
             }
         })
         .collect();
+    let mut calibration = Calibration::zero(spec.calibration);
+    for a in &mut calibration.arrays {
+        let turn = gauss(&mut r, 0.1f64.to_radians())
+            * crate::analysis::solution::calibration::FOCAL_NORM_PX;
+        *a = [
+            gauss(&mut r, 10.0),
+            gauss(&mut r, 10.0),
+            0.0,
+            -turn,
+            turn,
+            0.0,
+        ];
+    }
+    for axis in &mut calibration.distortion {
+        for d in axis.iter_mut() {
+            *d = gauss(&mut r, 1.0);
+        }
+    }
     let mut obs = Vec::new();
     for (e, g) in exposures.iter().enumerate() {
         for (s, p) in params.iter().enumerate() {
@@ -123,9 +153,29 @@ pub fn synthetic(spec: &SyntheticSpec) -> Synthetic {
             let a = &attitudes[e];
             let (d0, d1) = (place[0] - g.centre_mas[0], place[1] - g.centre_mas[1]);
             let (scale, (sin, cos)) = (a.p.hypot(a.q), a.q.atan2(a.p).sin_cos());
+            // the design focal-plane position (east to the left), its array the quadrant, and what the
+            // instrument adds there, written out
+            let focal_px = [-d0 / SYNTHETIC_MAS_PER_PX, d1 / SYNTHETIC_MAS_PER_PX];
+            let array = usize::from(focal_px[0] >= 0.0) + 2 * usize::from(focal_px[1] >= 0.0);
+            let (u, v) = (
+                focal_px[0] / crate::analysis::solution::calibration::FOCAL_NORM_PX,
+                focal_px[1] / crate::analysis::solution::calibration::FOCAL_NORM_PX,
+            );
+            let mut dfx = [0.0; 2];
+            if let Some(c) = calibration.arrays.get(array) {
+                dfx = [c[0] + c[2] * u + c[3] * v, c[1] + c[4] * u + c[5] * v];
+            }
+            for (m, (p, q)) in spec.calibration.monomials().into_iter().enumerate() {
+                dfx[0] += calibration.distortion[0][m] * u.powi(p) * v.powi(q);
+                dfx[1] += calibration.distortion[1][m] * u.powi(p) * v.powi(q);
+            }
             let o = [
-                g.centre_mas[0] + scale * (cos * d0 - sin * d1) + a.offset_mas[0],
-                g.centre_mas[1] + scale * (sin * d0 + cos * d1) + a.offset_mas[1],
+                g.centre_mas[0] + scale * (cos * d0 - sin * d1) + a.offset_mas[0]
+                    - SYNTHETIC_MAS_PER_PX * dfx[0],
+                g.centre_mas[1]
+                    + scale * (sin * d0 + cos * d1)
+                    + a.offset_mas[1]
+                    + SYNTHETIC_MAS_PER_PX * dfx[1],
             ];
             obs.push(Observation {
                 exposure: e,
@@ -137,6 +187,8 @@ pub fn synthetic(spec: &SyntheticSpec) -> Synthetic {
                 } else {
                     1.0
                 },
+                array,
+                focal_px,
             });
         }
     }
@@ -160,6 +212,7 @@ pub fn synthetic(spec: &SyntheticSpec) -> Synthetic {
         exposures,
         obs,
         refs,
+        calibration,
     }
 }
 

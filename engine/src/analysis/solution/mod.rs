@@ -12,14 +12,15 @@
 //! with P the exposure's parallax factors (the displacement per mas of parallax, from the observer's
 //! barycentric position). The exposure sees it through its attitude, a similarity transform about its centre
 //! c — offset a, rotation θ and scale 1 + k, written exactly linearly as `o = c + A (s − c) + a` with
-//! `A = [[p, −q], [q, p]]`, p = (1 + k) cos θ, q = (1 + k) sin θ. Distortion and each array's own offsets are
-//! assumed already removed from the measured positions here (the design WCS); solving for them is the next
-//! step of the issue.
+//! `A = [[p, −q], [q, p]]`, p = (1 + k) cos θ, q = (1 + k) sin θ. The measured places came through the
+//! focal plane's design model; with [`Options::calibration`] the solution also solves what the instrument does
+//! differently — each array's affine offsets and a global distortion polynomial ([`calibration`]) — as a
+//! third block.
 //!
 //! **The solution** is block-iterative, like Gaia's AGIS: with the attitudes fixed every source is a small
 //! weighted least-squares fit of its own observations (plus its reference-catalogue entry as a prior, which
 //! anchors the frame); with the sources fixed every exposure's (p, q, a) is one too; the two alternate until
-//! nothing moves by more than the tolerance. Then observations beyond `clip_sigma` are rejected and it runs
+//! nothing moves by more than the tolerance (with a calibration, the third block follows the attitudes). Then observations beyond `clip_sigma` are rejected and it runs
 //! again. A source's covariance is its block's, the attitudes held fixed (with hundreds of sources per
 //! exposure the attitude's share is small; the χ² test in `tests` checks the pulls).
 //!
@@ -28,8 +29,10 @@
 //! them, so with several epochs its entries must carry proper motions and parallaxes (a survey such as Gaia's
 //! does), and at least two sources must be anchored.
 
+pub mod calibration;
 mod solve;
 
+pub use calibration::{Calibration, CalibrationModel};
 pub use solve::solve;
 
 /// One measured position of a source in one exposure, on the tangent plane (mas), with its 1σ error per axis.
@@ -40,6 +43,10 @@ pub struct Observation {
     pub xi_mas: f64,
     pub eta_mas: f64,
     pub sigma_mas: f64,
+    /// The array it was measured on (0 … arrays − 1; only the calibration reads it).
+    pub array: usize,
+    /// Its design focal-plane position, px from the optical axis (only the calibration reads it).
+    pub focal_px: [f64; 2],
 }
 
 /// What the solution knows of an exposure (never its attitude error).
@@ -51,6 +58,9 @@ pub struct ExposureGeometry {
     pub parallax_factor: [f64; 2],
     /// The point its attitude turns and scales about (its pointing), mas.
     pub centre_mas: [f64; 2],
+    /// Its design map from focal-plane px to the plane's mas (row-major 2 × 2: scale, position angle and the
+    /// sky's handedness; only the calibration reads it).
+    pub to_plane: [f64; 4],
 }
 
 /// A reference-catalogue entry of a source: its parameters at the reference epoch with their 1σ errors
@@ -101,6 +111,8 @@ pub struct Options {
     pub clip_sigma: f64,
     /// Rounds of rejection at most.
     pub max_rejection_rounds: usize,
+    /// The calibration unknowns solved (none by default).
+    pub calibration: CalibrationModel,
 }
 
 impl Default for Options {
@@ -111,6 +123,7 @@ impl Default for Options {
             tolerance_mas: 1e-7,
             clip_sigma: 5.0,
             max_rejection_rounds: 5,
+            calibration: CalibrationModel::NONE,
         }
     }
 }
@@ -181,6 +194,8 @@ pub struct SolvedSource {
 pub struct Solution {
     pub sources: Vec<SolvedSource>,
     pub attitudes: Vec<Attitude>,
+    /// The calibration solved (zero when none was asked).
+    pub calibration: Calibration,
     /// Block alternations over all rounds.
     pub iterations: usize,
     /// The last round stopped at the tolerance (not at `max_iterations`).
@@ -222,6 +237,23 @@ pub enum SolutionError {
          positions only (SourceModel::Position) or observe over more epochs"
     )]
     Degenerate { span_yr: f64 },
+    #[error(
+        "every exposure points within {spread_mas:.0} mas of the others: a global distortion is unconstrained \
+         (each source is seen at one place of the focal plane: degenerate); dither the pattern, or solve the \
+         arrays' offsets alone (distortion order 0)"
+    )]
+    DistortionUnconstrained { spread_mas: f64 },
+    #[error(
+        "the calibration cannot be solved: array {0} (or a distortion term) has no observation that constrains \
+         it"
+    )]
+    CalibrationUnconstrained(usize),
+    #[error("calibration: {field} = {value}: allowed {allowed}")]
+    CalibrationModel {
+        field: &'static str,
+        value: usize,
+        allowed: &'static str,
+    },
     #[error(
         "the reference catalogue must carry proper motions and parallaxes (with errors) to anchor {0}"
     )]

@@ -1,5 +1,6 @@
 //! The block-iterative solution: validation, the two blocks, rejection (see the module's documentation).
 
+use super::calibration::{self, Calibration};
 use super::{
     Attitude, ExposureGeometry, Observation, Options, Params, Reference, Solution, SolutionError,
     SolvedSource, SourceModel,
@@ -27,14 +28,42 @@ pub fn solve(
         prior[r.source] = Some(r);
     }
     let mut active = vec![true; obs.len()];
-    // start: every exposure's attitude from the reference sources alone (the frame right from the start)
+    // start: every exposure's attitude from the reference sources alone (the frame right from the start),
+    // then, with a calibration, the instrument's from them too, and the attitudes again
     let ref_params: Vec<Option<Params>> = prior.iter().map(|r| r.map(|r| r.params)).collect();
-    let mut attitudes: Vec<Attitude> = (0..exposures.len())
-        .map(|e| {
-            attitude_block(obs, &by_exposure[e], &exposures[e], &ref_params, &active)
+    let mut cal = Calibration::zero(opt.calibration);
+    let mut pos: Vec<[f64; 2]> = obs.iter().map(|o| [o.xi_mas, o.eta_mas]).collect();
+    let start_attitudes = |pos: &[[f64; 2]], previous: Option<&[Attitude]>| -> Vec<Attitude> {
+        (0..exposures.len())
+            .map(|e| {
+                attitude_block(
+                    pos,
+                    obs,
+                    &by_exposure[e],
+                    &exposures[e],
+                    &ref_params,
+                    &active,
+                )
+                .or(previous.map(|p| p[e]))
                 .unwrap_or(Attitude::IDENTITY)
-        })
-        .collect();
+            })
+            .collect()
+    };
+    let mut attitudes = start_attitudes(&pos, None);
+    if opt.calibration.solves() {
+        let r = raw_residuals(obs, exposures, &attitudes, &ref_params);
+        if let Some(c) = calibration::fit(opt.calibration, obs, exposures, &r, &active) {
+            cal = c;
+            pos = corrected(obs, exposures, &cal);
+            attitudes = start_attitudes(&pos, Some(&attitudes));
+        }
+    }
+    // mas per focal-plane px (for the calibration's share of the convergence test)
+    let mas_per_px = exposures.first().map_or(1.0, |g| {
+        (g.to_plane[0] * g.to_plane[3] - g.to_plane[1] * g.to_plane[2])
+            .abs()
+            .sqrt()
+    });
     let mut sources: Vec<SolvedSource> = vec![unsolved(); n_sources];
     let (mut iterations, mut rejected) = (0, 0);
     let mut converged = true;
@@ -46,6 +75,7 @@ pub fn solve(
                 .into_par_iter()
                 .map(|s| {
                     source_block(
+                        &pos,
                         obs,
                         &by_source[s],
                         exposures,
@@ -63,7 +93,7 @@ pub fn solve(
             let new_attitudes: Vec<Attitude> = (0..exposures.len())
                 .into_par_iter()
                 .map(|e| {
-                    attitude_block(obs, &by_exposure[e], &exposures[e], &params, &active)
+                    attitude_block(&pos, obs, &by_exposure[e], &exposures[e], &params, &active)
                         .unwrap_or(attitudes[e])
                 })
                 .collect();
@@ -93,7 +123,16 @@ pub fn solve(
                 .fold(0.0f64, f64::max);
             sources = new_sources;
             attitudes = new_attitudes;
-            if moved_sources.max(moved_attitudes) <= opt.tolerance_mas {
+            let mut moved_calibration = 0.0;
+            if opt.calibration.solves() {
+                let r = raw_residuals(obs, exposures, &attitudes, &params);
+                let c = calibration::fit(opt.calibration, obs, exposures, &r, &active)
+                    .ok_or_else(|| unconstrained(obs, &active, opt.calibration.arrays))?;
+                moved_calibration = c.moved_px(&cal) * mas_per_px;
+                cal = c;
+                pos = corrected(obs, exposures, &cal);
+            }
+            if moved_sources.max(moved_attitudes).max(moved_calibration) <= opt.tolerance_mas {
                 this_round = true;
                 break;
             }
@@ -108,7 +147,7 @@ pub fn solve(
         let mut changed = 0;
         for (i, o) in obs.iter().enumerate() {
             let Some((rx, ry)) = residual(
-                o,
+                pos[i],
                 &exposures[o.exposure],
                 &attitudes[o.exposure],
                 &sources[o.source],
@@ -143,7 +182,7 @@ pub fn solve(
             continue;
         }
         if let Some((rx, ry)) = residual(
-            o,
+            pos[i],
             &exposures[o.exposure],
             &attitudes[o.exposure],
             &sources[o.source],
@@ -158,12 +197,13 @@ pub fn solve(
         .iter()
         .map(|r| r.sigma.iter().filter(|s| anchors(**s)).count())
         .sum();
-    let unknowns = n_sources * opt.model.len() + 4 * exposures.len();
+    let unknowns = n_sources * opt.model.len() + 4 * exposures.len() + opt.calibration.unknowns();
     // no degree of freedom left: no χ² to report
     let dof = (n_terms + priors).saturating_sub(unknowns);
     Ok(Solution {
         sources,
         attitudes,
+        calibration: cal,
         iterations,
         converged,
         rejected,
@@ -197,9 +237,9 @@ fn place(p: &Params, g: &ExposureGeometry) -> [f64; 2] {
     ]
 }
 
-/// Observed minus modelled, mas (None for an unsolved source).
+/// Observed (at `p`, the calibration removed) minus modelled, mas (None for an unsolved source).
 fn residual(
-    o: &Observation,
+    p: [f64; 2],
     g: &ExposureGeometry,
     a: &Attitude,
     s: &SolvedSource,
@@ -208,13 +248,58 @@ fn residual(
         return None;
     }
     let m = a.apply(g.centre_mas, place(&s.params, g));
-    Some((o.xi_mas - m[0], o.eta_mas - m[1]))
+    Some((p[0] - m[0], p[1] - m[1]))
+}
+
+/// Every observation's place with the calibration's correction removed, mas.
+fn corrected(
+    obs: &[Observation],
+    exposures: &[ExposureGeometry],
+    cal: &Calibration,
+) -> Vec<[f64; 2]> {
+    obs.par_iter()
+        .map(|o| {
+            let d = cal.correction_mas(o, &exposures[o.exposure]);
+            [o.xi_mas - d[0], o.eta_mas - d[1]]
+        })
+        .collect()
+}
+
+/// Every observation's measured minus modelled place without any calibration (what the calibration block
+/// fits), mas; None where its source has no parameters.
+fn raw_residuals(
+    obs: &[Observation],
+    exposures: &[ExposureGeometry],
+    attitudes: &[Attitude],
+    params: &[Option<Params>],
+) -> Vec<Option<[f64; 2]>> {
+    obs.par_iter()
+        .map(|o| {
+            let p = params[o.source].as_ref()?;
+            let g = &exposures[o.exposure];
+            let m = attitudes[o.exposure].apply(g.centre_mas, place(p, g));
+            Some([o.xi_mas - m[0], o.eta_mas - m[1]])
+        })
+        .collect()
+}
+
+/// The error of a calibration that cannot be fitted: the first array with fewer than 3 kept observations,
+/// else `arrays` (a distortion term).
+fn unconstrained(obs: &[Observation], active: &[bool], arrays: usize) -> SolutionError {
+    let mut n = vec![0usize; arrays];
+    for (o, on) in obs.iter().zip(active) {
+        if *on && o.array < arrays {
+            n[o.array] += 1;
+        }
+    }
+    SolutionError::CalibrationUnconstrained(n.iter().position(|c| *c < 3).unwrap_or(arrays))
 }
 
 /// One source's parameters from its observations (each turned back through its exposure's attitude) and its
 /// reference entry; a source whose full model is singular (too few epochs) gets its position only, with the
 /// reference's (or zero) motion.
 fn source_block(
+    pos: &[[f64; 2]],
     obs: &[Observation],
     mine: &[usize],
     exposures: &[ExposureGeometry],
@@ -231,7 +316,7 @@ fn source_block(
             let o = &obs[i];
             let g = &exposures[o.exposure];
             let a = &attitudes[o.exposure];
-            let s = a.invert(g.centre_mas, [o.xi_mas, o.eta_mas]);
+            let s = a.invert(g.centre_mas, pos[i]);
             let weight = (a.p * a.p + a.q * a.q) / (o.sigma_mas * o.sigma_mas);
             for axis in 0..2 {
                 let full = [
@@ -291,6 +376,7 @@ fn source_block(
 /// One exposure's attitude from the sources it sees (those with parameters), by linear least squares in
 /// (p, q, a_ξ, a_η); the lever arms are scaled to order 1 for the conditioning.
 fn attitude_block(
+    pos: &[[f64; 2]],
     obs: &[Observation],
     mine: &[usize],
     g: &ExposureGeometry,
@@ -304,7 +390,7 @@ fn attitude_block(
             let s = place(p, g);
             pairs.push((
                 [s[0] - g.centre_mas[0], s[1] - g.centre_mas[1]],
-                [o.xi_mas - g.centre_mas[0], o.eta_mas - g.centre_mas[1]],
+                [pos[i][0] - g.centre_mas[0], pos[i][1] - g.centre_mas[1]],
                 1.0 / (o.sigma_mas * o.sigma_mas),
             ));
         }
@@ -342,6 +428,48 @@ fn validate(
     n_sources: usize,
     opt: &Options,
 ) -> Result<(), SolutionError> {
+    let cm = opt.calibration;
+    if cm.distortion_order == 1 || cm.distortion_order > calibration::MAX_DISTORTION_ORDER {
+        return Err(SolutionError::CalibrationModel {
+            field: "distortion_order",
+            value: cm.distortion_order,
+            allowed: "0 (none) or 2 … 5",
+        });
+    }
+    if cm.arrays > 64 {
+        return Err(SolutionError::CalibrationModel {
+            field: "arrays",
+            value: cm.arrays,
+            allowed: "0 … 64",
+        });
+    }
+    if cm.solves() {
+        if let Some(e) = exposures.iter().position(|g| {
+            !g.to_plane.iter().all(|v| v.is_finite())
+                || calibration::inverse2(&g.to_plane).is_none()
+        }) {
+            return Err(SolutionError::CalibrationModel {
+                field: "to_plane (a singular or non-finite focal-plane map) of exposure",
+                value: e,
+                allowed: "an invertible finite 2 × 2 matrix",
+            });
+        }
+    }
+    if cm.distortion_order > 0 {
+        let spread = |k: usize| {
+            let (lo, hi) = exposures
+                .iter()
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), g| {
+                    (lo.min(g.centre_mas[k]), hi.max(g.centre_mas[k]))
+                });
+            hi - lo
+        };
+        let spread_mas = spread(0).max(spread(1));
+        // a dither smaller than an arcsecond moves a source by ≈ 2 px over the focal plane: nothing to see
+        if !(spread_mas >= 1000.0) {
+            return Err(SolutionError::DistortionUnconstrained { spread_mas });
+        }
+    }
     let mut seen = std::collections::HashSet::with_capacity(obs.len());
     let mut observed = vec![0usize; n_sources];
     for (index, o) in obs.iter().enumerate() {
@@ -362,6 +490,29 @@ fn validate(
                 value: o.sigma_mas,
                 extra: " and > 0",
             });
+        }
+        if cm.solves() {
+            for (field, value) in [
+                ("focal_px[0]", o.focal_px[0]),
+                ("focal_px[1]", o.focal_px[1]),
+            ] {
+                if !value.is_finite() {
+                    return Err(SolutionError::NotFinite {
+                        index,
+                        field,
+                        value,
+                        extra: "",
+                    });
+                }
+            }
+            if cm.arrays > 0 && o.array >= cm.arrays {
+                return Err(SolutionError::OutOfRange {
+                    index,
+                    what: "array",
+                    value: o.array,
+                    limit: cm.arrays - 1,
+                });
+            }
         }
         if o.exposure >= exposures.len() {
             return Err(SolutionError::OutOfRange {
