@@ -443,17 +443,16 @@ fn validate(
             allowed: "0 … 64",
         });
     }
-    if cm.solves() {
-        if let Some(e) = exposures.iter().position(|g| {
-            !g.to_plane.iter().all(|v| v.is_finite())
-                || calibration::inverse2(&g.to_plane).is_none()
-        }) {
-            return Err(SolutionError::CalibrationModel {
-                field: "to_plane (a singular or non-finite focal-plane map) of exposure",
-                value: e,
-                allowed: "an invertible finite 2 × 2 matrix",
-            });
-        }
+    if let Some(e) = exposures.iter().position(|g| {
+        cm.solves()
+            && (!g.to_plane.iter().all(|v| v.is_finite())
+                || calibration::inverse2(&g.to_plane).is_none())
+    }) {
+        return Err(SolutionError::CalibrationModel {
+            field: "to_plane (a singular or non-finite focal-plane map) of exposure",
+            value: e,
+            allowed: "an invertible finite 2 × 2 matrix",
+        });
     }
     if cm.distortion_order > 0 {
         let spread = |k: usize| {
