@@ -33,6 +33,8 @@ pub enum Stream {
     CosmicRays = 15,
     /// The synthetic sequences of the astrometric solution's benchmark.
     Solution = 16,
+    /// The reference catalogue of a sequence's region (`studies::sequence::reference`).
+    SkyReference = 17,
     Test = 99,
 }
 

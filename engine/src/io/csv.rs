@@ -70,6 +70,34 @@ pub fn read(path: &Path) -> Result<(Vec<String>, Vec<Vec<String>>), IoError> {
     Ok((header, rows))
 }
 
+/// Column `name` of a table read with [`read`], parsed as f64 where `inf` and `NaN` are values too (a
+/// bound a fit could not give).
+pub fn column_f64_any(
+    path: &Path,
+    header: &[String],
+    rows: &[Vec<String>],
+    name: &str,
+) -> Result<Vec<f64>, IoError> {
+    let i = header
+        .iter()
+        .position(|h| h == name)
+        .ok_or_else(|| IoError::Format {
+            path: path.to_path_buf(),
+            message: format!("no column `{name}`"),
+        })?;
+    rows.iter()
+        .enumerate()
+        .map(|(k, r)| {
+            r.get(i)
+                .and_then(|v| v.trim().parse::<f64>().ok())
+                .ok_or_else(|| IoError::Format {
+                    path: path.to_path_buf(),
+                    message: format!("row {}: column `{name}` is not a number", k + 2),
+                })
+        })
+        .collect()
+}
+
 /// Column `name` of a table read with [`read`], parsed as f64.
 pub fn column_f64(
     path: &Path,

@@ -17,6 +17,7 @@ pub mod crowded;
 pub mod dataset;
 pub mod focal_plane;
 pub mod image;
+pub mod solution;
 pub mod vectors;
 
 pub use catalogue::*;

@@ -118,18 +118,22 @@ pub fn synthetic(spec: &SyntheticSpec) -> Synthetic {
             }
         })
         .collect();
-    let mut calibration = Calibration::zero(spec.calibration);
+    let mut calibration = Calibration::zero(
+        spec.calibration,
+        crate::analysis::solution::calibration::DEFAULT_FOCAL_NORM_PX,
+    );
     for a in &mut calibration.arrays {
         let turn = gauss(&mut r, 0.1f64.to_radians())
-            * crate::analysis::solution::calibration::FOCAL_NORM_PX;
-        *a = [
-            gauss(&mut r, 10.0),
-            gauss(&mut r, 10.0),
-            0.0,
-            -turn,
-            turn,
-            0.0,
-        ];
+            * crate::analysis::solution::calibration::DEFAULT_FOCAL_NORM_PX;
+        let (bx, by) = (gauss(&mut r, 10.0), gauss(&mut r, 10.0));
+        a[0][..3].copy_from_slice(&[bx, 0.0, -turn]);
+        a[1][..3].copy_from_slice(&[by, turn, 0.0]);
+        // higher terms (a displaced array's share of the distortion): 0.05 px
+        for axis in a.iter_mut() {
+            for c in axis.iter_mut().skip(3) {
+                *c = gauss(&mut r, 0.05);
+            }
+        }
     }
     for axis in &mut calibration.distortion {
         for d in axis.iter_mut() {
@@ -158,12 +162,15 @@ pub fn synthetic(spec: &SyntheticSpec) -> Synthetic {
             let focal_px = [-d0 / SYNTHETIC_MAS_PER_PX, d1 / SYNTHETIC_MAS_PER_PX];
             let array = usize::from(focal_px[0] >= 0.0) + 2 * usize::from(focal_px[1] >= 0.0);
             let (u, v) = (
-                focal_px[0] / crate::analysis::solution::calibration::FOCAL_NORM_PX,
-                focal_px[1] / crate::analysis::solution::calibration::FOCAL_NORM_PX,
+                focal_px[0] / crate::analysis::solution::calibration::DEFAULT_FOCAL_NORM_PX,
+                focal_px[1] / crate::analysis::solution::calibration::DEFAULT_FOCAL_NORM_PX,
             );
             let mut dfx = [0.0; 2];
             if let Some(c) = calibration.arrays.get(array) {
-                dfx = [c[0] + c[2] * u + c[3] * v, c[1] + c[4] * u + c[5] * v];
+                for (m, (p, q)) in spec.calibration.array_terms().into_iter().enumerate() {
+                    dfx[0] += c[0][m] * u.powi(p) * v.powi(q);
+                    dfx[1] += c[1][m] * u.powi(p) * v.powi(q);
+                }
             }
             for (m, (p, q)) in spec.calibration.monomials().into_iter().enumerate() {
                 dfx[0] += calibration.distortion[0][m] * u.powi(p) * v.powi(q);

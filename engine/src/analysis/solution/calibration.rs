@@ -6,12 +6,14 @@
 //! (nominal array positions, the design distortion); what the instrument does differently is
 //!
 //! ```text
-//! Δf = b_k + B_k f/L + Σ_{2 ≤ p+q ≤ n} d_pq (f_x/L)^p (f_y/L)^q      (focal-plane px)
+//! Δf = Σ_{p+q ≤ m} a_k,pq (f_x/L)^p (f_y/L)^q + Σ_{m < p+q ≤ n} d_pq (f_x/L)^p (f_y/L)^q   (focal-plane px)
 //! ```
 //!
 //! for a detection at design focal-plane position f (px from the optical axis) on array k, L =
-//! [`FOCAL_NORM_PX`]; on the plane it is `M_e Δf`, M_e the exposure's focal-plane-to-plane matrix. With the
-//! sources and attitudes held, (b, B, d) is one linear least-squares fit of every residual turned back into
+//! [`FOCAL_NORM_PX`]: each array's own polynomial of order m (1: the offset b_k and affine B_k; 2 also the
+//! quadratic terms a global distortion takes on an array displaced from its design place, ∇D · δ_k) and a
+//! global one of orders m + 1 … n; on the plane it is `M_e Δf`, M_e the exposure's focal-plane-to-plane matrix. With the
+//! sources and attitudes held, (a, d) is one linear least-squares fit of every residual turned back into
 //! focal-plane pixels (x and y apart: they share no parameter).
 //!
 //! **The gauge.** A shift common to every array, and the similarity part (turn and scale) of their B's
@@ -21,24 +23,38 @@
 
 use super::{ExposureGeometry, Observation};
 
-/// Normalising length of the focal-plane coordinates, px: about the quad focal plane's corner radius.
-pub const FOCAL_NORM_PX: f64 = 3000.0;
+/// The default normalising length L of the focal-plane coordinates, px: about JASMINE's quad focal plane's
+/// corner radius (`Options::focal_norm_px`: a focal plane's own keeps the terms of order 1).
+pub const DEFAULT_FOCAL_NORM_PX: f64 = 3000.0;
 
 /// Which calibration unknowns the solution solves.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct CalibrationModel {
-    /// Arrays with affine offsets of their own (0: none; the observations are taken as they are).
+    /// Arrays with terms of their own (0: none; the observations are taken as they are).
     pub arrays: usize,
-    /// Order of the global distortion polynomial (0: none, else 2 … [`MAX_DISTORTION_ORDER`]).
+    /// The order of each array's own polynomial: 1 affine (offset, turn, scale, shear), 2 quadratic too —
+    /// what a global distortion becomes on an array that sits a little off its design place (its gradient
+    /// times the offset).
+    pub array_order: usize,
+    /// The global distortion's highest order (0: none; else `array_order` + 1 … [`MAX_DISTORTION_ORDER`]):
+    /// its terms start one order above the arrays' own.
     pub distortion_order: usize,
 }
 
 /// The highest distortion order solved (the mission's plate model goes to 5).
 pub const MAX_DISTORTION_ORDER: usize = 5;
 
+/// The monomials (p, q) with `lo ≤ p + q ≤ hi`, by order, then by falling p.
+fn monomials_between(lo: usize, hi: usize) -> Vec<(i32, i32)> {
+    (lo as i32..=hi as i32)
+        .flat_map(|n| (0..=n).map(move |q| (n - q, q)))
+        .collect()
+}
+
 impl CalibrationModel {
     pub const NONE: CalibrationModel = CalibrationModel {
         arrays: 0,
+        array_order: 1,
         distortion_order: 0,
     };
 
@@ -47,16 +63,27 @@ impl CalibrationModel {
         self.arrays > 0 || self.distortion_order > 0
     }
 
-    /// The distortion's monomials (p, q), 2 ≤ p + q ≤ order.
-    pub fn monomials(&self) -> Vec<(i32, i32)> {
-        (2..=self.distortion_order as i32)
-            .flat_map(|n| (0..=n).map(move |q| (n - q, q)))
-            .collect()
+    /// Each array's own monomials: (0, 0), (1, 0), (0, 1)[, (2, 0), (1, 1), (0, 2)].
+    pub fn array_terms(&self) -> Vec<(i32, i32)> {
+        if self.arrays == 0 {
+            return Vec::new();
+        }
+        monomials_between(0, self.array_order)
     }
 
-    /// Unknowns per axis: 3 per array (offset and a row of B), one per monomial.
+    /// The global distortion's monomials: orders above the arrays' own up to `distortion_order`.
+    pub fn monomials(&self) -> Vec<(i32, i32)> {
+        let lo = if self.arrays > 0 {
+            self.array_order + 1
+        } else {
+            2
+        };
+        monomials_between(lo, self.distortion_order)
+    }
+
+    /// Unknowns per axis.
     fn per_axis(&self) -> usize {
-        3 * self.arrays + self.monomials().len()
+        self.arrays * self.array_terms().len() + self.monomials().len()
     }
 
     /// Unknowns in all, less the gauge the attitudes hold (2 shifts, a turn and a scale).
@@ -70,29 +97,37 @@ impl CalibrationModel {
 #[derive(Debug, Clone, PartialEq)]
 pub struct Calibration {
     pub model: CalibrationModel,
-    /// Per array `[b_x, b_y, B_xx, B_xy, B_yx, B_yy]`: px, and px per L of focal-plane position.
-    pub arrays: Vec<[f64; 6]>,
+    /// Per array, per axis (x, y): the coefficients of [`CalibrationModel::array_terms`] (px: the first the
+    /// offset, the next two the affine B's row, per L of focal-plane position).
+    pub arrays: Vec<[Vec<f64>; 2]>,
     /// `d_pq` per axis, in the order of [`CalibrationModel::monomials`], px.
     pub distortion: [Vec<f64>; 2],
+    /// L: focal-plane positions are in units of it in every term, px.
+    pub norm_px: f64,
 }
 
 impl Calibration {
     /// Nothing to correct.
-    pub fn zero(model: CalibrationModel) -> Self {
-        let m = model.monomials().len();
+    pub fn zero(model: CalibrationModel, norm_px: f64) -> Self {
+        let (a, m) = (model.array_terms().len(), model.monomials().len());
         Self {
             model,
-            arrays: vec![[0.0; 6]; model.arrays],
+            arrays: vec![[vec![0.0; a], vec![0.0; a]]; model.arrays],
             distortion: [vec![0.0; m], vec![0.0; m]],
+            norm_px,
         }
     }
 
     /// Δf at design focal-plane position `f_px` on array `array`, px.
     pub fn correction_px(&self, array: usize, f_px: [f64; 2]) -> [f64; 2] {
-        let (u, v) = (f_px[0] / FOCAL_NORM_PX, f_px[1] / FOCAL_NORM_PX);
+        let (u, v) = (f_px[0] / self.norm_px, f_px[1] / self.norm_px);
         let mut d = [0.0; 2];
         if let Some(a) = self.arrays.get(array) {
-            d = [a[0] + a[2] * u + a[3] * v, a[1] + a[4] * u + a[5] * v];
+            for (m, (p, q)) in self.model.array_terms().into_iter().enumerate() {
+                let t = u.powi(p) * v.powi(q);
+                d[0] += a[0][m] * t;
+                d[1] += a[1][m] * t;
+            }
         }
         for (m, (p, q)) in self.model.monomials().into_iter().enumerate() {
             let t = u.powi(p) * v.powi(q);
@@ -115,47 +150,97 @@ impl Calibration {
     /// The largest change of Δf between two calibrations anywhere within L of the axis, px (a bound: the sum
     /// of the coefficients' changes).
     pub fn moved_px(&self, other: &Calibration) -> f64 {
+        let change =
+            |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| (x - y).abs()).sum::<f64>();
         let arrays = self
             .arrays
             .iter()
             .zip(&other.arrays)
-            .map(|(a, b)| {
-                let d: Vec<f64> = (0..6).map(|i| (a[i] - b[i]).abs()).collect();
-                (d[0] + d[2] + d[3]).max(d[1] + d[4] + d[5])
-            })
+            .map(|(a, b)| change(&a[0], &b[0]).max(change(&a[1], &b[1])))
             .fold(0.0f64, f64::max);
-        let dist = (0..2)
-            .map(|ax| {
-                self.distortion[ax]
-                    .iter()
-                    .zip(&other.distortion[ax])
-                    .map(|(a, b)| (a - b).abs())
-                    .sum::<f64>()
-            })
-            .fold(0.0f64, f64::max);
+        let dist = change(&self.distortion[0], &other.distortion[0])
+            .max(change(&self.distortion[1], &other.distortion[1]));
         arrays + dist
     }
 
+    /// The same terms in a larger model (the new ones zero).
+    pub fn extended_to(&self, model: CalibrationModel) -> Calibration {
+        let mut c = Calibration::zero(model, self.norm_px);
+        let terms = model.array_terms();
+        for (a, old) in c.arrays.iter_mut().zip(&self.arrays) {
+            for (m, t) in self.model.array_terms().into_iter().enumerate() {
+                if let Some(j) = terms.iter().position(|x| *x == t) {
+                    a[0][j] = old[0][m];
+                    a[1][j] = old[1][m];
+                }
+            }
+        }
+        let mono = model.monomials();
+        for (m, t) in self.model.monomials().into_iter().enumerate() {
+            if let Some(j) = mono.iter().position(|x| *x == t) {
+                c.distortion[0][j] = self.distortion[0][m];
+                c.distortion[1][j] = self.distortion[1][m];
+            }
+        }
+        c
+    }
+
     /// Hand the gauge to the attitudes: remove the arrays' mean offset and the similarity part (turn and
-    /// scale) of their mean B.
+    /// scale) of their mean affine B.
     pub fn remove_gauge(&mut self) {
         let n = self.arrays.len();
         if n == 0 {
             return;
         }
-        let mean = |i: usize| self.arrays.iter().map(|a| a[i]).sum::<f64>() / n as f64;
-        let (bx, by) = (mean(0), mean(1));
-        let s = (mean(2) + mean(5)) / 2.0;
-        let r = (mean(4) - mean(3)) / 2.0;
+        let mean =
+            |axis: usize, i: usize| self.arrays.iter().map(|a| a[axis][i]).sum::<f64>() / n as f64;
+        let (bx, by) = (mean(0, 0), mean(1, 0));
+        // B = [[x_u, x_v], [y_u, y_v]]: scale (x_u + y_v)/2, turn (y_u − x_v)/2
+        let s = (mean(0, 1) + mean(1, 2)) / 2.0;
+        let r = (mean(1, 1) - mean(0, 2)) / 2.0;
         for a in &mut self.arrays {
-            a[0] -= bx;
-            a[1] -= by;
-            a[2] -= s;
-            a[5] -= s;
-            a[4] -= r;
-            a[3] += r;
+            a[0][0] -= bx;
+            a[1][0] -= by;
+            a[0][1] -= s;
+            a[1][2] -= s;
+            a[1][1] -= r;
+            a[0][2] += r;
         }
     }
+}
+
+/// Solve normal equations `N x = r` scaled by their diagonal (Jacobi), so that the singularity test sees
+/// the terms' correlations, not their units: None where a term is unconstrained or is (to 1 part in 10⁹ of
+/// its scale) a combination of the others.
+fn solve_scaled(nm: &[f64], r: &[f64], n: usize) -> Option<Vec<f64>> {
+    let d: Vec<f64> = (0..n).map(|i| nm[i * n + i].sqrt()).collect();
+    if d.iter().any(|v| !(*v > 0.0) || !v.is_finite()) {
+        return None;
+    }
+    let scaled: Vec<f64> = (0..n * n).map(|k| nm[k] / (d[k / n] * d[k % n])).collect();
+    let rs: Vec<f64> = (0..n).map(|i| r[i] / d[i]).collect();
+    // the pivot test of `linalg::solve` is relative to the largest entry (1 on the scaled diagonal): a
+    // correlation beyond 1 − 10⁻⁹ fails it
+    let x = crate::numerics::linalg::solve(&scaled, &rs, n)?;
+    let mut min_pivot = f64::INFINITY;
+    {
+        // an LDLᵀ pass for the smallest pivot (the scaled matrix is symmetric positive semi-definite)
+        let mut m = scaled.clone();
+        for c in 0..n {
+            let p = m[c * n + c];
+            min_pivot = min_pivot.min(p);
+            if !(p > 0.0) {
+                return None;
+            }
+            for i in c + 1..n {
+                let f = m[i * n + c] / p;
+                for j in c..n {
+                    m[i * n + j] -= f * m[c * n + j];
+                }
+            }
+        }
+    }
+    (min_pivot > 1e-9).then(|| (0..n).map(|i| x[i] / d[i]).collect())
 }
 
 /// The inverse of a 2 × 2 row-major matrix (None when singular).
@@ -164,99 +249,231 @@ pub fn inverse2(m: &[f64; 4]) -> Option<[f64; 4]> {
     (det.abs() > 0.0 && det.is_finite()).then(|| [m[3] / det, -m[1] / det, -m[2] / det, m[0] / det])
 }
 
-/// The calibration block: with the sources and attitudes held, (b, B, d) from every kept observation's
-/// residual `r` (plane, mas, observed minus modelled without calibration) turned back into focal-plane px.
-/// `None` when the fit is singular (an array without observations, a distortion the pattern cannot see).
-pub fn fit(
+/// The instrument block: with the sources held, every exposure's attitude and the calibration together —
+/// one linear least-squares fit, the attitudes eliminated exposure by exposure (each exposure's 4 × 4 block,
+/// a Schur complement), so that what the two share (a shift, turn or scale common to the arrays: the gauge,
+/// held at zero for the calibration by four penalty rows) never bounces between them. Every kept observation
+/// with a place `places[i]` (its source's place at the exposure's epoch, mas) enters turned into the
+/// focal-plane frame: `M⁻¹(o − c) = A′ M⁻¹(s − c) + a′ + Δf(f)`, A′ a similarity.
+///
+/// Returns the calibration and each exposure's attitude (None where it sees fewer than two placed sources),
+/// or None when the calibration is unconstrained.
+pub fn fit_with_attitudes(
     model: CalibrationModel,
+    norm_px: f64,
     obs: &[Observation],
     exposures: &[ExposureGeometry],
-    residuals: &[Option<[f64; 2]>],
+    places: &[Option<[f64; 2]>],
     active: &[bool],
-) -> Option<Calibration> {
+) -> Option<(Calibration, Vec<Option<super::Attitude>>)> {
     use rayon::prelude::*;
     let mono = model.monomials();
+    let terms = model.array_terms();
     let n = model.per_axis();
+    let n2 = 2 * n;
     let inv: Vec<Option<[f64; 4]>> = exposures.iter().map(|g| inverse2(&g.to_plane)).collect();
-    // (normal matrix, right-hand side) per axis; each row touches 3 + monomials entries
-    let zero = || {
-        (
-            vec![0.0; n * n],
-            vec![0.0; n],
-            vec![0.0; n * n],
-            vec![0.0; n],
-        )
-    };
-    let (nx, rx, ny, ry) = obs
+    // per exposure: A (4 × 4), B (4 × 2n), its right-hand side (4), and its share of C (2n × 2n) and of the
+    // calibration's right-hand side (2n)
+    struct Block {
+        a: [f64; 16],
+        b: Vec<f64>,
+        ra: [f64; 4],
+        c: Vec<f64>,
+        rc: Vec<f64>,
+        count: usize,
+    }
+    let mut by_exposure: Vec<Vec<usize>> = vec![Vec::new(); exposures.len()];
+    for (i, o) in obs.iter().enumerate() {
+        if active[i] && places[i].is_some() {
+            by_exposure[o.exposure].push(i);
+        }
+    }
+    let blocks: Vec<Option<Block>> = by_exposure
         .par_iter()
-        .zip(residuals.par_iter())
-        .zip(active.par_iter())
-        .fold(zero, |mut acc, ((o, r), on)| {
-            let (Some(r), Some(m), true) = (r, inv[o.exposure], *on) else {
-                return acc;
-            };
-            let g = &exposures[o.exposure];
+        .enumerate()
+        .map(|(e, mine)| {
+            let g = &exposures[e];
+            let m = inv[e]?;
             let det = (g.to_plane[0] * g.to_plane[3] - g.to_plane[1] * g.to_plane[2]).abs();
-            // σ in px: the plane's mas per px is √|det M|
-            let w = det / (o.sigma_mas * o.sigma_mas);
-            let d = [m[0] * r[0] + m[1] * r[1], m[2] * r[0] + m[3] * r[1]];
-            let (u, v) = (o.focal_px[0] / FOCAL_NORM_PX, o.focal_px[1] / FOCAL_NORM_PX);
-            let mut idx: Vec<(usize, f64)> = Vec::with_capacity(3 + mono.len());
-            if model.arrays > 0 {
-                let k = 3 * o.array;
-                idx.extend([(k, 1.0), (k + 1, u), (k + 2, v)]);
-            }
-            let base = 3 * model.arrays;
-            idx.extend(
-                mono.iter()
-                    .enumerate()
-                    .map(|(j, (p, q))| (base + j, u.powi(*p) * v.powi(*q))),
-            );
-            for (axis, (nm, rhs)) in [(&mut acc.0, &mut acc.1), (&mut acc.2, &mut acc.3)]
-                .into_iter()
-                .enumerate()
-            {
-                for &(i, xi) in &idx {
-                    rhs[i] += w * xi * d[axis];
-                    for &(j, xj) in &idx {
-                        nm[i * n + j] += w * xi * xj;
+            let mut blk = Block {
+                a: [0.0; 16],
+                b: vec![0.0; 4 * n2],
+                ra: [0.0; 4],
+                c: vec![0.0; n2 * n2],
+                rc: vec![0.0; n2],
+                count: mine.len(),
+            };
+            let to_focal = |p: [f64; 2]| {
+                let d = [p[0] - g.centre_mas[0], p[1] - g.centre_mas[1]];
+                [m[0] * d[0] + m[1] * d[1], m[2] * d[0] + m[3] * d[1]]
+            };
+            let mut phi: Vec<(usize, f64)> = Vec::with_capacity(terms.len() + mono.len());
+            for &i in mine {
+                let o = &obs[i];
+                let Some(place) = places[i] else { continue };
+                // σ in px: the plane's mas per px is √|det M|
+                let w = det / (o.sigma_mas * o.sigma_mas);
+                let (y, sp) = (to_focal([o.xi_mas, o.eta_mas]), to_focal(place));
+                let (u, v) = (o.focal_px[0] / norm_px, o.focal_px[1] / norm_px);
+                phi.clear();
+                let k = terms.len() * o.array;
+                phi.extend(
+                    terms
+                        .iter()
+                        .enumerate()
+                        .map(|(j, (p, q))| (k + j, u.powi(*p) * v.powi(*q))),
+                );
+                let base = terms.len() * model.arrays;
+                phi.extend(
+                    mono.iter()
+                        .enumerate()
+                        .map(|(j, (p, q))| (base + j, u.powi(*p) * v.powi(*q))),
+                );
+                // x: p′ s′x − q′ s′y + a′x + Σ cx φ;  y: q′ s′x + p′ s′y + a′y + Σ cy φ
+                for axis in 0..2 {
+                    let att = if axis == 0 {
+                        [sp[0], -sp[1], 1.0, 0.0]
+                    } else {
+                        [sp[1], sp[0], 0.0, 1.0]
+                    };
+                    let off = axis * n;
+                    for r in 0..4 {
+                        blk.ra[r] += w * att[r] * y[axis];
+                        for c in 0..4 {
+                            blk.a[r * 4 + c] += w * att[r] * att[c];
+                        }
+                        for &(j, x) in &phi {
+                            blk.b[r * n2 + off + j] += w * att[r] * x;
+                        }
+                    }
+                    for &(i1, x1) in &phi {
+                        blk.rc[off + i1] += w * x1 * y[axis];
+                        for &(j1, x2) in &phi {
+                            blk.c[(off + i1) * n2 + off + j1] += w * x1 * x2;
+                        }
                     }
                 }
             }
-            acc
+            Some(blk)
         })
-        .reduce(zero, |mut a, b| {
-            for (x, y) in a.0.iter_mut().zip(&b.0) {
-                *x += y;
+        .collect();
+    // the reduced system for the calibration: C − Σ Bᵀ A⁻¹ B, r − Σ Bᵀ A⁻¹ rₐ
+    let mut sys = vec![0.0; n2 * n2];
+    let mut rhs = vec![0.0; n2];
+    let mut a_inv: Vec<Option<Vec<f64>>> = Vec::with_capacity(blocks.len());
+    for blk in &blocks {
+        let Some(blk) = blk else {
+            a_inv.push(None);
+            continue;
+        };
+        let ai = (blk.count >= 2)
+            .then(|| crate::numerics::linalg::inverse(&blk.a, 4))
+            .flatten();
+        let Some(ai) = ai else {
+            a_inv.push(None);
+            continue;
+        };
+        for (x, y) in sys.iter_mut().zip(&blk.c) {
+            *x += y;
+        }
+        for (x, y) in rhs.iter_mut().zip(&blk.rc) {
+            *x += y;
+        }
+        // G = A⁻¹ B (4 × 2n), g = A⁻¹ rₐ
+        let mut gm = vec![0.0; 4 * n2];
+        let mut gv = [0.0; 4];
+        for r in 0..4 {
+            for k in 0..4 {
+                let f = ai[r * 4 + k];
+                gv[r] += f * blk.ra[k];
+                for j in 0..n2 {
+                    gm[r * n2 + j] += f * blk.b[k * n2 + j];
+                }
             }
-            for (x, y) in a.1.iter_mut().zip(&b.1) {
-                *x += y;
+        }
+        for i in 0..n2 {
+            for r in 0..4 {
+                let bri = blk.b[r * n2 + i];
+                if bri == 0.0 {
+                    continue;
+                }
+                rhs[i] -= bri * gv[r];
+                for j in 0..n2 {
+                    sys[i * n2 + j] -= bri * gm[r * n2 + j];
+                }
             }
-            for (x, y) in a.2.iter_mut().zip(&b.2) {
-                *x += y;
+        }
+        a_inv.push(Some(ai));
+    }
+    let t = terms.len();
+    if model.arrays > 0 {
+        // the gauge: the arrays' mean offset and the similarity part of their mean B are zero
+        let heavy = (0..n2)
+            .map(|i| sys[i * n2 + i])
+            .fold(0.0f64, f64::max)
+            .max(1e-300);
+        let at = |axis: usize, k: usize, j: usize| axis * n + t * k + j;
+        let mut rows: Vec<Vec<(usize, f64)>> = vec![Vec::new(); 4];
+        for k in 0..model.arrays {
+            rows[0].push((at(0, k, 0), 1.0));
+            rows[1].push((at(1, k, 0), 1.0));
+            // scale: x_u + y_v; turn: y_u − x_v
+            rows[2].extend([(at(0, k, 1), 1.0), (at(1, k, 2), 1.0)]);
+            rows[3].extend([(at(1, k, 1), 1.0), (at(0, k, 2), -1.0)]);
+        }
+        for row in &rows {
+            for &(i, a) in row {
+                for &(j, b) in row {
+                    sys[i * n2 + j] += heavy * a * b;
+                }
             }
-            for (x, y) in a.3.iter_mut().zip(&b.3) {
-                *x += y;
-            }
-            a
-        });
-    let bx = crate::numerics::linalg::solve(&nx, &rx, n)?;
-    let by = crate::numerics::linalg::solve(&ny, &ry, n)?;
-    let mut c = Calibration::zero(model);
-    for (k, a) in c.arrays.iter_mut().enumerate() {
+        }
+    }
+    let x = solve_scaled(&sys, &rhs, n2)?;
+    let mut cal = Calibration::zero(model, norm_px);
+    for (k, a) in cal.arrays.iter_mut().enumerate() {
         *a = [
-            bx[3 * k],
-            by[3 * k],
-            bx[3 * k + 1],
-            bx[3 * k + 2],
-            by[3 * k + 1],
-            by[3 * k + 2],
+            x[t * k..t * (k + 1)].to_vec(),
+            x[n + t * k..n + t * (k + 1)].to_vec(),
         ];
     }
-    let base = 3 * model.arrays;
-    c.distortion = [bx[base..].to_vec(), by[base..].to_vec()];
-    c.remove_gauge();
-    Some(c)
+    let base = t * model.arrays;
+    cal.distortion = [x[base..n].to_vec(), x[n + base..].to_vec()];
+    // each exposure's attitude: A⁻¹ (rₐ − B x), turned back onto the plane
+    let attitudes = blocks
+        .iter()
+        .zip(&a_inv)
+        .zip(exposures)
+        .map(|((blk, ai), g)| {
+            let (blk, ai) = (blk.as_ref()?, ai.as_ref()?);
+            let mut r = blk.ra;
+            for (k, rk) in r.iter_mut().enumerate() {
+                *rk -= (0..n2).map(|j| blk.b[k * n2 + j] * x[j]).sum::<f64>();
+            }
+            let th: Vec<f64> = (0..4)
+                .map(|i| (0..4).map(|k| ai[i * 4 + k] * r[k]).sum())
+                .collect();
+            let m = g.to_plane;
+            let mi = inverse2(&m)?;
+            // A = M A′ M⁻¹ (a similarity, with the sky's handedness), a = M a′
+            let ap = [th[0], -th[1], th[1], th[0]];
+            let mul = |a: &[f64; 4], b: &[f64; 4]| {
+                [
+                    a[0] * b[0] + a[1] * b[2],
+                    a[0] * b[1] + a[1] * b[3],
+                    a[2] * b[0] + a[3] * b[2],
+                    a[2] * b[1] + a[3] * b[3],
+                ]
+            };
+            let full = mul(&mul(&m, &ap), &mi);
+            Some(super::Attitude {
+                p: (full[0] + full[3]) / 2.0,
+                q: (full[2] - full[1]) / 2.0,
+                offset_mas: [m[0] * th[2] + m[1] * th[3], m[2] * th[2] + m[3] * th[3]],
+            })
+        })
+        .collect();
+    Some((cal, attitudes))
 }
 
 #[cfg(test)]
@@ -264,34 +481,46 @@ mod tests {
     use super::*;
 
     #[test]
-    fn monomials_of_order_three_are_the_seven_terms_without_affine_ones() {
+    fn the_terms_of_arrays_and_distortion_do_not_overlap() {
         let m = CalibrationModel {
             arrays: 4,
+            array_order: 1,
             distortion_order: 3,
         };
+        assert_eq!(m.array_terms(), vec![(0, 0), (1, 0), (0, 1)]);
         assert_eq!(
             m.monomials(),
             vec![(2, 0), (1, 1), (0, 2), (3, 0), (2, 1), (1, 2), (0, 3)]
         );
-        // 4 arrays × 6 + 2 × 7, less the gauge's 4
+        // 4 arrays × 2 × 3 + 2 × 7, less the gauge's 4
         assert_eq!(m.unknowns(), 24 + 14 - 4);
+        let q = CalibrationModel {
+            array_order: 2,
+            ..m
+        };
+        assert_eq!(q.array_terms().len(), 6);
+        assert_eq!(q.monomials(), vec![(3, 0), (2, 1), (1, 2), (0, 3)]);
     }
 
     #[test]
     fn the_gauge_leaves_no_common_shift_turn_or_scale() {
-        let mut c = Calibration::zero(CalibrationModel {
-            arrays: 3,
-            distortion_order: 0,
-        });
+        let mut c = Calibration::zero(
+            CalibrationModel {
+                arrays: 3,
+                array_order: 1,
+                distortion_order: 0,
+            },
+            DEFAULT_FOCAL_NORM_PX,
+        );
         c.arrays = vec![
-            [1.0, 2.0, 0.1, -0.2, 0.3, 0.05],
-            [-4.0, 0.5, 0.0, 0.01, 0.02, 0.0],
-            [0.7, -3.0, 0.2, 0.0, -0.1, 0.3],
+            [vec![1.0, 0.1, -0.2], vec![2.0, 0.3, 0.05]],
+            [vec![-4.0, 0.0, 0.01], vec![0.5, 0.02, 0.0]],
+            [vec![0.7, 0.2, 0.0], vec![-3.0, -0.1, 0.3]],
         ];
         c.remove_gauge();
-        let mean = |i: usize| c.arrays.iter().map(|a| a[i]).sum::<f64>() / 3.0;
-        assert!(mean(0).abs() < 1e-15 && mean(1).abs() < 1e-15);
-        assert!((mean(2) + mean(5)).abs() < 1e-15, "scale");
-        assert!((mean(4) - mean(3)).abs() < 1e-15, "turn");
+        let mean = |axis: usize, i: usize| c.arrays.iter().map(|a| a[axis][i]).sum::<f64>() / 3.0;
+        assert!(mean(0, 0).abs() < 1e-15 && mean(1, 0).abs() < 1e-15);
+        assert!((mean(0, 1) + mean(1, 2)).abs() < 1e-15, "scale");
+        assert!((mean(1, 1) - mean(0, 2)).abs() < 1e-15, "turn");
     }
 }

@@ -30,6 +30,7 @@
 //! does), and at least two sources must be anchored.
 
 pub mod calibration;
+pub mod feed;
 mod solve;
 
 pub use calibration::{Calibration, CalibrationModel};
@@ -113,6 +114,9 @@ pub struct Options {
     pub max_rejection_rounds: usize,
     /// The calibration unknowns solved (none by default).
     pub calibration: CalibrationModel,
+    /// L, px: the calibration's focal-plane positions are in units of it (a focal plane's reach keeps its
+    /// terms of order 1 and the fit well conditioned).
+    pub focal_norm_px: f64,
 }
 
 impl Default for Options {
@@ -124,6 +128,7 @@ impl Default for Options {
             clip_sigma: 5.0,
             max_rejection_rounds: 5,
             calibration: CalibrationModel::NONE,
+            focal_norm_px: calibration::DEFAULT_FOCAL_NORM_PX,
         }
     }
 }
@@ -251,7 +256,7 @@ pub enum SolutionError {
     #[error("calibration: {field} = {value}: allowed {allowed}")]
     CalibrationModel {
         field: &'static str,
-        value: usize,
+        value: f64,
         allowed: &'static str,
     },
     #[error(

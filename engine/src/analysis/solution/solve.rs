@@ -8,6 +8,9 @@ use super::{
 use crate::numerics::linalg::weighted_lstsq;
 use rayon::prelude::*;
 
+/// How far a converged calibration's correction still moves from step to step: its rounding, mas.
+const CALIBRATION_ROUNDING_MAS: f64 = 1e-5;
+
 /// Solve `n_sources` sources and every exposure's attitude from `obs`, anchored by `refs`.
 pub fn solve(
     obs: &[Observation],
@@ -31,7 +34,7 @@ pub fn solve(
     // start: every exposure's attitude from the reference sources alone (the frame right from the start),
     // then, with a calibration, the instrument's from them too, and the attitudes again
     let ref_params: Vec<Option<Params>> = prior.iter().map(|r| r.map(|r| r.params)).collect();
-    let mut cal = Calibration::zero(opt.calibration);
+    let mut cal = Calibration::zero(opt.calibration, opt.focal_norm_px);
     let mut pos: Vec<[f64; 2]> = obs.iter().map(|o| [o.xi_mas, o.eta_mas]).collect();
     let start_attitudes = |pos: &[[f64; 2]], previous: Option<&[Attitude]>| -> Vec<Attitude> {
         (0..exposures.len())
@@ -51,11 +54,28 @@ pub fn solve(
     };
     let mut attitudes = start_attitudes(&pos, None);
     if opt.calibration.solves() {
-        let r = raw_residuals(obs, exposures, &attitudes, &ref_params);
-        if let Some(c) = calibration::fit(opt.calibration, obs, exposures, &r, &active) {
-            cal = c;
+        // the arrays' affine terms alone from the references: a start the full model refines
+        let start = calibration::CalibrationModel {
+            array_order: 1,
+            distortion_order: 0,
+            ..opt.calibration
+        };
+        let places = places_of(obs, exposures, &ref_params);
+        if let Some((c, att)) = calibration::fit_with_attitudes(
+            start,
+            opt.focal_norm_px,
+            obs,
+            exposures,
+            &places,
+            &active,
+        ) {
+            cal = c.extended_to(opt.calibration);
             pos = corrected(obs, exposures, &cal);
-            attitudes = start_attitudes(&pos, Some(&attitudes));
+            for (a, n) in attitudes.iter_mut().zip(att) {
+                if let Some(n) = n {
+                    *a = n;
+                }
+            }
         }
     }
     // mas per focal-plane px (for the calibration's share of the convergence test)
@@ -90,13 +110,33 @@ pub fn solve(
                 .iter()
                 .map(|s| s.params[0].is_finite().then_some(s.params))
                 .collect();
-            let new_attitudes: Vec<Attitude> = (0..exposures.len())
-                .into_par_iter()
-                .map(|e| {
-                    attitude_block(&pos, obs, &by_exposure[e], &exposures[e], &params, &active)
-                        .unwrap_or(attitudes[e])
-                })
-                .collect();
+            // the instrument: the attitudes alone, or with the calibration in one block
+            let mut new_cal = None;
+            let new_attitudes: Vec<Attitude> = if opt.calibration.solves() {
+                let places = places_of(obs, exposures, &params);
+                let (c, att) = calibration::fit_with_attitudes(
+                    opt.calibration,
+                    opt.focal_norm_px,
+                    obs,
+                    exposures,
+                    &places,
+                    &active,
+                )
+                .ok_or_else(|| unconstrained(obs, &active, opt.calibration.arrays))?;
+                new_cal = Some(c);
+                att.into_iter()
+                    .zip(&attitudes)
+                    .map(|(n, old)| n.unwrap_or(*old))
+                    .collect()
+            } else {
+                (0..exposures.len())
+                    .into_par_iter()
+                    .map(|e| {
+                        attitude_block(&pos, obs, &by_exposure[e], &exposures[e], &params, &active)
+                            .unwrap_or(attitudes[e])
+                    })
+                    .collect()
+            };
             let moved_sources = sources
                 .iter()
                 .zip(&new_sources)
@@ -124,15 +164,16 @@ pub fn solve(
             sources = new_sources;
             attitudes = new_attitudes;
             let mut moved_calibration = 0.0;
-            if opt.calibration.solves() {
-                let r = raw_residuals(obs, exposures, &attitudes, &params);
-                let c = calibration::fit(opt.calibration, obs, exposures, &r, &active)
-                    .ok_or_else(|| unconstrained(obs, &active, opt.calibration.arrays))?;
+            if let Some(c) = new_cal {
                 moved_calibration = c.moved_px(&cal) * mas_per_px;
                 cal = c;
                 pos = corrected(obs, exposures, &cal);
             }
-            if moved_sources.max(moved_attitudes).max(moved_calibration) <= opt.tolerance_mas {
+            // the calibration's terms settle to their rounding (≈ 10⁻¹⁰ of their size: 10⁻⁵ mas), which
+            // can lie above the tolerance
+            if moved_sources.max(moved_attitudes) <= opt.tolerance_mas
+                && moved_calibration <= opt.tolerance_mas.max(CALIBRATION_ROUNDING_MAS)
+            {
                 this_round = true;
                 break;
             }
@@ -265,20 +306,17 @@ fn corrected(
         .collect()
 }
 
-/// Every observation's measured minus modelled place without any calibration (what the calibration block
-/// fits), mas; None where its source has no parameters.
-fn raw_residuals(
+/// Every observation's source place at its exposure's epoch, mas; None where its source has no parameters.
+fn places_of(
     obs: &[Observation],
     exposures: &[ExposureGeometry],
-    attitudes: &[Attitude],
     params: &[Option<Params>],
 ) -> Vec<Option<[f64; 2]>> {
     obs.par_iter()
         .map(|o| {
-            let p = params[o.source].as_ref()?;
-            let g = &exposures[o.exposure];
-            let m = attitudes[o.exposure].apply(g.centre_mas, place(p, g));
-            Some([o.xi_mas - m[0], o.eta_mas - m[1]])
+            params[o.source]
+                .as_ref()
+                .map(|p| place(p, &exposures[o.exposure]))
         })
         .collect()
 }
@@ -308,8 +346,7 @@ fn source_block(
     active: &[bool],
     model: SourceModel,
 ) -> SolvedSource {
-    let fit = |model: SourceModel, fixed: &Params| -> Option<SolvedSource> {
-        let n = model.len();
+    let fit = |n: usize, fixed: &Params| -> Option<SolvedSource> {
         let (mut design, mut y, mut w) = (Vec::new(), Vec::new(), Vec::new());
         let mut used = 0;
         for &i in mine.iter().filter(|i| active[**i]) {
@@ -364,13 +401,47 @@ fn source_block(
         f[2..].copy_from_slice(&r.params[2..]);
         f
     });
-    fit(model, &fixed)
-        .or_else(|| {
-            (model == SourceModel::Full)
-                .then(|| fit(SourceModel::Position, &fixed))
-                .flatten()
-        })
+    // what its epochs can give: five parameters from three epochs or more (clusters of observations more
+    // than EPOCH_GAP_YR apart), position and proper motion from two (the parallax then its reference's, or
+    // 0), position alone from one
+    // a reference with motions enters as priors on all five, whatever the epochs: its proper motion and
+    // parallax then carry their errors into the position instead of being taken as exact
+    let priors_on_motion = prior.is_some_and(|r| (2..5).all(|k| anchors(r.sigma[k])));
+    let n = match (model, priors_on_motion) {
+        (_, true) => 5,
+        (SourceModel::Position, false) => 2,
+        (SourceModel::Full, false) => match epochs(mine, obs, exposures, active) {
+            0 | 1 => 2,
+            2 => 4,
+            _ => 5,
+        },
+    };
+    fit(n, &fixed)
+        .or_else(|| (n > 2).then(|| fit(2, &fixed)).flatten())
         .unwrap_or_else(unsolved)
+}
+
+/// Observations further apart in time than this belong to different epochs, years (≈ 18 days: a visit's
+/// exposures are hours to days apart, visits months).
+const EPOCH_GAP_YR: f64 = 0.05;
+
+/// How many epochs a source's kept observations span.
+fn epochs(
+    mine: &[usize],
+    obs: &[Observation],
+    exposures: &[ExposureGeometry],
+    active: &[bool],
+) -> usize {
+    let mut t: Vec<f64> = mine
+        .iter()
+        .filter(|i| active[**i])
+        .map(|&i| exposures[obs[i].exposure].t_yr)
+        .collect();
+    if t.is_empty() {
+        return 0;
+    }
+    t.sort_by(f64::total_cmp);
+    1 + t.windows(2).filter(|w| w[1] - w[0] > EPOCH_GAP_YR).count()
 }
 
 /// One exposure's attitude from the sources it sees (those with parameters), by linear least squares in
@@ -429,17 +500,34 @@ fn validate(
     opt: &Options,
 ) -> Result<(), SolutionError> {
     let cm = opt.calibration;
-    if cm.distortion_order == 1 || cm.distortion_order > calibration::MAX_DISTORTION_ORDER {
+    if !(opt.focal_norm_px.is_finite() && opt.focal_norm_px > 0.0) {
+        return Err(SolutionError::CalibrationModel {
+            field: "focal_norm_px",
+            value: opt.focal_norm_px,
+            allowed: "a finite length > 0 px",
+        });
+    }
+    if !(1..=2).contains(&cm.array_order) {
+        return Err(SolutionError::CalibrationModel {
+            field: "array_order",
+            value: cm.array_order as f64,
+            allowed: "1 (affine) or 2 (quadratic)",
+        });
+    }
+    let lowest = if cm.arrays > 0 { cm.array_order + 1 } else { 2 };
+    if cm.distortion_order != 0
+        && (cm.distortion_order < lowest || cm.distortion_order > calibration::MAX_DISTORTION_ORDER)
+    {
         return Err(SolutionError::CalibrationModel {
             field: "distortion_order",
-            value: cm.distortion_order,
-            allowed: "0 (none) or 2 … 5",
+            value: cm.distortion_order as f64,
+            allowed: "0 (none), or from one above the arrays' own order to 5",
         });
     }
     if cm.arrays > 64 {
         return Err(SolutionError::CalibrationModel {
             field: "arrays",
-            value: cm.arrays,
+            value: cm.arrays as f64,
             allowed: "0 … 64",
         });
     }
@@ -450,7 +538,7 @@ fn validate(
     }) {
         return Err(SolutionError::CalibrationModel {
             field: "to_plane (a singular or non-finite focal-plane map) of exposure",
-            value: e,
+            value: e as f64,
             allowed: "an invertible finite 2 × 2 matrix",
         });
     }

@@ -15,6 +15,7 @@ mod crowded_cmd;
 mod options;
 mod outputs;
 mod sequence_cmd;
+mod solve_cmd;
 mod sweep_cmd;
 
 pub use options::{
@@ -147,6 +148,10 @@ enum Command {
     /// A step-stare observation sequence: its plan and coverage map, and each exposure simulated and analysed
     /// (resumable, shardable), the catalogues gathered into one FITS table.
     Sequence(sequence_cmd::SequenceArgs),
+    /// The astrometric solution of a sequence that has run, from its products: sources (positions, proper
+    /// motions, parallaxes), attitudes and the instrument's calibration; scored against the truth, with the
+    /// precision against the number of exposures.
+    Solve(solve_cmd::SolveArgs),
     /// Monte Carlo sweep over a parameter grid (resumable, shardable; --emit-slurm for a cluster).
     Sweep(sweep_cmd::SweepArgs),
     /// Merge the shards of a sweep.
@@ -382,6 +387,7 @@ fn run(cli: Cli) -> Result<()> {
         Command::Score(a) => cmd::score(&a),
         Command::Crowded(a) => crowded_cmd::crowded(&a),
         Command::Sequence(a) => sequence_cmd::sequence(&a),
+        Command::Solve(a) => solve_cmd::solve(&a),
         Command::Sweep(a) => sweep_cmd::sweep(&a),
         Command::Merge(a) => sweep_cmd::merge(&a),
         Command::Report(a) => sweep_cmd::report(&a),

@@ -86,26 +86,32 @@ pub fn sequence(a: &SequenceArgs) -> Result<()> {
     let coverage_s = t.elapsed().as_secs_f64();
     // the plan's files: made again identically on a rerun (same spec, same seed)
     let mut outputs = crate::outputs::Outputs::in_dir(&a.out)?;
-    let plan_rows: Vec<Vec<Cell>> = plan
-        .exposures
-        .iter()
-        .map(|e| {
-            let s = &plan.stares[e.stare];
-            vec![
-                Cell::I(e.index as i64),
-                Cell::I(e.stare as i64),
-                Cell::I(s.visit as i64),
-                Cell::F(s.l_deg),
-                Cell::F(s.b_deg),
-                Cell::F(s.ra_deg),
-                Cell::F(s.dec_deg),
-                Cell::F(s.pa_deg),
-                Cell::S(e.start.utc_iso()),
-                Cell::F(e.start.tdb_mjd()),
-                Cell::I(e.seed as i64),
-            ]
-        })
-        .collect();
+    // the plan as the pipeline knows it (planned pointings), and the pointings as flown beside it (only
+    // scoring reads those)
+    let (mut plan_rows, mut flown_rows) = (Vec::new(), Vec::new());
+    for e in &plan.exposures {
+        let s = &plan.stares[e.stare];
+        let (ra, dec, pa) = s.planned();
+        plan_rows.push(vec![
+            Cell::I(e.index as i64),
+            Cell::I(e.stare as i64),
+            Cell::I(s.visit as i64),
+            Cell::F(s.l_deg),
+            Cell::F(s.b_deg),
+            Cell::F(ra),
+            Cell::F(dec),
+            Cell::F(pa),
+            Cell::S(e.start.utc_iso()),
+            Cell::F(e.start.tdb_mjd()),
+            Cell::I(e.seed as i64),
+        ]);
+        flown_rows.push(vec![
+            Cell::I(e.index as i64),
+            Cell::F(s.ra_deg),
+            Cell::F(s.dec_deg),
+            Cell::F(s.pa_deg),
+        ]);
+    }
     engine::io::csv::write(
         &outputs.path("plan.csv"),
         &[
@@ -113,6 +119,11 @@ pub fn sequence(a: &SequenceArgs) -> Result<()> {
             "date_obs", "mjd_tdb", "seed",
         ],
         &plan_rows,
+    )?;
+    engine::io::csv::write(
+        &outputs.path("plan_truth.csv"),
+        &["exposure", "ra_deg", "dec_deg", "pa_deg"],
+        &flown_rows,
     )?;
     let cov_rows: Vec<Vec<Cell>> = (0..coverage.rows)
         .flat_map(|j| (0..coverage.columns).map(move |i| (i, j)))
@@ -196,7 +207,12 @@ pub fn sequence(a: &SequenceArgs) -> Result<()> {
             cpus_per_task: a.cpus_per_task,
             jsim: std::env::current_exe()?,
         };
-        for name in ["config.toml", "sequence.toml", run::FIELD_NAME] {
+        for name in [
+            "config.toml",
+            "sequence.toml",
+            run::FIELD_NAME,
+            engine::io::sky_reference::REFERENCE_NAME,
+        ] {
             outputs.add(&dir.join(name));
         }
         let scripts = sequence::slurm::emit(&plan, &cfg, &dir, &job).map_err(anyhow::Error::msg)?;
@@ -213,10 +229,17 @@ pub fn sequence(a: &SequenceArgs) -> Result<()> {
         );
         return Ok(());
     }
-    // the field: drawn once (the same seed draws it again identically on a rerun)
+    // what it is planned with, for the solution (`jsim solve`) to read back
+    for name in ["config.toml", "sequence.toml"] {
+        outputs.add(&a.out.join(name));
+    }
+    run::write_setup(&plan, &cfg, &a.out).map_err(anyhow::Error::msg)?;
+    // the field and its reference catalogue: drawn once (the same seed draws them again identically on a
+    // rerun)
     let field = a.out.join(run::FIELD_NAME);
     if !field.exists() {
         outputs.add(&field);
+        outputs.add(&a.out.join(engine::io::sky_reference::REFERENCE_NAME));
         run::write_field(&plan, &cfg, &a.out)?;
     }
     let bright = a.out.join(sequence::persistence::BRIGHT_FIELD_NAME);

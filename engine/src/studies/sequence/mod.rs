@@ -7,8 +7,10 @@
 pub mod coverage;
 pub mod persistence;
 pub mod plan;
+pub mod reference;
 pub mod run;
 pub mod slurm;
+pub mod solution;
 pub mod spec;
 
 pub use coverage::{Coverage, coverage};

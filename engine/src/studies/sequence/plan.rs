@@ -190,6 +190,31 @@ pub fn exposure_config(base: &Config, plan: &Plan, e: &PlannedExposure) -> Confi
     c
 }
 
+/// What the pipeline knows of exposure `e`: [`exposure_config`] at its stare's **planned** pointing (no
+/// pointing or roll error) on the focal plane **as designed** (no assembly offsets or turns) — the design
+/// WCS its catalogue's sky positions come through, and what the astrometric solution starts from.
+pub fn design_config(base: &Config, plan: &Plan, e: &PlannedExposure) -> Config {
+    let mut c = exposure_config(base, plan, e);
+    let (ra, dec, pa) = plan.stares[e.stare].planned();
+    (c.sky.ra_deg, c.sky.dec_deg, c.sky.pa_deg) = (ra, dec, pa);
+    c.focal_plane.array_offsets_px = [[0.0; 2]; 4];
+    c.focal_plane.array_rotation_errors_deg = [0.0; 4];
+    c
+}
+
+impl Stare {
+    /// Where it was planned to point: (RA, Dec, PA) in degrees, Galactic north up.
+    pub fn planned(&self) -> (f64, f64, f64) {
+        let (ra, dec) = galactic_to_icrs(self.l_deg, self.b_deg);
+        (ra, dec, galactic_north_pa_deg(ra, dec))
+    }
+}
+
+/// The mid-exposure instant of exposure `e` of a configuration `cfg` (its start plus half the exposure).
+pub fn mid_exposure(cfg: &Config, e: &PlannedExposure) -> Epoch {
+    e.start.plus_s(cfg.detector.exposure_s / 2.0)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -51,6 +51,21 @@ pub enum SequenceError {
     Source(#[from] crate::session::source::SourceError),
 }
 
+/// Write the configuration and the sequence file a sequence is planned with (`config.toml`,
+/// `sequence.toml`) into `dir`: what its Slurm tasks and its astrometric solution (`jsim solve`) read back.
+pub fn write_setup(plan: &Plan, cfg: &Config, dir: &Path) -> Result<(PathBuf, PathBuf), String> {
+    crate::io::ensure_dir(dir).map_err(|e| e.to_string())?;
+    let config = dir.join("config.toml");
+    let spec = dir.join("sequence.toml");
+    crate::io::write_atomic(&config, cfg.to_toml().as_bytes()).map_err(|e| e.to_string())?;
+    let spec_text = toml::to_string(&super::spec::SequenceFile {
+        sequence: plan.spec.clone(),
+    })
+    .map_err(|e| e.to_string())?;
+    crate::io::write_atomic(&spec, spec_text.as_bytes()).map_err(|e| e.to_string())?;
+    Ok((config, spec))
+}
+
 /// The file of exposure `index`'s catalogue.
 pub fn exposure_path(dir: &Path, index: usize) -> PathBuf {
     dir.join("exposures").join(format!("{index:05}.csv"))
@@ -86,6 +101,14 @@ pub fn write_field(plan: &Plan, base: &Config, dir: &Path) -> Result<PathBuf, Se
         })
         .collect();
     crate::io::ensure_dir(dir)?;
+    // the survey's catalogue of the same stars: the product that anchors the astrometric solution
+    let refs = super::reference::survey(
+        &stars,
+        &super::reference::SkySurvey::default(),
+        base.seed,
+        base.observation.catalogue_epoch_jyear,
+    );
+    crate::io::sky_reference::write(&refs, dir)?;
     let path = dir.join(FIELD_NAME);
     crate::io::csv::write(
         &path,
@@ -147,14 +170,18 @@ pub fn run_exposure(
     let first = analyses
         .first()
         .ok_or_else(|| SequenceError::Invalid("no countermeasure to run".into()))?;
-    let mjd_tdb = e.start.plus_s(c.detector.exposure_s / 2.0).tdb_mjd();
+    let mjd_tdb = super::plan::mid_exposure(&c, e).tdb_mjd();
     let scale = c.instrument.plate_scale_mas();
+    // the sky positions a pipeline gives: through the design WCS at the planned pointing (the images'
+    // headers carry the simulator's true one)
+    let design = super::plan::design_config(base, plan, e);
     let (mut rows, mut truth_rows) = (Vec::new(), Vec::new());
-    for (a, sim) in first.arrays.iter().zip(&fps.arrays) {
-        let wcs = sim.wcs();
+    for a in &first.arrays {
+        let wcs = crate::sky::array_wcs(&design, a.index).ok();
         for s in &a.stars {
             let f = &s.fit;
             let (ra, dec) = wcs
+                .as_ref()
                 .and_then(|w| w.pixel_to_sky(f.x, f.y))
                 .unwrap_or((f64::NAN, f64::NAN));
             rows.push(vec![

@@ -70,14 +70,7 @@ pub fn emit(plan: &Plan, cfg: &Config, dir: &Path, job: &SlurmJob) -> Result<Vec
     let sdir = dir.join("slurm");
     let logs = sdir.join("logs");
     io::ensure_dir(&logs).map_err(|e| e.to_string())?;
-    let config = dir.join("config.toml");
-    let spec = dir.join("sequence.toml");
-    io::write_atomic(&config, cfg.to_toml().as_bytes()).map_err(|e| e.to_string())?;
-    let spec_text = toml::to_string(&super::spec::SequenceFile {
-        sequence: plan.spec.clone(),
-    })
-    .map_err(|e| e.to_string())?;
-    io::write_atomic(&spec, spec_text.as_bytes()).map_err(|e| e.to_string())?;
+    let (config, spec) = super::run::write_setup(plan, cfg, dir)?;
     let (cfg_w, spec_w) = (word(&config)?, word(&spec)?);
     let n = job.shards;
     let partition = job

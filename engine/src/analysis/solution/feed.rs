@@ -1,0 +1,662 @@
+//! From a sequence's instrument products to the solution's input: every detection put on the sequence's
+//! tangent plane through its array's **design** WCS at the exposure's **planned** pointing (the pipeline
+//! knows no better: the true pointing, the arrays as assembled and any distortion beyond the design are what
+//! the solution solves), the detections of all exposures identified as sources against the reference
+//! catalogue and each other, and each exposure's epoch, parallax factors and focal-plane map.
+//!
+//! **Identification.** Each array of each exposure is first aligned to the reference catalogue: the offset
+//! between its brightest detections and the reference stars around them voted on a 0.25″ grid (the mode is
+//! the pointing error, the aberration the design model leaves, the array's assembly offset: tens of
+//! arcseconds, larger than the stars' separations in the bulge), then an affine map fitted to the stars
+//! matched within 1″ and again within the match radius. Through that map, a detection whose nearest source
+//! (a reference star, or one found in an earlier exposure) lies within the match radius is that source —
+//! only the nearest detection of a source per exposure; a detection with no source within the radius starts
+//! a new one. The map serves identification only: the observations are the design-model places.
+//!
+//! **Weights.** An observation's σ is its fit's Cramér–Rao bound and a floor added in quadrature (the
+//! jitter, flat and PSF errors the bound leaves out; a knob), the larger of its two axes.
+
+use super::{ExposureGeometry, Observation, Reference};
+use crate::config::Config;
+use crate::sky::apparent;
+use crate::time::Epoch;
+use std::collections::HashMap;
+
+/// One detection of an exposure's catalogue (what `exposures/NNNNN.csv` holds).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Detection {
+    pub exposure: usize,
+    /// 0 … 3.
+    pub array: usize,
+    pub x_px: f64,
+    pub y_px: f64,
+    pub flux_e: f64,
+    /// The fit's Cramér–Rao bound, the larger axis, px.
+    pub crlb_px: f64,
+    pub flags: u32,
+}
+
+/// One entry of a reference catalogue: ICRS degrees at `ref_epoch_jyear`, µα*, µδ (mas/yr), ϖ (mas), and
+/// the 1σ errors of those five (mas, mas/yr).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SkyReference {
+    pub ra_deg: f64,
+    pub dec_deg: f64,
+    pub pmra_mas_per_yr: f64,
+    pub pmdec_mas_per_yr: f64,
+    pub parallax_mas: f64,
+    pub sigma: [f64; 5],
+    pub hw: f64,
+    pub ref_epoch_jyear: f64,
+}
+
+/// What the pipeline knows of an exposure: its design configuration (the planned pointing, the focal plane
+/// as designed, its time and orbit) and its mid-exposure instant.
+#[derive(Debug, Clone)]
+pub struct DesignExposure {
+    pub cfg: Config,
+    pub mid: Epoch,
+}
+
+/// The feed's knobs.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FeedOptions {
+    /// A detection is a source's when it lies within this of it (after the alignment), mas.
+    pub match_radius_mas: f64,
+    /// How far the alignment looks for each array's offset, mas.
+    pub search_radius_mas: f64,
+    /// Added in quadrature to each detection's Cramér–Rao bound, mas.
+    pub sigma_floor_mas: f64,
+    /// A source needs this many observations to be solved.
+    pub min_observations: usize,
+}
+
+impl Default for FeedOptions {
+    fn default() -> Self {
+        Self {
+            match_radius_mas: 200.0,
+            search_radius_mas: 30_000.0,
+            sigma_floor_mas: 1.0,
+            min_observations: 2,
+        }
+    }
+}
+
+/// The solution's input and where each part came from.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Fed {
+    pub obs: Vec<Observation>,
+    pub exposures: Vec<ExposureGeometry>,
+    pub refs: Vec<Reference>,
+    pub n_sources: usize,
+    /// Per observation, its detection's index in the input.
+    pub detection: Vec<usize>,
+    /// Per source, its reference entry's index, if any.
+    pub reference: Vec<Option<usize>>,
+    /// The tangent point (ICRS degrees) and the reference epoch (Julian year, TDB).
+    pub tangent_deg: (f64, f64),
+    pub ref_epoch_jyear: f64,
+    /// Arrays of exposures left out, too few reference stars to align them: (exposure, array, matched).
+    pub unaligned: Vec<(usize, usize, usize)>,
+    /// Detections left out: flagged, a closer detection took their source, or on an unaligned array.
+    pub left_out: usize,
+}
+
+/// The feed cannot be made.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum FeedError {
+    #[error("feed: {field} = {value}: allowed {allowed}")]
+    Option {
+        field: &'static str,
+        value: f64,
+        allowed: &'static str,
+    },
+    #[error("feed: detection {index}: {what}")]
+    Detection { index: usize, what: String },
+    #[error("feed: exposure {0}: {1}")]
+    Design(usize, String),
+    #[error("feed: the reference catalogue is empty or has a non-finite entry (row {0})")]
+    Reference(usize),
+    #[error("feed: no array of any exposure could be aligned to the reference catalogue")]
+    NothingAligned,
+}
+
+impl FeedOptions {
+    fn validate(&self) -> Result<(), FeedError> {
+        let check = |field, v: f64, lo: f64, hi: f64, allowed| {
+            if (lo..=hi).contains(&v) && v.is_finite() {
+                Ok(())
+            } else {
+                Err(FeedError::Option {
+                    field,
+                    value: v,
+                    allowed,
+                })
+            }
+        };
+        check(
+            "match_radius_mas",
+            self.match_radius_mas,
+            1.0,
+            5000.0,
+            "1 … 5000 mas",
+        )?;
+        check(
+            "search_radius_mas",
+            self.search_radius_mas,
+            self.match_radius_mas,
+            300_000.0,
+            "the match radius … 300000 mas",
+        )?;
+        check(
+            "sigma_floor_mas",
+            self.sigma_floor_mas,
+            0.0,
+            1000.0,
+            "0 … 1000 mas",
+        )?;
+        check(
+            "min_observations",
+            self.min_observations as f64,
+            1.0,
+            1000.0,
+            "1 … 1000",
+        )
+    }
+}
+
+/// A uniform grid of points on the plane for neighbour queries.
+struct Grid {
+    cell: f64,
+    cells: HashMap<(i64, i64), Vec<usize>>,
+}
+
+impl Grid {
+    fn new(cell: f64) -> Self {
+        Self {
+            cell,
+            cells: HashMap::new(),
+        }
+    }
+    fn key(&self, p: [f64; 2]) -> (i64, i64) {
+        (
+            (p[0] / self.cell).floor() as i64,
+            (p[1] / self.cell).floor() as i64,
+        )
+    }
+    fn insert(&mut self, p: [f64; 2], i: usize) {
+        let k = self.key(p);
+        self.cells.entry(k).or_default().push(i);
+    }
+    /// Every index within `r` cells' reach of `p` (r = ⌈radius / cell⌉).
+    fn near(&self, p: [f64; 2], radius: f64, mut f: impl FnMut(usize)) {
+        let (kx, ky) = self.key(p);
+        let r = (radius / self.cell).ceil() as i64;
+        for dy in -r..=r {
+            for dx in -r..=r {
+                if let Some(v) = self.cells.get(&(kx + dx, ky + dy)) {
+                    v.iter().for_each(|i| f(*i));
+                }
+            }
+        }
+    }
+}
+
+/// Build the solution's input (see the module's documentation).
+pub fn feed(
+    detections: &[Detection],
+    designs: &[DesignExposure],
+    references: &[SkyReference],
+    tangent_deg: (f64, f64),
+    opt: &FeedOptions,
+) -> Result<Fed, FeedError> {
+    opt.validate()?;
+    if let Some(i) = references.iter().position(|r| {
+        ![r.ra_deg, r.dec_deg, r.ref_epoch_jyear]
+            .iter()
+            .all(|v| v.is_finite())
+            || !r.sigma.iter().all(|s| s.is_finite() && *s > 0.0)
+    }) {
+        return Err(FeedError::Reference(i));
+    }
+    let ref_epoch = references
+        .first()
+        .map(|r| r.ref_epoch_jyear)
+        .ok_or(FeedError::Reference(0))?;
+    let plane = |ra: f64, dec: f64| -> [f64; 2] {
+        let (x, y) = apparent::offset_mas(tangent_deg, (ra, dec));
+        [x, y]
+    };
+    // each exposure's arrays' design WCS and focal plane, its geometry and the aberration its design model
+    // leaves at the tangent point
+    struct Design {
+        wcs: Vec<crate::sky::wcs::ArrayWcs>,
+        fp: crate::sky::focal_plane::FocalPlane,
+        shift_mas: [f64; 2],
+    }
+    let mut models = Vec::with_capacity(designs.len());
+    let mut exposures = Vec::with_capacity(designs.len());
+    for (e, d) in designs.iter().enumerate() {
+        let err = |m: String| FeedError::Design(e, m);
+        let wcs = (0..4)
+            .map(|k| crate::sky::array_wcs(&d.cfg, k))
+            .collect::<Result<Vec<_>, _>>()
+            .map_err(err)?;
+        let fp = crate::sky::focal_plane(&d.cfg).nominal();
+        let (c, to_plane) = focal_map(&wcs[0], &fp, tangent_deg).map_err(err)?;
+        let observer = crate::sky::orbit(&d.cfg).map_err(err)?.observer(&d.mid);
+        let place = apparent::Place {
+            years: d.mid.julian_year_tdb() - ref_epoch,
+            observer,
+            apparent: true,
+        };
+        let (ra_a, dec_a) = apparent::direction(
+            tangent_deg.0,
+            tangent_deg.1,
+            &apparent::Motion::default(),
+            &place,
+        );
+        let shift = plane(ra_a, dec_a);
+        exposures.push(ExposureGeometry {
+            t_yr: d.mid.julian_year_tdb() - ref_epoch,
+            parallax_factor: apparent::parallax_factors(
+                tangent_deg.0,
+                tangent_deg.1,
+                observer.position_au,
+            ),
+            centre_mas: c,
+            to_plane,
+        });
+        models.push(Design {
+            wcs,
+            fp,
+            shift_mas: shift,
+        });
+    }
+    // every detection on the plane, through its design model
+    let mut places = Vec::with_capacity(detections.len());
+    for (index, d) in detections.iter().enumerate() {
+        let bad = |what: String| FeedError::Detection { index, what };
+        if d.exposure >= designs.len() {
+            return Err(bad(format!(
+                "exposure {} (the plan has {})",
+                d.exposure,
+                designs.len()
+            )));
+        }
+        if d.array >= 4 {
+            return Err(bad(format!("array {} (allowed 0 … 3)", d.array)));
+        }
+        // a flagged detection is left out: only its position must be a number
+        let bound_ok = d.flags != 0 || (d.crlb_px.is_finite() && d.crlb_px >= 0.0);
+        if !(d.x_px.is_finite() && d.y_px.is_finite() && bound_ok) {
+            return Err(bad(format!(
+                "x_px {}, y_px {}, crlb {}: a position must be finite, an unflagged detection's bound \
+                 finite and ≥ 0",
+                d.x_px, d.y_px, d.crlb_px
+            )));
+        }
+        let m = &models[d.exposure];
+        let p = m.wcs[d.array]
+            .pixel_to_sky(d.x_px, d.y_px)
+            .map(|(ra, dec)| plane(ra, dec))
+            .ok_or_else(|| bad("its pixel has no sky through the design WCS".into()))?;
+        let (fx, fy) = m.fp.to_focal_plane(d.array, d.x_px, d.y_px);
+        places.push((p, [fx, fy]));
+    }
+    // the references on the plane, their parameters and a grid of them
+    let mut refs = Vec::with_capacity(references.len());
+    let mut ref_grid = Grid::new(opt.search_radius_mas.max(1000.0));
+    for (i, r) in references.iter().enumerate() {
+        let p = plane_params(
+            tangent_deg,
+            r.ra_deg,
+            r.dec_deg,
+            [r.pmra_mas_per_yr, r.pmdec_mas_per_yr],
+            r.parallax_mas,
+        );
+        ref_grid.insert([p[0], p[1]], i);
+        refs.push(p);
+    }
+    // align each (exposure, array) to the references
+    let mut groups: HashMap<(usize, usize), Vec<usize>> = HashMap::new();
+    for (i, d) in detections.iter().enumerate() {
+        groups.entry((d.exposure, d.array)).or_default().push(i);
+    }
+    let mut keys: Vec<(usize, usize)> = groups.keys().copied().collect();
+    keys.sort_unstable();
+    let mut maps: HashMap<(usize, usize), [f64; 6]> = HashMap::new();
+    let mut unaligned = Vec::new();
+    for key in &keys {
+        let members = &groups[key];
+        let shift = models[key.0].shift_mas;
+        match align(members, detections, &places, &refs, &ref_grid, shift, opt) {
+            Ok(m) => {
+                maps.insert(*key, m);
+            }
+            Err(found) => unaligned.push((key.0, key.1, found)),
+        }
+    }
+    if maps.is_empty() {
+        return Err(FeedError::NothingAligned);
+    }
+    // identification, exposure by exposure
+    let mut source_pos: Vec<[f64; 2]> = refs.iter().map(|r| [r[0], r[1]]).collect();
+    let mut reference: Vec<Option<usize>> = (0..refs.len()).map(Some).collect();
+    let mut grid = Grid::new(opt.match_radius_mas);
+    for (i, p) in source_pos.iter().enumerate() {
+        grid.insert(*p, i);
+    }
+    let mut assigned: Vec<Option<usize>> = vec![None; detections.len()];
+    let mut left_out = 0usize;
+    let mut by_exposure: Vec<Vec<usize>> = vec![Vec::new(); designs.len()];
+    for (i, d) in detections.iter().enumerate() {
+        by_exposure[d.exposure].push(i);
+    }
+    let r2 = opt.match_radius_mas * opt.match_radius_mas;
+    for members in &by_exposure {
+        // each detection's nearest source within the radius; a source keeps its nearest detection
+        let mut claim: HashMap<usize, (usize, f64)> = HashMap::new();
+        let mut fresh = Vec::new();
+        for &i in members {
+            let d = &detections[i];
+            let Some(m) = maps.get(&(d.exposure, d.array)) else {
+                left_out += 1;
+                continue;
+            };
+            if d.flags != 0 {
+                left_out += 1;
+                continue;
+            }
+            let p = apply(m, places[i].0);
+            let mut best: Option<(usize, f64)> = None;
+            grid.near(p, opt.match_radius_mas, |s| {
+                let q = source_pos[s];
+                let d2 = (q[0] - p[0]).powi(2) + (q[1] - p[1]).powi(2);
+                if d2 <= r2 && best.is_none_or(|(_, b)| d2 < b) {
+                    best = Some((s, d2));
+                }
+            });
+            match best {
+                Some((s, d2)) => {
+                    if let Some((_, od2)) = claim.get(&s).copied() {
+                        // one of the two is left out: the farther
+                        left_out += 1;
+                        if d2 < od2 {
+                            claim.insert(s, (i, d2));
+                        }
+                    } else {
+                        claim.insert(s, (i, d2));
+                    }
+                }
+                None => fresh.push((i, p)),
+            }
+        }
+        for (s, (i, _)) in claim {
+            assigned[i] = Some(s);
+        }
+        for (i, p) in fresh {
+            let s = source_pos.len();
+            source_pos.push(p);
+            reference.push(None);
+            grid.insert(p, s);
+            assigned[i] = Some(s);
+        }
+    }
+    // sources with enough observations, renumbered
+    let mut count = vec![0usize; source_pos.len()];
+    for s in assigned.iter().flatten() {
+        count[*s] += 1;
+    }
+    let mut index = vec![usize::MAX; source_pos.len()];
+    let mut kept_ref = Vec::new();
+    let mut n_sources = 0;
+    for (s, c) in count.iter().enumerate() {
+        if *c >= opt.min_observations {
+            index[s] = n_sources;
+            kept_ref.push(reference[s]);
+            n_sources += 1;
+        }
+    }
+    let mut obs = Vec::new();
+    let mut detection = Vec::new();
+    for (i, a) in assigned.iter().enumerate() {
+        let Some(s) = a else { continue };
+        if index[*s] == usize::MAX {
+            left_out += 1;
+            continue;
+        }
+        let d = &detections[i];
+        let g = &exposures[d.exposure];
+        let mas_per_px = (g.to_plane[0] * g.to_plane[3] - g.to_plane[1] * g.to_plane[2])
+            .abs()
+            .sqrt();
+        let (p, f) = places[i];
+        obs.push(Observation {
+            exposure: d.exposure,
+            source: index[*s],
+            xi_mas: p[0],
+            eta_mas: p[1],
+            sigma_mas: (d.crlb_px * mas_per_px)
+                .hypot(opt.sigma_floor_mas)
+                .max(1e-3),
+            array: d.array,
+            focal_px: f,
+        });
+        detection.push(i);
+    }
+    let solved_refs = kept_ref
+        .iter()
+        .enumerate()
+        .filter_map(|(s, r)| {
+            r.map(|r| Reference {
+                source: s,
+                params: refs[r],
+                sigma: references[r].sigma,
+            })
+        })
+        .collect();
+    Ok(Fed {
+        obs,
+        exposures,
+        refs: solved_refs,
+        n_sources,
+        detection,
+        reference: kept_ref,
+        tangent_deg,
+        ref_epoch_jyear: ref_epoch,
+        unaligned,
+        left_out,
+    })
+}
+
+/// A star's parameters on the plane at `tangent_deg`: its place (ICRS degrees) projected, its proper motion
+/// (µα*, µδ, mas/yr) as the projected displacement over a year, its parallax (mas) as it is — the
+/// solution's [`Params`](super::Params). Over the half-degree of a sequence the plane's axes turn from the
+/// local east and north by ≲ 0.3 %, which the projected motion keeps.
+pub fn plane_params(
+    tangent_deg: (f64, f64),
+    ra_deg: f64,
+    dec_deg: f64,
+    pm_mas_per_yr: [f64; 2],
+    parallax_mas: f64,
+) -> super::Params {
+    let (x0, y0) = apparent::offset_mas(tangent_deg, (ra_deg, dec_deg));
+    let cos_dec = dec_deg.to_radians().cos().max(1e-9);
+    let (x1, y1) = apparent::offset_mas(
+        tangent_deg,
+        (
+            ra_deg + pm_mas_per_yr[0] / 3.6e6 / cos_dec,
+            dec_deg + pm_mas_per_yr[1] / 3.6e6,
+        ),
+    );
+    [x0, y0, x1 - x0, y1 - y0, parallax_mas]
+}
+
+/// Where a design model puts the optical axis on the plane at `tangent_deg` (mas), and its map from
+/// focal-plane px to the plane's mas there (row-major 2 × 2), from array 0's design WCS `wcs0` (its TAN
+/// projection reaches the axis; the distortion has no gradient there).
+pub fn focal_map(
+    wcs0: &crate::sky::wcs::ArrayWcs,
+    fp: &crate::sky::focal_plane::FocalPlane,
+    tangent_deg: (f64, f64),
+) -> Result<([f64; 2], [f64; 4]), String> {
+    let at = |fx: f64, fy: f64| -> Result<[f64; 2], String> {
+        let (x, y) = fp.to_array(0, fx, fy);
+        let (ra, dec) = wcs0
+            .pixel_to_sky(x, y)
+            .ok_or("the design WCS has no sky at its axis")?;
+        let (u, v) = apparent::offset_mas(tangent_deg, (ra, dec));
+        Ok([u, v])
+    };
+    let (c, px, py) = (at(0.0, 0.0)?, at(100.0, 0.0)?, at(0.0, 100.0)?);
+    Ok((
+        c,
+        [
+            (px[0] - c[0]) / 100.0,
+            (py[0] - c[0]) / 100.0,
+            (px[1] - c[1]) / 100.0,
+            (py[1] - c[1]) / 100.0,
+        ],
+    ))
+}
+
+/// `p ↦ (m₀ + m₁ p_x + m₂ p_y, m₃ + m₄ p_x + m₅ p_y)`.
+fn apply(m: &[f64; 6], p: [f64; 2]) -> [f64; 2] {
+    [
+        m[0] + m[1] * p[0] + m[2] * p[1],
+        m[3] + m[4] * p[0] + m[5] * p[1],
+    ]
+}
+
+/// Reference stars an alignment needs: fewer leave the array out.
+const MIN_ALIGNMENT_STARS: usize = 3;
+
+/// The map that puts one array's detections onto the reference stars (see the module's documentation), or
+/// the number of stars matched when too few are.
+fn align(
+    members: &[usize],
+    detections: &[Detection],
+    places: &[([f64; 2], [f64; 2])],
+    refs: &[[f64; 5]],
+    grid: &Grid,
+    shift_mas: [f64; 2],
+    opt: &FeedOptions,
+) -> Result<[f64; 6], usize> {
+    // the brightest unflagged detections vote for the offset
+    let mut bright: Vec<usize> = members
+        .iter()
+        .copied()
+        .filter(|i| detections[*i].flags == 0)
+        .collect();
+    bright.sort_by(|a, b| detections[*b].flux_e.total_cmp(&detections[*a].flux_e));
+    bright.truncate(300);
+    let bin = 250.0;
+    let mut votes: HashMap<(i64, i64), u32> = HashMap::new();
+    let radius = opt.search_radius_mas;
+    for &i in &bright {
+        let p = places[i].0;
+        let guess = [p[0] - shift_mas[0], p[1] - shift_mas[1]];
+        grid.near(guess, radius, |r| {
+            let d = [refs[r][0] - guess[0], refs[r][1] - guess[1]];
+            if d[0].abs() <= radius && d[1].abs() <= radius {
+                *votes
+                    .entry(((d[0] / bin).floor() as i64, (d[1] / bin).floor() as i64))
+                    .or_default() += 1;
+            }
+        });
+    }
+    let Some((&(bx, by), _)) = votes
+        .iter()
+        .max_by_key(|(k, v)| (**v, std::cmp::Reverse(**k)))
+    else {
+        return Err(0);
+    };
+    let offset = [
+        (bx as f64 + 0.5) * bin - shift_mas[0],
+        (by as f64 + 0.5) * bin - shift_mas[1],
+    ];
+    let mut map = [offset[0], 1.0, 0.0, offset[1], 0.0, 1.0];
+    for radius in [1000.0f64.max(opt.match_radius_mas), opt.match_radius_mas] {
+        let pairs: Vec<([f64; 2], [f64; 2])> = bright
+            .iter()
+            .filter_map(|&i| {
+                let o = places[i].0;
+                let p = apply(&map, o);
+                let mut best: Option<(usize, f64)> = None;
+                grid.near(p, radius, |r| {
+                    let d2 = (refs[r][0] - p[0]).powi(2) + (refs[r][1] - p[1]).powi(2);
+                    if d2 <= radius * radius && best.is_none_or(|(_, b)| d2 < b) {
+                        best = Some((r, d2));
+                    }
+                });
+                best.map(|(r, _)| (o, [refs[r][0], refs[r][1]]))
+            })
+            .collect();
+        if pairs.len() < MIN_ALIGNMENT_STARS {
+            return Err(pairs.len());
+        }
+        map = fit_map(&pairs);
+    }
+    Ok(map)
+}
+
+/// The least-squares map from `pairs`' first to second points: affine with ≥ 6 pairs, else a shift.
+fn fit_map(pairs: &[([f64; 2], [f64; 2])]) -> [f64; 6] {
+    let n = pairs.len() as f64;
+    let mean = |f: &dyn Fn(&([f64; 2], [f64; 2])) -> f64| pairs.iter().map(f).sum::<f64>() / n;
+    let (ox, oy) = (mean(&|p| p.0[0]), mean(&|p| p.0[1]));
+    let (rx, ry) = (mean(&|p| p.1[0]), mean(&|p| p.1[1]));
+    if pairs.len() >= 6 {
+        let mut design = Vec::with_capacity(pairs.len() * 3);
+        let (mut yx, mut yy) = (Vec::new(), Vec::new());
+        for (o, r) in pairs {
+            design.extend_from_slice(&[1.0, (o[0] - ox) / 1e6, (o[1] - oy) / 1e6]);
+            yx.push(r[0] - rx);
+            yy.push(r[1] - ry);
+        }
+        let w = vec![1.0; pairs.len()];
+        let lstsq = crate::numerics::linalg::weighted_lstsq;
+        if let (Some((a, _)), Some((b, _))) =
+            (lstsq(&design, &yx, &w, 3), lstsq(&design, &yy, &w, 3))
+        {
+            let (a1, a2, b1, b2) = (a[1] / 1e6, a[2] / 1e6, b[1] / 1e6, b[2] / 1e6);
+            return [
+                rx + a[0] - a1 * ox - a2 * oy,
+                a1,
+                a2,
+                ry + b[0] - b1 * ox - b2 * oy,
+                b1,
+                b2,
+            ];
+        }
+    }
+    [rx - ox, 1.0, 0.0, ry - oy, 0.0, 1.0]
+}
+
+/// The inverse of the gnomonic projection at `tangent_deg`: the ICRS place (degrees) of plane point
+/// (ξ, η) mas.
+pub fn plane_to_sky(tangent_deg: (f64, f64), xi_mas: f64, eta_mas: f64) -> (f64, f64) {
+    let rad = std::f64::consts::PI / 180.0 / 3.6e6;
+    let (x, y) = (xi_mas * rad, eta_mas * rad);
+    let (ra0, de0) = (tangent_deg.0.to_radians(), tangent_deg.1.to_radians());
+    let den = de0.cos() - y * de0.sin();
+    let ra = ra0 + x.atan2(den);
+    let dec = ((de0.sin() + y * de0.cos()) * (ra - ra0).cos()).atan2(den);
+    (ra.to_degrees().rem_euclid(360.0), dec.to_degrees())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_plane_round_trips_to_the_sky() {
+        let t = (266.4, -29.0);
+        for (ra, dec) in [(266.4, -29.0), (266.7, -28.8), (266.1, -29.3)] {
+            let (x, y) = apparent::offset_mas(t, (ra, dec));
+            let (r2, d2) = plane_to_sky(t, x, y);
+            assert!(apparent::separation_mas((ra, dec), (r2, d2)) < 1e-6);
+        }
+    }
+}

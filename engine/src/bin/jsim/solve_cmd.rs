@@ -1,0 +1,336 @@
+//! `jsim solve`: the astrometric solution of a sequence that has run (its products only), then its scoring
+//! against the truth and the precision against the number of exposures. Engine side:
+//! [`engine::studies::sequence::solution`].
+
+use anyhow::{Result, bail};
+use clap::Args;
+use engine::analysis::solution::SourceModel;
+use engine::io::csv::Cell;
+use engine::io::plot::{Scale, Series};
+use engine::studies::sequence::solution::{self as sq, PrecisionRow};
+use std::path::PathBuf;
+use std::time::Instant;
+
+#[derive(Args, Clone, Debug)]
+pub struct SolveArgs {
+    /// The sequence's directory (`jsim sequence --out`): config.toml, sequence.toml, reference.csv,
+    /// exposures/.
+    #[arg(long, default_value = "out/sequence")]
+    pub sequence: PathBuf,
+    /// Solve the first N exposures of those that have run, for each N given (the precision against N);
+    /// default: all that have run.
+    #[arg(long, value_delimiter = ',')]
+    pub exposures: Vec<usize>,
+    /// The sources' model: position, full (position, proper motion, parallax), or auto (full where the
+    /// exposures span ≥ 0.1 yr).
+    #[arg(long, default_value = "auto")]
+    pub model: String,
+    /// Order of the global distortion solved (0: none; 2 … 5); default: 3 where the exposures point at two
+    /// places or more, else 0.
+    #[arg(long)]
+    pub distortion_order: Option<usize>,
+    /// Added in quadrature to each detection's Cramér–Rao bound as its σ, mas.
+    #[arg(long, default_value_t = 1.0)]
+    pub sigma_floor_mas: f64,
+    /// A detection is a source's when within this of it after the alignment, mas.
+    #[arg(long, default_value_t = 200.0)]
+    pub match_radius_mas: f64,
+    /// Output directory (default: solution/ in the sequence's directory): sources.csv, attitudes.csv,
+    /// calibration.csv, calibration_map.csv, score.csv, precision_vs_n.csv and .png, solution.json.
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+}
+
+pub fn solve(a: &SolveArgs) -> Result<()> {
+    let model = match a.model.as_str() {
+        "auto" => None,
+        "position" => Some(SourceModel::Position),
+        "full" => Some(SourceModel::Full),
+        m => bail!("--model {m:?}: allowed auto, position, full"),
+    };
+    let spec = sq::SolveSpec {
+        model,
+        distortion_order: a.distortion_order,
+        feed: engine::analysis::solution::feed::FeedOptions {
+            match_radius_mas: a.match_radius_mas,
+            sigma_floor_mas: a.sigma_floor_mas,
+            ..Default::default()
+        },
+    };
+    let t = Instant::now();
+    let p = sq::read_products(&a.sequence)?;
+    let mut ns = a.exposures.clone();
+    if ns.is_empty() {
+        ns.push(p.exposures_run);
+    }
+    ns.sort_unstable();
+    ns.dedup();
+    if let Some(n) = ns.iter().find(|n| **n == 0 || **n > p.exposures_run) {
+        bail!(
+            "--exposures {n}: allowed 1 … {} (the exposures that have run)",
+            p.exposures_run
+        );
+    }
+    eprintln!(
+        "read {} exposures' {} detections and {} reference stars in {:.1} s",
+        p.exposures_run,
+        p.detections.len(),
+        p.references.len(),
+        t.elapsed().as_secs_f64()
+    );
+    let out = a.out.clone().unwrap_or_else(|| a.sequence.join("solution"));
+    let mut outputs = crate::outputs::Outputs::in_dir(&out)?;
+    // the scoring reads the truth, apart from the solution
+    let truth = sq::read_truth(&a.sequence, &p)?;
+    let (lo, hi) = (p.cfg.scene.bulge.hw_min, p.cfg.scene.bulge.hw_max);
+    let edges = engine::scoring::crowded::edges(lo, hi, 1.0);
+    let mut table: Vec<PrecisionRow> = Vec::new();
+    let mut summary = Vec::new();
+    for (k, &n) in ns.iter().enumerate() {
+        let t = Instant::now();
+        let (fed, opt, sol) = sq::solve_first(&p, n, &spec)?;
+        let solve_s = t.elapsed().as_secs_f64();
+        let truths = sq::true_sources(&fed, &truth);
+        let bins = engine::scoring::solution::score_sources(&sol.sources, &truths, &edges);
+        let single = sq::single_exposure_rms(&p, &truth, n, &edges);
+        eprintln!(
+            "{n} exposures: {} observations of {} sources ({} in the reference catalogue), {} detections left \
+             out, {} arrays unaligned; {:?} model, distortion order {}; {} iterations{}, {} rejected, χ²/dof \
+             {:.3}; {solve_s:.1} s",
+            fed.obs.len(),
+            fed.n_sources,
+            fed.refs.len(),
+            fed.left_out,
+            fed.unaligned.len(),
+            opt.model,
+            opt.calibration.distortion_order,
+            sol.iterations,
+            if sol.converged {
+                ""
+            } else {
+                " (not converged)"
+            },
+            sol.rejected,
+            sol.chi2_per_dof
+        );
+        for (b, s) in bins.iter().zip(&single) {
+            if b.sources > 0 {
+                eprintln!(
+                    "  Hw {:.0}–{:.0}: {:>6} sources, {:>4.0} obs; position {:.3} mas rms, {:.3} robust, {:.1} % \
+                     beyond 5σ (σ {:.3}; single {:.2} → √N {:.3}); pm {:.3} mas/yr (σ {:.3}); parallax {:.3} mas \
+                     (σ {:.3})",
+                    b.hw_lo,
+                    b.hw_hi,
+                    b.sources,
+                    b.observations,
+                    b.position_rms_mas,
+                    b.position_robust_mas,
+                    100.0 * b.outlier_fraction,
+                    b.position_sigma_mas,
+                    s,
+                    s / b.observations.sqrt(),
+                    b.pm_rms_mas_per_yr,
+                    b.pm_sigma_mas_per_yr,
+                    b.parallax_rms_mas,
+                    b.parallax_sigma_mas
+                );
+            }
+            table.push(PrecisionRow {
+                exposures: n,
+                bin: *b,
+                single_mas: *s,
+            });
+        }
+        summary.push(serde_json::json!({
+            "exposures": n,
+            "observations": fed.obs.len(),
+            "sources": fed.n_sources,
+            "references": fed.refs.len(),
+            "left_out": fed.left_out,
+            "unaligned_arrays": fed.unaligned.len(),
+            "model": format!("{:?}", opt.model),
+            "distortion_order": opt.calibration.distortion_order,
+            "iterations": sol.iterations,
+            "converged": sol.converged,
+            "rejected": sol.rejected,
+            "chi2_per_dof": sol.chi2_per_dof,
+            "solve_s": solve_s,
+        }));
+        // the last (largest) solution's files
+        if k + 1 == ns.len() {
+            sq::write_solution(&out, &p, &fed, &sol)?;
+            for f in ["sources.csv", "attitudes.csv", "calibration.csv"] {
+                outputs.add(&out.join(f));
+            }
+            // each source against its true star (the scoring's per-source table)
+            let rows: Vec<Vec<Cell>> = sol
+                .sources
+                .iter()
+                .zip(&truths)
+                .enumerate()
+                .filter_map(|(s, (v, t))| {
+                    let t = t.as_ref()?;
+                    let mut row = vec![Cell::I(s as i64), Cell::F(t.hw)];
+                    row.extend((0..5).map(|k| Cell::F(v.params[k] - t.params[k])));
+                    row.extend(v.sigma.iter().map(|x| Cell::F(*x)));
+                    row.extend([
+                        Cell::I(v.observations as i64),
+                        Cell::I(i64::from(fed.reference[s].is_some())),
+                    ]);
+                    Some(row)
+                })
+                .collect();
+            engine::io::csv::write(
+                &outputs.path("score_sources.csv"),
+                &[
+                    "source",
+                    "hw",
+                    "d_xi_mas",
+                    "d_eta_mas",
+                    "d_pm_xi",
+                    "d_pm_eta",
+                    "d_parallax",
+                    "xi_error",
+                    "eta_error",
+                    "pm_xi_error",
+                    "pm_eta_error",
+                    "parallax_error",
+                    "observations",
+                    "in_reference",
+                ],
+                &rows,
+            )?;
+            let map = sq::calibration_map(&p, &sol)?;
+            let rms = |c: usize| {
+                (map.iter().map(|r| r[c] * r[c]).sum::<f64>() / map.len().max(1) as f64).sqrt()
+            };
+            let scale = p.cfg.instrument.plate_scale_mas();
+            eprintln!(
+                "calibration: the instrument's correction {:.3}/{:.3} px rms (x/y), the solved one's residual \
+                 {:.4}/{:.4} px = {:.2}/{:.2} mas rms over the arrays",
+                rms(5),
+                rms(6),
+                rms(9),
+                rms(10),
+                rms(9) * scale,
+                rms(10) * scale
+            );
+            let rows: Vec<Vec<Cell>> = map
+                .iter()
+                .map(|r| r.iter().map(|v| Cell::F(*v)).collect())
+                .collect();
+            engine::io::csv::write(
+                &outputs.path("calibration_map.csv"),
+                &[
+                    "array",
+                    "x_px",
+                    "y_px",
+                    "u_px",
+                    "v_px",
+                    "true_dx_px",
+                    "true_dy_px",
+                    "solved_dx_px",
+                    "solved_dy_px",
+                    "residual_dx_px",
+                    "residual_dy_px",
+                ],
+                &rows,
+            )?;
+            if let Some(last) = summary.last_mut() {
+                last["calibration_residual_rms_px"] = serde_json::json!([rms(9), rms(10)]);
+            }
+        }
+    }
+    let rows: Vec<Vec<Cell>> = table
+        .iter()
+        .map(|r| {
+            let b = &r.bin;
+            vec![
+                Cell::I(r.exposures as i64),
+                Cell::F(b.hw_lo),
+                Cell::F(b.hw_hi),
+                Cell::I(b.sources as i64),
+                Cell::F(b.observations),
+                Cell::F(b.position_rms_mas),
+                Cell::F(b.position_robust_mas),
+                Cell::F(b.outlier_fraction),
+                Cell::F(b.position_sigma_mas),
+                Cell::F(r.single_mas),
+                Cell::F(r.single_mas / b.observations.sqrt()),
+                Cell::F(b.pm_rms_mas_per_yr),
+                Cell::F(b.pm_sigma_mas_per_yr),
+                Cell::F(b.parallax_rms_mas),
+                Cell::F(b.parallax_sigma_mas),
+            ]
+        })
+        .collect();
+    engine::io::csv::write(
+        &outputs.path("precision_vs_n.csv"),
+        &[
+            "exposures",
+            "hw_lo",
+            "hw_hi",
+            "sources",
+            "observations",
+            "position_rms_mas",
+            "position_robust_mas",
+            "outlier_fraction",
+            "position_sigma_mas",
+            "single_exposure_mas",
+            "sqrt_n_mas",
+            "pm_rms_mas_per_yr",
+            "pm_sigma_mas_per_yr",
+            "parallax_rms_mas",
+            "parallax_sigma_mas",
+        ],
+        &rows,
+    )?;
+    // precision against N per magnitude bin, each beside its √N line
+    let mut series = Vec::new();
+    for w in edges.windows(2) {
+        let pts: Vec<&PrecisionRow> = table
+            .iter()
+            .filter(|r| r.bin.hw_lo == w[0] && r.bin.sources >= 5)
+            .collect();
+        if pts.is_empty() {
+            continue;
+        }
+        let x: Vec<f64> = pts.iter().map(|r| r.exposures as f64).collect();
+        series.push(Series {
+            label: format!("Hw {:.0}–{:.0}", w[0], w[1]),
+            x: x.clone(),
+            y: pts.iter().map(|r| r.bin.position_robust_mas).collect(),
+            yerr: None,
+            yerr_below: None,
+        });
+        series.push(Series {
+            label: format!("Hw {:.0}–{:.0}: single / √obs", w[0], w[1]),
+            x,
+            y: pts
+                .iter()
+                .map(|r| r.single_mas / r.bin.observations.sqrt())
+                .collect(),
+            yerr: None,
+            yerr_below: None,
+        });
+    }
+    if !series.is_empty() {
+        engine::io::plot::line_plot(
+            &outputs.path("precision_vs_n.png"),
+            "Solved position error against the number of exposures",
+            "exposures N",
+            "position error per axis, robust [mas]",
+            &series,
+            &[],
+            Scale::Log,
+            Scale::Log,
+        )?;
+    }
+    engine::io::write_atomic(
+        &outputs.path("solution.json"),
+        serde_json::to_string_pretty(&summary)?.as_bytes(),
+    )?;
+    outputs.keep();
+    eprintln!("wrote {}", out.display());
+    Ok(())
+}

@@ -1,0 +1,470 @@
+//! The astrometric solution of a sequence that has run (`jsim solve`): its products read back — the
+//! configuration and sequence file it was planned with (for the planned pointings and the design focal
+//! plane), the exposures' catalogues, the reference catalogue — fed to `analysis::solution` and solved; the
+//! sources, attitudes and calibration written; then, apart, the scoring: the solved sources against the
+//! field's stars, the calibration against the instrument's, the precision against the number of exposures
+//! beside √N from the single-exposure accuracy.
+
+use super::plan::{Plan, design_config, exposure_config, mid_exposure};
+use super::run::SequenceError;
+use crate::analysis::solution::feed::{
+    self, DesignExposure, Detection, Fed, FeedOptions, SkyReference,
+};
+use crate::analysis::solution::{CalibrationModel, Options, Solution, SourceModel};
+use crate::config::Config;
+use crate::io::csv::Cell;
+use crate::scoring::solution::{BinScore, TrueSource};
+use std::path::Path;
+
+/// What to solve.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct SolveSpec {
+    /// Solve positions only, or all five parameters; None: five where the exposures span ≥ 0.1 yr.
+    pub model: Option<SourceModel>,
+    /// The global distortion's order (0 or 2 … 5); None: 3 where the exposures point at ≥ 2 places, else 0.
+    pub distortion_order: Option<usize>,
+    pub feed: FeedOptions,
+}
+
+/// A sequence's products, read back.
+#[derive(Debug, Clone)]
+pub struct Products {
+    pub cfg: Config,
+    pub plan: Plan,
+    /// Exposures 0 … n − 1 have run (their catalogues are there).
+    pub exposures_run: usize,
+    pub designs: Vec<DesignExposure>,
+    pub detections: Vec<Detection>,
+    pub references: Vec<SkyReference>,
+    /// The sequence's centre: the tangent point (ICRS degrees).
+    pub tangent_deg: (f64, f64),
+}
+
+fn invalid(m: impl std::fmt::Display) -> SequenceError {
+    SequenceError::Invalid(m.to_string())
+}
+
+/// Read a sequence directory's products: the exposures that have run, from the first on.
+pub fn read_products(dir: &Path) -> Result<Products, SequenceError> {
+    let cfg_path = dir.join("config.toml");
+    let spec_path = dir.join("sequence.toml");
+    if !cfg_path.exists() || !spec_path.exists() {
+        return Err(invalid(format!(
+            "{} holds no sequence (config.toml and sequence.toml are written by `jsim sequence`)",
+            dir.display()
+        )));
+    }
+    let cfg = Config::load(&cfg_path).map_err(invalid)?;
+    let spec = super::Spec::load(&spec_path).map_err(invalid)?;
+    let plan = super::plan(&spec, &cfg).map_err(invalid)?;
+    let exposures_run = plan
+        .exposures
+        .iter()
+        .take_while(|e| super::run::exposure_path(dir, e.index).exists())
+        .count();
+    if exposures_run == 0 {
+        return Err(invalid(format!(
+            "{}: no exposure has run yet (exposures/00000.csv is missing)",
+            dir.display()
+        )));
+    }
+    let designs = plan.exposures[..exposures_run]
+        .iter()
+        .map(|e| {
+            let c = design_config(&cfg, &plan, e);
+            let mid = mid_exposure(&c, e);
+            DesignExposure { cfg: c, mid }
+        })
+        .collect();
+    let mut detections = Vec::new();
+    for e in &plan.exposures[..exposures_run] {
+        let path = super::run::exposure_path(dir, e.index);
+        let (h, rows) = crate::io::csv::read(&path)?;
+        let col = |n: &str| crate::io::csv::column_f64(&path, &h, &rows, n);
+        let (ex, ar, x, y, f) = (
+            col("exposure")?,
+            col("array")?,
+            col("x_px")?,
+            col("y_px")?,
+            col("flux_e")?,
+        );
+        let any = |n: &str| crate::io::csv::column_f64_any(&path, &h, &rows, n);
+        let (cx, cy, fl) = (any("crlb_x_px")?, any("crlb_y_px")?, col("flags")?);
+        for i in 0..rows.len() {
+            detections.push(Detection {
+                exposure: ex[i] as usize,
+                array: (ar[i] as usize).saturating_sub(1),
+                x_px: x[i],
+                y_px: y[i],
+                flux_e: f[i],
+                crlb_px: cx[i].max(cy[i]),
+                flags: fl[i] as u32,
+            });
+        }
+    }
+    let references =
+        crate::io::sky_reference::read(&dir.join(crate::io::sky_reference::REFERENCE_NAME))?;
+    let tangent_deg = super::plan::galactic_to_icrs(spec.centre_l_deg, spec.centre_b_deg);
+    Ok(Products {
+        cfg,
+        plan,
+        exposures_run,
+        designs,
+        detections,
+        references,
+        tangent_deg,
+    })
+}
+
+/// The options a solution of the first `n` exposures gets from `spec`.
+fn options(p: &Products, n: usize, spec: &SolveSpec) -> Options {
+    let ex = &p.plan.exposures[..n];
+    let years: Vec<f64> = p.designs[..n]
+        .iter()
+        .map(|d| d.mid.julian_year_tdb())
+        .collect();
+    let span = years.iter().cloned().fold(f64::NEG_INFINITY, f64::max)
+        - years.iter().cloned().fold(f64::INFINITY, f64::min);
+    let model = spec.model.unwrap_or(if span >= 0.1 {
+        SourceModel::Full
+    } else {
+        SourceModel::Position
+    });
+    let pointings = {
+        let mut s: Vec<usize> = ex.iter().map(|e| e.stare).collect();
+        s.dedup();
+        s.len()
+    };
+    let distortion_order = spec
+        .distortion_order
+        .unwrap_or(if pointings >= 2 { 3 } else { 0 });
+    // (each array's own terms are quadratic: the global distortion starts at order 3)
+    Options {
+        model,
+        calibration: CalibrationModel {
+            arrays: 4,
+            array_order: 2,
+            distortion_order,
+        },
+        max_iterations: 2000,
+        // the focal plane's corner radius: its terms of order 1
+        focal_norm_px: (p.cfg.instrument.detector_px as f64 + p.cfg.focal_plane.gap_px / 2.0)
+            * std::f64::consts::SQRT_2,
+        ..Options::default()
+    }
+}
+
+/// Feed and solve the first `n` exposures.
+pub fn solve_first(
+    p: &Products,
+    n: usize,
+    spec: &SolveSpec,
+) -> Result<(Fed, Options, Solution), SequenceError> {
+    if n == 0 || n > p.exposures_run {
+        return Err(invalid(format!(
+            "exposures {n}: allowed 1 … {} (the exposures that have run)",
+            p.exposures_run
+        )));
+    }
+    let dets: Vec<Detection> = p
+        .detections
+        .iter()
+        .filter(|d| d.exposure < n)
+        .copied()
+        .collect();
+    let fed = feed::feed(
+        &dets,
+        &p.designs[..n],
+        &p.references,
+        p.tangent_deg,
+        &spec.feed,
+    )
+    .map_err(invalid)?;
+    let opt = options(p, n, spec);
+    let sol =
+        crate::analysis::solution::solve(&fed.obs, &fed.exposures, &fed.refs, fed.n_sources, &opt)
+            .map_err(invalid)?;
+    Ok((fed, opt, sol))
+}
+
+/// Write the solution into `out`: `sources.csv`, `attitudes.csv`, `calibration.csv`.
+pub fn write_solution(
+    out: &Path,
+    p: &Products,
+    fed: &Fed,
+    sol: &Solution,
+) -> Result<(), SequenceError> {
+    crate::io::ensure_dir(out)?;
+    let rows: Vec<Vec<Cell>> = sol
+        .sources
+        .iter()
+        .enumerate()
+        .map(|(s, v)| {
+            let (ra, dec) = feed::plane_to_sky(p.tangent_deg, v.params[0], v.params[1]);
+            let mut row = vec![Cell::I(s as i64), Cell::F(ra), Cell::F(dec)];
+            row.extend(v.params.iter().map(|x| Cell::F(*x)));
+            row.extend(v.sigma.iter().map(|x| Cell::F(*x)));
+            row.extend([
+                Cell::I(v.observations as i64),
+                Cell::F(v.chi2),
+                Cell::I(i64::from(fed.reference[s].is_some())),
+            ]);
+            row
+        })
+        .collect();
+    crate::io::csv::write(
+        &out.join("sources.csv"),
+        &[
+            "source",
+            "ra",
+            "dec",
+            "xi_mas",
+            "eta_mas",
+            "pm_xi",
+            "pm_eta",
+            "parallax",
+            "xi_error",
+            "eta_error",
+            "pm_xi_error",
+            "pm_eta_error",
+            "parallax_error",
+            "observations",
+            "chi2",
+            "in_reference",
+        ],
+        &rows,
+    )?;
+    let rows: Vec<Vec<Cell>> = sol
+        .attitudes
+        .iter()
+        .zip(&fed.exposures)
+        .enumerate()
+        .map(|(e, (a, g))| {
+            vec![
+                Cell::I(e as i64),
+                Cell::F(g.t_yr + fed.ref_epoch_jyear),
+                Cell::F(a.offset_mas[0]),
+                Cell::F(a.offset_mas[1]),
+                Cell::F(a.roll_rad().to_degrees() * 3600.0),
+                Cell::F(a.scale_error() * 1e6),
+            ]
+        })
+        .collect();
+    crate::io::csv::write(
+        &out.join("attitudes.csv"),
+        &[
+            "exposure",
+            "epoch_jyear",
+            "offset_xi_mas",
+            "offset_eta_mas",
+            "roll_arcsec",
+            "scale_ppm",
+        ],
+        &rows,
+    )?;
+    let c = &sol.calibration;
+    let term = |axis: &str, (pp, qq): (i32, i32)| format!("d{axis}_u{pp}v{qq}");
+    let mut rows: Vec<Vec<Cell>> = Vec::new();
+    for (k, a) in c.arrays.iter().enumerate() {
+        for (m, t) in c.model.array_terms().into_iter().enumerate() {
+            for (axis, name) in ["x", "y"].iter().enumerate() {
+                rows.push(vec![
+                    Cell::S(format!("array{}", k + 1)),
+                    Cell::S(term(name, t)),
+                    Cell::F(a[axis][m]),
+                ]);
+            }
+        }
+    }
+    for (m, t) in c.model.monomials().into_iter().enumerate() {
+        for (axis, name) in ["x", "y"].iter().enumerate() {
+            rows.push(vec![
+                Cell::S("distortion".into()),
+                Cell::S(term(name, t)),
+                Cell::F(c.distortion[axis][m]),
+            ]);
+        }
+    }
+    crate::io::csv::write(&out.join("calibration.csv"), &["part", "term", "px"], &rows)?;
+    Ok(())
+}
+
+/// The scoring's view of a sequence: each detection's true star, the field's stars on the plane.
+pub struct Truth {
+    /// Per detection of [`Products::detections`]: its star's row in `field.csv`, if matched.
+    pub star_of_detection: Vec<Option<usize>>,
+    /// Per detection: its position error in the exposure's own analysis (mas, x and y), if matched.
+    pub single_error_mas: Vec<Option<[f64; 2]>>,
+    pub stars: Vec<TrueSource>,
+}
+
+/// Read the truth of a sequence (the scoring step only).
+pub fn read_truth(dir: &Path, p: &Products) -> Result<Truth, SequenceError> {
+    let field = dir.join(super::run::FIELD_NAME);
+    let (h, rows) = crate::io::csv::read(&field)?;
+    let col = |n: &str| crate::io::csv::column_f64(&field, &h, &rows, n);
+    let (ra, dec, hw, pmra, pmdec, plx) = (
+        col("ra")?,
+        col("dec")?,
+        col("hw")?,
+        col("pmra")?,
+        col("pmdec")?,
+        col("parallax")?,
+    );
+    let stars = (0..rows.len())
+        .map(|i| TrueSource {
+            params: feed::plane_params(p.tangent_deg, ra[i], dec[i], [pmra[i], pmdec[i]], plx[i]),
+            hw: hw[i],
+        })
+        .collect();
+    let (mut star_of_detection, mut single_error_mas) = (Vec::new(), Vec::new());
+    for e in &p.plan.exposures[..p.exposures_run] {
+        let path = dir
+            .join("exposures")
+            .join(format!("{:05}_truth.csv", e.index));
+        let (h, rows) = crate::io::csv::read(&path)?;
+        let col = |n: &str| crate::io::csv::column_f64(&path, &h, &rows, n);
+        let any = |n: &str| crate::io::csv::column_f64_any(&path, &h, &rows, n);
+        let (id, dx, dy) = (col("truth_id")?, any("dx_mas")?, any("dy_mas")?);
+        for i in 0..rows.len() {
+            let m = (id[i] >= 0.0).then_some(id[i] as usize);
+            star_of_detection.push(m);
+            single_error_mas.push(
+                m.filter(|_| dx[i].is_finite() && dy[i].is_finite())
+                    .map(|_| [dx[i], dy[i]]),
+            );
+        }
+    }
+    if star_of_detection.len() != p.detections.len() {
+        return Err(invalid(
+            "the exposures' truth files do not match their catalogues row by row",
+        ));
+    }
+    Ok(Truth {
+        star_of_detection,
+        single_error_mas,
+        stars,
+    })
+}
+
+/// Each solved source's true star: the one most of its observations' detections were matched to.
+pub fn true_sources(fed: &Fed, truth: &Truth) -> Vec<Option<TrueSource>> {
+    let mut votes: Vec<std::collections::HashMap<usize, usize>> =
+        vec![Default::default(); fed.n_sources];
+    for (o, &d) in fed.obs.iter().zip(&fed.detection) {
+        if let Some(s) = truth.star_of_detection[d] {
+            *votes[o.source].entry(s).or_default() += 1;
+        }
+    }
+    votes
+        .into_iter()
+        .map(|v| {
+            v.into_iter()
+                .max_by_key(|(s, n)| (*n, std::cmp::Reverse(*s)))
+                .and_then(|(s, _)| truth.stars.get(s).copied())
+        })
+        .collect()
+}
+
+/// The single-exposure accuracy per magnitude bin (rms per axis of the matched detections' errors, mas).
+pub fn single_exposure_rms(p: &Products, truth: &Truth, n: usize, edges: &[f64]) -> Vec<f64> {
+    edges
+        .windows(2)
+        .map(|w| {
+            let (mut sum, mut k) = (0.0, 0usize);
+            for (i, d) in p.detections.iter().enumerate() {
+                if d.exposure >= n || d.flags != 0 {
+                    continue;
+                }
+                if let (Some(s), Some(e)) = (truth.star_of_detection[i], truth.single_error_mas[i])
+                {
+                    let hw = truth.stars[s].hw;
+                    if hw >= w[0] && hw < w[1] {
+                        sum += e[0] * e[0] + e[1] * e[1];
+                        k += 2;
+                    }
+                }
+            }
+            if k > 0 {
+                (sum / k as f64).sqrt()
+            } else {
+                f64::NAN
+            }
+        })
+        .collect()
+}
+
+/// The solved calibration against the instrument's, on a 9 × 9 grid over each array: the correction the
+/// instrument needs at a pixel — the design place of the pixel minus the place of the sky it truly sees, on
+/// the plane, turned back into focal-plane px by the design map at the axis (the solution's own convention)
+/// — and the solved one, and their difference with the attitudes' gauge removed. Rows: array, x_px, y_px,
+/// focal u, v (px), true Δ, solved Δ, residual (px).
+pub fn calibration_map(p: &Products, sol: &Solution) -> Result<Vec<[f64; 11]>, SequenceError> {
+    let e = &p.plan.exposures[0];
+    let design = design_config(&p.cfg, &p.plan, e);
+    // the arrays as assembled, at the same (planned) pointing
+    let mut flown = exposure_config(&p.cfg, &p.plan, e);
+    flown.sky = design.sky;
+    let nominal = crate::sky::focal_plane(&design).nominal();
+    let wd: Vec<_> = (0..4)
+        .map(|k| crate::sky::array_wcs(&design, k))
+        .collect::<Result<_, _>>()
+        .map_err(invalid)?;
+    let (_, m) = feed::focal_map(&wd[0], &nominal, p.tangent_deg).map_err(invalid)?;
+    let inv = crate::analysis::solution::calibration::inverse2(&m)
+        .ok_or_else(|| invalid("the design focal-plane map is singular"))?;
+    let plane = |s: (f64, f64)| crate::sky::apparent::offset_mas(p.tangent_deg, s);
+    let n = p.cfg.instrument.detector_px as f64;
+    let mut points = Vec::new();
+    let mut rows = Vec::new();
+    for (k, wd) in wd.iter().enumerate() {
+        let wt = crate::sky::array_wcs(&flown, k).map_err(invalid)?;
+        for j in 0..9 {
+            for i in 0..9 {
+                let (x, y) = ((i as f64 + 0.5) / 9.0 * n, (j as f64 + 0.5) / 9.0 * n);
+                let (Some(sky_true), Some(sky_design)) =
+                    (wt.pixel_to_sky(x, y), wd.pixel_to_sky(x, y))
+                else {
+                    continue;
+                };
+                let (a, b) = (plane(sky_design), plane(sky_true));
+                let d = [a.0 - b.0, a.1 - b.1];
+                let truth = [inv[0] * d[0] + inv[1] * d[1], inv[2] * d[0] + inv[3] * d[1]];
+                let f = nominal.to_focal_plane(k, x, y);
+                let solved = sol.calibration.correction_px(k, [f.0, f.1]);
+                // the gauge (a shift, turn and scale the attitudes can take from the arrays) acts on where
+                // the sky's light would land as designed, not on the measured place: its lever arm
+                points.push([f.0 - truth[0], f.1 - truth[1]]);
+                rows.push([
+                    k as f64 + 1.0,
+                    x,
+                    y,
+                    f.0,
+                    f.1,
+                    truth[0],
+                    truth[1],
+                    solved[0],
+                    solved[1],
+                    0.0,
+                    0.0,
+                ]);
+            }
+        }
+    }
+    let diff: Vec<[f64; 2]> = rows.iter().map(|r| [r[7] - r[5], r[8] - r[6]]).collect();
+    let res = crate::scoring::solution::calibration_residuals(&points, &diff);
+    for (r, d) in rows.iter_mut().zip(res) {
+        r[9] = d[0];
+        r[10] = d[1];
+    }
+    Ok(rows)
+}
+
+/// One row of the precision-against-N table.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PrecisionRow {
+    pub exposures: usize,
+    pub bin: BinScore,
+    /// The single-exposure accuracy in the bin (rms per axis over the first N exposures), mas.
+    pub single_mas: f64,
+}
