@@ -11,7 +11,8 @@ reductions below, which make the whole page set run in a few minutes:
   optics and 2 images (`REDUCED`; a command's own `--images` is capped at 2), except for the keys the command sets
   itself;
 * `jsim bench` gets `--quick` and small star counts (its own star-count options are replaced);
-* `jsim sequence` runs at most 2 exposures (`--exposures`; its Slurm scripts are only written);
+* `jsim sequence` runs at most 2 exposures (`--exposures`; its Slurm scripts are only written), and `jsim solve`
+  solves those (`--exposures 1,2`);
 * the sweep files are copied with the same reduced `[base]` and 4 exposures in stares of 2;
 * `crowded_image.py` writes a 256-px array of 1500 stars instead of 1968 px and 10⁵ stars,
   `photutils_catalogue.py` cuts 128 px instead of 512, and `simulate_reference.py` runs the reduced configuration
@@ -59,7 +60,7 @@ BENCH = {"--quick": None, "--stars": "50,100", "--bulge-stars": "50,100", "--ref
 PLACEHOLDER = re.compile(r"(…|<|\$|^[A-Z]{1,4}(\.[a-z]+)?$|=[A-Z]{1,4}$|^(DIR|PATH)$|NNN|^/$|^--[a-z-]+,$)")
 # producers before consumers; within a rank, the pages' order
 RANK = {"config": 0, "psf": 1, "ace": 1, "predict": 1, "simulate": 2, "crowded_image.py": 3, "crowded": 3,
-        "experiment": 4, "bench": 4, "sequence": 4, "analyze": 5, "photutils_catalogue.py": 6, "focal_plane_image.py": 6,
+        "experiment": 4, "bench": 4, "sequence": 4, "analyze": 5, "solve": 5, "photutils_catalogue.py": 6, "focal_plane_image.py": 6,
         "crowded_photutils.py": 6, "simulate_reference.py": 6, "persistence_cost.py": 6, "score": 7, "sweep": 8, "merge": 9, "report": 10}
 
 
@@ -133,6 +134,9 @@ def reduce(words, jsim_bin="jsim"):
             words[k] = str(min(int(words[k]), 2))
         else:
             words += ["--exposures", "2"]
+    if name == "solve" and "--exposures" in words:
+        # the reduced sequence has run 2 exposures
+        words[words.index("--exposures") + 1] = "1,2"
     if name in TAKES_SET:
         # a command's own image count is reduced too (the reduced ACE series covers the reduced count)
         if "--images" in words:

@@ -67,7 +67,7 @@ pub struct FeedOptions {
     pub search_radius_mas: f64,
     /// Added in quadrature to each detection's Cramér–Rao bound, mas.
     pub sigma_floor_mas: f64,
-    /// A source needs this many observations to be solved.
+    /// A source needs this many observations to be solved (a reference star's entry counts as one).
     pub min_observations: usize,
 }
 
@@ -412,7 +412,9 @@ pub fn feed(
     let mut kept_ref = Vec::new();
     let mut n_sources = 0;
     for (s, c) in count.iter().enumerate() {
-        if *c >= opt.min_observations {
+        // a reference star's entry counts as one more observation: seen once, it is still solved
+        let seen = *c + usize::from(reference[s].is_some() && *c > 0);
+        if seen >= opt.min_observations.max(1) && *c > 0 {
             index[s] = n_sources;
             kept_ref.push(reference[s]);
             n_sources += 1;

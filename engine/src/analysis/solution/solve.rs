@@ -404,12 +404,14 @@ fn source_block(
     // what its epochs can give: five parameters from three epochs or more (clusters of observations more
     // than EPOCH_GAP_YR apart), position and proper motion from two (the parallax then its reference's, or
     // 0), position alone from one
-    // a reference with motions enters as priors on all five, whatever the epochs: its proper motion and
-    // parallax then carry their errors into the position instead of being taken as exact
+    // in the full model a reference with motions enters as priors on all five, whatever the epochs: its
+    // proper motion and parallax then carry their errors into the reference-epoch position instead of being
+    // taken as exact (the position model takes them as they are: its position is the observations' epoch's,
+    // carried back by them)
     let priors_on_motion = prior.is_some_and(|r| (2..5).all(|k| anchors(r.sigma[k])));
     let n = match (model, priors_on_motion) {
-        (_, true) => 5,
-        (SourceModel::Position, false) => 2,
+        (SourceModel::Position, _) => 2,
+        (SourceModel::Full, true) => 5,
         (SourceModel::Full, false) => match epochs(mine, obs, exposures, active) {
             0 | 1 => 2,
             2 => 4,

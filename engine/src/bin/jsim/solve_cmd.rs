@@ -91,7 +91,13 @@ pub fn solve(a: &SolveArgs) -> Result<()> {
         let (fed, opt, sol) = sq::solve_first(&p, n, &spec)?;
         let solve_s = t.elapsed().as_secs_f64();
         let truths = sq::true_sources(&fed, &truth);
-        let bins = engine::scoring::solution::score_sources(&sol.sources, &truths, &edges);
+        // positions only: scored at the epoch of each source's observations (what its σ describes)
+        let (scored, truths) = if opt.model == SourceModel::Position {
+            sq::at_mean_epoch(&fed, &sol, &truths)
+        } else {
+            (sol.sources.clone(), truths)
+        };
+        let bins = engine::scoring::solution::score_sources(&scored, &truths, &edges);
         let single = sq::single_exposure_rms(&p, &truth, n, &edges);
         eprintln!(
             "{n} exposures: {} observations of {} sources ({} in the reference catalogue), {} detections left \
@@ -163,8 +169,7 @@ pub fn solve(a: &SolveArgs) -> Result<()> {
                 outputs.add(&out.join(f));
             }
             // each source against its true star (the scoring's per-source table)
-            let rows: Vec<Vec<Cell>> = sol
-                .sources
+            let rows: Vec<Vec<Cell>> = scored
                 .iter()
                 .zip(&truths)
                 .enumerate()

@@ -366,6 +366,57 @@ pub fn true_sources(fed: &Fed, truth: &Truth) -> Vec<Option<TrueSource>> {
         .collect()
 }
 
+/// For a positions-only solution: each source's solved and true place at the mean epoch of its
+/// observations (its position is that epoch's, carried to the reference epoch by motions taken as they are —
+/// the reference's, or none — so the place at the epoch is what its σ describes).
+pub fn at_mean_epoch(
+    fed: &Fed,
+    sol: &Solution,
+    truths: &[Option<TrueSource>],
+) -> (
+    Vec<crate::analysis::solution::SolvedSource>,
+    Vec<Option<TrueSource>>,
+) {
+    let n = sol.sources.len();
+    let (mut t, mut px, mut py, mut k) =
+        (vec![0.0; n], vec![0.0; n], vec![0.0; n], vec![0usize; n]);
+    for o in &fed.obs {
+        let g = &fed.exposures[o.exposure];
+        t[o.source] += g.t_yr;
+        px[o.source] += g.parallax_factor[0];
+        py[o.source] += g.parallax_factor[1];
+        k[o.source] += 1;
+    }
+    let place =
+        |p: &crate::analysis::solution::Params, s: usize| -> crate::analysis::solution::Params {
+            let m = k[s].max(1) as f64;
+            let mut q = *p;
+            q[0] = p[0] + p[2] * t[s] / m + p[4] * px[s] / m;
+            q[1] = p[1] + p[3] * t[s] / m + p[4] * py[s] / m;
+            q
+        };
+    let solved = sol
+        .sources
+        .iter()
+        .enumerate()
+        .map(|(s, v)| crate::analysis::solution::SolvedSource {
+            params: place(&v.params, s),
+            ..*v
+        })
+        .collect();
+    let truth = truths
+        .iter()
+        .enumerate()
+        .map(|(s, t)| {
+            t.map(|t| TrueSource {
+                params: place(&t.params, s),
+                hw: t.hw,
+            })
+        })
+        .collect();
+    (solved, truth)
+}
+
 /// The single-exposure accuracy per magnitude bin (rms per axis of the matched detections' errors, mas).
 pub fn single_exposure_rms(p: &Products, truth: &Truth, n: usize, edges: &[f64]) -> Vec<f64> {
     edges
