@@ -98,30 +98,19 @@ pub fn column_f64_any(
         .collect()
 }
 
-/// Column `name` of a table read with [`read`], parsed as f64.
+/// Column `name` of a table read with [`read`], parsed as f64 (finite values only).
 pub fn column_f64(
     path: &Path,
     header: &[String],
     rows: &[Vec<String>],
     name: &str,
 ) -> Result<Vec<f64>, IoError> {
-    let i = header
-        .iter()
-        .position(|h| h == name)
-        .ok_or_else(|| IoError::Format {
+    let v = column_f64_any(path, header, rows, name)?;
+    match v.iter().position(|x| !x.is_finite()) {
+        Some(k) => Err(IoError::Format {
             path: path.to_path_buf(),
-            message: format!("no column `{name}`"),
-        })?;
-    rows.iter()
-        .enumerate()
-        .map(|(k, r)| {
-            r.get(i)
-                .and_then(|v| v.parse::<f64>().ok())
-                .filter(|v| v.is_finite())
-                .ok_or_else(|| IoError::Format {
-                    path: path.to_path_buf(),
-                    message: format!("row {}: column `{name}` is not a finite number", k + 2),
-                })
-        })
-        .collect()
+            message: format!("row {}: column `{name}` is not a finite number", k + 2),
+        }),
+        None => Ok(v),
+    }
 }
