@@ -186,27 +186,44 @@ impl Calibration {
     }
 
     /// Hand the gauge to the attitudes: remove the arrays' mean offset and the similarity part (turn and
-    /// scale) of their mean affine B.
+    /// scale) of their mean affine B — the projection off [`gauge_rows`] (mutually orthogonal).
     pub fn remove_gauge(&mut self) {
-        let n = self.arrays.len();
-        if n == 0 {
-            return;
-        }
-        let mean =
-            |axis: usize, i: usize| self.arrays.iter().map(|a| a[axis][i]).sum::<f64>() / n as f64;
-        let (bx, by) = (mean(0, 0), mean(1, 0));
-        // B = [[x_u, x_v], [y_u, y_v]]: scale (x_u + y_v)/2, turn (y_u − x_v)/2
-        let s = (mean(0, 1) + mean(1, 2)) / 2.0;
-        let r = (mean(1, 1) - mean(0, 2)) / 2.0;
-        for a in &mut self.arrays {
-            a[0][0] -= bx;
-            a[1][0] -= by;
-            a[0][1] -= s;
-            a[1][2] -= s;
-            a[1][1] -= r;
-            a[0][2] += r;
+        let t = self.model.array_terms().len();
+        let n = self.model.per_axis();
+        // coefficient index in the (x, y) layout of [`gauge_rows`]
+        let at = |i: usize| (i / n, (i % n) / t, (i % n) % t);
+        for row in gauge_rows(self.model) {
+            let (dot, norm) = row.iter().fold((0.0, 0.0), |(d, m), &(i, w)| {
+                let (axis, k, j) = at(i);
+                (d + w * self.arrays[k][axis][j], m + w * w)
+            });
+            if norm > 0.0 {
+                for &(i, w) in &row {
+                    let (axis, k, j) = at(i);
+                    self.arrays[k][axis][j] -= dot / norm * w;
+                }
+            }
         }
     }
+}
+
+/// The gauge the attitudes hold, as four linear constraints on the calibration's coefficients (indexed x
+/// terms first, then y, each array's terms in turn): the arrays' mean offset in x and in y, and the
+/// similarity part of their mean B — scale `x_u + y_v`, turn `y_u − x_v`. None without arrays.
+fn gauge_rows(model: CalibrationModel) -> Vec<Vec<(usize, f64)>> {
+    if model.arrays == 0 {
+        return Vec::new();
+    }
+    let (t, n) = (model.array_terms().len(), model.per_axis());
+    let at = |axis: usize, k: usize, j: usize| axis * n + t * k + j;
+    let mut rows: Vec<Vec<(usize, f64)>> = vec![Vec::new(); 4];
+    for k in 0..model.arrays {
+        rows[0].push((at(0, k, 0), 1.0));
+        rows[1].push((at(1, k, 0), 1.0));
+        rows[2].extend([(at(0, k, 1), 1.0), (at(1, k, 2), 1.0)]);
+        rows[3].extend([(at(1, k, 1), 1.0), (at(0, k, 2), -1.0)]);
+    }
+    rows
 }
 
 /// Solve normal equations `N x = r` scaled by their diagonal (Jacobi), so that the singularity test sees
@@ -406,26 +423,15 @@ pub fn fit_with_attitudes(
         a_inv.push(Some(ai));
     }
     let t = terms.len();
-    if model.arrays > 0 {
-        // the gauge: the arrays' mean offset and the similarity part of their mean B are zero
-        let heavy = (0..n2)
-            .map(|i| sys[i * n2 + i])
-            .fold(0.0f64, f64::max)
-            .max(1e-300);
-        let at = |axis: usize, k: usize, j: usize| axis * n + t * k + j;
-        let mut rows: Vec<Vec<(usize, f64)>> = vec![Vec::new(); 4];
-        for k in 0..model.arrays {
-            rows[0].push((at(0, k, 0), 1.0));
-            rows[1].push((at(1, k, 0), 1.0));
-            // scale: x_u + y_v; turn: y_u − x_v
-            rows[2].extend([(at(0, k, 1), 1.0), (at(1, k, 2), 1.0)]);
-            rows[3].extend([(at(1, k, 1), 1.0), (at(0, k, 2), -1.0)]);
-        }
-        for row in &rows {
-            for &(i, a) in row {
-                for &(j, b) in row {
-                    sys[i * n2 + j] += heavy * a * b;
-                }
+    // the gauge, held at zero by penalty rows as heavy as the heaviest term
+    let heavy = (0..n2)
+        .map(|i| sys[i * n2 + i])
+        .fold(0.0f64, f64::max)
+        .max(1e-300);
+    for row in gauge_rows(model) {
+        for &(i, a) in &row {
+            for &(j, b) in &row {
+                sys[i * n2 + j] += heavy * a * b;
             }
         }
     }

@@ -562,7 +562,19 @@ fn validate(
     let mut seen = std::collections::HashSet::with_capacity(obs.len());
     let mut observed = vec![0usize; n_sources];
     for (index, o) in obs.iter().enumerate() {
-        for (field, value) in [("xi_mas", o.xi_mas), ("eta_mas", o.eta_mas)] {
+        // the focal-plane position only where a calibration reads it
+        let focal: &[(&'static str, f64)] = if cm.solves() {
+            &[
+                ("focal_px[0]", o.focal_px[0]),
+                ("focal_px[1]", o.focal_px[1]),
+            ]
+        } else {
+            &[]
+        };
+        for &(field, value) in [("xi_mas", o.xi_mas), ("eta_mas", o.eta_mas)]
+            .iter()
+            .chain(focal)
+        {
             if !value.is_finite() {
                 return Err(SolutionError::NotFinite {
                     index,
@@ -580,28 +592,13 @@ fn validate(
                 extra: " and > 0",
             });
         }
-        if cm.solves() {
-            for (field, value) in [
-                ("focal_px[0]", o.focal_px[0]),
-                ("focal_px[1]", o.focal_px[1]),
-            ] {
-                if !value.is_finite() {
-                    return Err(SolutionError::NotFinite {
-                        index,
-                        field,
-                        value,
-                        extra: "",
-                    });
-                }
-            }
-            if cm.arrays > 0 && o.array >= cm.arrays {
-                return Err(SolutionError::OutOfRange {
-                    index,
-                    what: "array",
-                    value: o.array,
-                    limit: cm.arrays - 1,
-                });
-            }
+        if cm.arrays > 0 && o.array >= cm.arrays {
+            return Err(SolutionError::OutOfRange {
+                index,
+                what: "array",
+                value: o.array,
+                limit: cm.arrays - 1,
+            });
         }
         if o.exposure >= exposures.len() {
             return Err(SolutionError::OutOfRange {

@@ -419,25 +419,25 @@ pub fn at_mean_epoch(
 
 /// The single-exposure accuracy per magnitude bin (rms per axis of the matched detections' errors, mas).
 pub fn single_exposure_rms(p: &Products, truth: &Truth, n: usize, edges: &[f64]) -> Vec<f64> {
-    edges
-        .windows(2)
-        .map(|w| {
-            let (mut sum, mut k) = (0.0, 0usize);
-            for (i, d) in p.detections.iter().enumerate() {
-                if d.exposure >= n || d.flags != 0 {
-                    continue;
-                }
-                if let (Some(s), Some(e)) = (truth.star_of_detection[i], truth.single_error_mas[i])
-                {
-                    let hw = truth.stars[s].hw;
-                    if hw >= w[0] && hw < w[1] {
-                        sum += e[0] * e[0] + e[1] * e[1];
-                        k += 2;
-                    }
-                }
+    let bins = edges.len().saturating_sub(1);
+    let (mut sum, mut k) = (vec![0.0; bins], vec![0usize; bins]);
+    for (i, d) in p.detections.iter().enumerate() {
+        if d.exposure >= n || d.flags != 0 {
+            continue;
+        }
+        if let (Some(s), Some(e)) = (truth.star_of_detection[i], truth.single_error_mas[i]) {
+            let hw = truth.stars[s].hw;
+            if let Some(b) = edges.windows(2).position(|w| hw >= w[0] && hw < w[1]) {
+                sum[b] += e[0] * e[0] + e[1] * e[1];
+                k[b] += 2;
             }
-            if k > 0 {
-                (sum / k as f64).sqrt()
+        }
+    }
+    sum.iter()
+        .zip(&k)
+        .map(|(s, k)| {
+            if *k > 0 {
+                (s / *k as f64).sqrt()
             } else {
                 f64::NAN
             }
