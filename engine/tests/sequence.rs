@@ -332,10 +332,35 @@ fn a_sequence_is_solved_from_its_products_and_scored() {
     let out = dir.join("seq");
     let o = run(&out, &spec, &[]);
     assert!(o.status.success(), "{}", stderr(&o));
-    // the products the solution reads, and nothing of the truth among them
-    for f in ["config.toml", "sequence.toml", "reference.csv", "plan.csv"] {
+    // the products the solution reads, and nothing of the truth among them: the instrument as designed
+    // (the arrays where they were designed), where the simulation's config.toml has them as assembled
+    for f in ["design.toml", "sequence.toml", "reference.csv", "plan.csv"] {
         assert!(out.join(f).exists(), "{f}");
     }
+    let design = engine::config::Config::load(&out.join("design.toml")).expect("design");
+    let built = engine::config::Config::load(&out.join("config.toml")).expect("config");
+    assert_eq!(design.focal_plane.array_offsets_px, [[0.0; 2]; 4]);
+    assert!(built.focal_plane.array_offsets_px[1][0].abs() > 0.1);
+    // by construction: the products alone, every truth file moved away, are what the solution reads
+    let bare = dir.join("products-only");
+    std::fs::create_dir_all(bare.join("exposures")).expect("mkdir");
+    for f in ["design.toml", "sequence.toml", "reference.csv", "plan.csv"] {
+        std::fs::copy(out.join(f), bare.join(f)).expect("copy");
+    }
+    for e in std::fs::read_dir(out.join("exposures")).expect("exposures") {
+        let path = e.expect("entry").path();
+        let name = path
+            .file_name()
+            .and_then(|n| n.to_str())
+            .unwrap_or_default()
+            .to_string();
+        if !name.contains("truth") {
+            std::fs::copy(&path, bare.join("exposures").join(&name)).expect("copy");
+        }
+    }
+    let products =
+        engine::studies::sequence::solution::read_products(&bare).expect("products alone");
+    assert_eq!(products.exposures_run, 8);
     let sol = dir.join("solution");
     let o = jsim()
         .args(["solve", "--sequence"])
@@ -400,7 +425,7 @@ fn a_sequence_is_solved_from_its_products_and_scored() {
         .output()
         .expect("solve");
     assert!(
-        !o.status.success() && stderr(&o).contains("config.toml"),
+        !o.status.success() && stderr(&o).contains("design.toml"),
         "{}",
         stderr(&o)
     );

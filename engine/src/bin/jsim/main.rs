@@ -10,6 +10,7 @@ use engine::session::Session;
 use std::path::PathBuf;
 
 mod bench_cmd;
+mod budget_out;
 mod cmd;
 mod crowded_cmd;
 mod options;

@@ -7,6 +7,7 @@ use clap::Args;
 use engine::analysis::solution::SourceModel;
 use engine::io::csv::Cell;
 use engine::io::plot::{Scale, Series};
+use engine::studies::sequence::budget::MissionPattern;
 use engine::studies::sequence::solution::{self as sq, PrecisionRow};
 use std::path::PathBuf;
 use std::time::Instant;
@@ -35,8 +36,22 @@ pub struct SolveArgs {
     /// A detection is a source's when within this of it after the alignment, mas.
     #[arg(long, default_value_t = 200.0)]
     pub match_radius_mas: f64,
+    /// The mission's exposures per star, for its error budget (written where the exposures asked for
+    /// include the sequence's exposures per stare: mission_budget.csv).
+    #[arg(long, default_value_t = 67_000)]
+    pub mission_exposures: usize,
+    /// The mission's exposures per stare (the toolkit's 26 at six fields per orbit).
+    #[arg(long, default_value_t = 26)]
+    pub mission_stare_exposures: usize,
+    /// The mission's length, years.
+    #[arg(long, default_value_t = 3.0)]
+    pub mission_years: f64,
+    /// Half-width of each Galactic-centre season (centred on the equinoxes), days.
+    #[arg(long, default_value_t = 45.0)]
+    pub season_half_width_days: f64,
     /// Output directory (default: solution/ in the sequence's directory): sources.csv, attitudes.csv,
-    /// calibration.csv, calibration_map.csv, score.csv, precision_vs_n.csv and .png, solution.json.
+    /// calibration.csv, calibration_map.csv, score_sources.csv, precision_vs_n.csv and .png,
+    /// mission_budget.csv, solution.json.
     #[arg(long)]
     pub out: Option<PathBuf>,
 }
@@ -59,6 +74,14 @@ pub fn solve(a: &SolveArgs) -> Result<()> {
     };
     let t = Instant::now();
     let p = sq::read_products(&a.sequence)?;
+    let mission = MissionPattern {
+        exposures_per_star: a.mission_exposures,
+        exposures_per_stare: a.mission_stare_exposures,
+        years: a.mission_years,
+        season_half_width_days: a.season_half_width_days,
+        ..MissionPattern::default()
+    };
+    mission.validate().map_err(anyhow::Error::msg)?;
     let mut ns = a.exposures.clone();
     if ns.is_empty() {
         ns.push(p.exposures_run);
@@ -205,7 +228,7 @@ pub fn solve(a: &SolveArgs) -> Result<()> {
                 ],
                 &rows,
             )?;
-            let map = sq::calibration_map(&p, &sol)?;
+            let map = sq::calibration_map(&p, &truth, &sol)?;
             let rms = |c: usize| {
                 (map.iter().map(|r| r[c] * r[c]).sum::<f64>() / map.len().max(1) as f64).sqrt()
             };
@@ -290,8 +313,14 @@ pub fn solve(a: &SolveArgs) -> Result<()> {
         ],
         &rows,
     )?;
-    // precision against N per magnitude bin, each beside its √N line
-    let mut series = Vec::new();
+    crate::budget_out::write_budget(
+        &mut outputs,
+        &mission,
+        &table,
+        p.plan.spec.exposures_per_stare,
+    )?;
+    // precision against N per magnitude bin, each beside its √N line (dashed, in its colour)
+    let (mut series, mut guides) = (Vec::new(), Vec::new());
     for w in edges.windows(2) {
         let pts: Vec<&PrecisionRow> = table
             .iter()
@@ -308,8 +337,8 @@ pub fn solve(a: &SolveArgs) -> Result<()> {
             yerr: None,
             yerr_below: None,
         });
-        series.push(Series {
-            label: format!("Hw {:.0}–{:.0}: single / √obs", w[0], w[1]),
+        guides.push(Series {
+            label: String::new(),
             x,
             y: pts
                 .iter()
@@ -320,12 +349,13 @@ pub fn solve(a: &SolveArgs) -> Result<()> {
         });
     }
     if !series.is_empty() {
-        engine::io::plot::line_plot(
+        engine::io::plot::line_plot_with_guides(
             &outputs.path("precision_vs_n.png"),
-            "Solved position error against the number of exposures",
+            "Solved position error against N (dashed: single exposure / √observations)",
             "exposures N",
             "position error per axis, robust [mas]",
             &series,
+            &guides,
             &[],
             Scale::Log,
             Scale::Log,

@@ -34,6 +34,8 @@ struct XyOptions<'a> {
     lines: bool,
     hlines: &'a [(f64, String)],
     diagonal: bool,
+    /// Dashed companions: guide i is drawn in series i's colour, thin, without markers or a legend entry.
+    guides: &'a [Series],
 }
 
 /// Shared body of `line_plot` and `scatter`.
@@ -66,7 +68,13 @@ fn draw_xy(
             [y, y - below, y + above]
         });
     let hline_values = opts.hlines.iter().map(|h| h.0);
-    let y_axis = Axis::fit(y_values.chain(hline_values), y_scale);
+    let guide_values = opts
+        .guides
+        .iter()
+        .flat_map(|g| g.x.iter().zip(&g.y))
+        .filter(|&(x, y)| ok(*x, *y) && x_axis.contains(*x))
+        .map(|(_, y)| *y);
+    let y_axis = Axis::fit(y_values.chain(hline_values).chain(guide_values), y_scale);
 
     let mut chart = ChartBuilder::on(root)
         .caption(title, (FONT, TITLE_SIZE))
@@ -166,6 +174,19 @@ fn draw_xy(
         }
     }
 
+    // Each series' dashed guide, in its colour.
+    for (i, g) in opts.guides.iter().enumerate() {
+        let style = color(i).stroke_width(1);
+        let line: Vec<(f64, f64)> =
+            g.x.iter()
+                .zip(&g.y)
+                .map(|(x, y)| (*x, *y))
+                .filter(|&(x, y)| ok(x, y) && x_axis.contains(x) && y_axis.contains(y))
+                .collect();
+        occupied.extend(line.iter().map(|&(x, y)| (x_axis.frac(x), y_axis.frac(y))));
+        chart.draw_series(DashedLineSeries::new(line, 6, 4, style))?;
+    }
+
     // Horizontal dashed reference lines.
     let usable_hlines = opts.hlines.iter().filter(|h| Axis::usable(h.0, y_scale));
     for (k, (v, label)) in usable_hlines.enumerate() {
@@ -231,10 +252,38 @@ pub fn line_plot(
     x_scale: Scale,
     y_scale: Scale,
 ) -> Result<(), PlotError> {
+    line_plot_with_guides(
+        path,
+        title,
+        x_label,
+        y_label,
+        series,
+        &[],
+        hlines,
+        x_scale,
+        y_scale,
+    )
+}
+
+/// [`line_plot`] with a dashed guide beside each series (guide i in series i's colour, no legend entry):
+/// e.g. what √N averaging would give beside each measured curve.
+#[allow(clippy::too_many_arguments)]
+pub fn line_plot_with_guides(
+    path: &Path,
+    title: &str,
+    x_label: &str,
+    y_label: &str,
+    series: &[Series],
+    guides: &[Series],
+    hlines: &[(f64, String)],
+    x_scale: Scale,
+    y_scale: Scale,
+) -> Result<(), PlotError> {
     let opts = XyOptions {
         lines: true,
         hlines,
         diagonal: false,
+        guides,
     };
     render(path, PLOT_SIZE, |root| {
         draw_xy(
@@ -259,6 +308,7 @@ pub fn scatter(
     let opts = XyOptions {
         lines: false,
         hlines: &[],
+        guides: &[],
         diagonal,
     };
     render(path, PLOT_SIZE, |root| {

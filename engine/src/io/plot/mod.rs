@@ -20,7 +20,7 @@ mod vectors;
 
 pub use histogram::histogram_cdf;
 pub use image::image_png;
-pub use line::{line_plot, scatter};
+pub use line::{line_plot, line_plot_with_guides, scatter};
 pub use map::{CountGrid, count_map};
 pub use vectors::{vector_map, vector_map_on_axes};
 

@@ -51,13 +51,29 @@ pub enum SequenceError {
     Source(#[from] crate::session::source::SourceError),
 }
 
+/// The instrument as designed, the sequence's product for its analysis: [`DESIGN_NAME`].
+pub const DESIGN_NAME: &str = "design.toml";
+
+/// The configuration as the pipeline knows the instrument: `cfg` with the arrays where they were designed
+/// (no assembly offsets or turns). The simulation's `config.toml` holds the instrument as assembled (and
+/// the seed of every draw): the truth, read by the Slurm tasks that simulate and by the scoring only.
+pub fn design_of(cfg: &Config) -> Config {
+    let mut c = cfg.clone();
+    c.focal_plane.array_offsets_px = [[0.0; 2]; 4];
+    c.focal_plane.array_rotation_errors_deg = [0.0; 4];
+    c
+}
+
 /// Write the configuration and the sequence file a sequence is planned with (`config.toml`,
-/// `sequence.toml`) into `dir`: what its Slurm tasks and its astrometric solution (`jsim solve`) read back.
+/// `sequence.toml`) into `dir`: what its Slurm tasks read back; and the instrument as designed
+/// (`design.toml`, [`design_of`]), which the astrometric solution (`jsim solve`) reads instead of the truth.
 pub fn write_setup(plan: &Plan, cfg: &Config, dir: &Path) -> Result<(PathBuf, PathBuf), String> {
     crate::io::ensure_dir(dir).map_err(|e| e.to_string())?;
     let config = dir.join("config.toml");
     let spec = dir.join("sequence.toml");
     crate::io::write_atomic(&config, cfg.to_toml().as_bytes()).map_err(|e| e.to_string())?;
+    crate::io::write_atomic(&dir.join(DESIGN_NAME), design_of(cfg).to_toml().as_bytes())
+        .map_err(|e| e.to_string())?;
     let spec_text = toml::to_string(&super::spec::SequenceFile {
         sequence: plan.spec.clone(),
     })
@@ -241,7 +257,13 @@ pub fn merge(plan: &Plan, dir: &Path) -> Result<PathBuf, SequenceError> {
         }
         let (h, rows) = crate::io::csv::read(&path)?;
         for (k, name) in CATALOGUE_HEADER.iter().enumerate() {
-            cols[k].extend(crate::io::csv::column_f64(&path, &h, &rows, name)?);
+            // a flagged detection's bounds may be infinite (a failed fit, an edge): kept as they are
+            let column = if name.starts_with("crlb_") {
+                crate::io::csv::column_f64_any(&path, &h, &rows, name)?
+            } else {
+                crate::io::csv::column_f64(&path, &h, &rows, name)?
+            };
+            cols[k].extend(column);
         }
     }
     let integer = ["exposure", "stare", "array", "flags"];
@@ -279,4 +301,46 @@ pub fn merge(plan: &Plan, dir: &Path) -> Result<PathBuf, SequenceError> {
         ],
     )?;
     Ok(path)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A flagged detection's bounds are infinite (a failed fit, an edge): the gathered table keeps them,
+    /// while a position that is not a number is a named error.
+    #[test]
+    fn the_gathered_table_keeps_a_flagged_detections_infinite_bounds() {
+        let spec = super::super::Spec {
+            stares_l: 1,
+            stares_b: 1,
+            exposures_per_stare: 1,
+            visits_utc: vec!["2031-03-21T00:00:00".into()],
+            ..Default::default()
+        };
+        let plan = super::super::plan(&spec, &Config::default()).expect("plan");
+        let dir = std::env::temp_dir().join(format!("jsim-merge-{}", std::process::id()));
+        std::fs::create_dir_all(dir.join("exposures")).expect("mkdir");
+        let header = CATALOGUE_HEADER.join(",");
+        let good = "0,0,1,10.5,20.5,1000,0.01,0.01,0,266.4,-28.9,62946.0";
+        let flagged = "0,0,1,3.2,20.5,500,inf,inf,788,266.4,-28.9,62946.0";
+        std::fs::write(
+            exposure_path(&dir, 0),
+            format!("{header}\n{good}\n{flagged}\n"),
+        )
+        .expect("write");
+        let path = merge(&plan, &dir).expect("merged");
+        let table =
+            crate::io::fits::read_table(&path, "CATALOGUE", &CATALOGUE_HEADER).expect("table");
+        assert_eq!(table[6][0], 0.01);
+        assert!(table[6][1].is_infinite() && table[8][1] == 788.0);
+        std::fs::write(
+            exposure_path(&dir, 0),
+            format!("{header}\n{}\n", good.replace("10.5", "nan")),
+        )
+        .expect("write");
+        let e = merge(&plan, &dir).expect_err("a position that is not a number");
+        assert!(e.to_string().contains("x_px"), "{e}");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 }

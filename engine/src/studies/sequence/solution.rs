@@ -46,16 +46,20 @@ fn invalid(m: impl std::fmt::Display) -> SequenceError {
 
 /// Read a sequence directory's products: the exposures that have run, from the first on.
 pub fn read_products(dir: &Path) -> Result<Products, SequenceError> {
-    let cfg_path = dir.join("config.toml");
+    // the instrument as designed and the plan: never config.toml (the instrument as assembled, the seeds)
+    let cfg_path = dir.join(super::run::DESIGN_NAME);
     let spec_path = dir.join("sequence.toml");
     if !cfg_path.exists() || !spec_path.exists() {
         return Err(invalid(format!(
-            "{} holds no sequence (config.toml and sequence.toml are written by `jsim sequence`)",
+            "{} holds no sequence (design.toml and sequence.toml are written by `jsim sequence`)",
             dir.display()
         )));
     }
     let cfg = Config::load(&cfg_path).map_err(invalid)?;
-    let spec = super::Spec::load(&spec_path).map_err(invalid)?;
+    let mut spec = super::Spec::load(&spec_path).map_err(invalid)?;
+    // the plan as planned: what the pointings and rolls were meant to be, no draw of their errors
+    spec.pointing_error_arcsec = 0.0;
+    spec.roll_error_arcsec = 0.0;
     let plan = super::plan(&spec, &cfg).map_err(invalid)?;
     let exposures_run = plan
         .exposures
@@ -291,6 +295,8 @@ pub fn write_solution(
 
 /// The scoring's view of a sequence: each detection's true star, the field's stars on the plane.
 pub struct Truth {
+    /// The instrument as assembled (`config.toml`).
+    pub cfg: Config,
     /// Per detection of [`Products::detections`]: its star's row in `field.csv`, if matched.
     pub star_of_detection: Vec<Option<usize>>,
     /// Per detection: its position error in the exposure's own analysis (mas, x and y), if matched.
@@ -300,6 +306,7 @@ pub struct Truth {
 
 /// Read the truth of a sequence (the scoring step only).
 pub fn read_truth(dir: &Path, p: &Products) -> Result<Truth, SequenceError> {
+    let cfg = Config::load(&dir.join("config.toml")).map_err(invalid)?;
     let field = dir.join(super::run::FIELD_NAME);
     let (h, rows) = crate::io::csv::read(&field)?;
     let col = |n: &str| crate::io::csv::column_f64(&field, &h, &rows, n);
@@ -341,6 +348,7 @@ pub fn read_truth(dir: &Path, p: &Products) -> Result<Truth, SequenceError> {
         ));
     }
     Ok(Truth {
+        cfg,
         star_of_detection,
         single_error_mas,
         stars,
@@ -450,11 +458,15 @@ pub fn single_exposure_rms(p: &Products, truth: &Truth, n: usize, edges: &[f64])
 /// the plane, turned back into focal-plane px by the design map at the axis (the solution's own convention)
 /// — and the solved one, and their difference with the attitudes' gauge removed. Rows: array, x_px, y_px,
 /// focal u, v (px), true Δ, solved Δ, residual (px).
-pub fn calibration_map(p: &Products, sol: &Solution) -> Result<Vec<[f64; 11]>, SequenceError> {
+pub fn calibration_map(
+    p: &Products,
+    truth: &Truth,
+    sol: &Solution,
+) -> Result<Vec<[f64; 11]>, SequenceError> {
     let e = &p.plan.exposures[0];
     let design = design_config(&p.cfg, &p.plan, e);
     // the arrays as assembled, at the same (planned) pointing
-    let mut flown = exposure_config(&p.cfg, &p.plan, e);
+    let mut flown = exposure_config(&truth.cfg, &p.plan, e);
     flown.sky = design.sky;
     let nominal = crate::sky::focal_plane(&design).nominal();
     let wd: Vec<_> = (0..4)
