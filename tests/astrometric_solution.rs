@@ -9,6 +9,7 @@ use engine::analysis::solution::{
     CalibrationModel, ExposureGeometry, Observation, Options, Params, Reference, SolutionError,
     SourceModel, solve,
 };
+use engine::studies::bench_solution::CALIBRATED;
 use engine::studies::bench_solution::{Synthetic, SyntheticSpec, synthetic};
 
 /// `n` sources, a 3 × 3 pattern of pointings a third of a field apart at epochs 0, 0.5, 1, 1.5 yr, attitude
@@ -200,12 +201,6 @@ fn bad_input_is_named() {
 
 /// Four arrays with offsets of 10 px and turns of 0.1° (the plate model's priors) and a third-order
 /// distortion of 1 px terms, on the 3 × 3 pattern.
-const CALIBRATED: CalibrationModel = CalibrationModel {
-    arrays: 4,
-    array_order: 2,
-    distortion_order: 3,
-};
-
 #[test]
 fn noise_free_it_recovers_the_arrays_offsets_and_the_distortion() {
     let t = synthetic(&SyntheticSpec {

@@ -43,6 +43,9 @@ pub enum BenchError {
     Sequence(#[from] crate::studies::sequence::run::SequenceError),
     #[error(transparent)]
     Solution(#[from] crate::analysis::solution::SolutionError),
+    /// A benchmark's own setting out of its range.
+    #[error("{0}")]
+    Invalid(String),
 }
 
 /// One line of the benchmark.

@@ -1,10 +1,12 @@
 //! The astrometric solution's cost against its size (`jsim bench --parts solution`), and the synthetic
-//! sequences it runs on (the solution's tests draw theirs here too): N sources × 100 exposures (5 × 5
-//! pointings a third of a field apart over four epochs, half a year apart; attitude errors of 200 mas, 10″
-//! and 2 ppm; 1-mas measurements; every 8th source in a reference catalogue with a survey's errors), each
-//! solved with the default options. Each row's time is the solution's; its
-//! error the rms of the solved positions against the synthetic truth over the rms of their own σ (1 when the
-//! covariance describes the scatter), the note the observations, iterations and memory of the inputs.
+//! sequences it runs on (the solution's tests draw theirs here too): N sources × E exposures (5 × 5
+//! pointings a third of a field apart, E / 25 epochs half a year apart; attitude errors of 200 mas, 10″
+//! and 2 ppm; 1-mas measurements; every 8th source in a reference catalogue with a survey's errors; with
+//! the instrument's calibration — four arrays' quadratic terms and a cubic distortion — drawn and solved,
+//! or without), each solved with the default options. Each row's time is the solution's; its error the rms
+//! of the solved positions against the synthetic truth over the rms of their own σ (1 when the covariance
+//! describes the scatter), the note the observations, iterations, the inputs' memory and the process's
+//! peak memory so far.
 
 use super::bench::{BenchError, BenchRow};
 use crate::analysis::solution::{
@@ -223,14 +225,75 @@ pub fn synthetic(spec: &SyntheticSpec) -> Synthetic {
     }
 }
 
-/// The rows: one per source count.
-pub fn solution_scaling(counts: &[usize], seed: u64) -> Result<Vec<BenchRow>, BenchError> {
+/// The instrument's calibration of the benchmark (and of the tests that solve one): four arrays with their
+/// own terms to order 2 and a global distortion of order 3, as `jsim solve` solves a sequence's.
+pub const CALIBRATED: CalibrationModel = CalibrationModel {
+    arrays: 4,
+    array_order: 2,
+    distortion_order: 3,
+};
+
+/// The process's peak resident memory so far, MiB (Linux: `VmHWM` of /proc/self/status; NaN elsewhere).
+pub fn peak_memory_mib() -> f64 {
+    std::fs::read_to_string("/proc/self/status")
+        .ok()
+        .and_then(|s| {
+            s.lines()
+                .find(|l| l.starts_with("VmHWM:"))
+                .and_then(|l| l.split_whitespace().nth(1)?.parse::<f64>().ok())
+        })
+        .map_or(f64::NAN, |kib| kib / 1024.0)
+}
+
+/// The rows: one per source count and exposure count (a multiple of 25: the 5 × 5 pattern per epoch), with
+/// the calibration `calibration` drawn and solved ([`CalibrationModel::NONE`]: none).
+pub fn solution_scaling(
+    counts: &[usize],
+    exposures: &[usize],
+    calibration: CalibrationModel,
+    seed: u64,
+) -> Result<Vec<BenchRow>, BenchError> {
+    if let Some(e) = exposures
+        .iter()
+        .find(|e| **e == 0 || **e % 25 != 0 || **e > 2500)
+    {
+        return Err(BenchError::Invalid(format!(
+            "--solution-exposures {e}: allowed multiples of 25 (the 5 × 5 pattern per epoch) up to 2500"
+        )));
+    }
+    if let Some(n) = counts.iter().find(|n| **n < 100 || **n > 2_000_000) {
+        return Err(BenchError::Invalid(format!(
+            "--solution-sources {n}: allowed 100 … 2·10⁶"
+        )));
+    }
     let mut rows = Vec::new();
     for &n in counts {
-        let syn = synthetic(&SyntheticSpec::bench(n, seed));
+        for &e in exposures {
+            rows.push(one_row(n, e, calibration, seed)?);
+        }
+    }
+    Ok(rows)
+}
+
+fn one_row(
+    n: usize,
+    n_exposures: usize,
+    calibration: CalibrationModel,
+    seed: u64,
+) -> Result<BenchRow, BenchError> {
+    {
+        let syn = synthetic(&SyntheticSpec {
+            epochs: n_exposures / 25,
+            calibration,
+            ..SyntheticSpec::bench(n, seed)
+        });
         let (truth, exposures, obs) = (&syn.params, &syn.exposures, &syn.obs);
+        let options = Options {
+            calibration,
+            ..Options::default()
+        };
         let t0 = Instant::now();
-        let sol = solve(obs, exposures, &syn.refs, n, &Options::default())?;
+        let sol = solve(obs, exposures, &syn.refs, n, &options)?;
         let time_s = t0.elapsed().as_secs_f64();
         let (mut err2, mut sig2, mut m) = (0.0, 0.0, 0usize);
         for (s, p) in sol.sources.iter().zip(truth) {
@@ -247,26 +310,39 @@ pub fn solution_scaling(counts: &[usize], seed: u64) -> Result<Vec<BenchRow>, Be
             (f64::NAN, f64::NAN)
         };
         let input_mib = (obs.len() * std::mem::size_of::<Observation>()) as f64 / 1048576.0;
-        rows.push(BenchRow {
+        Ok(BenchRow {
             rms_err: ratio,
             astro_mas: rms_mas,
             ..BenchRow::timing(
                 "astrometric solution",
-                format!("{n} sources × {} exposures", exposures.len()),
+                format!(
+                    "{n} sources × {} exposures{}",
+                    exposures.len(),
+                    if calibration == CalibrationModel::NONE {
+                        ""
+                    } else {
+                        ", calibration"
+                    }
+                ),
                 "cpu".into(),
                 n,
                 time_s,
                 &format!(
-                    "{} observations ({input_mib:.0} MiB), {} iterations{}, {} rejected, χ²/dof {:.3}; \
-                     rms error / rms σ of the positions in rms_err, their rms error (mas) in pos",
+                    "{} observations ({input_mib:.0} MiB), {} iterations{}, {} rejected, χ²/dof {:.3}, peak \
+                     memory {:.0} MiB; rms error / rms σ of the positions in rms_err, their rms error (mas) in \
+                     pos",
                     obs.len(),
                     sol.iterations,
-                    if sol.converged { "" } else { " (not converged)" },
+                    if sol.converged {
+                        ""
+                    } else {
+                        " (not converged)"
+                    },
                     sol.rejected,
-                    sol.chi2_per_dof
+                    sol.chi2_per_dof,
+                    peak_memory_mib()
                 ),
             )
-        });
+        })
     }
-    Ok(rows)
 }

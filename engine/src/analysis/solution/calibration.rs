@@ -325,6 +325,10 @@ pub fn fit_with_attitudes(
                 [m[0] * d[0] + m[1] * d[1], m[2] * d[0] + m[3] * d[1]]
             };
             let mut phi: Vec<(usize, f64)> = Vec::with_capacity(terms.len() + mono.len());
+            let max_order = model.distortion_order.max(model.array_order);
+            let (mut upow, mut vpow) = (vec![1.0; max_order + 1], vec![1.0; max_order + 1]);
+            // C's x block (the y block is the same: one φ, one weight per observation), upper triangle
+            let mut cx = vec![0.0; n * n];
             for &i in mine {
                 let o = &obs[i];
                 let Some(place) = places[i] else { continue };
@@ -332,19 +336,23 @@ pub fn fit_with_attitudes(
                 let w = det / (o.sigma_mas * o.sigma_mas);
                 let (y, sp) = (to_focal([o.xi_mas, o.eta_mas]), to_focal(place));
                 let (u, v) = (o.focal_px[0] / norm_px, o.focal_px[1] / norm_px);
+                for k in 1..=max_order {
+                    upow[k] = upow[k - 1] * u;
+                    vpow[k] = vpow[k - 1] * v;
+                }
                 phi.clear();
                 let k = terms.len() * o.array;
                 phi.extend(
                     terms
                         .iter()
                         .enumerate()
-                        .map(|(j, (p, q))| (k + j, u.powi(*p) * v.powi(*q))),
+                        .map(|(j, (p, q))| (k + j, upow[*p as usize] * vpow[*q as usize])),
                 );
                 let base = terms.len() * model.arrays;
                 phi.extend(
                     mono.iter()
                         .enumerate()
-                        .map(|(j, (p, q))| (base + j, u.powi(*p) * v.powi(*q))),
+                        .map(|(j, (p, q))| (base + j, upow[*p as usize] * vpow[*q as usize])),
                 );
                 // x: p′ s′x − q′ s′y + a′x + Σ cx φ;  y: q′ s′x + p′ s′y + a′y + Σ cy φ
                 for axis in 0..2 {
@@ -355,19 +363,33 @@ pub fn fit_with_attitudes(
                     };
                     let off = axis * n;
                     for r in 0..4 {
-                        blk.ra[r] += w * att[r] * y[axis];
+                        let wa = w * att[r];
+                        blk.ra[r] += wa * y[axis];
                         for c in 0..4 {
-                            blk.a[r * 4 + c] += w * att[r] * att[c];
+                            blk.a[r * 4 + c] += wa * att[c];
                         }
                         for &(j, x) in &phi {
-                            blk.b[r * n2 + off + j] += w * att[r] * x;
+                            blk.b[r * n2 + off + j] += wa * x;
                         }
                     }
                     for &(i1, x1) in &phi {
                         blk.rc[off + i1] += w * x1 * y[axis];
-                        for &(j1, x2) in &phi {
-                            blk.c[(off + i1) * n2 + off + j1] += w * x1 * x2;
-                        }
+                    }
+                }
+                // φ's indices rise (an array's terms, then the distortion's): the upper triangle is i1 ≤ j1
+                for (a, &(i1, x1)) in phi.iter().enumerate() {
+                    let wx = w * x1;
+                    for &(j1, x2) in &phi[a..] {
+                        cx[i1 * n + j1] += wx * x2;
+                    }
+                }
+            }
+            for i1 in 0..n {
+                for j1 in i1..n {
+                    let v = cx[i1 * n + j1];
+                    for off in [0, n] {
+                        blk.c[(off + i1) * n2 + off + j1] = v;
+                        blk.c[(off + j1) * n2 + off + i1] = v;
                     }
                 }
             }

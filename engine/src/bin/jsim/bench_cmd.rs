@@ -16,7 +16,7 @@ pub struct BenchArgs {
     /// against the number of stars), crowded (the crowded-field analysis against the number of stars and its
     /// detection threshold), persistence (its threshold and lookback against the exact setting, on a
     /// two-stare sequence of the default field), solution (the astrometric solution of synthetic sequences of
-    /// --solution-sources × 100 exposures); the last five are not in the default set: minutes.
+    /// --solution-sources × --solution-exposures, with the calibration); the last five are not in the default set: minutes.
     #[arg(
         long,
         default_value = "methods,knobs,stars,epsf",
@@ -35,9 +35,17 @@ pub struct BenchArgs {
     /// Star counts of the focal-plane rows (part bulge).
     #[arg(long, default_value = "1000,10000,100000", value_delimiter = ',')]
     pub bulge_stars: Vec<usize>,
-    /// Source counts of the astrometric-solution rows (part solution), each with 100 exposures.
+    /// Source counts of the astrometric-solution rows (part solution).
     #[arg(long, default_value = "1000,10000,100000", value_delimiter = ',')]
     pub solution_sources: Vec<usize>,
+    /// Exposure counts of the astrometric-solution rows, multiples of 25 (a 5 × 5 pattern per epoch); every
+    /// source count is run with each.
+    #[arg(long, default_value = "100", value_delimiter = ',')]
+    pub solution_exposures: Vec<usize>,
+    /// The instrument's calibration in the astrometric-solution rows: full (four arrays' own terms and a
+    /// cubic distortion, drawn and solved) or none.
+    #[arg(long, value_enum, default_value_t = SolutionCalibration::Full)]
+    pub solution_calibration: SolutionCalibration,
     /// Detection thresholds of the crowded-analysis rows (part crowded), on the largest field.
     #[arg(long, default_value = "3,5,10", value_delimiter = ',')]
     pub crowded_sigmas: Vec<f64>,
@@ -47,6 +55,13 @@ pub struct BenchArgs {
     /// Output directory (bench.csv, bench.png).
     #[arg(long, default_value = "out/bench")]
     pub out: PathBuf,
+}
+
+/// The calibration the solution's benchmark draws and solves.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SolutionCalibration {
+    Full,
+    None,
 }
 
 /// The parts `--parts` may name.
@@ -153,6 +168,11 @@ pub fn bench(a: &BenchArgs) -> Result<()> {
         eprintln!("bench: the astrometric solution against its size …");
         rows.extend(engine::studies::bench_solution::solution_scaling(
             &a.solution_sources,
+            &a.solution_exposures,
+            match a.solution_calibration {
+                SolutionCalibration::Full => engine::studies::bench_solution::CALIBRATED,
+                SolutionCalibration::None => engine::analysis::solution::CalibrationModel::NONE,
+            },
             cfg.seed,
         )?);
         save(&rows)?;
