@@ -5,6 +5,8 @@
 pub enum Action {
     /// Load the configuration file at the path on screen.
     Open,
+    /// Read the sequence directory on screen and show its products.
+    OpenSequence,
     /// Write the configuration of what is on screen.
     Save,
     /// Save, then copy the `jsim experiment` / `jsim simulate` command that reproduces it.

@@ -4,12 +4,13 @@
 //! Each frame: take the worker's messages (dropping those of old generations), draw the panels (the controls
 //! edit the settings in place; the other panels read the state and return [`Action`]s), perform the
 //! actions, then compare what is on screen with what was last requested and, if it changed, start a new
-//! generation of work with only the stages that the change invalidates.
+//! generation of work with only the stages that the change invalidates. The sequence view reads a sequence's
+//! products on Open sequence (small files, read at once) and starts no work.
 
 use crate::action::Action;
 use crate::panels;
 use crate::reproduce;
-use crate::settings::{Settings, format_mags, parse_mags};
+use crate::settings::{CentralView, Settings, format_mags, parse_mags};
 use crate::state::{Note, OnScreen, Progress, Results, Status};
 use crate::worker::{Job, Msg, Request, Stages, Worker};
 use engine::config::Config;
@@ -45,6 +46,8 @@ pub struct Runtime {
     pub mags_text: String,
     pub mags_error: Option<String>,
     pub textures: panels::image::Textures,
+    /// The sequence read by the last Open sequence, or why it could not be.
+    pub sequence: panels::sequence::Loaded,
     /// Number of jobs sent (for tests and the status line).
     pub jobs_sent: u64,
 }
@@ -63,18 +66,34 @@ impl ExplorerApp {
         Self { settings, rt }
     }
 
-    /// The app for the command line `jsim-app [CONFIG.toml]`: the settings of the last session (from
-    /// `storage`) or the defaults, then the file given, if any (a file that cannot be loaded is reported in
-    /// the window).
+    /// The app for the command line `jsim-app [CONFIG.toml] [--sequence DIR]`: the settings of the last
+    /// session (from `storage`) or the defaults, then the file given, if any (a file that cannot be loaded is
+    /// reported in the window), then the sequence given (shown in the sequence view) — or, without one, the
+    /// last session's sequence where it left the sequence view on.
     pub fn from_args(
         storage: Option<&dyn eframe::Storage>,
-        mut args: impl Iterator<Item = std::ffi::OsString>,
+        args: impl Iterator<Item = std::ffi::OsString>,
     ) -> Self {
         let settings = storage.and_then(Settings::load).unwrap_or_default();
         let mut app = Self::with_settings(settings);
-        if let Some(p) = args.next() {
+        let cli = match CliArgs::parse(args) {
+            Ok(c) => c,
+            Err(e) => {
+                app.error(e);
+                CliArgs::default()
+            }
+        };
+        if let Some(p) = cli.config {
             app.settings.config_path = p.to_string_lossy().into_owned();
             app.open_config();
+        }
+        if let Some(d) = cli.sequence {
+            app.settings.sequence_dir = d.to_string_lossy().into_owned();
+            app.open_sequence();
+        } else if app.settings.view.central == CentralView::Sequence
+            && !app.settings.sequence_dir.trim().is_empty()
+        {
+            app.open_sequence();
         }
         app
     }
@@ -101,10 +120,20 @@ impl ExplorerApp {
             panels::toolbar::toolbar_ui(
                 ui,
                 &mut self.settings.config_path,
+                &mut self.settings.view.central,
                 &self.rt.status,
                 &mut actions,
             );
         });
+        if self.settings.view.central == CentralView::Sequence {
+            self.show_sequence(ui, &mut actions);
+            for a in actions {
+                self.perform(a, &ctx);
+            }
+            // nothing new starts for the exposure while the sequence is shown; a queued job still goes
+            self.flush(&ctx);
+            return;
+        }
         let screen = OnScreen::of(&self.settings);
         egui::Panel::bottom("summary").show(ui, |ui| {
             panels::summary::summary_ui(ui, &screen, &self.rt.results);
@@ -140,6 +169,24 @@ impl ExplorerApp {
             self.perform(a, &ctx);
         }
         self.sync(&ctx);
+    }
+
+    /// The sequence view: its directory and what was read on the left, the products in the centre.
+    fn show_sequence(&mut self, ui: &mut egui::Ui, actions: &mut Vec<Action>) {
+        egui::Panel::left("sequence_controls")
+            .resizable(true)
+            .default_size(330.0)
+            .show(ui, |ui| {
+                panels::sequence::controls_ui(
+                    ui,
+                    &mut self.settings.sequence_dir,
+                    &self.rt.sequence,
+                    actions,
+                );
+            });
+        egui::CentralPanel::default().show(ui, |ui| {
+            panels::sequence::central_ui(ui, &self.rt.sequence);
+        });
     }
 
     fn ensure_worker(&mut self, ctx: &egui::Context) {
@@ -306,6 +353,7 @@ impl ExplorerApp {
     fn perform(&mut self, a: Action, ctx: &egui::Context) {
         match a {
             Action::Open => self.open_config(),
+            Action::OpenSequence => self.open_sequence(),
             Action::Save => match self.save_config() {
                 Ok(path) => self.info(format!("saved {}", path.display())),
                 Err(e) => self.error(e),
@@ -388,9 +436,56 @@ impl ExplorerApp {
         }
     }
 
+    /// Read the sequence directory at `sequence_dir` and show it in the sequence view (an error is shown
+    /// there, in place of the panels).
+    pub fn open_sequence(&mut self) {
+        let dir = PathBuf::from(self.settings.sequence_dir.trim());
+        self.settings.view.central = CentralView::Sequence;
+        self.rt.sequence = Some(if dir.as_os_str().is_empty() {
+            Err("give the directory of a sequence (`jsim sequence --out DIR`)".into())
+        } else {
+            engine::io::sequence_view::read_sequence_view(&dir).map_err(|e| e.to_string())
+        });
+    }
+
     /// Write the configuration of what is on screen to `config_path`; returns the absolute path written.
     pub fn save_config(&self) -> Result<PathBuf, String> {
         reproduce::save_config(&self.settings, Path::new(&self.settings.config_path))
+    }
+}
+
+/// The command line: `[CONFIG.toml] [--sequence DIR]` (`--sequence=DIR` too), in any order.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct CliArgs {
+    pub config: Option<std::ffi::OsString>,
+    pub sequence: Option<std::ffi::OsString>,
+}
+
+impl CliArgs {
+    /// The arguments after the program's name; an unknown option, a missing directory or a second
+    /// configuration is an error (in words, for the terminal or the window).
+    pub fn parse(mut args: impl Iterator<Item = std::ffi::OsString>) -> Result<Self, String> {
+        let mut cli = CliArgs::default();
+        while let Some(a) = args.next() {
+            let text = a.to_string_lossy();
+            if text == "--sequence" {
+                let dir = args
+                    .next()
+                    .ok_or_else(|| "--sequence needs a directory".to_string())?;
+                cli.sequence = Some(dir);
+            } else if let Some(dir) = text.strip_prefix("--sequence=") {
+                cli.sequence = Some(dir.into());
+            } else if text.starts_with('-') {
+                return Err(format!("unknown option {text}"));
+            } else if cli.config.is_some() {
+                return Err(format!(
+                    "one configuration file at most (a second one: {text})"
+                ));
+            } else {
+                cli.config = Some(a);
+            }
+        }
+        Ok(cli)
     }
 }
 
@@ -429,6 +524,21 @@ pub fn stages_for(old: Option<&Request>, new: &Request, auto_curve: bool) -> Sta
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_command_line_takes_a_config_and_a_sequence() {
+        let parse = |a: &[&str]| CliArgs::parse(a.iter().map(std::ffi::OsString::from));
+        assert_eq!(parse(&[]), Ok(CliArgs::default()));
+        let both = parse(&["a.toml", "--sequence", "out/seq"]).expect("ok");
+        assert_eq!(both.config.as_deref(), Some("a.toml".as_ref()));
+        assert_eq!(both.sequence.as_deref(), Some("out/seq".as_ref()));
+        let eq = parse(&["--sequence=out/seq"]).expect("ok");
+        assert_eq!(eq.sequence.as_deref(), Some("out/seq".as_ref()));
+        assert!(eq.config.is_none());
+        assert!(parse(&["--sequence"]).is_err_and(|e| e.contains("needs a directory")));
+        assert!(parse(&["--bogus"]).is_err_and(|e| e == "unknown option --bogus"));
+        assert!(parse(&["a.toml", "b.toml"]).is_err_and(|e| e.contains("b.toml")));
+    }
 
     #[test]
     fn only_invalidated_stages_rerun() {

@@ -1,14 +1,18 @@
-//! `jsim-app [CONFIG.toml]`: the desktop explorer. `main` answers `--help` and `--version` without a window,
-//! builds the window options and starts the app (on the settings of the last session, which eframe keeps);
-//! without a display it says so in one line instead of a windowing library's debug error.
+//! `jsim-app [CONFIG.toml] [--sequence DIR]`: the desktop explorer. `main` answers `--help` and `--version`
+//! without a window, rejects a malformed command line with the usage, builds the window options and starts
+//! the app (on the settings of the last session, which eframe keeps); without a display it says so in one
+//! line instead of a windowing library's debug error.
 
 const USAGE: &str = "\
 jsim-app — the JASMINE astrometry explorer (a desktop window)
 
-Usage: jsim-app [CONFIG.toml]
+Usage: jsim-app [CONFIG.toml] [--sequence DIR]
        jsim-app --help | --version
 
-CONFIG.toml   a jsim configuration to open (default: the last session's settings)
+CONFIG.toml      a jsim configuration to open (default: the last session's settings)
+--sequence DIR   show a sequence's directory (`jsim sequence --out DIR`): its coverage map and, once
+                 `jsim solve --sequence DIR` has run, the precision against the number of exposures and
+                 the distortion residual map
 
 Every number it shows comes from the jsim engine; `jsim --help` is the command line.";
 
@@ -23,11 +27,11 @@ fn main() -> std::process::ExitCode {
             println!("jsim-app {}", env!("CARGO_PKG_VERSION"));
             return std::process::ExitCode::SUCCESS;
         }
-        Some(a) if a.starts_with('-') => {
-            eprintln!("jsim-app: unknown option {a}\n\n{USAGE}");
-            return std::process::ExitCode::FAILURE;
-        }
         _ => {}
+    }
+    if let Err(e) = app::app::CliArgs::parse(args.iter().cloned()) {
+        eprintln!("jsim-app: {e}\n\n{USAGE}");
+        return std::process::ExitCode::FAILURE;
     }
     if std::env::var_os("DISPLAY").is_none() && std::env::var_os("WAYLAND_DISPLAY").is_none() {
         eprintln!(

@@ -1,6 +1,6 @@
 //! The explorer's settings: what reproduces a view and persists across restarts (eframe's storage) — the
-//! engine configuration, the countermeasure, the curve's magnitudes, the view settings and the path of the
-//! configuration file.
+//! engine configuration, the countermeasure, the curve's magnitudes, the view settings, the path of the
+//! configuration file and the sequence directory last opened.
 
 use crate::view::{Colormap, Stretch};
 use crate::worker::Request;
@@ -13,6 +13,25 @@ pub const DEFAULT_MAGS: [f64; 6] = [12.0, 12.5, 13.0, 13.5, 14.0, 14.5];
 
 /// Key of the settings in eframe's storage.
 pub const STORAGE_KEY: &str = "jsim-explorer-settings";
+
+/// What the central area shows: the exposure simulated from the settings, or a sequence's products read
+/// from its directory.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub enum CentralView {
+    #[default]
+    Exposure,
+    Sequence,
+}
+
+impl CentralView {
+    pub const ALL: [CentralView; 2] = [CentralView::Exposure, CentralView::Sequence];
+    pub fn name(self) -> &'static str {
+        match self {
+            CentralView::Exposure => "Exposure",
+            CentralView::Sequence => "Sequence",
+        }
+    }
+}
 
 /// View settings (they change no result).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -34,6 +53,9 @@ pub struct ViewSettings {
     pub show_predicted_arrows: bool,
     /// Run the magnitude curve after every change.
     pub auto_curve: bool,
+    /// The exposure or the sequence view.
+    #[serde(default)]
+    pub central: CentralView,
 }
 
 impl Default for ViewSettings {
@@ -50,6 +72,7 @@ impl Default for ViewSettings {
             closeup_radius_px: 8,
             show_predicted_arrows: true,
             auto_curve: true,
+            central: CentralView::Exposure,
         }
     }
 }
@@ -68,6 +91,9 @@ pub struct Settings {
     pub view: ViewSettings,
     /// Path for Open / Save / Copy as CLI.
     pub config_path: String,
+    /// The sequence directory for Open sequence (`jsim sequence --out DIR`).
+    #[serde(default)]
+    pub sequence_dir: String,
 }
 
 impl Default for Settings {
@@ -84,6 +110,7 @@ impl Settings {
             mags: DEFAULT_MAGS.to_vec(),
             view: ViewSettings::default(),
             config_path: "jsim-explorer.toml".into(),
+            sequence_dir: String::new(),
         }
     }
 

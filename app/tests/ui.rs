@@ -454,3 +454,124 @@ fn main_window_snapshot() {
     h.mask(timing);
     h.snapshot("main_window");
 }
+
+/// A tiny sequence directory as `jsim sequence` and `jsim solve` write it (their exact headers): 4 × 3
+/// coverage cells, the precision of 2 magnitude bins at N = 1, 2, 4, and array 1's 9 × 9 calibration map whose
+/// residual is ±0.01 px in x and ±0.005 px in y (rms 0.01 / 0.005 px); config.toml empty (the default
+/// instrument's plate scale).
+fn write_sequence(dir: &std::path::Path) {
+    std::fs::create_dir_all(dir.join("solution")).expect("sequence dir");
+    let mut coverage = String::from("l_deg,b_deg,exposures\n");
+    for j in 0..3 {
+        for i in 0..4 {
+            let (l, b) = (-0.015 + 0.01 * i as f64, -0.01 + 0.01 * j as f64);
+            coverage.push_str(&format!("{l},{b},{}\n", (i + j) % 4 * 3));
+        }
+    }
+    std::fs::write(dir.join("coverage.csv"), coverage).expect("coverage.csv");
+    let mut precision = String::from(
+        "exposures,hw_lo,hw_hi,sources,observations,position_rms_mas,position_robust_mas,\
+         outlier_fraction,position_sigma_mas,single_exposure_mas,sqrt_n_mas,pm_rms_mas_per_yr,\
+         pm_sigma_mas_per_yr,parallax_rms_mas,parallax_sigma_mas\n",
+    );
+    for n in [1, 2, 4] {
+        for (lo, single) in [(10, 2.0), (12, 6.0)] {
+            let s = single / (n as f64).sqrt();
+            precision.push_str(&format!(
+                "{n},{lo},{},40,{n},{},{},0,{},{single},{s},NaN,NaN,NaN,NaN\n",
+                lo + 1,
+                1.2 * s,
+                1.1 * s,
+                0.9 * s
+            ));
+        }
+    }
+    std::fs::write(dir.join("solution/precision_vs_n.csv"), precision).expect("precision");
+    let mut map = String::from(
+        "array,x_px,y_px,u_px,v_px,true_dx_px,true_dy_px,solved_dx_px,solved_dy_px,residual_dx_px,\
+         residual_dy_px\n",
+    );
+    for j in 0..9 {
+        for i in 0..9 {
+            let (x, y) = ((i as f64 + 0.5) * 64.0, (j as f64 + 0.5) * 64.0);
+            let sign = if (i + j) % 2 == 0 { 1.0 } else { -1.0 };
+            map.push_str(&format!(
+                "1,{x},{y},{},{},0.5,-0.3,0.49,-0.29,{},{}\n",
+                x - 600.0,
+                y - 600.0,
+                0.01 * sign,
+                -0.005 * sign
+            ));
+        }
+    }
+    std::fs::write(dir.join("solution/calibration_map.csv"), map).expect("calibration map");
+    std::fs::write(dir.join("config.toml"), "").expect("config.toml");
+}
+
+/// The sequence view, opened through its directory field: the coverage map, the precision against N and
+/// the distortion residual with its rms in mas; a directory that does not exist shows the named error.
+#[test]
+fn the_sequence_view_shows_a_solved_sequence() {
+    let dir = std::env::temp_dir().join(format!("jsim-app-sequence-{}", std::process::id()));
+    write_sequence(&dir);
+    let mut app = ExplorerApp::new(small_config());
+    app.settings.view.central = app::settings::CentralView::Sequence;
+    let mut h = harness(app, false);
+    h.run();
+    h.get_by_label_contains("open a sequence's directory");
+    let field = h.get_by_role_and_label(Role::TextInput, "sequence directory");
+    field.focus();
+    field.type_text(&dir.display().to_string());
+    h.run();
+    assert_eq!(h.state().settings.sequence_dir, dir.display().to_string());
+    h.get_by_label("Open sequence").click();
+    h.run();
+    h.get_by_label_contains("Coverage: exposures per sky cell");
+    h.get_by_label_contains("at most 9");
+    h.get_by_label_contains("Precision against the number of exposures N");
+    h.get_by_label_contains("Hw 10–11");
+    h.get_by_label_contains("Hw 12–13");
+    let scale = Config::default().instrument.plate_scale_mas();
+    h.get_by_label_contains(&format!(
+        "Distortion residual: solved − true, gauge removed — rms {:.3} / {:.3} mas",
+        0.01 * scale,
+        0.005 * scale
+    ));
+    h.get_by_label_contains("array 1:");
+    assert!(
+        h.state().is_idle(),
+        "the sequence view starts no simulation"
+    );
+    assert_eq!(h.state().rt.jobs_sent, 0);
+
+    // not solved yet: the coverage, and the command that solves it
+    std::fs::remove_dir_all(dir.join("solution")).expect("rm solution");
+    h.get_by_label("Open sequence").click();
+    h.run();
+    h.get_by_label_contains("Coverage: exposures per sky cell");
+    assert_eq!(
+        h.get_all_by_label_contains("not solved yet: jsim solve --sequence")
+            .count(),
+        2
+    );
+    drop(h);
+    std::fs::remove_dir_all(&dir).ok();
+
+    // from the command line: a directory that does not exist is named in the view
+    let missing = std::env::temp_dir().join(format!("jsim-app-no-sequence-{}", std::process::id()));
+    let app = ExplorerApp::from_args(
+        None,
+        ["--sequence".into(), missing.clone().into_os_string()].into_iter(),
+    );
+    assert_eq!(
+        app.settings.view.central,
+        app::settings::CentralView::Sequence
+    );
+    let mut h = harness(app, false);
+    h.run();
+    h.get_by_label_contains(&format!(
+        "Cannot show the sequence: {}: no such directory",
+        missing.display()
+    ));
+    assert_eq!(h.state().rt.jobs_sent, 0);
+}

@@ -10,7 +10,7 @@ use egui::Color32;
 use egui_plot::{Arrows, Corner, HLine, Line, LineStyle, Plot, PlotPoints, uniform_grid_spacer};
 
 /// One colour per array.
-const ARRAY_COLOURS: [Color32; 4] = [
+pub const ARRAY_COLOURS: [Color32; 4] = [
     Color32::from_rgb(90, 200, 120),
     Color32::from_rgb(90, 160, 255),
     Color32::from_rgb(255, 150, 60),

@@ -8,6 +8,8 @@
 //!   star's close-up and that array's ePSF;
 //! * [`psd`], [`series`], [`vectors`], [`curve`] — the four plots; [`crowded`] — the quad's vector maps
 //!   and magnitude curve from its crowded-field analysis; [`axes`] — what the plots share;
+//! * [`sequence`] — the sequence view: a sequence directory's coverage map, precision against the number of
+//!   exposures and distortion residual map (its own left panel and central area);
 //! * [`widgets`] — the framed cells and their titles.
 
 pub mod axes;
@@ -18,6 +20,7 @@ pub mod focal;
 pub mod image;
 pub mod psd;
 pub mod quad;
+pub mod sequence;
 pub mod series;
 pub mod summary;
 pub mod toolbar;

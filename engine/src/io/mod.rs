@@ -13,6 +13,7 @@ pub mod plot;
 pub mod products;
 pub mod readout_header;
 pub mod score;
+pub mod sequence_view;
 pub mod sky_reference;
 
 use std::path::{Path, PathBuf};
