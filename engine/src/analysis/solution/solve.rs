@@ -346,8 +346,19 @@ fn source_block(
     active: &[bool],
     model: SourceModel,
 ) -> SolvedSource {
+    // the normal equations accumulated in place (no per-source buffers: this runs for every source in every
+    // iteration), row by row in the order weighted least squares would take them
     let fit = |n: usize, fixed: &Params| -> Option<SolvedSource> {
-        let (mut design, mut y, mut w) = (Vec::new(), Vec::new(), Vec::new());
+        let (mut ata, mut atb, mut rows) = ([0.0; 25], [0.0; 5], 0usize);
+        let mut add = |row: &[f64], y: f64, w: f64| {
+            for a in 0..n {
+                atb[a] += w * row[a] * y;
+                for b in 0..n {
+                    ata[a * n + b] += w * row[a] * row[b];
+                }
+            }
+            rows += 1;
+        };
         let mut used = 0;
         for &i in mine.iter().filter(|i| active[**i]) {
             let o = &obs[i];
@@ -365,9 +376,7 @@ fn source_block(
                 ];
                 // the parameters this model does not solve are moved to the left-hand side
                 let known: f64 = (n..5).map(|k| full[k] * fixed[k]).sum();
-                design.extend_from_slice(&full[..n]);
-                y.push(s[axis] - known);
-                w.push(weight);
+                add(&full[..n], s[axis] - known, weight);
             }
             used += 1;
         }
@@ -376,13 +385,16 @@ fn source_block(
                 if anchors(r.sigma[k]) {
                     let mut row = [0.0; 5];
                     row[k] = 1.0;
-                    design.extend_from_slice(&row[..n]);
-                    y.push(r.params[k]);
-                    w.push(1.0 / (r.sigma[k] * r.sigma[k]));
+                    add(&row[..n], r.params[k], 1.0 / (r.sigma[k] * r.sigma[k]));
                 }
             }
         }
-        let (beta, cov) = weighted_lstsq(&design, &y, &w, n)?;
+        if rows < n {
+            return None;
+        }
+        let normal = &ata[..n * n];
+        let beta = crate::numerics::linalg::solve(normal, &atb[..n], n)?;
+        let cov = crate::numerics::linalg::inverse(normal, n)?;
         let mut params = *fixed;
         let mut sigma = [f64::NAN; 5];
         for k in 0..n {
