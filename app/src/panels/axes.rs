@@ -160,6 +160,31 @@ pub fn nice(x: f64) -> f64 {
     }
 }
 
+/// A vector plot's white reference arrow from `origin` to `tip`, its label `gap` (plot units) to the right of
+/// the tip.
+pub fn reference_arrow(
+    pui: &mut egui_plot::PlotUi<'_>,
+    origin: [f64; 2],
+    tip: [f64; 2],
+    gap: f64,
+    label: String,
+) {
+    use egui_plot::{Arrows, PlotPoint, PlotPoints, Text};
+    pui.arrows(
+        Arrows::new(
+            "reference",
+            PlotPoints::new(vec![origin]),
+            PlotPoints::new(vec![tip]),
+        )
+        .color(egui::Color32::WHITE)
+        .tip_length(6.0),
+    );
+    pui.text(
+        Text::new("", PlotPoint::new(tip[0] + gap, tip[1]), label)
+            .anchor(egui::Align2::LEFT_CENTER),
+    );
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

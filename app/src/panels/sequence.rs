@@ -12,7 +12,7 @@ use crate::view::{Colormap, colour};
 use egui::{Color32, Rect, UiBuilder, pos2, vec2};
 use egui_plot::{
     Arrows, Heatmap, HoverPosition, Line, LineStyle, MarkerShape, Plot, PlotPoint, PlotPoints,
-    Points, Text,
+    Points,
 };
 use engine::io::sequence_view::{CoverageGrid, SequenceView, SolutionView};
 
@@ -391,22 +391,12 @@ fn calibration_ui(ui: &mut egui::Ui, s: &SolutionView) {
             if per_px == 0.0 {
                 return;
             }
-            pui.arrows(
-                Arrows::new(
-                    "reference",
-                    PlotPoints::new(vec![ref_origin]),
-                    PlotPoints::new(vec![ref_tip]),
-                )
-                .color(Color32::WHITE)
-                .tip_length(6.0),
-            );
-            pui.text(
-                Text::new(
-                    "",
-                    PlotPoint::new(ref_tip[0] + 0.3 * step, ref_tip[1]),
-                    format!("{ref_unit} {unit}"),
-                )
-                .anchor(egui::Align2::LEFT_CENTER),
+            super::axes::reference_arrow(
+                pui,
+                ref_origin,
+                ref_tip,
+                0.3 * step,
+                format!("{ref_unit} {unit}"),
             );
         });
 }

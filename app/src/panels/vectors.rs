@@ -6,8 +6,7 @@ use super::axes::{MEASURED, PREDICTED};
 use super::widgets::title;
 use crate::settings::ViewSettings;
 use crate::state::{OnScreen, Results};
-use egui::Color32;
-use egui_plot::{Arrows, Plot, PlotPoint, PlotPoints, Text};
+use egui_plot::{Arrows, Plot, PlotPoints};
 use engine::scoring::vectors::Arrow;
 
 /// Origins and tips of arrows drawn `px_per_mas` pixels per mas.
@@ -93,22 +92,6 @@ pub fn vector_ui(ui: &mut egui::Ui, screen: &OnScreen, view: &mut ViewSettings, 
                 .color(MEASURED)
                 .tip_length(5.0),
             );
-            pui.arrows(
-                Arrows::new(
-                    "reference",
-                    PlotPoints::new(vec![ref_origin]),
-                    PlotPoints::new(vec![ref_tip]),
-                )
-                .color(Color32::WHITE)
-                .tip_length(6.0),
-            );
-            pui.text(
-                Text::new(
-                    "",
-                    PlotPoint::new(ref_tip[0] + 0.15 * spacing, ref_tip[1]),
-                    ref_label,
-                )
-                .anchor(egui::Align2::LEFT_CENTER),
-            );
+            super::axes::reference_arrow(pui, ref_origin, ref_tip, 0.15 * spacing, ref_label);
         });
 }

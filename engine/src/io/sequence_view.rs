@@ -450,25 +450,29 @@ pub fn read_precision(path: &Path) -> Result<Vec<PrecisionRow>, IoError> {
         .collect())
 }
 
+/// `calibration_map.csv`'s columns, as `jsim solve` writes them.
+pub const CALIBRATION_MAP_COLUMNS: [&str; 11] = [
+    "array",
+    "x_px",
+    "y_px",
+    "u_px",
+    "v_px",
+    "true_dx_px",
+    "true_dy_px",
+    "solved_dx_px",
+    "solved_dy_px",
+    "residual_dx_px",
+    "residual_dy_px",
+];
+
 /// Read `calibration_map.csv`.
 pub fn read_calibration_map(path: &Path) -> Result<Vec<CalibrationCell>, IoError> {
     let t = Table::read(path)?;
     let array = t.whole("array")?;
-    let cols: Vec<Vec<f64>> = [
-        "x_px",
-        "y_px",
-        "u_px",
-        "v_px",
-        "true_dx_px",
-        "true_dy_px",
-        "solved_dx_px",
-        "solved_dy_px",
-        "residual_dx_px",
-        "residual_dy_px",
-    ]
-    .iter()
-    .map(|n| t.finite(n))
-    .collect::<Result<_, _>>()?;
+    let cols: Vec<Vec<f64>> = CALIBRATION_MAP_COLUMNS[1..]
+        .iter()
+        .map(|n| t.finite(n))
+        .collect::<Result<_, _>>()?;
     Ok((0..t.rows.len())
         .map(|k| CalibrationCell {
             array: array[k] as u32,

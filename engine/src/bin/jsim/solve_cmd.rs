@@ -249,19 +249,7 @@ pub fn solve(a: &SolveArgs) -> Result<()> {
                 .collect();
             engine::io::csv::write(
                 &outputs.path("calibration_map.csv"),
-                &[
-                    "array",
-                    "x_px",
-                    "y_px",
-                    "u_px",
-                    "v_px",
-                    "true_dx_px",
-                    "true_dy_px",
-                    "solved_dx_px",
-                    "solved_dy_px",
-                    "residual_dx_px",
-                    "residual_dy_px",
-                ],
+                &engine::io::sequence_view::CALIBRATION_MAP_COLUMNS,
                 &rows,
             )?;
             if let Some(last) = summary.last_mut() {
