@@ -14,6 +14,7 @@
 pub mod bulge;
 pub mod catalogue;
 pub mod placement;
+pub mod transit;
 
 use crate::config::{Config, SceneKind};
 use crate::rng::{self, Stream};
