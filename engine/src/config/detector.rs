@@ -10,6 +10,14 @@ use std::path::PathBuf;
 #[serde(tag = "kind", rename_all = "kebab-case", deny_unknown_fields)]
 pub enum IntraPixel {
     Uniform,
+    /// A planar photodiode's charge collection, weaker towards the pixel's edges: along each axis
+    /// `1 + a·(1 − 12 (u − ½)²)`, u ∈ [0, 1] across the pixel — mean 1, 1 + a at the centre, 1 − 2a at the
+    /// edges — and the map their product. a = 0.12 spans 0.76 … 1.12 per axis, the range of JASMINE-imagesim's
+    /// measured-like profiles (0.71–1.13 in x, 0.75–1.21 in y); InGaAs figures for JASMINE's arrays were not
+    /// found, so the amplitude is a knob (`kind = "parabolic"`, `amplitude = 0.12`).
+    Parabolic {
+        amplitude: f64,
+    },
     /// Separable map: `profile_x[i] · profile_y[j]`, each resampled to the subpixel count.
     Separable {
         profile_x: Vec<f64>,

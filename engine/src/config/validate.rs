@@ -210,6 +210,15 @@ impl Config {
                 "must be ≤ 0.5",
             ));
         }
+        if let IntraPixel::Parabolic { amplitude } = d.intra_pixel
+            && !(amplitude.is_finite() && (0.0..0.5).contains(&amplitude))
+        {
+            return Err(invalid(
+                "detector.intra_pixel.amplitude",
+                amplitude,
+                "allowed 0 ≤ amplitude < 0.5 (the edges' response 1 − 2·amplitude stays positive)",
+            ));
+        }
         if let IntraPixel::Separable {
             profile_x,
             profile_y,

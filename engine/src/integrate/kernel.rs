@@ -80,6 +80,27 @@ impl IntraPixelMap {
                     weights: w,
                 }
             }
+            IntraPixel::Parabolic { amplitude } => {
+                // each subpixel's mean of 1 + a(1 − 12(u − ½)²) over its width: exact, so the map's mean is 1
+                let s = subpixels as f64;
+                let cube = |u: f64| (u - 0.5).powi(3);
+                let p: Vec<f64> = (0..subpixels)
+                    .map(|k| {
+                        let (u0, u1) = (k as f64 / s, (k + 1) as f64 / s);
+                        1.0 + amplitude * (1.0 - 4.0 * (cube(u1) - cube(u0)) * s)
+                    })
+                    .collect();
+                let mut w = vec![0.0; subpixels * subpixels];
+                for ky in 0..subpixels {
+                    for kx in 0..subpixels {
+                        w[ky * subpixels + kx] = p[kx] * p[ky];
+                    }
+                }
+                Self {
+                    subpixels,
+                    weights: w,
+                }
+            }
             IntraPixel::Csv { path } => Self::from_csv(path)?,
         };
         Ok(map.normalised())
@@ -516,6 +537,38 @@ impl KernelCache {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The parabolic map: mean 1 at any subpixel count (each subpixel the exact mean of the profile over its
+    /// width), 1 + a at the centre and 1 − 2a at the edges per axis when fine, uniform at 2 subpixels (each
+    /// half's mean of a symmetric profile about its mean is the mean), separable; and an amplitude that would
+    /// make the edges dark or negative is refused.
+    #[test]
+    fn the_parabolic_intra_pixel_map_has_its_stated_shape() {
+        let mut det = crate::config::Config::default().detector;
+        det.intra_pixel = IntraPixel::Parabolic { amplitude: 0.12 };
+        let fine = IntraPixelMap::from_config(&det, 200).expect("map");
+        let mean = fine.weights.iter().sum::<f64>() / fine.weights.len() as f64;
+        assert!((mean - 1.0).abs() < 1e-12, "{mean}");
+        // separable (its factors come back up to a common scale: normalised to mean 1 here)
+        let (px, _) = fine.separable().expect("separable");
+        let m = px.iter().sum::<f64>() / px.len() as f64;
+        let (lo, hi) = px.iter().fold((f64::MAX, f64::MIN), |(a, b), v| {
+            (a.min(v / m), b.max(v / m))
+        });
+        assert!(
+            (hi - 1.12).abs() < 1e-4 && (lo - 0.76).abs() < 4e-3,
+            "{lo} … {hi}"
+        );
+        let two = IntraPixelMap::from_config(&det, 2).expect("map");
+        assert!(two.weights.iter().all(|w| (w - 1.0).abs() < 1e-12));
+        let mut cfg = crate::config::Config::default();
+        cfg.detector.intra_pixel = IntraPixel::Parabolic { amplitude: 0.5 };
+        let e = cfg.validate().expect_err("dark edges");
+        assert!(
+            e.to_string().contains("detector.intra_pixel.amplitude"),
+            "{e}"
+        );
+    }
 
     #[test]
     fn refinement_makes_offsets_grid_multiples() {
