@@ -115,8 +115,9 @@ pub struct PrecisionRow {
     pub outlier_fraction: f64,
     /// The solution's own position σ per axis (rms over the sources), mas.
     pub position_sigma_mas: f64,
-    /// The single-exposure accuracy in the bin, and it divided by √(observations), mas; None where the file
-    /// says NaN (no single-exposure errors in the bin).
+    /// The single-exposure accuracy in the bin (rms), and its robust scatter (each exposure's common shift
+    /// removed) divided by √(observations) — what averaging would give —, mas; None where the file says NaN
+    /// (no single-exposure errors in the bin).
     pub single_exposure_mas: Option<f64>,
     pub sqrt_n_mas: Option<f64>,
 }

@@ -121,7 +121,7 @@ pub fn solve(a: &SolveArgs) -> Result<()> {
             (sol.sources.clone(), truths)
         };
         let bins = engine::scoring::solution::score_sources(&scored, &truths, &edges);
-        let single = sq::single_exposure_rms(&p, &truth, n, &edges);
+        let single = sq::single_exposure_errors(&p, &truth, n, &edges);
         eprintln!(
             "{n} exposures: {} observations of {} sources ({} in the reference catalogue), {} detections left \
              out, {} arrays unaligned; {:?} model, distortion order {}; {} iterations{}, {} rejected, χ²/dof \
@@ -146,7 +146,8 @@ pub fn solve(a: &SolveArgs) -> Result<()> {
             if b.sources > 0 {
                 eprintln!(
                     "  Hw {:.0}–{:.0}: {:>6} sources, {:>4.0} obs; position {:.3} mas rms, {:.3} robust, {:.1} % \
-                     beyond 5σ (σ {:.3}; single {:.2} → √N {:.3}); pm {:.3} mas/yr (σ {:.3}); parallax {:.3} mas \
+                     beyond 5σ (σ {:.3}; single {:.2} rms, {:.2} robust → √N {:.3}); pm {:.3} mas/yr (σ {:.3}); \
+                     parallax {:.3} mas \
                      (σ {:.3})",
                     b.hw_lo,
                     b.hw_hi,
@@ -156,8 +157,9 @@ pub fn solve(a: &SolveArgs) -> Result<()> {
                     b.position_robust_mas,
                     100.0 * b.outlier_fraction,
                     b.position_sigma_mas,
-                    s,
-                    s / b.observations.sqrt(),
+                    s.rms_mas,
+                    s.robust_mas,
+                    s.robust_mas / b.observations.sqrt(),
                     b.pm_rms_mas_per_yr,
                     b.pm_sigma_mas_per_yr,
                     b.parallax_rms_mas,
@@ -167,7 +169,7 @@ pub fn solve(a: &SolveArgs) -> Result<()> {
             table.push(PrecisionRow {
                 exposures: n,
                 bin: *b,
-                single_mas: *s,
+                single: *s,
             });
         }
         summary.push(serde_json::json!({
@@ -271,8 +273,9 @@ pub fn solve(a: &SolveArgs) -> Result<()> {
                 Cell::F(b.position_robust_mas),
                 Cell::F(b.outlier_fraction),
                 Cell::F(b.position_sigma_mas),
-                Cell::F(r.single_mas),
-                Cell::F(r.single_mas / b.observations.sqrt()),
+                Cell::F(r.single.rms_mas),
+                Cell::F(r.single.robust_mas),
+                Cell::F(r.single.robust_mas / b.observations.sqrt()),
                 Cell::F(b.pm_rms_mas_per_yr),
                 Cell::F(b.pm_sigma_mas_per_yr),
                 Cell::F(b.parallax_rms_mas),
@@ -293,6 +296,7 @@ pub fn solve(a: &SolveArgs) -> Result<()> {
             "outlier_fraction",
             "position_sigma_mas",
             "single_exposure_mas",
+            "single_exposure_robust_mas",
             "sqrt_n_mas",
             "pm_rms_mas_per_yr",
             "pm_sigma_mas_per_yr",
@@ -330,7 +334,7 @@ pub fn solve(a: &SolveArgs) -> Result<()> {
             x,
             y: pts
                 .iter()
-                .map(|r| r.single_mas / r.bin.observations.sqrt())
+                .map(|r| r.single.robust_mas / r.bin.observations.sqrt())
                 .collect(),
             yerr: None,
             yerr_below: None,
@@ -339,7 +343,7 @@ pub fn solve(a: &SolveArgs) -> Result<()> {
     if !series.is_empty() {
         engine::io::plot::line_plot_with_guides(
             &outputs.path("precision_vs_n.png"),
-            "Solved position error against N (dashed: single exposure / √observations)",
+            "Solved position error against N (dashed: single exposure, robust / √observations)",
             "exposures N",
             "position error per axis, robust [mas]",
             &series,

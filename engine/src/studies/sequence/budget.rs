@@ -225,7 +225,8 @@ pub struct BudgetRow {
     pub hw_hi: f64,
     /// The sources the measurement rests on.
     pub sources: usize,
-    /// What the sequence measured: σ_e, and the combined error of one stare's exposures (robust, per axis).
+    /// What the sequence measured: σ_e (the single exposures' robust scatter, each exposure's common shift
+    /// removed), and the combined error of one stare's exposures (robust, per axis).
     pub single_mas: f64,
     pub one_stare_mas: f64,
     pub errors: ExposureErrors,
@@ -246,15 +247,16 @@ pub fn budget_from_precision(
         .filter(|r| r.exposures == measured_stare && r.bin.sources >= 5)
     {
         let b = &r.bin;
-        if !(r.single_mas.is_finite() && b.position_robust_mas.is_finite()) {
+        let single = r.single.robust_mas;
+        if !(single.is_finite() && b.position_robust_mas.is_finite()) {
             continue;
         }
-        let errors = errors_from_one_stare(r.single_mas, b.position_robust_mas, b.observations);
+        let errors = errors_from_one_stare(single, b.position_robust_mas, b.observations);
         out.push(BudgetRow {
             hw_lo: b.hw_lo,
             hw_hi: b.hw_hi,
             sources: b.sources,
-            single_mas: r.single_mas,
+            single_mas: single,
             one_stare_mas: b.position_robust_mas,
             errors,
             end: end_of_mission(pattern, errors)?,
