@@ -8,6 +8,7 @@ pub mod crowding;
 pub mod detection;
 pub mod epsf;
 pub mod image;
+pub mod lightcurve;
 pub mod pipeline;
 pub mod report;
 pub mod response;
