@@ -1,6 +1,7 @@
 //! Analysis of images: detection, the effective PSF (Anderson & King 2000), fits, countermeasures, the fit's
 //! response to jitter, the accuracy report and the deviation vector map — and the
-//! one per-image [`pipeline`] that runs them in order.
+//! one per-image [`pipeline`] that runs them in order; the astrometric [`solution`] of many exposures; the
+//! light curves of transit photometry ([`lightcurve`]: binned scatter, box least squares).
 
 pub mod countermeasures;
 pub mod crowded;
