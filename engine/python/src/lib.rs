@@ -16,6 +16,7 @@ mod experiment;
 mod exposure;
 mod scoring;
 mod session;
+mod transit;
 
 /// The engine's error as the Python exception a user expects: a bad configuration or argument is a
 /// `ValueError` naming the field and its allowed range, a file problem an `OSError`, anything else a
@@ -60,6 +61,7 @@ fn _jsim(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<session::PyAnalysis>()?;
     m.add_function(wrap_pyfunction!(experiment::experiment, m)?)?;
     m.add_function(wrap_pyfunction!(scoring::score, m)?)?;
+    m.add_function(wrap_pyfunction!(transit::transit_flux, m)?)?;
     m.add("__version__", engine::VERSION)?;
     m.add("COUNTERMEASURES", engine::analysis::countermeasures::NAMES)?;
     Ok(())

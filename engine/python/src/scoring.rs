@@ -7,7 +7,7 @@ use pyo3::prelude::*;
 use pyo3::types::PyDict;
 
 /// A 1-D float array (or sequence) as a vector, named in errors.
-fn column(v: &Bound<'_, PyAny>, name: &str) -> PyResult<Vec<f64>> {
+pub fn column(v: &Bound<'_, PyAny>, name: &str) -> PyResult<Vec<f64>> {
     let np = v.py().import("numpy")?;
     let a = np.call_method1("asarray", (v, "float64"))?;
     let a: PyReadonlyArray1<'_, f64> = a

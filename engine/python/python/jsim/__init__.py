@@ -33,6 +33,7 @@ from ._jsim import (  # noqa: F401, E402
     Session,
     __version__,
     score,
+    transit_flux,
 )
 from ._jsim import experiment as _experiment  # noqa: E402
 
@@ -44,6 +45,7 @@ __all__ = [
     "Session",
     "experiment",
     "score",
+    "transit_flux",
     "__version__",
 ]
 

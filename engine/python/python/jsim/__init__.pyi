@@ -133,6 +133,21 @@ def score(
     """The scoring step (``jsim score``): completeness, accuracy and false detections per magnitude bin
     of measured x, y (optional flags, array) against a truth x, y, mag (optional array)."""
 
+def transit_flux(
+    t_days: npt.ArrayLike,
+    *,
+    t0: float,
+    per: float,
+    rp: float,
+    a: float,
+    inc: float,
+    u: Tuple[float, float],
+    exp_time: float = 0.0,
+    supersample: int = 1,
+) -> npt.NDArray[np.float64]:
+    """A limb-darkened transit's relative flux (circular orbit, quadratic law) at times in days; each value
+    averaged over ``exp_time`` days sampled ``supersample`` times (batman's conventions)."""
+
 def experiment(
     config: Optional[Config] = None,
     *,
