@@ -10,7 +10,7 @@ reductions below, which make the whole page set run in a few minutes:
 * every command that simulates (or reads a configuration to predict) gets `--set` overrides for a 256-px array, a 4 × 4 grid, coarse
   optics and 2 images (`REDUCED`; a command's own `--images` is capped at 2), except for the keys the command sets
   itself;
-* `jsim bench` gets `--quick` and small star counts (its own star-count options are replaced);
+* `jsim bench` gets `--quick` and small star counts (its own star-count and solution-size options are replaced);
 * `jsim sequence` runs at most 2 exposures (`--exposures`; its Slurm scripts are only written), and `jsim solve`
   solves those (`--exposures 1,2`);
 * the sweep files are copied with the same reduced `[base]` and 4 exposures in stares of 2;
@@ -55,7 +55,7 @@ REDUCED = {
 SHORTCUT = {"fidelity.images": "--images", "fidelity.backend": "--backend"}
 TAKES_SET = {"psf", "ace", "simulate", "experiment", "crowded", "bench", "predict", "sequence"}
 BENCH = {"--quick": None, "--stars": "50,100", "--bulge-stars": "50,100", "--ref-stars": "5",
-         "--epsf-images": "1", "--solution-sources": "300"}
+         "--epsf-images": "1", "--solution-sources": "300", "--solution-exposures": "25,50"}
 # a placeholder word (`DIR`, `F.fits`, `fidelity.images=K`, `$VAR`, `…`), or an option in a list (`--a, --b`)
 PLACEHOLDER = re.compile(r"(…|<|\$|^[A-Z]{1,4}(\.[a-z]+)?$|=[A-Z]{1,4}$|^(DIR|PATH)$|NNN|^/$|^--[a-z-]+,$)")
 # producers before consumers; within a rank, the pages' order

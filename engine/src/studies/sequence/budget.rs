@@ -107,9 +107,11 @@ impl MissionPattern {
     pub fn stare_epochs(&self) -> Result<Vec<Epoch>, String> {
         self.validate()?;
         let start = Epoch::from_utc_iso(&self.start_utc)?;
-        let first_year: i32 = self.start_utc[..4]
-            .parse()
-            .map_err(|_| format!("mission start {:?}: no year", self.start_utc))?;
+        let first_year: i32 = self
+            .start_utc
+            .get(..4)
+            .and_then(|y| y.parse().ok())
+            .ok_or_else(|| format!("mission start {:?}: no year", self.start_utc))?;
         let mission_s = self.years * 365.25 * 86_400.0;
         let half_s = self.season_half_width_days * 86_400.0;
         // the seasons' [start, end) in seconds from the mission's start, clipped to the mission
