@@ -172,7 +172,9 @@ fn draw_histogram(
     }
 
     if n > 0 || threshold.is_some() {
-        draw_legend(&mut chart, legend_corner(&occupied))?;
+        // the histogram, its CDF, the threshold
+        let entries = 2 * usize::from(n > 0) + usize::from(threshold.is_some());
+        draw_legend(&mut chart, legend_corner(&occupied, entries))?;
     }
     Ok(())
 }

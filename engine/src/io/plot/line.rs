@@ -85,7 +85,7 @@ fn draw_xy(
     configure_mesh(&mut chart, x_label, y_label)?;
 
     let mut occupied = Vec::new();
-    let mut any_label = false;
+    let mut labels = 0usize;
     for (i, s) in series.iter().enumerate() {
         let c = color(i);
         let pts: Vec<(f64, f64, Option<Bar>)> = triples(s).collect();
@@ -152,7 +152,7 @@ fn draw_xy(
                 .map(|&p| EmptyElement::at(p) + Polygon::new(shape.clone(), c.filled())),
         )?;
         if !s.label.is_empty() {
-            any_label = true;
+            labels += 1;
             let lines = opts.lines;
             let glyph = marker_shape(i, 4.5);
             anno.label(s.label.as_str()).legend(move |(x, y)| {
@@ -199,7 +199,7 @@ fn draw_xy(
         ))?;
         occupied.extend([0.1, 0.3, 0.5, 0.7, 0.9].map(|fx| (fx, y_axis.frac(*v))));
         if !label.is_empty() {
-            any_label = true;
+            labels += 1;
             anno.label(label.as_str())
                 .legend(move |p| dashed_glyph!(p, style));
         }
@@ -228,12 +228,12 @@ fn draw_xy(
                 .draw_series(DashedLineSeries::new(line, 8, 5, style))?
                 .label("y = x")
                 .legend(move |p| dashed_glyph!(p, style));
-            any_label = true;
+            labels += 1;
         }
     }
 
-    if any_label {
-        draw_legend(&mut chart, legend_corner(&occupied))?;
+    if labels > 0 {
+        draw_legend(&mut chart, legend_corner(&occupied, labels))?;
     }
     Ok(())
 }

@@ -438,8 +438,11 @@ fn marker_shape(i: usize, r: f64) -> Vec<(i32, i32)> {
     }
 }
 
-/// Where the legend box overlaps the fewest of the given points (fractions of the plot, y up).
-fn legend_corner(points: &[(f64, f64)]) -> SeriesLabelPosition {
+/// Where the legend box of `entries` lines overlaps the fewest of the given points (fractions of the plot, y
+/// up): the box's size estimated from its lines (≈ 5.5 % of the plot's height each, a third of its width).
+fn legend_corner(points: &[(f64, f64)], entries: usize) -> SeriesLabelPosition {
+    let h = (0.05 + 0.055 * entries as f64).clamp(0.2, 0.9);
+    let w = 0.35;
     let corners = [
         (SeriesLabelPosition::UpperRight, true, true),
         (SeriesLabelPosition::UpperLeft, false, true),
@@ -451,8 +454,8 @@ fn legend_corner(points: &[(f64, f64)]) -> SeriesLabelPosition {
         let count = points
             .iter()
             .filter(|&&(fx, fy)| {
-                let in_x = if right { fx > 0.55 } else { fx < 0.45 };
-                let in_y = if upper { fy > 0.6 } else { fy < 0.4 };
+                let in_x = if right { fx > 1.0 - w } else { fx < w };
+                let in_y = if upper { fy > 1.0 - h } else { fy < h };
                 in_x && in_y
             })
             .count();
