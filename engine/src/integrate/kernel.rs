@@ -53,6 +53,18 @@ impl IntraPixelMap {
         }
     }
 
+    /// The separable map `w[ky·s + kx] = p_x[kx] · p_y[ky]` (both profiles of s subpixels).
+    fn outer(px: &[f64], py: &[f64]) -> Self {
+        let s = px.len();
+        Self {
+            subpixels: s,
+            weights: py
+                .iter()
+                .flat_map(|y| px.iter().map(move |x| x * y))
+                .collect(),
+        }
+    }
+
     /// Resolve the configured map at `subpixels` per axis (a CSV map sets its own size).
     pub fn from_config(det: &Detector, subpixels: usize) -> Result<Self, KernelError> {
         let map = match &det.intra_pixel {
@@ -68,17 +80,7 @@ impl IntraPixelMap {
                         })
                         .collect()
                 };
-                let (px, py) = (rs(profile_x), rs(profile_y));
-                let mut w = vec![0.0; subpixels * subpixels];
-                for ky in 0..subpixels {
-                    for kx in 0..subpixels {
-                        w[ky * subpixels + kx] = px[kx] * py[ky];
-                    }
-                }
-                Self {
-                    subpixels,
-                    weights: w,
-                }
+                Self::outer(&rs(profile_x), &rs(profile_y))
             }
             IntraPixel::Parabolic { amplitude } => {
                 // each subpixel's mean of 1 + a(1 − 12(u − ½)²) over its width: exact, so the map's mean is 1
@@ -90,16 +92,7 @@ impl IntraPixelMap {
                         1.0 + amplitude * (1.0 - 4.0 * (cube(u1) - cube(u0)) * s)
                     })
                     .collect();
-                let mut w = vec![0.0; subpixels * subpixels];
-                for ky in 0..subpixels {
-                    for kx in 0..subpixels {
-                        w[ky * subpixels + kx] = p[kx] * p[ky];
-                    }
-                }
-                Self {
-                    subpixels,
-                    weights: w,
-                }
+                Self::outer(&p, &p)
             }
             IntraPixel::Csv { path } => Self::from_csv(path)?,
         };
