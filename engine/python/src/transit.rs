@@ -1,5 +1,5 @@
 //! `jsim.transit_flux`: a limb-darkened transit's light curve (`engine::scene::transit`) on a numpy array of
-//! times.
+//! times; `jsim.box_least_squares`: the transit search on a light curve (`engine::analysis::lightcurve`).
 
 use crate::scoring::column;
 use engine::scene::transit::Transit;
@@ -54,4 +54,45 @@ pub fn transit_flux<'py>(
         })
         .collect();
     Ok(f.into_pyarray(py))
+}
+
+/// Box least squares (`engine::analysis::lightcurve`): the most significant box over the trial periods and
+/// durations (days) of a light curve `t_days, flux, sigma`. Returns a dict — `period, t0, duration, depth,
+/// depth_sigma, snr, points_in` — or None when no box holds a point.
+#[pyfunction]
+#[pyo3(signature = (t_days, flux, sigma, *, periods, durations))]
+pub fn box_least_squares<'py>(
+    py: Python<'py>,
+    t_days: &Bound<'py, PyAny>,
+    flux: &Bound<'py, PyAny>,
+    sigma: &Bound<'py, PyAny>,
+    periods: &Bound<'py, PyAny>,
+    durations: &Bound<'py, PyAny>,
+) -> PyResult<Option<Bound<'py, pyo3::types::PyDict>>> {
+    let (t, f, s) = (
+        column(t_days, "t_days")?,
+        column(flux, "flux")?,
+        column(sigma, "sigma")?,
+    );
+    if f.len() != t.len() || s.len() != t.len() {
+        return Err(PyValueError::new_err(format!(
+            "t_days ({}), flux ({}) and sigma ({}): one value each",
+            t.len(),
+            f.len(),
+            s.len()
+        )));
+    }
+    let (p, d) = (column(periods, "periods")?, column(durations, "durations")?);
+    let Some(fit) = engine::analysis::lightcurve::box_least_squares(&t, &f, &s, &p, &d) else {
+        return Ok(None);
+    };
+    let out = pyo3::types::PyDict::new(py);
+    out.set_item("period", fit.period_days)?;
+    out.set_item("t0", fit.t0_days)?;
+    out.set_item("duration", fit.duration_days)?;
+    out.set_item("depth", fit.depth)?;
+    out.set_item("depth_sigma", fit.depth_sigma)?;
+    out.set_item("snr", fit.snr)?;
+    out.set_item("points_in", fit.points_in)?;
+    Ok(Some(out))
 }

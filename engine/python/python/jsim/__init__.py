@@ -32,6 +32,7 @@ from ._jsim import (  # noqa: F401, E402
     Exposure,
     Session,
     __version__,
+    box_least_squares,
     score,
     transit_flux,
 )
@@ -43,6 +44,7 @@ __all__ = [
     "Config",
     "Exposure",
     "Session",
+    "box_least_squares",
     "experiment",
     "score",
     "transit_flux",

@@ -148,6 +148,17 @@ def transit_flux(
     """A limb-darkened transit's relative flux (circular orbit, quadratic law) at times in days; each value
     averaged over ``exp_time`` days sampled ``supersample`` times (batman's conventions)."""
 
+def box_least_squares(
+    t_days: npt.ArrayLike,
+    flux: npt.ArrayLike,
+    sigma: npt.ArrayLike,
+    *,
+    periods: npt.ArrayLike,
+    durations: npt.ArrayLike,
+) -> Optional[Dict[str, Any]]:
+    """Box least squares: the most significant box (period, t0, duration, depth, depth_sigma, snr,
+    points_in) over the trial periods and durations (days), or None."""
+
 def experiment(
     config: Optional[Config] = None,
     *,
