@@ -318,7 +318,11 @@ pub fn solve(a: &SolveArgs) -> Result<()> {
             .iter()
             .filter(|r| r.bin.hw_lo == w[0] && r.bin.sources >= 5)
             .collect();
-        if pts.is_empty() {
+        // a bin whose error grows with the exposures is one whose identification fails (sources fainter than
+        // the reference catalogue, mismatched): the table keeps it, the figure leaves it out
+        let grows = pts.len() > 1
+            && pts[pts.len() - 1].bin.position_robust_mas > 2.0 * pts[0].bin.position_robust_mas;
+        if pts.is_empty() || grows {
             continue;
         }
         let x: Vec<f64> = pts.iter().map(|r| r.exposures as f64).collect();
