@@ -1,8 +1,9 @@
 //! Scoring an astrometric solution against the truth: each solved source's position, proper motion and
 //! parallax against its true star's (the star most of its detections were matched to), per magnitude bin,
-//! beside the errors the solution reports; and the solved calibration against the instrument's.
+//! beside the errors the solution reports; the solved calibration against the instrument's; and each solved
+//! attitude against what the true stars say it should be.
 
-use crate::analysis::solution::{Params, SolvedSource};
+use crate::analysis::solution::{ExposureGeometry, Observation, Params, Solution, SolvedSource};
 
 /// A source's true parameters (on the solution's plane) and magnitude.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -142,6 +143,101 @@ pub fn calibration_residuals(points: &[[f64; 2]], diff: &[[f64; 2]]) -> Vec<[f64
                 d[0] - (beta[0] + beta[2] * u - beta[3] * v),
                 d[1] - (beta[1] + beta[3] * u + beta[2] * v),
             ]
+        })
+        .collect()
+}
+
+/// One exposure's attitude error: what its attitude should have been, given the solved calibration and the true
+/// stars, minus what was solved (in the solution's gauge and frame).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AttitudeError {
+    pub offset_mas: [f64; 2],
+    pub roll_arcsec: f64,
+    pub scale_ppm: f64,
+    /// The matched stars it rests on.
+    pub stars: usize,
+}
+
+/// Each exposure's attitude against the truth. Every observation of a source with a true star is modelled
+/// with the star's true parameters through the solved attitude and calibration,
+/// `o = c + A (s_true − c) + a + M Δf`; what is left, `r = o_obs − o`, is fitted per exposure by the
+/// attitude's own similarity `δa + δA (s_true − c)` (weights 1/σ², one pass again without the points beyond
+/// 5 × their robust scatter): δ is the attitude the true stars ask for minus the solved one. The frame's error
+/// (the reference catalogue's, common to every source) is in every exposure's δ alike. `None` for an exposure
+/// with fewer than 10 such stars.
+pub fn attitude_errors(
+    obs: &[Observation],
+    exposures: &[ExposureGeometry],
+    sol: &Solution,
+    truths: &[Option<TrueSource>],
+) -> Vec<Option<AttitudeError>> {
+    let mut by_exposure: Vec<Vec<usize>> = vec![Vec::new(); exposures.len()];
+    for (i, o) in obs.iter().enumerate() {
+        if truths.get(o.source).is_some_and(Option::is_some) && o.exposure < exposures.len() {
+            by_exposure[o.exposure].push(i);
+        }
+    }
+    by_exposure
+        .iter()
+        .enumerate()
+        .map(|(e, mine)| {
+            let g = &exposures[e];
+            let a = sol.attitudes.get(e)?;
+            // (s − c, residual, σ) of each star
+            let rows: Vec<([f64; 2], [f64; 2], f64)> = mine
+                .iter()
+                .filter_map(|&i| {
+                    let o = &obs[i];
+                    let t = truths[o.source].as_ref()?;
+                    let p = &t.params;
+                    let s = [
+                        p[0] + p[2] * g.t_yr + p[4] * g.parallax_factor[0],
+                        p[1] + p[3] * g.t_yr + p[4] * g.parallax_factor[1],
+                    ];
+                    let d = sol.calibration.correction_mas(o, g);
+                    let m = a.apply(g.centre_mas, s);
+                    let r = [o.xi_mas - d[0] - m[0], o.eta_mas - d[1] - m[1]];
+                    let ds = [s[0] - g.centre_mas[0], s[1] - g.centre_mas[1]];
+                    r.iter()
+                        .all(|v| v.is_finite())
+                        .then_some((ds, r, o.sigma_mas))
+                })
+                .collect();
+            let fit = |keep: &dyn Fn(&([f64; 2], [f64; 2], f64)) -> bool| {
+                let (mut design, mut y, mut w) = (Vec::new(), Vec::new(), Vec::new());
+                let mut n = 0;
+                for row in rows.iter().filter(|r| keep(r)) {
+                    let (ds, r, sigma) = row;
+                    // x: δa_x + δp dx − δq dy;  y: δa_y + δq dx + δp dy
+                    design.extend_from_slice(&[1.0, 0.0, ds[0], -ds[1]]);
+                    design.extend_from_slice(&[0.0, 1.0, ds[1], ds[0]]);
+                    y.extend_from_slice(r);
+                    w.extend_from_slice(&[1.0 / (sigma * sigma); 2]);
+                    n += 1;
+                }
+                (n >= 10)
+                    .then(|| crate::numerics::linalg::weighted_lstsq(&design, &y, &w, 4))
+                    .flatten()
+                    .map(|(b, _)| (b, n))
+            };
+            let (first, _) = fit(&|_| true)?;
+            let left = |row: &([f64; 2], [f64; 2], f64)| {
+                let (ds, r, _) = row;
+                [
+                    r[0] - first[0] - first[2] * ds[0] + first[3] * ds[1],
+                    r[1] - first[1] - first[3] * ds[0] - first[2] * ds[1],
+                ]
+            };
+            let spread: Vec<f64> = rows.iter().flat_map(&left).collect();
+            let cut = 5.0 * crate::numerics::stats::mad_sigma(&spread).max(1e-9);
+            let (b, n) = fit(&|row| left(row).iter().all(|v| v.abs() <= cut))?;
+            // the solved attitude's A = [[p, −q], [q, p]]: δp, δq are a scale and a turn on it
+            Some(AttitudeError {
+                offset_mas: [b[0], b[1]],
+                roll_arcsec: b[3] * 206_264.806,
+                scale_ppm: b[2] * 1e6,
+                stars: n,
+            })
         })
         .collect()
 }

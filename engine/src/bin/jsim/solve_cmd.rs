@@ -50,8 +50,8 @@ pub struct SolveArgs {
     #[arg(long, default_value_t = 45.0)]
     pub season_half_width_days: f64,
     /// Output directory (default: solution/ in the sequence's directory): sources.csv, attitudes.csv,
-    /// calibration.csv, calibration_map.csv, score_sources.csv, precision_vs_n.csv and .png,
-    /// mission_budget.csv, solution.json.
+    /// calibration.csv, calibration_map.csv, score_sources.csv, score_attitudes.csv, precision_vs_n.csv and
+    /// .png, mission_budget.csv, solution.json.
     #[arg(long)]
     pub out: Option<PathBuf>,
 }
@@ -113,12 +113,12 @@ pub fn solve(a: &SolveArgs) -> Result<()> {
         let t = Instant::now();
         let (fed, opt, sol) = sq::solve_first(&p, n, &spec)?;
         let solve_s = t.elapsed().as_secs_f64();
-        let truths = sq::true_sources(&fed, &truth);
+        let true_all = sq::true_sources(&fed, &truth);
         // positions only: scored at the epoch of each source's observations (what its σ describes)
         let (scored, truths) = if opt.model == SourceModel::Position {
-            sq::at_mean_epoch(&fed, &sol, &truths)
+            sq::at_mean_epoch(&fed, &sol, &true_all)
         } else {
-            (sol.sources.clone(), truths)
+            (sol.sources.clone(), true_all.clone())
         };
         let bins = engine::scoring::solution::score_sources(&scored, &truths, &edges);
         let single = sq::single_exposure_errors(&p, &truth, n, &edges);
@@ -230,6 +230,66 @@ pub fn solve(a: &SolveArgs) -> Result<()> {
                 ],
                 &rows,
             )?;
+            // each attitude against what the true stars ask of it
+            let att = engine::scoring::solution::attitude_errors(
+                &fed.obs,
+                &fed.exposures,
+                &sol,
+                &true_all,
+            );
+            let att_rows: Vec<Vec<Cell>> = att
+                .iter()
+                .enumerate()
+                .filter_map(|(e, a)| {
+                    let a = a.as_ref()?;
+                    Some(vec![
+                        Cell::I(e as i64),
+                        Cell::F(a.offset_mas[0]),
+                        Cell::F(a.offset_mas[1]),
+                        Cell::F(a.roll_arcsec),
+                        Cell::F(a.scale_ppm),
+                        Cell::I(a.stars as i64),
+                    ])
+                })
+                .collect();
+            engine::io::csv::write(
+                &outputs.path("score_attitudes.csv"),
+                &[
+                    "exposure",
+                    "d_offset_xi_mas",
+                    "d_offset_eta_mas",
+                    "d_roll_arcsec",
+                    "d_scale_ppm",
+                    "stars",
+                ],
+                &att_rows,
+            )?;
+            let scored_att: Vec<_> = att.iter().flatten().collect();
+            let k = scored_att.len().max(1) as f64;
+            let rms_att = |f: &dyn Fn(&&engine::scoring::solution::AttitudeError) -> f64| {
+                (scored_att.iter().map(|a| f(a).powi(2)).sum::<f64>() / k).sqrt()
+            };
+            let att_summary = [
+                rms_att(&|a| a.offset_mas[0]),
+                rms_att(&|a| a.offset_mas[1]),
+                rms_att(&|a| a.roll_arcsec),
+                rms_att(&|a| a.scale_ppm),
+            ];
+            eprintln!(
+                "attitudes against the truth ({} exposures): offset {:.3}/{:.3} mas, roll {:.4}″, scale {:.3} ppm rms",
+                scored_att.len(),
+                att_summary[0],
+                att_summary[1],
+                att_summary[2],
+                att_summary[3]
+            );
+            if let Some(last) = summary.last_mut() {
+                last["attitude_error_rms"] = serde_json::json!({
+                    "offset_mas": [att_summary[0], att_summary[1]],
+                    "roll_arcsec": att_summary[2],
+                    "scale_ppm": att_summary[3],
+                });
+            }
             let map = sq::calibration_map(&p, &truth, &sol)?;
             let rms = |c: usize| {
                 (map.iter().map(|r| r[c] * r[c]).sum::<f64>() / map.len().max(1) as f64).sqrt()
