@@ -1,8 +1,9 @@
 //! Small numerical building blocks shared by the physics modules: a vectorisable dot product, a safe dense
-//! matrix product, 2-D FFTs, a dense linear solver, and robust statistics.
+//! matrix product, 2-D FFTs, a dense linear solver, Gauss–Legendre quadrature, and robust statistics.
 
 pub mod dot;
 pub mod fft2;
 pub mod gemm;
 pub mod linalg;
+pub mod quadrature;
 pub mod stats;

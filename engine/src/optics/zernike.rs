@@ -123,36 +123,12 @@ pub fn rms(coeffs: &[f64]) -> f64 {
 mod tests {
     use super::*;
 
-    /// Gauss–Legendre nodes/weights on [0, 1] by Newton iteration on P_n.
+    /// Gauss–Legendre nodes/weights on [0, 1].
     fn gauss_legendre(n: usize) -> Vec<(f64, f64)> {
-        let mut out = Vec::new();
-        for i in 1..=n {
-            let mut x = (std::f64::consts::PI * (i as f64 - 0.25) / (n as f64 + 0.5)).cos();
-            for _ in 0..100 {
-                let (mut p0, mut p1) = (1.0, x);
-                for k in 2..=n {
-                    let p2 = ((2 * k - 1) as f64 * x * p1 - (k - 1) as f64 * p0) / k as f64;
-                    p0 = p1;
-                    p1 = p2;
-                }
-                let dp = n as f64 * (x * p1 - p0) / (x * x - 1.0);
-                let dx = p1 / dp;
-                x -= dx;
-                if dx.abs() < 1e-15 {
-                    break;
-                }
-            }
-            let (mut p0, mut p1) = (1.0, x);
-            for k in 2..=n {
-                let p2 = ((2 * k - 1) as f64 * x * p1 - (k - 1) as f64 * p0) / k as f64;
-                p0 = p1;
-                p1 = p2;
-            }
-            let dp = n as f64 * (x * p1 - p0) / (x * x - 1.0);
-            let w = 2.0 / ((1.0 - x * x) * dp * dp);
-            out.push((0.5 * (x + 1.0), 0.5 * w));
-        }
-        out
+        crate::numerics::quadrature::gauss_legendre(n)
+            .into_iter()
+            .map(|(x, w)| (0.5 * (x + 1.0), 0.5 * w))
+            .collect()
     }
 
     #[test]

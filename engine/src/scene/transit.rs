@@ -136,37 +136,11 @@ impl Transit {
     }
 }
 
-/// Gauss–Legendre nodes and weights on [−1, 1] (Newton on Pₙ from the Chebyshev guesses).
-fn gauss_legendre(n: usize) -> Vec<(f64, f64)> {
-    (0..n)
-        .map(|i| {
-            let mut x = (std::f64::consts::PI * (i as f64 + 0.75) / (n as f64 + 0.5)).cos();
-            let mut dp = 1.0;
-            for _ in 0..100 {
-                // P_n(x) and its derivative by the recurrence
-                let (mut p0, mut p1) = (1.0, x);
-                for k in 2..=n {
-                    let p2 = ((2 * k - 1) as f64 * x * p1 - (k - 1) as f64 * p0) / k as f64;
-                    p0 = p1;
-                    p1 = p2;
-                }
-                dp = n as f64 * (x * p1 - p0) / (x * x - 1.0);
-                let dx = p1 / dp;
-                x -= dx;
-                if dx.abs() < 1e-15 {
-                    break;
-                }
-            }
-            (x, 2.0 / ((1.0 - x * x) * dp * dp))
-        })
-        .collect()
-}
-
 /// Nodes per interval of the occultation integral.
 const NODES: usize = 48;
 
 thread_local! {
-    static GL: Vec<(f64, f64)> = gauss_legendre(NODES);
+    static GL: Vec<(f64, f64)> = crate::numerics::quadrature::gauss_legendre(NODES);
 }
 
 /// ∫ₐᵇ f(r) dr with r = a + (b − a)(1 − cos θ)/2, θ ∈ [0, π], by Gauss–Legendre in θ.
