@@ -185,6 +185,18 @@ pub fn reference_arrow(
     );
 }
 
+/// What the cursor is over in a plot: the curve's name (empty away from the data) and the point.
+pub fn hovered<'a>(pos: &egui_plot::HoverPosition<'a>) -> (&'a str, egui_plot::PlotPoint) {
+    match pos {
+        egui_plot::HoverPosition::NearDataPoint {
+            plot_name,
+            position,
+            ..
+        } => (plot_name, *position),
+        egui_plot::HoverPosition::Elsewhere { position } => ("", *position),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

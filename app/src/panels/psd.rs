@@ -6,7 +6,7 @@ use super::axes::{X_COLOUR, Y_COLOUR, decade_label, decade_marks, small_legend};
 use super::widgets::title;
 use crate::state::{OnScreen, Results};
 use egui::Color32;
-use egui_plot::{AxisHints, Corner, HoverPosition, Line, LineStyle, Plot, PlotPoints, VLine};
+use egui_plot::{AxisHints, Corner, Line, LineStyle, Plot, PlotPoints, VLine};
 use engine::jitter::Psd;
 
 /// Frequencies at which the model is drawn: a log grid over the series' band, plus points across each
@@ -71,14 +71,7 @@ pub fn psd_ui(ui: &mut egui::Ui, screen: &OnScreen, results: &Results) {
         .y_grid_spacer(decade_marks)
         .y_axis_formatter(|m, _| decade_label(m))
         .label_formatter(move |pos| {
-            let (name, p) = match pos {
-                HoverPosition::NearDataPoint {
-                    plot_name,
-                    position,
-                    ..
-                } => (*plot_name, *position),
-                HoverPosition::Elsewhere { position } => ("", *position),
-            };
+            let (name, p) = super::axes::hovered(pos);
             let (f, v) = (10f64.powf(p.x), 10f64.powf(p.y));
             let mut text = format!("{name}\nf = {f:.3} Hz\nPSD = {v:.3e} model units/Hz");
             if let Some(g) = gain {

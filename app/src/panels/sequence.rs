@@ -11,8 +11,7 @@ use crate::action::Action;
 use crate::view::{Colormap, colour};
 use egui::{Color32, Rect, UiBuilder, pos2, vec2};
 use egui_plot::{
-    Arrows, Heatmap, HoverPosition, Line, LineStyle, MarkerShape, Plot, PlotPoint, PlotPoints,
-    Points,
+    Arrows, Heatmap, Line, LineStyle, MarkerShape, Plot, PlotPoint, PlotPoints, Points,
 };
 use engine::io::sequence_view::{CoverageGrid, SequenceView, SolutionView};
 
@@ -169,10 +168,7 @@ fn coverage_ui(ui: &mut egui::Ui, v: &SequenceView) {
             .x_axis_label("Galactic longitude l [deg]")
             .y_axis_label("Galactic latitude b [deg]")
             .label_formatter(move |pos| {
-                let p = match pos {
-                    HoverPosition::NearDataPoint { position, .. } => *position,
-                    HoverPosition::Elsewhere { position } => *position,
-                };
+                let (_, p) = super::axes::hovered(pos);
                 Some(describe_cell(&grid, p.x, p.y))
             })
             .show(ui, |pui| pui.heatmap(heat));
@@ -244,14 +240,7 @@ fn precision_ui(ui: &mut egui::Ui, s: &SolutionView) {
         .x_axis_formatter(|m, _| decade_label_125(m))
         .y_axis_formatter(|m, _| decade_label_125(m))
         .label_formatter(|pos| {
-            let (name, p) = match pos {
-                HoverPosition::NearDataPoint {
-                    plot_name,
-                    position,
-                    ..
-                } => (*plot_name, *position),
-                HoverPosition::Elsewhere { position } => ("", *position),
-            };
+            let (name, p) = super::axes::hovered(pos);
             Some(format!(
                 "{name}\nN = {:.1}\n{:.3} mas",
                 10f64.powf(p.x),

@@ -189,11 +189,7 @@ pub fn attitude_errors(
                 .filter_map(|&i| {
                     let o = &obs[i];
                     let t = truths[o.source].as_ref()?;
-                    let p = &t.params;
-                    let s = [
-                        p[0] + p[2] * g.t_yr + p[4] * g.parallax_factor[0],
-                        p[1] + p[3] * g.t_yr + p[4] * g.parallax_factor[1],
-                    ];
+                    let s = g.place(&t.params);
                     let d = sol.calibration.correction_mas(o, g);
                     let m = a.apply(g.centre_mas, s);
                     let r = [o.xi_mas - d[0] - m[0], o.eta_mas - d[1] - m[1]];

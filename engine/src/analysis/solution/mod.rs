@@ -64,6 +64,17 @@ pub struct ExposureGeometry {
     pub to_plane: [f64; 4],
 }
 
+impl ExposureGeometry {
+    /// Where a source of parameters `p` is at this exposure's epoch:
+    /// `(ξ₀ + μ_ξ t + ϖ P_ξ, η₀ + μ_η t + ϖ P_η)`, mas.
+    pub fn place(&self, p: &Params) -> [f64; 2] {
+        [
+            p[0] + p[2] * self.t_yr + p[4] * self.parallax_factor[0],
+            p[1] + p[3] * self.t_yr + p[4] * self.parallax_factor[1],
+        ]
+    }
+}
+
 /// A reference-catalogue entry of a source: its parameters at the reference epoch with their 1σ errors
 /// ([`Params`]' order: ξ₀, η₀ mas; μ_ξ, μ_η mas/yr; ϖ mas). An error of 0 or ∞ leaves that parameter free.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -270,14 +270,6 @@ fn unsolved() -> SolvedSource {
     }
 }
 
-/// Where a source with parameters `p` is at exposure `g`'s epoch.
-fn place(p: &Params, g: &ExposureGeometry) -> [f64; 2] {
-    [
-        p[0] + p[2] * g.t_yr + p[4] * g.parallax_factor[0],
-        p[1] + p[3] * g.t_yr + p[4] * g.parallax_factor[1],
-    ]
-}
-
 /// Observed (at `p`, the calibration removed) minus modelled, mas (None for an unsolved source).
 fn residual(
     p: [f64; 2],
@@ -288,7 +280,7 @@ fn residual(
     if !s.params[0].is_finite() {
         return None;
     }
-    let m = a.apply(g.centre_mas, place(&s.params, g));
+    let m = a.apply(g.centre_mas, g.place(&s.params));
     Some((p[0] - m[0], p[1] - m[1]))
 }
 
@@ -316,7 +308,7 @@ fn places_of(
         .map(|o| {
             params[o.source]
                 .as_ref()
-                .map(|p| place(p, &exposures[o.exposure]))
+                .map(|p| exposures[o.exposure].place(p))
         })
         .collect()
 }
@@ -472,7 +464,7 @@ fn attitude_block(
     for &i in mine.iter().filter(|i| active[**i]) {
         let o = &obs[i];
         if let Some(p) = &params[o.source] {
-            let s = place(p, g);
+            let s = g.place(p);
             pairs.push((
                 [s[0] - g.centre_mas[0], s[1] - g.centre_mas[1]],
                 [pos[i][0] - g.centre_mas[0], pos[i][1] - g.centre_mas[1]],

@@ -265,9 +265,14 @@ pub fn solve(a: &SolveArgs) -> Result<()> {
                 &att_rows,
             )?;
             let scored_att: Vec<_> = att.iter().flatten().collect();
-            let k = scored_att.len().max(1) as f64;
+            // no exposure scored: no number (NaN, null in solution.json), never 0
+            let k = scored_att.len() as f64;
             let rms_att = |f: &dyn Fn(&&engine::scoring::solution::AttitudeError) -> f64| {
-                (scored_att.iter().map(|a| f(a).powi(2)).sum::<f64>() / k).sqrt()
+                if scored_att.is_empty() {
+                    f64::NAN
+                } else {
+                    (scored_att.iter().map(|a| f(a).powi(2)).sum::<f64>() / k).sqrt()
+                }
             };
             let att_summary = [
                 rms_att(&|a| a.offset_mas[0]),
