@@ -35,6 +35,8 @@ pub enum Stream {
     Solution = 16,
     /// The reference catalogue of a sequence's region (`studies::sequence::reference`).
     SkyReference = 17,
+    /// A transit stare's field, its plates' noise and telemetry (`studies::transit`).
+    Transit = 18,
     Test = 99,
 }
 

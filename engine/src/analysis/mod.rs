@@ -14,6 +14,7 @@ pub mod pipeline;
 pub mod report;
 pub mod response;
 pub mod solution;
+pub mod stare_photometry;
 
 pub use image::AnalysisImage;
 pub use pipeline::{Analysis, ImageAnalysis, Options, Supplied, analyse_image};

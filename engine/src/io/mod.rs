@@ -5,6 +5,7 @@
 pub mod analysis_input;
 pub mod crowded;
 pub mod csv;
+pub mod ecsv;
 pub mod exposure;
 pub mod fits;
 pub mod focal_plane;

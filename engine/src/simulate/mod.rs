@@ -401,11 +401,16 @@ impl Simulator {
     /// colour (no star's own field-dependent wavefront error), with this simulation's pixel model, in this
     /// array's axes — the model PSF an instrument team hands the analysis.
     pub fn design_kernel(&self) -> Result<Arc<PixelKernel>, SimError> {
+        self.design_kernel_with_blur(0.0)
+    }
+
+    /// The design pixel kernel blurred by a Gaussian of `blur_px` (a jitter's σ the telemetry reports).
+    pub fn design_kernel_with_blur(&self, blur_px: f64) -> Result<Arc<PixelKernel>, SimError> {
         let psf = self.in_array_axes(
             self.bank
                 .get(self.cfg.scene.j_minus_h, &self.bank.centre_key()),
         );
-        self.kernel_with_blur(&psf, 0.0)
+        self.kernel_with_blur(&psf, blur_px)
     }
 
     /// The nominal window (first pixel's) of exposure `index` on its track.
@@ -471,25 +476,35 @@ impl Simulator {
     ) -> Result<(Vec<f64>, Option<Track>), SimError> {
         let n = self.cfg.instrument.detector_px;
         let track = self.track(index);
-        let motion = match &track {
-            Some(t) => Motion::Track(t),
-            None => Motion::Static,
-        };
-        let frame = FrameSpec {
-            timing: &self.timing,
-            detector_px: n,
-            stamp_radius_px: self.cfg.fidelity.stamp_radius_px,
-            method: self.cfg.fidelity.method,
-            map: &self.map,
-            deposit_phases: self.cfg.fidelity.deposit_phases,
-        };
-        let stamps = self.integrator.integrate(jobs, motion, &frame)?;
+        let stamps = self.stamps(jobs, track.as_ref())?;
         let mut img = vec![0.0; n * n];
         integrate::add_stamps(&mut img, n, &stamps);
         if self.cfg.fidelity.halo_radius_px > 0 {
             integrate::add_stamps(&mut img, n, &self.halo_stamps()?);
         }
         Ok((img, track))
+    }
+
+    /// Noise-free star electrons of the jobs as stamps (only the pixels each star reaches), the star moving
+    /// along `track` (or still).
+    pub fn stamps(
+        &self,
+        jobs: &[StarJob],
+        track: Option<&Track>,
+    ) -> Result<Vec<integrate::Stamp>, SimError> {
+        let motion = match track {
+            Some(t) => Motion::Track(t),
+            None => Motion::Static,
+        };
+        let frame = FrameSpec {
+            timing: &self.timing,
+            detector_px: self.cfg.instrument.detector_px,
+            stamp_radius_px: self.cfg.fidelity.stamp_radius_px,
+            method: self.cfg.fidelity.method,
+            map: &self.map,
+            deposit_phases: self.cfg.fidelity.deposit_phases,
+        };
+        Ok(self.integrator.integrate(jobs, motion, &frame)?)
     }
 
     /// The static PSF halo of every star (`fidelity.halo_radius_px` > 0): the PSF beyond the main table,

@@ -12,3 +12,4 @@ pub mod predict;
 pub mod predict_shape;
 pub mod sequence;
 pub mod sweep;
+pub mod transit;

@@ -1,0 +1,502 @@
+//! The transit stare simulated: one target and its comparison stars, each read in a small window, plate
+//! after plate, the ACE jitter and the slow drift moving them over the pixels.
+//!
+//! **Readout modelled: windowed, co-added sub-exposures.** Each plate (`plate_s`, 12.5 s by default) is
+//! `n` sub-exposures of `exposure_s = plate_s / n`, each a reset and a correlated double sampling of only
+//! the stars' windows, summed on board. The signal integrates the whole plate (a window of 23² pixels reads
+//! in 2.6 ms at 5 µs per pixel: the gaps are neglected), the read noise enters n times
+//! (σ = σ_image √n), and saturation is each sub-exposure's: `n` is the smallest whose sub-exposure keeps
+//! every star's peak pixel (centred on a pixel, no jitter) below the full well. Every pixel of a window
+//! shares the plate's window (sample-and-hold timing), the cadence is `plate_s + readout.t_overhead_s`. The
+//! choice is ours: JASMINE's readout for targets brighter than Hw ≈ 9.5 was not found; co-adding keeps the
+//! cadence and the jitter averaging of a 12.5-s plate for every magnitude.
+//!
+//! **Jitter.** The ACE series of `[ace]` is generated in chunks of `ace.span_s` (each its own stream) and cut
+//! into plates; the chunks are independent (the PSD's knee at 0.1 Hz gives a correlation time of 1.6 s, far
+//! below a chunk). **Drift**: `drift_mas_per_h` along `drift_angle_deg`, plus `orbital_drift_mas` per axis at
+//! `orbital_period_min` (x as a sine, y as a cosine), added to the whole plate. **Telemetry**: each plate's
+//! mean pointing (ACE + drift) with a Gaussian error of `telemetry_error_mas`, and its jitter σ.
+
+use super::spec::Spec;
+use crate::analysis::lightcurve::aperture_flux;
+use crate::config::{AceCase, Config, IntraPixel, ReadoutOrder};
+use crate::integrate::StarJob;
+use crate::integrate::track::Track;
+use crate::jitter::AceSeries;
+use crate::rng::{self, Stream};
+use crate::scene::Star;
+use crate::simulate::{ArrayPlace, ArraySpec, SimError, Simulator};
+use rand::RngExt;
+use rand_distr::{Distribution, Normal, Poisson};
+use std::sync::Arc;
+
+/// The chosen readout of the stare.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StareReadout {
+    /// Each plate's integration and its sub-exposures.
+    pub plate_s: f64,
+    pub sub_exposures: usize,
+    pub exposure_s: f64,
+    /// The longest sub-exposure at which no star's peak pixel fills the well.
+    pub longest_safe_s: f64,
+    /// Start-to-start time of plates, s.
+    pub cadence_s: f64,
+    /// A window's read noise per plate, e⁻ (σ_image √n).
+    pub read_noise_e: f64,
+}
+
+/// Where a star's window lies on the detector.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Window {
+    pub x0: i64,
+    pub y0: i64,
+    pub n: usize,
+}
+
+/// One plate: the windows as read (ADU, co-added) and what the telemetry says.
+#[derive(Debug, Clone)]
+pub struct Plate {
+    /// Mid-plate time, days from the stare's start.
+    pub t_mid_days: f64,
+    /// One window per star (row-major `n × n`), ADU.
+    pub windows_adu: Vec<Vec<f32>>,
+    /// Telemetry: the mean pointing (ACE + drift) over the plate with its error, and the jitter σ, mas.
+    pub telemetry_x_mas: f64,
+    pub telemetry_y_mas: f64,
+    pub telemetry_sigma_mas: f64,
+}
+
+/// The truth of one plate (for scoring and the noise budget only).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PlateTruth {
+    /// The target's relative flux (the transit averaged over the plate).
+    pub transit_flux: f64,
+    /// The drift and the ACE's mean offset over the plate, px.
+    pub drift_px: (f64, f64),
+    pub jitter_mean_px: (f64, f64),
+}
+
+/// The observation: what the instrument delivers and, apart, the truth.
+pub struct Observation {
+    pub spec: Spec,
+    /// The configuration the stare ran with (windowed timing, the spec's intra-pixel response).
+    pub cfg: Config,
+    pub readout: StareReadout,
+    /// Star 0 is the target.
+    pub stars: Vec<Star>,
+    pub windows: Vec<Window>,
+    /// The calibration flat cut to each window (1 where the analysis is uncalibrated).
+    pub calibration_flat: Vec<Vec<f32>>,
+    pub plates: Vec<Plate>,
+    /// Truth: each plate's, and each window's noise-free pixel fractions' sums Σp and Σp² over the plates
+    /// (the flat residual's budget).
+    pub truth: Vec<PlateTruth>,
+    pub pixel_moments: Vec<(Vec<f64>, Vec<f64>)>,
+    /// Truth: each star's noise-free aperture flux per plate (`[radius][star][plate]`, e⁻, at each of
+    /// `spec.aperture_radii_px()`; the aperture at the star's true place in the plate, a perfect flat): what
+    /// the pointing alone does to the photometry.
+    pub clean_aperture_e: Vec<Vec<Vec<f64>>>,
+    /// The model PSF the analysis fits: the design PSF blurred by the telemetry's median jitter σ.
+    pub model_psf: crate::analysis::epsf::Epsf,
+    /// Seconds spent simulating.
+    pub simulate_s: f64,
+    pub backend: String,
+}
+
+/// Errors of a stare.
+#[derive(Debug, thiserror::Error)]
+pub enum StareError {
+    #[error("{0}")]
+    Spec(String),
+    #[error(
+        "transit.exposure_s = {exposure_s} s: the {who} (Hw {hw:.2}) saturates, its peak pixel reaching {peak_e:.0} e⁻ \
+         of a {well_e:.0}-e⁻ well; the longest exposure that does not is {longest_s:.3} s (set exposure_s = 0 \
+         for the longest plate_s / n below it)"
+    )]
+    Saturates {
+        exposure_s: f64,
+        who: String,
+        hw: f64,
+        peak_e: f64,
+        well_e: f64,
+        longest_s: f64,
+    },
+    #[error(transparent)]
+    Sim(#[from] SimError),
+}
+
+/// The configuration of a stare: `cfg` with sample-and-hold windows of one plate, back to back, the spec's
+/// intra-pixel response, and the ACE generated by the stare itself (the simulator sees a still telescope).
+pub fn stare_config(cfg: &Config, spec: &Spec) -> Config {
+    let mut c = cfg.clone();
+    c.readout.order = ReadoutOrder::SampleHold;
+    c.detector.exposure_s = spec.plate_s;
+    c.readout.exposure_cadence_s = spec.plate_s + c.readout.t_overhead_s;
+    c.fidelity.images = 1;
+    if spec.intra_pixel_amplitude == 0.0 {
+        c.detector.intra_pixel = IntraPixel::Uniform;
+    } else if spec.intra_pixel_amplitude > 0.0 {
+        c.detector.intra_pixel = IntraPixel::Parabolic {
+            amplitude: spec.intra_pixel_amplitude,
+        };
+    }
+    c
+}
+
+/// The target (star 0, near the detector's centre at a random pixel phase) and the comparison stars, at
+/// least 1.5 windows from each other.
+pub fn field(cfg: &Config, spec: &Spec) -> Vec<Star> {
+    let mut r = rng::stream(cfg.seed, Stream::Transit, u64::MAX);
+    let c = cfg.instrument.detector_px as f64 / 2.0;
+    let mut stars = vec![Star {
+        id: 0,
+        x_px: c + r.random_range(-0.5..0.5),
+        y_px: c + r.random_range(-0.5..0.5),
+        mag_hw: spec.target_hw,
+        j_minus_h: spec.target_j_minus_h,
+        in_truth: true,
+    }];
+    let min_sep = 1.5 * spec.window_px as f64;
+    let mut tries = 0;
+    while stars.len() <= spec.comparisons && tries < 100_000 {
+        tries += 1;
+        let rad = spec.field_radius_px * r.random::<f64>().sqrt();
+        let ang = std::f64::consts::TAU * r.random::<f64>();
+        let (x, y) = (c + rad * ang.cos(), c + rad * ang.sin());
+        if stars
+            .iter()
+            .any(|s| (s.x_px - x).hypot(s.y_px - y) < min_sep)
+        {
+            continue;
+        }
+        let dm = spec.comparison_dmag_min
+            + (spec.comparison_dmag_max - spec.comparison_dmag_min) * r.random::<f64>();
+        stars.push(Star {
+            id: stars.len(),
+            x_px: x,
+            y_px: y,
+            mag_hw: spec.target_hw + dm,
+            j_minus_h: spec.target_j_minus_h
+                + spec.comparison_jh_spread * (2.0 * r.random::<f64>() - 1.0),
+            in_truth: true,
+        });
+    }
+    stars
+}
+
+/// Choose the sub-exposure: the spec's, checked, or the longest `plate_s / n` that keeps every star's peak
+/// pixel below the full well (and the ADC's range).
+pub fn choose_readout(
+    cfg: &Config,
+    spec: &Spec,
+    stars: &[Star],
+    jobs: &[StarJob],
+) -> Result<StareReadout, StareError> {
+    let d = &cfg.detector;
+    let well = d
+        .full_well_e
+        .min((2f64.powi(d.adc_bits as i32) - 1.0 - d.bias_adu) * d.gain_e_per_adu);
+    let flat_max = 1.0 + 4.0 * d.inter_pixel_flat_sigma;
+    // the peak pixel's rate: the brightest share of a still star's light one pixel takes (the kernel at
+    // the pixel's centre: the intra-pixel response included), through a pixel 4σ more sensitive than most
+    let (worst, peak_rate) = stars
+        .iter()
+        .zip(jobs)
+        .map(|(s, j)| (s, j.star.rate_e_per_s * j.kernel.eval(0.0, 0.0) * flat_max))
+        .fold((&stars[0], 0.0), |a, b| if b.1 > a.1 { b } else { a });
+    let longest = well / (peak_rate + d.dark_e_per_s);
+    let exposure = if spec.exposure_s > 0.0 {
+        if spec.exposure_s > longest {
+            return Err(StareError::Saturates {
+                exposure_s: spec.exposure_s,
+                who: if worst.id == 0 {
+                    "target".into()
+                } else {
+                    format!("comparison star {}", worst.id)
+                },
+                hw: worst.mag_hw,
+                peak_e: (peak_rate + d.dark_e_per_s) * spec.exposure_s,
+                well_e: well,
+                longest_s: longest,
+            });
+        }
+        spec.exposure_s
+    } else {
+        let n = (spec.plate_s / longest).ceil().max(1.0);
+        spec.plate_s / n
+    };
+    let n = (spec.plate_s / exposure).round().max(1.0) as usize;
+    Ok(StareReadout {
+        plate_s: spec.plate_s,
+        sub_exposures: n,
+        exposure_s: exposure,
+        longest_safe_s: longest,
+        cadence_s: cfg.exposure_cadence_s(),
+        read_noise_e: d.image_read_noise_e() * (n as f64).sqrt(),
+    })
+}
+
+/// The drift at `t_s` from the stare's start, mas.
+pub fn drift_mas(spec: &Spec, t_s: f64) -> (f64, f64) {
+    let lin = spec.drift_mas_per_h * t_s / 3600.0;
+    let a = spec.drift_angle_deg.to_radians();
+    let ph = std::f64::consts::TAU * t_s / (spec.orbital_period_min * 60.0);
+    (
+        lin * a.cos() + spec.orbital_drift_mas * ph.sin(),
+        lin * a.sin() + spec.orbital_drift_mas * ph.cos(),
+    )
+}
+
+/// Simulate the stare of `spec` with `cfg`'s instrument.
+pub fn observe(cfg: &Config, spec: &Spec) -> Result<Observation, StareError> {
+    let t_start = std::time::Instant::now();
+    let mut c = stare_config(cfg, spec);
+    let cadence = c.exposure_cadence_s();
+    spec.validate(cadence).map_err(StareError::Spec)?;
+    let realistic = c.ace.case == AceCase::Realistic;
+    // the simulator sees a still telescope; the stare cuts its own tracks (Gaussian ACE stays a blur)
+    let mut sim_cfg = c.clone();
+    if realistic {
+        sim_cfg.ace.case = AceCase::None;
+    }
+    sim_cfg.scene.j_minus_h = spec.target_j_minus_h;
+    sim_cfg.validate().map_err(|e| StareError::Sim(e.into()))?;
+    let stars = field(&sim_cfg, spec);
+    let (integrator, _) = crate::integrate::Integrator::choose(sim_cfg.fidelity.backend);
+    let sim = Simulator::build_array(
+        &sim_cfg,
+        ArraySpec {
+            place: ArrayPlace {
+                index: 0,
+                rotation_deg: 0.0,
+                seed: sim_cfg.seed,
+            },
+            stars: stars.clone(),
+        },
+        None,
+        Arc::new(crate::optics::PsfBank::new(&sim_cfg)),
+        Arc::new(Default::default()),
+        integrator,
+        None,
+    )?;
+    let jobs = sim.jobs()?;
+    let readout = choose_readout(&c, spec, &stars, &jobs)?;
+    let plates_n = spec.plates(cadence);
+    let transit = spec.transit();
+    let n = c.instrument.detector_px;
+    let half = (spec.window_px / 2) as i64;
+    let windows: Vec<Window> = stars
+        .iter()
+        .map(|s| Window {
+            x0: s.x_px.round() as i64 - half,
+            y0: s.y_px.round() as i64 - half,
+            n: spec.window_px,
+        })
+        .collect();
+    let cut = |img: &[f32], w: &Window| -> Vec<f32> {
+        let mut out = Vec::with_capacity(w.n * w.n);
+        for y in 0..w.n {
+            let row = (w.y0 + y as i64) as usize * n + w.x0 as usize;
+            out.extend_from_slice(&img[row..row + w.n]);
+        }
+        out
+    };
+    let true_flat = detector_flat(&sim);
+    let flat_w: Vec<Vec<f32>> = windows.iter().map(|w| cut(&true_flat, w)).collect();
+    let calibration_flat = match sim.calibration_flat() {
+        Some(f) => windows.iter().map(|w| cut(&f, w)).collect(),
+        None => windows.iter().map(|w| vec![1.0; w.n * w.n]).collect(),
+    };
+    // the ACE in chunks of whole plates
+    c.ace.span_s = c.ace.span_s.max(cadence + 1.0);
+    let per_chunk = ((c.ace.span_s - 1.0) / cadence).floor().max(1.0) as usize;
+    c.ace.span_s = per_chunk as f64 * cadence + 1.0;
+    let plate_scale = c.instrument.plate_scale_mas();
+    let span = c.readout.t_overhead_s + spec.plate_s;
+    let d = &c.detector;
+    let dark_e = d.dark_e_per_s * spec.plate_s;
+    let bias = d.bias_adu * readout.sub_exposures as f64;
+    let mut plates = Vec::with_capacity(plates_n);
+    let mut truth = Vec::with_capacity(plates_n);
+    let mut moments: Vec<(Vec<f64>, Vec<f64>)> = windows
+        .iter()
+        .map(|w| (vec![0.0; w.n * w.n], vec![0.0; w.n * w.n]))
+        .collect();
+    let radii = spec.aperture_radii_px();
+    let mut clean_ap: Vec<Vec<Vec<f64>>> =
+        vec![vec![Vec::with_capacity(plates_n); windows.len()]; radii.len()];
+    let mut series: Option<(usize, AceSeries)> = None;
+    let mut next: Option<(usize, AceSeries)> = None;
+    for p in 0..plates_n {
+        let t0 = p as f64 * cadence;
+        let t_mid = t0 + c.readout.t_overhead_s + 0.5 * spec.plate_s;
+        let drift = drift_mas(spec, t_mid);
+        let chunk = p / per_chunk;
+        let mut track = if realistic {
+            if series.as_ref().map(|s| s.0) != Some(chunk) {
+                // two chunks at a time, one per core (each chunk's series is its own stream)
+                series = match next.take() {
+                    Some(s) if s.0 == chunk => Some(s),
+                    _ => {
+                        let more = (chunk + 1) * per_chunk < plates_n;
+                        let (a, b) = rayon::join(
+                            || AceSeries::generate(&c, c.seed, 1 + chunk as u64),
+                            || more.then(|| AceSeries::generate(&c, c.seed, 2 + chunk as u64)),
+                        );
+                        next = b.map(|b| (chunk + 1, b));
+                        Some((chunk, a))
+                    }
+                };
+            }
+            let s = &series.as_ref().expect("generated above").1;
+            Track::from_series(
+                s,
+                (p % per_chunk) as f64 * cadence,
+                span,
+                c.fidelity.time_stride,
+                plate_scale,
+            )
+        } else {
+            Track::still(span, 1e-3)
+        };
+        let w = track.window(c.readout.t_overhead_s, span);
+        let jitter_mean = track.window_mean(&w);
+        let jitter_sigma_px = {
+            let (mut s2, mut tw) = (0.0, 0.0);
+            for j in w.first..=w.last.min(track.len().saturating_sub(1)) {
+                let wt = w.weight(j);
+                s2 += wt
+                    * ((track.dx_px[j] - jitter_mean.0).powi(2)
+                        + (track.dy_px[j] - jitter_mean.1).powi(2))
+                    / 2.0;
+                tw += wt;
+            }
+            (s2 / tw.max(1e-300)).sqrt()
+        };
+        let (dxp, dyp) = (drift.0 / plate_scale, drift.1 / plate_scale);
+        track.dx_px.iter_mut().for_each(|v| *v += dxp);
+        track.dy_px.iter_mut().for_each(|v| *v += dyp);
+        let tf = transit.map_or(1.0, |tr| {
+            tr.mean_flux(
+                (t0 + c.readout.t_overhead_s) / 86_400.0,
+                spec.plate_s / 86_400.0,
+                7,
+            )
+        });
+        let mut pj = jobs.clone();
+        pj[0].star.rate_e_per_s *= tf;
+        let stamps = sim.stamps(&pj, Some(&track))?;
+        if stamps.len() != jobs.len() {
+            return Err(StareError::Spec(
+                "transit: a star's window left the detector (lower field_radius_px)".into(),
+            ));
+        }
+        let mut r = rng::stream(c.seed, Stream::Transit, p as u64);
+        let read = Normal::new(0.0, readout.read_noise_e.max(1e-300)).ok();
+        let mut windows_adu = Vec::with_capacity(windows.len());
+        for (k, (wdw, st)) in windows.iter().zip(&stamps).enumerate() {
+            let mut out = vec![0.0f32; wdw.n * wdw.n];
+            let mut clean = vec![0.0f64; wdw.n * wdw.n];
+            for y in 0..wdw.n {
+                for x in 0..wdw.n {
+                    let (gx, gy) = (wdw.x0 + x as i64, wdw.y0 + y as i64);
+                    let (sx, sy) = (gx - st.x0, gy - st.y0);
+                    let star_e =
+                        if sx >= 0 && sy >= 0 && (sx as usize) < st.nx && (sy as usize) < st.ny {
+                            st.data[sy as usize * st.nx + sx as usize]
+                        } else {
+                            0.0
+                        };
+                    clean[y * wdw.n + x] = star_e;
+                    let i = y * wdw.n + x;
+                    let mean = star_e.max(0.0) * flat_w[k][i] as f64 + dark_e;
+                    let mut e = if d.shot_noise && mean > 0.0 {
+                        Poisson::new(mean).map(|q| q.sample(&mut r)).unwrap_or(mean)
+                    } else {
+                        mean
+                    };
+                    if let (true, Some(rn)) = (d.read_noise, &read) {
+                        e += rn.sample(&mut r);
+                    }
+                    let mut v = e / d.gain_e_per_adu + bias;
+                    if d.digitise {
+                        v = v.round();
+                    }
+                    out[i] = v as f32;
+                }
+            }
+            // the aperture at the star's true place in this plate (its nominal place, the drift and the
+            // jitter's mean)
+            let (tx, ty) = (
+                stars[k].x_px + dxp + jitter_mean.0 - wdw.x0 as f64,
+                stars[k].y_px + dyp + jitter_mean.1 - wdw.y0 as f64,
+            );
+            for (ri, &rad) in radii.iter().enumerate() {
+                clean_ap[ri][k].push(
+                    aperture_flux(
+                        &clean,
+                        wdw.n,
+                        wdw.n,
+                        tx,
+                        ty,
+                        rad,
+                        spec.annulus_in_px,
+                        spec.annulus_out_px,
+                    )
+                    .map_or(f64::NAN, |a| a.flux),
+                );
+            }
+            let total: f64 = clean.iter().sum::<f64>().max(1e-300);
+            let (s1, s2) = &mut moments[k];
+            for (i, v) in clean.iter().enumerate() {
+                let q = v / total;
+                s1[i] += q;
+                s2[i] += q * q;
+            }
+            windows_adu.push(out);
+        }
+        let tel = Normal::new(0.0, spec.telemetry_error_mas.max(1e-300)).ok();
+        let mut tel_err = || tel.as_ref().map_or(0.0, |t| t.sample(&mut r));
+        plates.push(Plate {
+            t_mid_days: t_mid / 86_400.0,
+            windows_adu,
+            telemetry_x_mas: (jitter_mean.0 + dxp) * plate_scale + tel_err(),
+            telemetry_y_mas: (jitter_mean.1 + dyp) * plate_scale + tel_err(),
+            telemetry_sigma_mas: jitter_sigma_px * plate_scale,
+        });
+        truth.push(PlateTruth {
+            transit_flux: tf,
+            drift_px: (dxp, dyp),
+            jitter_mean_px: jitter_mean,
+        });
+    }
+    let sigmas: Vec<f64> = plates.iter().map(|p| p.telemetry_sigma_mas).collect();
+    let blur_px = crate::numerics::stats::median(&sigmas) / plate_scale;
+    let kernel = sim.design_kernel_with_blur(if blur_px.is_finite() { blur_px } else { 0.0 })?;
+    let half_psf = (spec.window_px / 2).max(4);
+    let model_psf = crate::analysis::epsf::Epsf::from_fn(4, half_psf, |x, y| kernel.eval(x, y));
+    Ok(Observation {
+        clean_aperture_e: clean_ap,
+        model_psf,
+        spec: spec.clone(),
+        readout,
+        stars,
+        windows,
+        calibration_flat,
+        plates,
+        truth,
+        pixel_moments: moments,
+        simulate_s: t_start.elapsed().as_secs_f64(),
+        backend: sim.backend_name(),
+        cfg: c,
+    })
+}
+
+/// The detector's true flat (what the simulator's charge is multiplied by).
+fn detector_flat(sim: &Simulator) -> Vec<f32> {
+    let n = sim.cfg.instrument.detector_px;
+    sim.collected(&vec![1.0; n * n])
+        .into_iter()
+        .map(|v| v as f32)
+        .collect()
+}
