@@ -15,7 +15,7 @@ pub struct PyConfig {
 }
 
 /// A Python value as the TOML text `--set FIELD=VALUE` would take.
-fn toml_text(v: &Bound<'_, PyAny>) -> PyResult<String> {
+pub(crate) fn toml_text(v: &Bound<'_, PyAny>) -> PyResult<String> {
     if v.is_instance_of::<PyBool>() {
         return Ok(if v.extract::<bool>()? {
             "true"

@@ -1,11 +1,16 @@
 //! `jsim.transit_flux`: a limb-darkened transit's light curve (`engine::scene::transit`) on a numpy array of
-//! times; `jsim.box_least_squares`: the transit search on a light curve (`engine::analysis::lightcurve`).
+//! times; `jsim.box_least_squares`: the transit search on a light curve (`engine::analysis::lightcurve`);
+//! `jsim.transit`: a transit-monitoring stare (what `jsim transit` runs), its light curve as numpy arrays.
 
+use crate::OrPy;
+use crate::config::PyConfig;
 use crate::scoring::column;
 use engine::scene::transit::Transit;
+use engine::studies::transit::{Spec, run};
 use numpy::{IntoPyArray, PyArray1};
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
+use pyo3::types::PyDict;
 
 /// The relative flux of a star with a transiting planet (circular orbit, quadratic limb darkening) at
 /// times `t_days` (days): `t0` mid-transit, `per` the period (days), `rp` the planet's radius and `a` the
@@ -95,4 +100,75 @@ pub fn box_least_squares<'py>(
     out.set_item("snr", fit.snr)?;
     out.set_item("points_in", fit.points_in)?;
     Ok(Some(out))
+}
+
+/// Simulate and analyse a transit stare: one bright target and its comparison stars read in windows,
+/// plate after plate (`jsim transit`). Keyword arguments set the stare's fields (`target_hw`,
+/// `duration_h`, `depth`, `comparisons`, `intra_pixel_amplitude`, `aperture_px`, `decorrelate`, … as in the
+/// `[transit]` file). Returns a dict: the light curve's arrays (`time` in days, `flux` decorrelated,
+/// `flux_raw`, `flux_aperture`, `flux_psf`, `x`, `y`, `sky`, `telemetry_x`, `telemetry_y`,
+/// `telemetry_sigma`, `in_box`), the truth's `injected` flux (for scoring), and dicts `readout`,
+/// `precision`, `budget`, `recovery` (None without a transit found) and `detections`.
+#[pyfunction]
+#[pyo3(signature = (config = None, **fields))]
+pub fn transit<'py>(
+    py: Python<'py>,
+    config: Option<PyConfig>,
+    fields: Option<&Bound<'py, PyDict>>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let cfg = config.map(|c| c.inner).unwrap_or_default();
+    cfg.validate().or_py()?;
+    let mut spec = Spec::default();
+    if let Some(f) = fields {
+        for (k, v) in f.iter() {
+            let key: String = k.extract()?;
+            let text = crate::config::toml_text(&v)?;
+            spec = spec.set(&key, &text).map_err(PyValueError::new_err)?;
+        }
+    }
+    let (obs, r) = py
+        .detach(|| run::run(&cfg, &spec))
+        .map_err(|e| PyValueError::new_err(e.to_string()))?;
+    let d = PyDict::new(py);
+    let lc = &r.lc;
+    for (name, v) in [
+        ("time", &lc.t_days),
+        ("flux", &lc.flux),
+        ("flux_raw", &lc.flux_raw),
+        ("flux_aperture", &lc.aperture_rel),
+        ("flux_psf", &lc.psf_rel),
+        ("x", &lc.x_px),
+        ("y", &lc.y_px),
+        ("sky", &lc.sky_e),
+        ("telemetry_x", &lc.telemetry_x_mas),
+        ("telemetry_y", &lc.telemetry_y_mas),
+        ("telemetry_sigma", &lc.telemetry_sigma_mas),
+    ] {
+        d.set_item(name, v.clone().into_pyarray(py))?;
+    }
+    d.set_item("in_box", lc.in_box.clone().into_pyarray(py))?;
+    let injected: Vec<f64> = obs.truth.iter().map(|t| t.transit_flux).collect();
+    d.set_item("injected", injected.into_pyarray(py))?;
+    d.set_item("aperture_px", lc.aperture_px)?;
+    let json = |v: serde_json::Value| -> PyResult<Bound<'py, PyAny>> {
+        let json_mod = py.import("json")?;
+        json_mod.call_method1("loads", (v.to_string(),))
+    };
+    let readout = &r.readout;
+    d.set_item(
+        "readout",
+        json(serde_json::json!({
+            "plate_s": readout.plate_s,
+            "sub_exposures": readout.sub_exposures,
+            "exposure_s": readout.exposure_s,
+            "longest_safe_exposure_s": readout.longest_safe_s,
+            "cadence_s": readout.cadence_s,
+            "read_noise_e": readout.read_noise_e,
+        }))?,
+    )?;
+    d.set_item("precision", json(serde_json::json!(r.precision))?)?;
+    d.set_item("budget", json(serde_json::json!(r.budget))?)?;
+    d.set_item("recovery", json(serde_json::json!(r.recovery))?)?;
+    d.set_item("detections", json(serde_json::json!(r.detections))?)?;
+    Ok(d)
 }

@@ -2,6 +2,8 @@
 batman (Kreidberg 2015), whose quadratic law is Mandel & Agol's closed form with elliptic integrals, where
 jsim integrates the occulted intensity numerically."""
 
+import subprocess
+
 import batman
 import numpy as np
 import pytest
@@ -91,3 +93,58 @@ def test_box_least_squares_finds_what_astropy_finds():
     assert jsim.box_least_squares(t[:0], f[:0], sigma[:0], periods=periods, durations=durations) is None
     with pytest.raises(ValueError, match="one value each"):
         jsim.box_least_squares(t, f[:-1], sigma, periods=periods, durations=durations)
+
+
+# ---------------------------------------------------------------------------------------------------------
+# jsim.transit: a stare, its light curve as numpy arrays and as the CLI's astropy table
+# ---------------------------------------------------------------------------------------------------------
+
+STARE = dict(comparisons=5, field_radius_px=150.0)
+
+
+def test_a_stare_gives_numpy_light_curves_and_recovers_its_transit(cfg):
+    r = jsim.transit(cfg, duration_h=3.0, depth=0.01, **STARE)
+    n = len(r["time"])
+    assert n == int(3.0 * 3600 / 12.6)
+    for k in ["flux", "flux_raw", "flux_aperture", "flux_psf", "x", "y", "telemetry_sigma", "injected"]:
+        assert isinstance(r[k], np.ndarray) and r[k].shape == (n,), k
+    # the injected transit is Mandel & Agol's, averaged over each 12.5-s plate: batman's, independently
+    t0 = 1.5 / 24
+    inc = 90.0
+    ref = batman_flux(r["time"], t0=t0, per=14.0, rp=0.1, a=71.5, inc=inc, u=(0.1, 0.3),
+                      exp_time=12.5 / 86400, supersample=7)
+    # each plate's time is its integration's middle; batman averages 7 instants across it as jsim does
+    assert np.max(np.abs(r["injected"] - ref)) < 1e-6
+    rec = r["recovery"]
+    assert rec is not None and rec["overlaps_injected"]
+    assert abs(rec["depth"] - rec["injected_depth"]) < 3 * rec["depth_sigma"], rec
+
+
+def test_the_cli_writes_the_same_light_curve_as_an_astropy_table(cfg, jsim_bin, tmp_path):
+    from astropy.table import Table
+
+    sets = [f"--set={k}={v}" for k, v in {
+        "instrument.detector_px": 512, "instrument.photosensitive_px": 496, "readout.channels": 4,
+        "readout.channel_width_px": 128, "optics.pupil_samples": 128, "optics.psf_oversampling": 8,
+        "optics.psf_radius_px": 10, "band.wavelength_step_um": 0.05, "fidelity.subpixels": 4,
+        "fidelity.backend": '"cpu"', "ace.span_s": 120.0, "transit.comparisons": 5,
+        "transit.field_radius_px": 150.0,
+    }.items()]
+    out = tmp_path / "stare"
+    subprocess.run([jsim_bin, "transit", "--hours", "0.3", "--depth", "0", *sets, "--out", str(out)],
+                   check=True, capture_output=True)
+    t = Table.read(out / "lightcurve.ecsv")
+    assert str(t["time"].unit) == "d" and str(t["telemetry_sigma"].unit) == "mas"
+    r = jsim.transit(cfg, duration_h=0.3, depth=0.0, **STARE)
+    assert len(t) == len(r["time"])
+    np.testing.assert_allclose(np.asarray(t["flux"]), r["flux"], rtol=1e-12)
+    assert t.meta["comparisons"] == "5"
+
+
+def test_bad_stares_are_value_errors_naming_the_field(cfg):
+    with pytest.raises(ValueError, match="transit.period_days"):
+        jsim.transit(cfg, duration_h=3.0, depth=0.003, period_days=0.0, **STARE)
+    with pytest.raises(ValueError, match="transit.exposure_s"):
+        jsim.transit(cfg, target_hw=6.0, exposure_s=12.5, duration_h=0.1, depth=0.0, **STARE)
+    with pytest.raises(ValueError, match="no such field"):
+        jsim.transit(cfg, colour=1.0)

@@ -34,6 +34,7 @@ from ._jsim import (  # noqa: F401, E402
     __version__,
     box_least_squares,
     score,
+    transit,
     transit_flux,
 )
 from ._jsim import experiment as _experiment  # noqa: E402
@@ -47,6 +48,7 @@ __all__ = [
     "box_least_squares",
     "experiment",
     "score",
+    "transit",
     "transit_flux",
     "__version__",
 ]

@@ -159,6 +159,13 @@ def box_least_squares(
     """Box least squares: the most significant box (period, t0, duration, depth, depth_sigma, snr,
     points_in) over the trial periods and durations (days), or None."""
 
+def transit(config: Optional[Config] = None, **fields: Any) -> Dict[str, Any]:
+    """A transit-monitoring stare (``jsim transit``): keyword arguments set the ``[transit]`` fields
+    (``target_hw``, ``duration_h``, ``depth``, ``comparisons``, …); returns the light curve's numpy arrays
+    (``time`` in days, ``flux``, ``flux_raw``, ``flux_aperture``, ``flux_psf``, ``x``, ``y``, ``sky``,
+    ``telemetry_x``, ``telemetry_y``, ``telemetry_sigma``, ``in_box``, the truth's ``injected``) and dicts
+    ``readout``, ``precision``, ``budget``, ``recovery`` and ``detections``."""
+
 def experiment(
     config: Optional[Config] = None,
     *,

@@ -5,7 +5,7 @@
 //! [`engine::studies::transit`].
 
 use crate::options::{AceArg, BaseArgs, ConfigArgs, IntegrationArgs, SeedArg};
-use anyhow::{Context, Result, bail};
+use anyhow::{Context, Result};
 use clap::Args;
 use engine::studies::transit::{self, Spec, outputs, precision as study};
 use std::path::PathBuf;
@@ -89,24 +89,8 @@ fn set_field(spec: &Spec, assignment: &str) -> Result<Spec> {
     let (key, value) = assignment
         .split_once('=')
         .with_context(|| format!("--set {assignment}: expected transit.FIELD=VALUE"))?;
-    let field = key.trim().trim_start_matches("transit.");
-    let mut table = toml::Value::try_from(spec)?;
-    let v: toml::Value = toml::from_str::<toml::Table>(&format!("v = {}", value.trim()))
-        .ok()
-        .and_then(|t| t.get("v").cloned())
-        .unwrap_or_else(|| toml::Value::String(value.trim().to_string()));
-    match table.as_table_mut() {
-        Some(t) if t.contains_key(field) => {
-            t.insert(field.to_string(), v);
-        }
-        _ => bail!(
-            "--set {key}: the stare has no field {field:?} (fields: see `jsim transit --help` and the \
-             [transit] file's keys)"
-        ),
-    }
-    table
-        .try_into()
-        .map_err(|e: toml::de::Error| anyhow::anyhow!("--set {assignment}: {}", e.message()))
+    spec.set(key, value)
+        .map_err(|e| anyhow::anyhow!("--set {assignment}: {e}"))
 }
 
 pub fn transit(a: &TransitArgs) -> Result<()> {

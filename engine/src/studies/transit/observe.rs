@@ -93,8 +93,8 @@ pub struct Observation {
     pub truth: Vec<PlateTruth>,
     pub pixel_moments: Vec<(Vec<f64>, Vec<f64>)>,
     /// Truth: each star's noise-free aperture flux per plate (`[radius][star][plate]`, e⁻, at each of
-    /// `spec.aperture_radii_px()`; the aperture at the star's true place in the plate, a perfect flat): what
-    /// the pointing alone does to the photometry.
+    /// `spec.aperture_radii_px()`; the aperture at the star's true place in the plate, a perfect flat, the
+    /// target's transit divided out): what the pointing alone does to the photometry.
     pub clean_aperture_e: Vec<Vec<Vec<f64>>>,
     /// The model PSF the analysis fits: the design PSF blurred by the telemetry's median jitter σ.
     pub model_psf: crate::analysis::epsf::Epsf,
@@ -431,6 +431,8 @@ pub fn observe(cfg: &Config, spec: &Spec) -> Result<Observation, StareError> {
                 stars[k].x_px + dxp + jitter_mean.0 - wdw.x0 as f64,
                 stars[k].y_px + dyp + jitter_mean.1 - wdw.y0 as f64,
             );
+            // the target's without its transit (a factor on its rate): the pointing's part alone
+            let unit = if k == 0 { tf } else { 1.0 };
             for (ri, &rad) in radii.iter().enumerate() {
                 clean_ap[ri][k].push(
                     aperture_flux(
@@ -443,7 +445,7 @@ pub fn observe(cfg: &Config, spec: &Spec) -> Result<Observation, StareError> {
                         spec.annulus_in_px,
                         spec.annulus_out_px,
                     )
-                    .map_or(f64::NAN, |a| a.flux),
+                    .map_or(f64::NAN, |a| a.flux / unit),
                 );
             }
             let total: f64 = clean.iter().sum::<f64>().max(1e-300);

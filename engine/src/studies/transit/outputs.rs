@@ -76,7 +76,12 @@ pub fn write(dir: &Path, obs: &Observation, r: &StareResult) -> Result<(), IoErr
                 "jitter sigma in the plate",
                 &lc.telemetry_sigma_mas,
             ),
-            col("in_box", "", "1 inside the transit box found", &in_box),
+            col(
+                "in_box",
+                "",
+                "1 inside the transit box found (widened by a quarter of its duration each side)",
+                &in_box,
+            ),
         ],
         &meta,
     )?;

@@ -35,7 +35,8 @@ pub struct LightCurve {
     pub telemetry_x_mas: Vec<f64>,
     pub telemetry_y_mas: Vec<f64>,
     pub telemetry_sigma_mas: Vec<f64>,
-    /// Plates inside the transit box found (left out of the decorrelation's fit and the precision).
+    /// Plates inside the transit box found, widened by [`MASK_MARGIN`] (left out of the decorrelation's fit
+    /// and the precision).
     pub in_box: Vec<bool>,
     /// The decorrelation's regressors (one series per regressor; none without decorrelation).
     pub regressors: Vec<Vec<f64>>,
@@ -204,7 +205,7 @@ pub fn light_curve(obs: &Observation, m: &[Vec<StarMeasure>]) -> LightCurve {
     if let Some(b) = search(&t_days, &flux, obs.spec.duration_h)
         && b.snr >= DETECTION_SNR
     {
-        in_box = box_mask(&t_days, &b);
+        in_box = box_mask(&t_days, &b, MASK_MARGIN);
         let out: Vec<bool> = in_box.iter().map(|b| !b).collect();
         flux = decorrelated(&flux_raw, &out);
     }
@@ -227,13 +228,18 @@ pub fn light_curve(obs: &Observation, m: &[Vec<StarMeasure>]) -> LightCurve {
     }
 }
 
-/// The plates inside a box (its mid-time ± half its duration).
-pub fn box_mask(t_days: &[f64], b: &BoxFit) -> Vec<bool> {
+/// The plates inside a box (its mid-time ± half its duration) widened by `margin` of its duration on each
+/// side.
+pub fn box_mask(t_days: &[f64], b: &BoxFit, margin: f64) -> Vec<bool> {
     t_days
         .iter()
-        .map(|t| (t - b.t0_days).abs() <= 0.5 * b.duration_days)
+        .map(|t| (t - b.t0_days).abs() <= (0.5 + margin) * b.duration_days)
         .collect()
 }
+
+/// How much of its duration the transit's mask adds on each side, for the decorrelation and the precision
+/// (a box is a little shorter than the transit it finds: its ingress and egress stay out of it).
+pub const MASK_MARGIN: f64 = 0.25;
 
 /// A single-transit box search: one trial period of twice the stare (no folding, no wrap-around), durations
 /// from 15 min to half the stare in 15-min steps, the points' σ their robust scatter.
@@ -333,7 +339,7 @@ pub fn analyse(obs: &Observation) -> StareResult {
 
 /// Score a found box against the injected transit (the truth).
 fn score(obs: &Observation, lc: &LightCurve, b: &BoxFit) -> Recovery {
-    let inside = box_mask(&lc.t_days, b);
+    let inside = box_mask(&lc.t_days, b, 0.0);
     let depths: Vec<f64> = obs
         .truth
         .iter()

@@ -137,6 +137,8 @@ pub const APERTURE_CHOICES_PX: [f64; 7] = [3.0, 4.0, 5.0, 6.0, 8.0, 10.0, 12.0];
 
 /// Most plates one stare may take (≈ 2 weeks at 12.6 s; memory and time grow with it).
 pub const MAX_PLATES: usize = 100_000;
+/// Most memory the stare's windows may take, bytes (plates × stars × window² × 4).
+pub const MAX_WINDOW_BYTES: f64 = 4e9;
 /// Most comparison stars.
 pub const MAX_COMPARISONS: usize = 200;
 
@@ -148,6 +150,26 @@ impl Spec {
         let f: TransitFile = toml::from_str(&text)
             .map_err(|e| format!("transit file {}: {}", path.display(), e.message()))?;
         Ok(f.transit)
+    }
+
+    /// Set one field from its TOML text (`depth`, `0.003`; a bare word is a string): the stare with it
+    /// changed, or an error naming the field (validation comes once, when the stare runs).
+    pub fn set(&self, field: &str, value: &str) -> Result<Spec, String> {
+        let field = field.trim().trim_start_matches("transit.");
+        let mut table = toml::Value::try_from(self).map_err(|e| e.to_string())?;
+        let v: toml::Value = toml::from_str::<toml::Table>(&format!("v = {}", value.trim()))
+            .ok()
+            .and_then(|t| t.get("v").cloned())
+            .unwrap_or_else(|| toml::Value::String(value.trim().to_string()));
+        match table.as_table_mut() {
+            Some(t) if t.contains_key(field) => {
+                t.insert(field.to_string(), v);
+            }
+            _ => return Err(format!("transit.{field}: the stare has no such field")),
+        }
+        table.try_into().map_err(|e: toml::de::Error| {
+            format!("transit.{field} = {}: {}", value.trim(), e.message())
+        })
     }
 
     /// The aperture radii measured: the spec's, or the automatic choice's candidates.
@@ -302,6 +324,22 @@ impl Spec {
                 "window_px",
                 self.window_px.to_string(),
                 "allowed odd 9 … 101",
+            );
+        }
+        let bytes =
+            plates as f64 * (self.comparisons + 1) as f64 * (self.window_px as f64).powi(2) * 4.0;
+        if bytes > MAX_WINDOW_BYTES {
+            return bad(
+                "duration_h",
+                self.duration_h.to_string(),
+                &format!(
+                    "the windows of {plates} plates × {} stars × {}² px would take {:.1} GB (at most {:.0} GB): \
+                     shorten the stare, or lower comparisons or window_px",
+                    self.comparisons + 1,
+                    self.window_px,
+                    bytes / 1e9,
+                    MAX_WINDOW_BYTES / 1e9
+                ),
             );
         }
         let half = (self.window_px / 2) as f64;
