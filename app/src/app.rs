@@ -50,6 +50,8 @@ pub struct Runtime {
     pub sequence: panels::sequence::Loaded,
     /// Number of jobs sent (for tests and the status line).
     pub jobs_sent: u64,
+    /// The transit view's stares.
+    pub transit: crate::worker::transit::TransitRunner,
 }
 
 impl ExplorerApp {
@@ -125,6 +127,14 @@ impl ExplorerApp {
                 &mut actions,
             );
         });
+        if self.settings.view.central == CentralView::Transit {
+            self.show_transit(ui, &ctx);
+            for a in actions {
+                self.perform(a, &ctx);
+            }
+            self.flush(&ctx);
+            return;
+        }
         if self.settings.view.central == CentralView::Sequence {
             self.show_sequence(ui, &mut actions);
             for a in actions {
@@ -186,6 +196,23 @@ impl ExplorerApp {
             });
         egui::CentralPanel::default().show(ui, |ui| {
             panels::sequence::central_ui(ui, &self.rt.sequence);
+        });
+    }
+
+    /// The transit view: the stare's controls on the left, its light curve and budget in the centre; a
+    /// change of the controls (or of the configuration) reruns the stare.
+    fn show_transit(&mut self, ui: &mut egui::Ui, ctx: &egui::Context) {
+        let t = &mut self.rt.transit;
+        t.update(&self.settings.cfg, &self.settings.transit, ctx);
+        egui::Panel::left("transit_controls")
+            .resizable(true)
+            .default_size(330.0)
+            .show(ui, |ui| {
+                panels::transit::controls_ui(ui, &mut self.settings.transit, t.busy);
+            });
+        let stale = t.stale(&self.settings.cfg, &self.settings.transit);
+        egui::CentralPanel::default().show(ui, |ui| {
+            panels::transit::central_ui(ui, t.shown.as_ref(), stale);
         });
     }
 

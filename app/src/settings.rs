@@ -21,15 +21,79 @@ pub enum CentralView {
     #[default]
     Exposure,
     Sequence,
+    Transit,
 }
 
 impl CentralView {
-    pub const ALL: [CentralView; 2] = [CentralView::Exposure, CentralView::Sequence];
+    pub const ALL: [CentralView; 3] = [
+        CentralView::Exposure,
+        CentralView::Sequence,
+        CentralView::Transit,
+    ];
     pub fn name(self) -> &'static str {
         match self {
             CentralView::Exposure => "Exposure",
             CentralView::Sequence => "Sequence",
+            CentralView::Transit => "Transit",
         }
+    }
+}
+
+/// The transit view's controls: the stare's knobs the view offers (the rest as `jsim transit`'s defaults)
+/// and the ACE's σ (set on a copy of the configuration for the stare only).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+pub struct TransitControls {
+    pub target_hw: f64,
+    pub hours: f64,
+    pub comparisons: usize,
+    pub ace_sigma_mas: f64,
+    pub intra_pixel_amplitude: f64,
+    pub plate_s: f64,
+    /// The sub-exposure, s (0: the longest that does not saturate).
+    pub exposure_s: f64,
+    pub depth: f64,
+    /// The aperture radius, px (0: chosen per stare).
+    pub aperture_px: f64,
+}
+
+impl Default for TransitControls {
+    fn default() -> Self {
+        Self {
+            target_hw: 9.7,
+            hours: 2.0,
+            comparisons: 10,
+            ace_sigma_mas: 300.0,
+            intra_pixel_amplitude: 0.12,
+            plate_s: 12.5,
+            exposure_s: 0.0,
+            depth: 0.003,
+            aperture_px: 0.0,
+        }
+    }
+}
+
+impl TransitControls {
+    /// The stare these controls describe (`jsim transit`'s defaults otherwise).
+    pub fn spec(&self) -> engine::studies::transit::Spec {
+        engine::studies::transit::Spec {
+            target_hw: self.target_hw,
+            duration_h: self.hours,
+            comparisons: self.comparisons,
+            intra_pixel_amplitude: self.intra_pixel_amplitude,
+            plate_s: self.plate_s,
+            exposure_s: self.exposure_s,
+            depth: self.depth,
+            aperture_px: self.aperture_px,
+            ..Default::default()
+        }
+    }
+
+    /// The configuration of the stare: `cfg` with the ACE's σ of the controls.
+    pub fn config(&self, cfg: &Config) -> Config {
+        let mut c = cfg.clone();
+        c.ace.sigma_mas = self.ace_sigma_mas;
+        c
     }
 }
 
@@ -94,6 +158,9 @@ pub struct Settings {
     /// The sequence directory for Open sequence (`jsim sequence --out DIR`).
     #[serde(default)]
     pub sequence_dir: String,
+    /// The transit view's stare.
+    #[serde(default)]
+    pub transit: TransitControls,
 }
 
 impl Default for Settings {
@@ -111,6 +178,7 @@ impl Settings {
             view: ViewSettings::default(),
             config_path: "jsim-explorer.toml".into(),
             sequence_dir: String::new(),
+            transit: TransitControls::default(),
         }
     }
 

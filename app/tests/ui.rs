@@ -575,3 +575,55 @@ fn the_sequence_view_shows_a_solved_sequence() {
     ));
     assert_eq!(h.state().rt.jobs_sent, 0);
 }
+
+/// The transit view: its first stare shows the light curve, the box found and the noise budget; a change of
+/// the intra-pixel amplitude reruns the stare with it.
+#[test]
+fn the_transit_view_reruns_its_stare_when_a_knob_changes() {
+    let mut app = ExplorerApp::new(small_config());
+    app.settings.view.central = app::settings::CentralView::Transit;
+    app.settings.transit.hours = 1.8;
+    app.settings.transit.comparisons = 3;
+    app.settings.transit.depth = 0.01;
+    let mut h = harness(app, false);
+    let wait = |h: &mut Harness<'_, ExplorerApp>| {
+        let t0 = Instant::now();
+        loop {
+            h.step();
+            if !h.state().rt.transit.busy && h.state().rt.transit.shown.is_some() {
+                break;
+            }
+            assert!(
+                t0.elapsed() < Duration::from_secs(300),
+                "timed out waiting for the stare"
+            );
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        h.run();
+    };
+    wait(&mut h);
+    if let Some(Err(e)) = &h.state().rt.transit.shown {
+        panic!("the stare failed: {e}");
+    }
+    h.get_by_label_contains("Light curve: 514 plates");
+    h.get_by_label_contains("box found:");
+    h.get_by_label_contains("Noise budget (ppm)");
+    h.get_by_label_contains("jitter x intra-pixel");
+    let first = h.state().rt.transit.requested.clone();
+    h.state_mut().settings.transit.intra_pixel_amplitude = 0.3;
+    h.step();
+    assert!(h.state().rt.transit.busy, "a new stare runs");
+    wait(&mut h);
+    let second = h.state().rt.transit.requested.clone();
+    assert_ne!(first, second);
+    assert_eq!(
+        second.map(|(_, c)| c.intra_pixel_amplitude),
+        Some(0.3),
+        "the stare ran with the new amplitude"
+    );
+    assert_eq!(
+        h.state().rt.jobs_sent,
+        0,
+        "the exposure's work does not start"
+    );
+}

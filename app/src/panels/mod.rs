@@ -10,6 +10,8 @@
 //!   and magnitude curve from its crowded-field analysis; [`axes`] — what the plots share;
 //! * [`sequence`] — the sequence view: a sequence directory's coverage map, precision against the number of
 //!   exposures and distortion residual map (its own left panel and central area);
+//! * [`transit`] — the transit view: a stare's light curve and noise budget (its own left panel and central
+//!   area, rerun as its controls change);
 //! * [`widgets`] — the framed cells and their titles.
 
 pub mod axes;
@@ -24,6 +26,7 @@ pub mod sequence;
 pub mod series;
 pub mod summary;
 pub mod toolbar;
+pub mod transit;
 pub mod vectors;
 pub mod widgets;
 

@@ -24,6 +24,9 @@ pub fn toolbar_ui(
                     CentralView::Sequence => {
                         "a step-stare sequence's coverage and astrometric solution (jsim sequence, jsim solve)"
                     }
+                    CentralView::Transit => {
+                        "transit photometry: a bright target's light curve and noise budget (jsim transit)"
+                    }
                 });
         }
         ui.separator();

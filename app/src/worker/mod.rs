@@ -23,6 +23,7 @@ pub mod out;
 pub mod protocol;
 pub mod stages;
 pub mod thread;
+pub mod transit;
 pub mod views;
 
 pub use protocol::{

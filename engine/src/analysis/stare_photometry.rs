@@ -165,6 +165,31 @@ pub fn normalised(v: &[f64]) -> Vec<f64> {
     v.iter().map(|x| x / m).collect()
 }
 
+/// `v` less its centred running mean over `w` values (truncated at the ends; finite values only): what
+/// changes from plate to plate, without the slow trend. Regressors high-passed this way let a
+/// decorrelation remove the jitter's plate-to-plate noise without also removing the light curve's slow
+/// variations (and the noise on the scale of a transit) along with the drift they follow.
+pub fn high_pass(v: &[f64], w: usize) -> Vec<f64> {
+    let h = w / 2;
+    let (mut sum, mut cnt) = (vec![0.0; v.len() + 1], vec![0usize; v.len() + 1]);
+    for (i, x) in v.iter().enumerate() {
+        let ok = x.is_finite();
+        sum[i + 1] = sum[i] + if ok { *x } else { 0.0 };
+        cnt[i + 1] = cnt[i] + usize::from(ok);
+    }
+    (0..v.len())
+        .map(|i| {
+            let (a, b) = (i.saturating_sub(h), (i + h + 1).min(v.len()));
+            let n = cnt[b] - cnt[a];
+            if n == 0 {
+                f64::NAN
+            } else {
+                v[i] - (sum[b] - sum[a]) / n as f64
+            }
+        })
+        .collect()
+}
+
 /// The regressors of a centroid decorrelation from positions `(x, y)` per plate: x̃, ỹ, x̃², ỹ², x̃ỹ with
 /// x̃ = x − mean.
 pub fn centroid_regressors(x: &[f64], y: &[f64]) -> Vec<Vec<f64>> {
@@ -257,6 +282,18 @@ mod tests {
                 "plate {p}: {} vs {want}",
                 out[p]
             );
+        }
+    }
+
+    #[test]
+    fn high_pass_removes_a_slow_trend_and_keeps_a_fast_one() {
+        let n = 2000;
+        let fast = |i: usize| if i.is_multiple_of(2) { 1.0 } else { -1.0 };
+        let v: Vec<f64> = (0..n).map(|i| 0.01 * i as f64 + fast(i)).collect();
+        let hp = high_pass(&v, 101);
+        for i in 60..n - 60 {
+            // a linear trend is its own centred mean; the alternation's mean over 101 values is ±1/101
+            assert!((hp[i] - fast(i)).abs() < 0.011, "{i}: {}", hp[i]);
         }
     }
 

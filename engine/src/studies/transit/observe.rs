@@ -144,8 +144,9 @@ pub fn stare_config(cfg: &Config, spec: &Spec) -> Config {
 }
 
 /// The target (star 0, near the detector's centre at a random pixel phase) and the comparison stars, at
-/// least 1.5 windows from each other.
-pub fn field(cfg: &Config, spec: &Spec) -> Vec<Star> {
+/// least 1.5 windows from each other, within `field_radius_px` of the target and one window inside the
+/// detector's edge; an error when they do not all fit.
+pub fn field(cfg: &Config, spec: &Spec) -> Result<Vec<Star>, StareError> {
     let mut r = rng::stream(cfg.seed, Stream::Transit, u64::MAX);
     let c = cfg.instrument.detector_px as f64 / 2.0;
     let mut stars = vec![Star {
@@ -157,10 +158,11 @@ pub fn field(cfg: &Config, spec: &Spec) -> Vec<Star> {
         in_truth: true,
     }];
     let min_sep = 1.5 * spec.window_px as f64;
+    let reach = spec.field_radius_px.min(c - spec.window_px as f64);
     let mut tries = 0;
     while stars.len() <= spec.comparisons && tries < 100_000 {
         tries += 1;
-        let rad = spec.field_radius_px * r.random::<f64>().sqrt();
+        let rad = reach.max(0.0) * r.random::<f64>().sqrt();
         let ang = std::f64::consts::TAU * r.random::<f64>();
         let (x, y) = (c + rad * ang.cos(), c + rad * ang.sin());
         if stars
@@ -181,7 +183,16 @@ pub fn field(cfg: &Config, spec: &Spec) -> Vec<Star> {
             in_truth: true,
         });
     }
-    stars
+    if stars.len() <= spec.comparisons {
+        return Err(StareError::Spec(format!(
+            "transit.comparisons = {}: only {} fit within {reach:.0} px of the target (field_radius_px, and one \
+             window inside the {}-px detector) at 1.5 windows apart: lower comparisons or window_px",
+            spec.comparisons,
+            stars.len() - 1,
+            cfg.instrument.detector_px
+        )));
+    }
+    Ok(stars)
 }
 
 /// Choose the sub-exposure: the spec's, checked, or the longest `plate_s / n` that keeps every star's peak
@@ -261,7 +272,7 @@ pub fn observe(cfg: &Config, spec: &Spec) -> Result<Observation, StareError> {
     }
     sim_cfg.scene.j_minus_h = spec.target_j_minus_h;
     sim_cfg.validate().map_err(|e| StareError::Sim(e.into()))?;
-    let stars = field(&sim_cfg, spec);
+    let stars = field(&sim_cfg, spec)?;
     let (integrator, _) = crate::integrate::Integrator::choose(sim_cfg.fidelity.backend);
     let sim = Simulator::build_array(
         &sim_cfg,
@@ -388,7 +399,7 @@ pub fn observe(cfg: &Config, spec: &Spec) -> Result<Observation, StareError> {
         let stamps = sim.stamps(&pj, Some(&track))?;
         if stamps.len() != jobs.len() {
             return Err(StareError::Spec(
-                "transit: a star's window left the detector (lower field_radius_px)".into(),
+                "transit.drift_mas_per_h: the drift took a star off the detector".into(),
             ));
         }
         let mut r = rng::stream(c.seed, Stream::Transit, p as u64);

@@ -279,10 +279,10 @@ pub fn budget_lines(r: &StareResult) -> Vec<String> {
         r.precision.plate_ppm,
         r.precision.hour_ppm,
         r.precision.six_and_half_hours_ppm,
-        if r.precision.six_and_half_measured {
-            ""
-        } else {
-            "  (6.5 h: the 1-h scatter / √6.5)"
+        match (r.precision.hour_measured, r.precision.six_and_half_measured) {
+            (true, true) => "",
+            (true, false) => "  (6.5 h: the 1-h scatter / √6.5)",
+            _ => "  (1 h, 6.5 h: the plates' scatter / √N)",
         }
     ));
     out

@@ -1,7 +1,8 @@
 //! The precision study: a stare without a transit at each target magnitude, its measured scatter at a plate,
 //! 1 h and 6.5 h beside the noise budget's terms, and the single-transit significance of the mission's
 //! 0.3 % and 0.1 % transits (`precision.csv`, `precision.png`, `precision.json`; each stare's own outputs in
-//! `hw_<mag>/`).
+//! `hw_<mag>/`). Each magnitude's stare runs with its own seed (the configuration's plus its index), so
+//! that the rows' noise is independent.
 
 use super::budget::Budget;
 use super::observe::StareError;
@@ -18,6 +19,8 @@ use std::path::Path;
 #[derive(Debug, Clone, serde::Serialize)]
 pub struct MagRow {
     pub hw: f64,
+    /// The stare's seed: the configuration's plus the magnitude's index (independent noise per row).
+    pub seed: u64,
     pub sub_exposures: usize,
     pub exposure_s: f64,
     pub measured: Precision,
@@ -53,17 +56,20 @@ pub fn run(
             .map_err(StareError::Spec)?;
     }
     let mut rows = Vec::new();
-    for &hw in magnitudes {
+    for (k, &hw) in magnitudes.iter().enumerate() {
         let s = Spec {
             target_hw: hw,
             depth: 0.0,
             ..spec.clone()
         };
+        let mut c = cfg.clone();
+        c.seed = cfg.seed.wrapping_add(k as u64);
         let t = std::time::Instant::now();
-        let (obs, r) = run::run(cfg, &s)?;
+        let (obs, r) = run::run(&c, &s)?;
         outputs::write(&dir.join(format!("hw_{hw}")), &obs, &r)?;
         rows.push(MagRow {
             hw,
+            seed: c.seed,
             sub_exposures: r.readout.sub_exposures,
             exposure_s: r.readout.exposure_s,
             measured: r.precision,
@@ -80,6 +86,7 @@ fn write(dir: &Path, rows: &[MagRow]) -> Result<(), IoError> {
     crate::io::ensure_dir(dir)?;
     let header = [
         "hw",
+        "seed",
         "sub_exposures",
         "exposure_s",
         "plate_ppm",
@@ -103,6 +110,7 @@ fn write(dir: &Path, rows: &[MagRow]) -> Result<(), IoError> {
             let h = &r.budget.hour;
             vec![
                 Cell::F(r.hw),
+                Cell::I(r.seed as i64),
                 Cell::I(r.sub_exposures as i64),
                 Cell::F(r.exposure_s),
                 Cell::F(r.measured.plate_ppm),

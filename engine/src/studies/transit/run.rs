@@ -47,6 +47,9 @@ pub struct LightCurve {
 pub struct Precision {
     pub plate_ppm: f64,
     pub hour_ppm: f64,
+    /// Whether the 1-h figure is measured (≥ 3 bins of 1 h out of the transit) or the plates' scatter over
+    /// √(plates per hour).
+    pub hour_measured: bool,
     pub six_and_half_hours_ppm: f64,
     /// Whether the 6.5-h figure is measured (≥ 3 bins of 6.5 h) or the 1-h one over √6.5 (white beyond 1 h).
     pub six_and_half_measured: bool,
@@ -173,7 +176,10 @@ pub fn light_curve(obs: &Observation, m: &[Vec<StarMeasure>]) -> LightCurve {
             // (their colours and pixel phases differ), which the differential leaves at ≈ 400 ppm a plate
             let ms = stats::mean(&ts);
             r.push(ts.iter().map(|s| s - ms).collect());
-            r
+            // plate to plate only: the slow drift's share stays in the light curve (the budget's drift
+            // term) rather than taking the light curve's own slow noise, and a transit's, with it
+            let hour = (3600.0 / obs.readout.cadence_s).round().max(3.0) as usize;
+            r.iter().map(|x| phot::high_pass(x, hour)).collect()
         }
     };
     let all = vec![true; psf_rel.len()];
@@ -273,17 +279,27 @@ pub fn precision(t_days: &[f64], flux: &[f64], mask: &[bool]) -> Precision {
     let good: Vec<f64> = f.iter().cloned().filter(|v| v.is_finite()).collect();
     let level = stats::mean(&good);
     let plate_ppm = 1e6 * stats::std_dev(&good) / level;
-    let hour_ppm = binned_scatter_ppm(t_days, &f, 1.0 / 24.0).unwrap_or(f64::NAN);
+    // too few whole hours out of the transit: the plates' scatter over √(plates per hour)
+    let per_hour = match (t_days.first(), t_days.last()) {
+        (Some(a), Some(b)) if t_days.len() > 1 => (t_days.len() - 1) as f64 / (24.0 * (b - a)),
+        _ => 1.0,
+    };
+    let (hour_ppm, hour_measured) = match binned_scatter_ppm(t_days, &f, 1.0 / 24.0) {
+        Some(v) => (v, true),
+        None => (plate_ppm / per_hour.max(1.0).sqrt(), false),
+    };
     match binned_scatter_ppm(t_days, &f, 6.5 / 24.0) {
         Some(v) => Precision {
             plate_ppm,
             hour_ppm,
+            hour_measured,
             six_and_half_hours_ppm: v,
             six_and_half_measured: true,
         },
         None => Precision {
             plate_ppm,
             hour_ppm,
+            hour_measured,
             six_and_half_hours_ppm: hour_ppm / 6.5f64.sqrt(),
             six_and_half_measured: false,
         },
