@@ -13,6 +13,8 @@ reductions below, which make the whole page set run in a few minutes:
 * `jsim bench` gets `--quick` and small star counts (its own star-count and solution-size options are replaced);
 * `jsim sequence` runs at most 2 exposures (`--exposures`; its Slurm scripts are only written), and `jsim solve`
   solves those (`--exposures 1,2`);
+* `jsim transit` stares at most 1.7 h with 3 comparison stars, and its precision study takes two magnitudes of
+  0.3 h;
 * the sweep files are copied with the same reduced `[base]` and 4 exposures in stares of 2;
 * `crowded_image.py` writes a 256-px array of 1500 stars instead of 1968 px and 10⁵ stars,
   `photutils_catalogue.py` cuts 128 px instead of 512, and `simulate_reference.py` runs the reduced configuration
@@ -53,14 +55,14 @@ REDUCED = {
 }
 # the command-line shortcut that sets each reduced key (the command's own value is kept)
 SHORTCUT = {"fidelity.images": "--images", "fidelity.backend": "--backend"}
-TAKES_SET = {"psf", "ace", "simulate", "experiment", "crowded", "bench", "predict", "sequence"}
+TAKES_SET = {"psf", "ace", "simulate", "experiment", "crowded", "bench", "predict", "sequence", "transit"}
 BENCH = {"--quick": None, "--stars": "50,100", "--bulge-stars": "50,100", "--ref-stars": "5",
          "--epsf-images": "1", "--solution-sources": "300", "--solution-exposures": "25,50"}
 # a placeholder word (`DIR`, `F.fits`, `fidelity.images=K`, `$VAR`, `…`), or an option in a list (`--a, --b`)
 PLACEHOLDER = re.compile(r"(…|<|\$|^[A-Z]{1,4}(\.[a-z]+)?$|=[A-Z]{1,4}$|^(DIR|PATH)$|NNN|^/$|^--[a-z-]+,$)")
 # producers before consumers; within a rank, the pages' order
 RANK = {"config": 0, "psf": 1, "ace": 1, "predict": 1, "simulate": 2, "crowded_image.py": 3, "crowded": 3,
-        "experiment": 4, "bench": 4, "sequence": 4, "analyze": 5, "solve": 5, "photutils_catalogue.py": 6, "focal_plane_image.py": 6,
+        "experiment": 4, "bench": 4, "sequence": 4, "transit": 4, "analyze": 5, "solve": 5, "photutils_catalogue.py": 6, "focal_plane_image.py": 6,
         "crowded_photutils.py": 6, "simulate_reference.py": 6, "persistence_cost.py": 6, "score": 7, "sweep": 8, "merge": 9, "report": 10}
 
 
@@ -134,6 +136,20 @@ def reduce(words, jsim_bin="jsim"):
             words[k] = str(min(int(words[k]), 2))
         else:
             words += ["--exposures", "2"]
+    if name == "transit":
+        # a stare of 3 comparison stars (they fit the reduced array) for 1.7 h (the default transit is
+        # 1.58 h long); the precision study at two magnitudes of 0.3 h
+        words += ["--set", "transit.comparisons=3"]
+        study = "--magnitudes" in words
+        if study:
+            k = words.index("--magnitudes") + 1
+            words[k] = ",".join(words[k].split(",")[:2])
+        hours = "0.3" if study else "1.7"
+        if "--hours" in words:
+            k = words.index("--hours") + 1
+            words[k] = str(min(float(words[k]), float(hours)))
+        else:
+            words += ["--hours", hours]
     if name == "solve" and "--exposures" in words:
         # the reduced sequence has run 2 exposures
         words[words.index("--exposures") + 1] = "1,2"

@@ -39,6 +39,10 @@ pub struct TransitArgs {
     /// precision.png, the detection of 0.3 % and 0.1 % transits), instead of the one stare.
     #[arg(long, value_delimiter = ',')]
     pub magnitudes: Vec<f64>,
+    /// Also write the instrument's products for an outside tool: windows.fits (every window of every plate,
+    /// the calibration flat over each window, the model PSF) and telemetry.ecsv.
+    #[arg(long)]
+    pub write_products: bool,
     /// Output directory: lightcurve.ecsv, truth.ecsv, transit.json, lightcurve.png (with --magnitudes:
     /// precision.csv, precision.png, precision.json and one directory per magnitude).
     #[arg(long, default_value = "out/transit")]
@@ -105,6 +109,9 @@ pub fn transit(a: &TransitArgs) -> Result<()> {
     }
     let (obs, r) = transit::run::run(&cfg, &spec)?;
     outputs::write(&a.out, &obs, &r)?;
+    if a.write_products {
+        outputs::write_products(&a.out, &obs)?;
+    }
     println!(
         "Hw {:.1} target, {} comparison stars: {} plates of {} s ({} × {:.3} s windowed sub-exposures; the \
          longest safe {:.2} s), cadence {:.2} s",

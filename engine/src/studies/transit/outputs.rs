@@ -1,6 +1,8 @@
 //! What a stare writes: the light curve (`lightcurve.ecsv`, astropy's table format: the products' side), the
 //! truth apart (`truth.ecsv`), the summary (`transit.json`: readout, precision, noise budget, recovery,
-//! detection) and the light curve's plot (`lightcurve.png`).
+//! detection) and the light curve's plot (`lightcurve.png`); on request ([`write_products`]) the instrument's
+//! products themselves, for an outside tool: every window of every plate, the calibration flat cut to the
+//! windows and the model PSF (`windows.fits`), and the telemetry (`telemetry.ecsv`).
 
 use super::budget::Terms;
 use super::observe::Observation;
@@ -36,7 +38,12 @@ pub fn write(dir: &Path, obs: &Observation, r: &StareResult) -> Result<(), IoErr
         &dir.join("lightcurve.ecsv"),
         &[
             col("time", "d", "mid-plate, from the stare's start", &lc.t_days),
-            col("flux", "", "differential, decorrelated, median 1", &lc.flux),
+            col(
+                "flux",
+                "",
+                "differential, decorrelated, 1 = median out of transit",
+                &lc.flux,
+            ),
             col(
                 "flux_raw",
                 "",
@@ -146,6 +153,105 @@ pub fn write(dir: &Path, obs: &Observation, r: &StareResult) -> Result<(), IoErr
     plot_light_curve(&dir.join("lightcurve.png"), obs, r)
 }
 
+/// Write the stare's products: `windows.fits` — the primary header (seed, plate, sub-exposures, gain, bias,
+/// read noise per plate, cadence), per star k an image `STAR_k` of `n × (n · plates)` ADU (plate p in rows
+/// `p·n … p·n + n − 1`) with its window's corner `X0`, `Y0` (0-based detector pixels) and Hw, an image
+/// `FLAT_k` (the calibration flat over the window), and `PSF_MODEL` (the model PSF the analysis fits: the
+/// design PSF blurred by the telemetry's median jitter, `OVERSAMP` nodes per pixel, centred); and
+/// `telemetry.ecsv` (each plate's time, mean pointing and jitter σ).
+pub fn write_products(dir: &Path, obs: &Observation) -> Result<(), IoError> {
+    use crate::io::fits::{self, Card, Hdu, Pixels};
+    crate::io::ensure_dir(dir)?;
+    let d = &obs.cfg.detector;
+    let primary = vec![
+        Card::i("SEED", obs.cfg.seed as i64, "master seed"),
+        Card::f(
+            "PLATE_S",
+            obs.readout.plate_s,
+            "[s] each plate's integration",
+        ),
+        Card::i(
+            "NSUB",
+            obs.readout.sub_exposures as i64,
+            "windowed sub-exposures co-added",
+        ),
+        Card::f("SUBEXP_S", obs.readout.exposure_s, "[s] each sub-exposure"),
+        Card::f("CADENCE", obs.readout.cadence_s, "[s] plate start to start"),
+        Card::f("GAIN", d.gain_e_per_adu, "[e/ADU]"),
+        Card::f(
+            "BIAS",
+            d.bias_adu * obs.readout.sub_exposures as f64,
+            "[ADU] co-added bias",
+        ),
+        Card::f(
+            "RDNOISE",
+            obs.readout.read_noise_e,
+            "[e] read noise per pixel per plate",
+        ),
+        Card::i("NPLATES", obs.plates.len() as i64, "plates"),
+        Card::i("NSTARS", obs.stars.len() as i64, "star 0 is the target"),
+    ];
+    let cubes: Vec<Vec<f32>> = (0..obs.windows.len())
+        .map(|k| {
+            obs.plates
+                .iter()
+                .flat_map(|p| p.windows_adu[k].iter().copied())
+                .collect()
+        })
+        .collect();
+    let names: Vec<(String, String)> = (0..obs.windows.len())
+        .map(|k| (format!("STAR_{k}"), format!("FLAT_{k}")))
+        .collect();
+    let psf_n = 2 * obs.model_psf.half_nodes + 1;
+    let mut hdus = vec![Hdu::Header { cards: primary }];
+    for (k, w) in obs.windows.iter().enumerate() {
+        hdus.push(Hdu::Image {
+            name: &names[k].0,
+            nx: w.n,
+            ny: w.n * obs.plates.len(),
+            pixels: Pixels::F32(&cubes[k]),
+            cards: vec![
+                Card::i("X0", w.x0, "window's first column (0-based)"),
+                Card::i("Y0", w.y0, "window's first row (0-based)"),
+                Card::f("HW", obs.stars[k].mag_hw, "catalogue magnitude"),
+            ],
+        });
+        hdus.push(Hdu::Image {
+            name: &names[k].1,
+            nx: w.n,
+            ny: w.n,
+            pixels: Pixels::F32(&obs.calibration_flat[k]),
+            cards: vec![],
+        });
+    }
+    hdus.push(Hdu::Image {
+        name: "PSF_MODEL",
+        nx: psf_n,
+        ny: psf_n,
+        pixels: Pixels::F64(&obs.model_psf.data),
+        cards: vec![Card::i(
+            "OVERSAMP",
+            obs.model_psf.oversampling as i64,
+            "nodes per pixel",
+        )],
+    });
+    fits::write(&dir.join("windows.fits"), &hdus)?;
+    let t: Vec<f64> = obs.plates.iter().map(|p| p.t_mid_days).collect();
+    let tx: Vec<f64> = obs.plates.iter().map(|p| p.telemetry_x_mas).collect();
+    let ty: Vec<f64> = obs.plates.iter().map(|p| p.telemetry_y_mas).collect();
+    let ts: Vec<f64> = obs.plates.iter().map(|p| p.telemetry_sigma_mas).collect();
+    ecsv::write(
+        &dir.join("telemetry.ecsv"),
+        &[
+            col("time", "d", "mid-plate", &t),
+            col("x", "mas", "mean pointing over the plate", &tx),
+            col("y", "mas", "mean pointing over the plate", &ty),
+            col("sigma", "mas", "jitter sigma in the plate", &ts),
+        ],
+        &[("seed", obs.cfg.seed.to_string())],
+    )
+}
+
 fn col<'a>(name: &'a str, unit: &'a str, d: &'a str, v: &'a [f64]) -> Column<'a> {
     Column {
         name,
@@ -155,27 +261,18 @@ fn col<'a>(name: &'a str, unit: &'a str, d: &'a str, v: &'a [f64]) -> Column<'a>
     }
 }
 
-/// The light curve (plates and 30-min bins, in hours) with the injected transit and the box found.
+/// The light curve (10-min bins, in hours) with the injected transit and the box found.
 fn plot_light_curve(path: &Path, obs: &Observation, r: &StareResult) -> Result<(), IoError> {
     let lc = &r.lc;
     let hours: Vec<f64> = lc.t_days.iter().map(|t| 24.0 * t).collect();
-    let (bx, by) = bin(&hours, &lc.flux, 0.5);
-    let mut series = vec![
-        Series {
-            label: "plates".into(),
-            x: hours.clone(),
-            y: lc.flux.clone(),
-            yerr: None,
-            yerr_below: None,
-        },
-        Series {
-            label: "30-min bins".into(),
-            x: bx,
-            y: by,
-            yerr: None,
-            yerr_below: None,
-        },
-    ];
+    let (bx, by) = bin(&hours, &lc.flux, 10.0 / 60.0);
+    let mut series = vec![Series {
+        label: "10-min bins".into(),
+        x: bx,
+        y: by,
+        yerr: None,
+        yerr_below: None,
+    }];
     if obs.spec.depth > 0.0 {
         series.push(Series {
             label: "injected".into(),

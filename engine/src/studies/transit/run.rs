@@ -17,7 +17,8 @@ use rayon::prelude::*;
 pub struct LightCurve {
     /// Mid-plate times, days from the stare's start.
     pub t_days: Vec<f64>,
-    /// The differential light curve of the chosen photometry, decorrelated (1 = median).
+    /// The differential light curve of the chosen photometry, decorrelated (1 = its median out of the
+    /// transit's mask).
     pub flux: Vec<f64>,
     /// … before decorrelation.
     pub flux_raw: Vec<f64>,
@@ -214,6 +215,17 @@ pub fn light_curve(obs: &Observation, m: &[Vec<StarMeasure>]) -> LightCurve {
         in_box = box_mask(&t_days, &b, MASK_MARGIN);
         let out: Vec<bool> = in_box.iter().map(|b| !b).collect();
         flux = decorrelated(&flux_raw, &out);
+    }
+    // 1 = the median out of the transit
+    let level: Vec<f64> = flux
+        .iter()
+        .zip(&in_box)
+        .filter(|(v, b)| !**b && v.is_finite())
+        .map(|(v, _)| *v)
+        .collect();
+    let out_level = stats::median(&level);
+    if out_level.is_finite() && out_level > 0.0 {
+        flux.iter_mut().for_each(|v| *v /= out_level);
     }
     LightCurve {
         t_days,
