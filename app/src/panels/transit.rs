@@ -232,17 +232,7 @@ fn budget(ui: &mut egui::Ui, r: &TransitShown, stale: bool) {
         });
     ui.add_space(6.0);
     for d in &r.detections {
-        ui.label(format!(
-            "a {:.1} % transit of {:.2} h: {:.1}σ in one transit ({})",
-            100.0 * d.depth,
-            d.duration_h,
-            d.snr,
-            if d.detected {
-                "detected"
-            } else {
-                "below 7.1σ"
-            }
-        ));
+        ui.label(d.describe());
     }
     ui.weak(format!(
         "{}stare simulated and analysed in {:.1} s",

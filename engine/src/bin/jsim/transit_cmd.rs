@@ -141,17 +141,7 @@ pub fn transit(a: &TransitArgs) -> Result<()> {
         );
     }
     for d in &r.detections {
-        println!(
-            "a {:.1} % transit of {:.2} h: {:.1}σ in one transit ({})",
-            100.0 * d.depth,
-            d.duration_h,
-            d.snr,
-            if d.detected {
-                "detected"
-            } else {
-                "below 7.1σ"
-            }
-        );
+        println!("{}", d.describe());
     }
     println!(
         "simulated in {:.1} s, analysed in {:.1} s ({}); wrote {}",

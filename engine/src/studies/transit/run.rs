@@ -67,6 +67,23 @@ pub struct Detection {
     pub detected: bool,
 }
 
+impl Detection {
+    /// One line: `a 0.3 % transit of 1.58 h: 38.6σ in one transit (detected)`.
+    pub fn describe(&self) -> String {
+        format!(
+            "a {:.1} % transit of {:.2} h: {:.1}σ in one transit ({})",
+            100.0 * self.depth,
+            self.duration_h,
+            self.snr,
+            if self.detected {
+                "detected".to_string()
+            } else {
+                format!("below {DETECTION_SNR}σ")
+            }
+        )
+    }
+}
+
 /// The significance a single transit needs to count as detected (Kepler's 7.1σ threshold, Jenkins et al.
 /// 2010).
 pub const DETECTION_SNR: f64 = 7.1;
