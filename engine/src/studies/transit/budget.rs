@@ -7,7 +7,8 @@
 //!   annulus pixels, of variance π/2 times a mean's);
 //! * **flat residual**: the calibration flat's error ε (`analysis.flat_field`; the flat's own σ when
 //!   uncalibrated) seen by a star moving over the pixels: `ε² Σᵢ var(pᵢ)` over the aperture's pixels, pᵢ the
-//!   share of the star's light in pixel i in each plate;
+//!   share of the star's light in pixel i in each plate — binned, the variance over the bins of each pixel's
+//!   bin-mean share (the drift carries the stars over the flat's errors slowly: that part does not average);
 //! * **jitter × intra-pixel** and **drift**: the noise-free differential aperture flux, plate by plate (the
 //!   stars moving as the ACE and the drift move them, a perfect flat and no noise), decorrelated as the
 //!   light curve is (its regressors, fitted out of the transit's box): its point-to-point
@@ -16,8 +17,9 @@
 //!
 //! A band-limited PSF collects the same total light at every pixel phase, whatever the intra-pixel map
 //! (JASMINE's optical cut-off, D/λ, is 0.83 cycles per pixel at 0.99 µm: below the map's first harmonic), so
-//! the jitter's noise is what the aperture cuts off: it grows as the aperture shrinks. White terms bin as
-//! 1/√N; the drift's binned value is its running mean's rms at that bin.
+//! the jitter's noise is what the aperture cuts off: it grows as the aperture shrinks. Photon, read and
+//! jitter bin as 1/√N; the drift at its running mean's rms over the bin; the flat over its bins' shares (as
+//! 1/√N when fewer than two bins fit the stare).
 
 use super::observe::Observation;
 use crate::analysis::stare_photometry::{decorrelate, differential};
@@ -142,6 +144,48 @@ pub fn predict(
         .sum::<f64>()
         / (fc * fc);
     let flat = (flat_var[0] + comp_flat).sqrt();
+    // binned: the variance over bins of each pixel's bin-mean fraction (the drift's slow share stays)
+    let in_aperture = |w: &super::observe::Window, i: usize| {
+        let c = (w.n / 2) as f64;
+        let (x, y) = ((i % w.n) as f64, (i / w.n) as f64);
+        (x - c).hypot(y - c) <= radius + 0.5
+    };
+    let flat_binned = |bf: &super::observe::BinnedFractions| -> Option<f64> {
+        let full = (0.5 * bf.bin_h * 3600.0 / obs.readout.cadence_s).max(1.0) as usize;
+        let bins: Vec<usize> = (0..bf.counts.len())
+            .filter(|&b| bf.counts[b] >= full)
+            .collect();
+        if bins.len() < 2 {
+            return None;
+        }
+        let var: Vec<f64> = obs
+            .windows
+            .iter()
+            .enumerate()
+            .map(|(k, w)| {
+                let npx = w.n * w.n;
+                (0..npx)
+                    .filter(|&i| in_aperture(w, i))
+                    .map(|i| {
+                        let m: Vec<f64> = bins
+                            .iter()
+                            .map(|&b| bf.sums[k][b * npx + i] / bf.counts[b] as f64)
+                            .collect();
+                        stats::std_dev(&m).powi(2)
+                    })
+                    .sum::<f64>()
+                    * eps
+                    * eps
+            })
+            .collect();
+        let comp: f64 = var[1..]
+            .iter()
+            .zip(&mean_flux[1..])
+            .map(|(v, f)| v * f * f)
+            .sum::<f64>()
+            / (fc * fc);
+        Some((var[0] + comp).sqrt())
+    };
     // the pointing alone: the noise-free differential light curve
     let clean = differential(clean_e);
     let clean = if regressors.is_empty() {
@@ -166,17 +210,23 @@ pub fn predict(
                 .max(0.0)
                 .sqrt(),
     };
-    let binned = |n: f64, drift: f64| Terms {
+    let binned = |n: f64, drift: f64, flat: Option<f64>| Terms {
         photon_ppm: plate_terms.photon_ppm / n.sqrt(),
         read_ppm: plate_terms.read_ppm / n.sqrt(),
         jitter_ppm: plate_terms.jitter_ppm / n.sqrt(),
-        flat_ppm: plate_terms.flat_ppm / n.sqrt(),
+        flat_ppm: flat.map_or(plate_terms.flat_ppm / n.sqrt(), |f| 1e6 * f),
         drift_ppm: 1e6 * drift,
+    };
+    let flat_at = |h: f64| {
+        obs.binned_fractions
+            .iter()
+            .find(|b| b.bin_h == h)
+            .and_then(flat_binned)
     };
     Budget {
         plate: plate_terms,
-        hour: binned(per_hour as f64, drift),
-        six_and_half_hours: binned(6.5 * per_hour as f64, drift_65),
+        hour: binned(per_hour as f64, drift, flat_at(1.0)),
+        six_and_half_hours: binned(6.5 * per_hour as f64, drift_65, flat_at(6.5)),
     }
 }
 

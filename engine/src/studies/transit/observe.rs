@@ -92,6 +92,9 @@ pub struct Observation {
     /// (the flat residual's budget).
     pub truth: Vec<PlateTruth>,
     pub pixel_moments: Vec<(Vec<f64>, Vec<f64>)>,
+    /// Truth: the same pixel fractions summed over consecutive bins of 1 h and 6.5 h (the flat residual's
+    /// budget binned: the drift moves the stars over the flat's errors slowly).
+    pub binned_fractions: Vec<BinnedFractions>,
     /// Truth: each star's noise-free aperture flux per plate (`[radius][star][plate]`, e⁻, at each of
     /// `spec.aperture_radii_px()`; the aperture at the star's true place in the plate, a perfect flat, the
     /// target's transit divided out): what the pointing alone does to the photometry.
@@ -101,6 +104,39 @@ pub struct Observation {
     /// Seconds spent simulating.
     pub simulate_s: f64,
     pub backend: String,
+}
+
+/// Each window's noise-free pixel fractions summed over consecutive bins of `bin_h` hours.
+#[derive(Debug, Clone, Default)]
+pub struct BinnedFractions {
+    pub bin_h: f64,
+    /// `[star][bin · n² + pixel]`.
+    pub sums: Vec<Vec<f64>>,
+    /// Plates per bin.
+    pub counts: Vec<usize>,
+}
+
+impl BinnedFractions {
+    fn add(&mut self, star: usize, t_h: f64, q: &[f64]) {
+        let b = (t_h / self.bin_h).floor().max(0.0) as usize;
+        let npx = q.len();
+        if self.sums.len() <= star {
+            self.sums.resize(star + 1, Vec::new());
+        }
+        let s = &mut self.sums[star];
+        if s.len() < (b + 1) * npx {
+            s.resize((b + 1) * npx, 0.0);
+        }
+        for (o, v) in s[b * npx..(b + 1) * npx].iter_mut().zip(q) {
+            *o += v;
+        }
+        if star == 0 {
+            if self.counts.len() <= b {
+                self.counts.resize(b + 1, 0);
+            }
+            self.counts[b] += 1;
+        }
+    }
 }
 
 /// Errors of a stare.
@@ -334,6 +370,13 @@ pub fn observe(cfg: &Config, spec: &Spec) -> Result<Observation, StareError> {
         .map(|w| (vec![0.0; w.n * w.n], vec![0.0; w.n * w.n]))
         .collect();
     let radii = spec.aperture_radii_px();
+    let mut binned: Vec<BinnedFractions> = [1.0, 6.5]
+        .iter()
+        .map(|&bin_h| BinnedFractions {
+            bin_h,
+            ..Default::default()
+        })
+        .collect();
     let mut clean_ap: Vec<Vec<Vec<f64>>> =
         vec![vec![Vec::with_capacity(plates_n); windows.len()]; radii.len()];
     let mut series: Option<(usize, AceSeries)> = None;
@@ -461,10 +504,13 @@ pub fn observe(cfg: &Config, spec: &Spec) -> Result<Observation, StareError> {
             }
             let total: f64 = clean.iter().sum::<f64>().max(1e-300);
             let (s1, s2) = &mut moments[k];
-            for (i, v) in clean.iter().enumerate() {
-                let q = v / total;
+            let q: Vec<f64> = clean.iter().map(|v| v / total).collect();
+            for (i, q) in q.iter().enumerate() {
                 s1[i] += q;
                 s2[i] += q * q;
+            }
+            for b in &mut binned {
+                b.add(k, t_mid / 3600.0, &q);
             }
             windows_adu.push(out);
         }
@@ -499,6 +545,7 @@ pub fn observe(cfg: &Config, spec: &Spec) -> Result<Observation, StareError> {
         plates,
         truth,
         pixel_moments: moments,
+        binned_fractions: binned,
         simulate_s: t_start.elapsed().as_secs_f64(),
         backend: sim.backend_name(),
         cfg: c,
