@@ -183,7 +183,7 @@ def test_photutils_on_the_written_products_gives_the_same_light_curve(jsim_bin, 
                 box = e[c - 3:c + 4, c - 3:c + 4]
                 cx, cy = centroid_com(box - np.median(e))
                 xy = (c - 3 + cx, c - 3 + cy)
-                sky = np.median(CircularAnnulus(xy, 11.0, 14.0).to_mask("center").get_values(e))
+                sky = np.median(CircularAnnulus(xy, 11.0, 14.0).to_mask(method="center").get_values(e))
                 ap = CircularAperture(xy, 6.0)
                 f.append(aperture_photometry(e, ap, method="exact")["aperture_sum"][0] - sky * ap.area)
             fluxes.append(np.array(f))

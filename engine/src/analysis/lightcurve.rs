@@ -75,27 +75,87 @@ pub fn aperture_flux(
     r_in_px: f64,
     r_out_px: f64,
 ) -> Option<ApertureFlux> {
-    if image.len() != nx * ny || !(r_px > 0.0 && r_px <= r_in_px && r_in_px < r_out_px) {
-        return None;
-    }
-    if !(x - r_px >= -0.5
-        && y - r_px >= -0.5
-        && x + r_px <= nx as f64 - 0.5
-        && y + r_px <= ny as f64 - 0.5)
-    {
-        return None;
-    }
+    aperture_fluxes(image, nx, ny, x, y, &[r_px], r_in_px, r_out_px)
+        .pop()
+        .flatten()
+}
+
+/// [`aperture_flux`] at each of `radii_px` around the same place, the annulus' median taken once.
+#[allow(clippy::too_many_arguments)]
+pub fn aperture_fluxes(
+    image: &[f64],
+    nx: usize,
+    ny: usize,
+    x: f64,
+    y: f64,
+    radii_px: &[f64],
+    r_in_px: f64,
+    r_out_px: f64,
+) -> Vec<Option<ApertureFlux>> {
+    let sky = (image.len() == nx * ny && r_in_px < r_out_px)
+        .then(|| annulus_sky(image, nx, ny, x, y, r_in_px, r_out_px))
+        .flatten();
+    radii_px
+        .iter()
+        .map(|&r| {
+            let (sky_per_px, sky_pixels) = sky?;
+            if !(r > 0.0 && r <= r_in_px) {
+                return None;
+            }
+            if !(x - r >= -0.5
+                && y - r >= -0.5
+                && x + r <= nx as f64 - 0.5
+                && y + r <= ny as f64 - 0.5)
+            {
+                return None;
+            }
+            let (sum, area) = covered_sum(image, nx, ny, x, y, r);
+            Some(ApertureFlux {
+                flux: sum - sky_per_px * area,
+                sky_per_px,
+                area_px: area,
+                sky_pixels,
+            })
+        })
+        .collect()
+}
+
+/// The median of the finite pixels whose centres lie between `r_in_px` and `r_out_px` of (x, y), and how many
+/// there are; `None` when there is none.
+pub fn annulus_sky(
+    image: &[f64],
+    nx: usize,
+    ny: usize,
+    x: f64,
+    y: f64,
+    r_in_px: f64,
+    r_out_px: f64,
+) -> Option<(f64, usize)> {
     let reach = r_out_px.ceil() as i64 + 1;
     let (cx, cy) = (x.round() as i64, y.round() as i64);
-    let (mut sum, mut area, mut sky) = (0.0, 0.0, Vec::new());
+    let mut sky = Vec::new();
     for j in (cy - reach).max(0)..=(cy + reach).min(ny as i64 - 1) {
         for i in (cx - reach).max(0)..=(cx + reach).min(nx as i64 - 1) {
             let v = image[j as usize * nx + i as usize];
-            let (dx, dy) = (i as f64 - x, j as f64 - y);
-            let d = dx.hypot(dy);
+            let d = (i as f64 - x).hypot(j as f64 - y);
             if d >= r_in_px && d <= r_out_px && v.is_finite() {
                 sky.push(v);
             }
+        }
+    }
+    (!sky.is_empty()).then(|| (crate::numerics::stats::median(&sky), sky.len()))
+}
+
+/// The signal within radius `r_px` of (x, y), each pixel weighted by the fraction of it the circle covers, and
+/// that area (the caller keeps the circle inside the image).
+fn covered_sum(image: &[f64], nx: usize, ny: usize, x: f64, y: f64, r_px: f64) -> (f64, f64) {
+    let reach = r_px.ceil() as i64 + 1;
+    let (cx, cy) = (x.round() as i64, y.round() as i64);
+    let (mut sum, mut area) = (0.0, 0.0);
+    for j in (cy - reach).max(0)..=(cy + reach).min(ny as i64 - 1) {
+        for i in (cx - reach).max(0)..=(cx + reach).min(nx as i64 - 1) {
+            let (dx, dy) = (i as f64 - x, j as f64 - y);
+            let d = dx.hypot(dy);
             // the covered fraction: 1 or 0 away from the edge, sub-sampled across it (a pixel's corners lie
             // within √½ of its centre)
             let f = if d + std::f64::consts::FRAC_1_SQRT_2 <= r_px {
@@ -115,21 +175,12 @@ pub fn aperture_flux(
                 inside as f64 / (n * n) as f64
             };
             if f > 0.0 {
-                sum += f * v;
+                sum += f * image[j as usize * nx + i as usize];
                 area += f;
             }
         }
     }
-    if sky.is_empty() {
-        return None;
-    }
-    let sky_per_px = crate::numerics::stats::median(&sky);
-    Some(ApertureFlux {
-        flux: sum - sky_per_px * area,
-        sky_per_px,
-        area_px: area,
-        sky_pixels: sky.len(),
-    })
+    (sum, area)
 }
 
 /// The best box found by [`box_least_squares`].

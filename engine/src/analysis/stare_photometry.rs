@@ -3,15 +3,16 @@
 //!
 //! Per window: electrons `e = (ADU − bias) g / flat_cal`; the sky per pixel from the annulus' median; the
 //! star's position and flux by a PSF fit (x, y, flux; the sky fixed) with the blurred design PSF (Anderson &
-//! King 2000's fit, [`crate::analysis::epsf::fit::fit_star`]); the aperture flux at the fitted position
-//! ([`crate::analysis::lightcurve::aperture_flux`]). The light curve is differential: the target over the
+//! King 2000's fit, [`crate::analysis::epsf::fit::fit_star`]); the aperture flux at the fitted position, at
+//! each radius with one sky ([`crate::analysis::lightcurve::aperture_fluxes`]). The light curve is
+//! differential: the target over the
 //! sum of the comparison stars (an ensemble weighted by flux, which averages their noise down), each
 //! normalised to its median. [`decorrelate`] removes what the measured centroid (or the telemetry) explains,
 //! by linear least squares over the points out of the transit.
 
 use super::epsf::Epsf;
 use super::epsf::fit::{FitOptions, PixelData, fit_star};
-use super::lightcurve::aperture_flux;
+use super::lightcurve::{annulus_sky, aperture_fluxes};
 use crate::numerics::{linalg, stats};
 
 /// How a window becomes electrons and where the flux is measured.
@@ -57,17 +58,8 @@ pub fn measure_window(
         .collect();
     let c = (n / 2) as f64;
     // the sky and a first centroid (first moment within 3 px of the window's centre, sky subtracted)
-    let sky = aperture_flux(
-        &e,
-        n,
-        n,
-        c,
-        c,
-        setup.annulus_in_px,
-        setup.annulus_in_px,
-        setup.annulus_out_px,
-    )
-    .map_or(0.0, |a| a.sky_per_px);
+    let sky = annulus_sky(&e, n, n, c, c, setup.annulus_in_px, setup.annulus_out_px)
+        .map_or(0.0, |(s, _)| s);
     let (mut sx, mut sy, mut sw) = (0.0, 0.0, 0.0);
     for y in 0..n {
         for x in 0..n {
@@ -94,8 +86,7 @@ pub fn measure_window(
         var_floor_e2: setup.read_noise_e * setup.read_noise_e,
         flat_sigma: 0.0,
     };
-    let star: Vec<f64> = e.iter().map(|v| v - sky).collect();
-    let f0 = star.iter().sum::<f64>().max(1.0);
+    let f0 = e.iter().map(|v| v - sky).sum::<f64>().max(1.0);
     let fit = fit_star(
         &img,
         psf,
@@ -114,14 +105,19 @@ pub fn measure_window(
     } else {
         (x0, y0, f64::NAN)
     };
-    let aperture_e = setup
-        .apertures_px
-        .iter()
-        .map(|&r| {
-            aperture_flux(&e, n, n, x, y, r, setup.annulus_in_px, setup.annulus_out_px)
-                .map_or(f64::NAN, |a| a.flux)
-        })
-        .collect();
+    let aperture_e = aperture_fluxes(
+        &e,
+        n,
+        n,
+        x,
+        y,
+        &setup.apertures_px,
+        setup.annulus_in_px,
+        setup.annulus_out_px,
+    )
+    .iter()
+    .map(|a| a.map_or(f64::NAN, |a| a.flux))
+    .collect();
     StarMeasure {
         x_px: x,
         y_px: y,

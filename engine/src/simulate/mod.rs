@@ -588,6 +588,11 @@ impl Simulator {
                 .sum()
     }
 
+    /// The detector's true flat (what the charge is multiplied by), row-major.
+    pub fn flat(&self) -> &[f32] {
+        &self.flat
+    }
+
     /// The calibration flat a pipeline holds for this detector (its true flat with the relative error of
     /// `analysis.flat_field`), made once; `None` when the analysis is uncalibrated.
     pub fn calibration_flat(&self) -> Option<Arc<Vec<f32>>> {

@@ -22,7 +22,7 @@
 //! 1/√N when fewer than two bins fit the stare).
 
 use super::observe::Observation;
-use crate::analysis::stare_photometry::{decorrelate, differential};
+use crate::analysis::stare_photometry::{decorrelate, differential, point_to_point};
 use crate::config::FlatField;
 use crate::numerics::stats;
 
@@ -118,38 +118,38 @@ pub fn predict(
         FlatField::Calibrated { error } => error,
         FlatField::Uncalibrated => d.inter_pixel_flat_sigma,
     };
-    let flat_var: Vec<f64> = obs
-        .pixel_moments
-        .iter()
-        .zip(&obs.windows)
-        .map(|((s1, s2), w)| {
-            let c = (w.n / 2) as f64;
-            let mut v = 0.0;
-            for y in 0..w.n {
-                for x in 0..w.n {
-                    if (x as f64 - c).hypot(y as f64 - c) <= radius + 0.5 {
-                        let i = y * w.n + x;
-                        let m = s1[i] / plates as f64;
-                        v += (s2[i] / plates as f64 - m * m).max(0.0);
-                    }
-                }
-            }
-            eps * eps * v
-        })
-        .collect();
-    let comp_flat: f64 = flat_var[1..]
-        .iter()
-        .zip(&mean_flux[1..])
-        .map(|(v, f)| v * f * f)
-        .sum::<f64>()
-        / (fc * fc);
-    let flat = (flat_var[0] + comp_flat).sqrt();
-    // binned: the variance over bins of each pixel's bin-mean fraction (the drift's slow share stays)
     let in_aperture = |w: &super::observe::Window, i: usize| {
         let c = (w.n / 2) as f64;
         let (x, y) = ((i % w.n) as f64, (i / w.n) as f64);
         (x - c).hypot(y - c) <= radius + 0.5
     };
+    // the target's relative variance and the ensemble's (each comparison's weighted by its flux²)
+    let differential_var = |var: &[f64]| {
+        var[0]
+            + var[1..]
+                .iter()
+                .zip(&mean_flux[1..])
+                .map(|(v, f)| v * f * f)
+                .sum::<f64>()
+                / (fc * fc)
+    };
+    let flat_var: Vec<f64> = obs
+        .pixel_moments
+        .iter()
+        .zip(&obs.windows)
+        .map(|((s1, s2), w)| {
+            let v: f64 = (0..w.n * w.n)
+                .filter(|&i| in_aperture(w, i))
+                .map(|i| {
+                    let m = s1[i] / plates as f64;
+                    (s2[i] / plates as f64 - m * m).max(0.0)
+                })
+                .sum();
+            eps * eps * v
+        })
+        .collect();
+    let flat = differential_var(&flat_var).sqrt();
+    // binned: the variance over bins of each pixel's bin-mean fraction (the drift's slow share stays)
     let flat_binned = |bf: &super::observe::BinnedFractions| -> Option<f64> {
         let full = (0.5 * bf.bin_h * 3600.0 / obs.readout.cadence_s).max(1.0) as usize;
         let bins: Vec<usize> = (0..bf.counts.len())
@@ -178,13 +178,7 @@ pub fn predict(
                     * eps
             })
             .collect();
-        let comp: f64 = var[1..]
-            .iter()
-            .zip(&mean_flux[1..])
-            .map(|(v, f)| v * f * f)
-            .sum::<f64>()
-            / (fc * fc);
-        Some((var[0] + comp).sqrt())
+        Some(differential_var(&var).sqrt())
     };
     // the pointing alone: the noise-free differential light curve
     let clean = differential(clean_e);
@@ -195,8 +189,7 @@ pub fn predict(
         decorrelate(&clean, regressors, &out).0
     };
     let good: Vec<f64> = clean.iter().cloned().filter(|v| v.is_finite()).collect();
-    let diffs: Vec<f64> = good.windows(2).map(|w| w[1] - w[0]).collect();
-    let jitter = stats::std_dev(&diffs) / std::f64::consts::SQRT_2;
+    let jitter = point_to_point(&good);
     let per_hour = (3600.0 / obs.readout.cadence_s).round().max(1.0) as usize;
     let drift = running_mean_rms(&good, per_hour);
     let drift_65 = running_mean_rms(&good, (6.5 * per_hour as f64).round() as usize);

@@ -18,7 +18,7 @@
 //! mean pointing (ACE + drift) with a Gaussian error of `telemetry_error_mas`, and its jitter σ.
 
 use super::spec::Spec;
-use crate::analysis::lightcurve::aperture_flux;
+use crate::analysis::lightcurve::aperture_fluxes;
 use crate::config::{AceCase, Config, IntraPixel, ReadoutOrder};
 use crate::integrate::StarJob;
 use crate::integrate::track::Track;
@@ -348,8 +348,7 @@ pub fn observe(cfg: &Config, spec: &Spec) -> Result<Observation, StareError> {
         }
         out
     };
-    let true_flat = detector_flat(&sim);
-    let flat_w: Vec<Vec<f32>> = windows.iter().map(|w| cut(&true_flat, w)).collect();
+    let flat_w: Vec<Vec<f32>> = windows.iter().map(|w| cut(sim.flat(), w)).collect();
     let calibration_flat = match sim.calibration_flat() {
         Some(f) => windows.iter().map(|w| cut(&f, w)).collect(),
         None => windows.iter().map(|w| vec![1.0; w.n * w.n]).collect(),
@@ -487,20 +486,18 @@ pub fn observe(cfg: &Config, spec: &Spec) -> Result<Observation, StareError> {
             );
             // the target's without its transit (a factor on its rate): the pointing's part alone
             let unit = if k == 0 { tf } else { 1.0 };
-            for (ri, &rad) in radii.iter().enumerate() {
-                clean_ap[ri][k].push(
-                    aperture_flux(
-                        &clean,
-                        wdw.n,
-                        wdw.n,
-                        tx,
-                        ty,
-                        rad,
-                        spec.annulus_in_px,
-                        spec.annulus_out_px,
-                    )
-                    .map_or(f64::NAN, |a| a.flux / unit),
-                );
+            let fluxes = aperture_fluxes(
+                &clean,
+                wdw.n,
+                wdw.n,
+                tx,
+                ty,
+                &radii,
+                spec.annulus_in_px,
+                spec.annulus_out_px,
+            );
+            for (series, a) in clean_ap.iter_mut().zip(&fluxes) {
+                series[k].push(a.map_or(f64::NAN, |a| a.flux / unit));
             }
             let total: f64 = clean.iter().sum::<f64>().max(1e-300);
             let (s1, s2) = &mut moments[k];
@@ -550,13 +547,4 @@ pub fn observe(cfg: &Config, spec: &Spec) -> Result<Observation, StareError> {
         backend: sim.backend_name(),
         cfg: c,
     })
-}
-
-/// The detector's true flat (what the simulator's charge is multiplied by).
-fn detector_flat(sim: &Simulator) -> Vec<f32> {
-    let n = sim.cfg.instrument.detector_px;
-    sim.collected(&vec![1.0; n * n])
-        .into_iter()
-        .map(|v| v as f32)
-        .collect()
 }

@@ -45,27 +45,26 @@ pub fn run(
     magnitudes: &[f64],
     dir: &Path,
 ) -> Result<Vec<MagRow>, StudyError> {
-    // every magnitude checked before any runs
-    for &hw in magnitudes {
-        let s = Spec {
+    let stares: Vec<Spec> = magnitudes
+        .iter()
+        .map(|&hw| Spec {
             target_hw: hw,
             depth: 0.0,
             ..spec.clone()
-        };
+        })
+        .collect();
+    // every magnitude checked before any runs
+    for s in &stares {
         s.validate(spec.plate_s + cfg.readout.t_overhead_s)
             .map_err(StareError::Spec)?;
     }
     let mut rows = Vec::new();
-    for (k, &hw) in magnitudes.iter().enumerate() {
-        let s = Spec {
-            target_hw: hw,
-            depth: 0.0,
-            ..spec.clone()
-        };
+    for (k, s) in stares.iter().enumerate() {
+        let hw = s.target_hw;
         let mut c = cfg.clone();
         c.seed = cfg.seed.wrapping_add(k as u64);
         let t = std::time::Instant::now();
-        let (obs, r) = run::run(&c, &s)?;
+        let (obs, r) = run::run(&c, s)?;
         outputs::write(&dir.join(format!("hw_{hw}")), &obs, &r)?;
         rows.push(MagRow {
             hw,

@@ -183,15 +183,16 @@ pub fn light_curve(obs: &Observation, m: &[Vec<StarMeasure>]) -> LightCurve {
     let tx: Vec<f64> = obs.plates.iter().map(|p| p.telemetry_x_mas).collect();
     let ty: Vec<f64> = obs.plates.iter().map(|p| p.telemetry_y_mas).collect();
     let ts: Vec<f64> = obs.plates.iter().map(|p| p.telemetry_sigma_mas).collect();
-    let regressors = match obs.spec.decorrelate {
-        Decorrelation::None => Vec::new(),
-        Decorrelation::Centroid | Decorrelation::Telemetry => {
-            let mut r = match obs.spec.decorrelate {
-                Decorrelation::Centroid => phot::centroid_regressors(&x_px, &y_px),
-                _ => phot::centroid_regressors(&tx, &ty),
-            };
-            // the PSF's width: the stars' aperture losses grow with the jitter alike, but not exactly alike
-            // (their colours and pixel phases differ), which the differential leaves at ≈ 400 ppm a plate
+    let place = match obs.spec.decorrelate {
+        Decorrelation::None => None,
+        Decorrelation::Centroid => Some(phot::centroid_regressors(&x_px, &y_px)),
+        Decorrelation::Telemetry => Some(phot::centroid_regressors(&tx, &ty)),
+    };
+    let regressors: Vec<Vec<f64>> = match place {
+        None => Vec::new(),
+        Some(mut r) => {
+            // the PSF's width (the telemetry's jitter σ): the aperture's losses grow with it, and the
+            // stars' losses need not divide out exactly in the differential
             let ms = stats::mean(&ts);
             r.push(ts.iter().map(|s| s - ms).collect());
             // plate to plate only: the slow drift's share stays in the light curve (the budget's drift
@@ -317,21 +318,17 @@ pub fn precision(t_days: &[f64], flux: &[f64], mask: &[bool]) -> Precision {
         Some(v) => (v, true),
         None => (plate_ppm / per_hour.max(1.0).sqrt(), false),
     };
-    match binned_scatter_ppm(t_days, &f, 6.5 / 24.0) {
-        Some(v) => Precision {
-            plate_ppm,
-            hour_ppm,
-            hour_measured,
-            six_and_half_hours_ppm: v,
-            six_and_half_measured: true,
-        },
-        None => Precision {
-            plate_ppm,
-            hour_ppm,
-            hour_measured,
-            six_and_half_hours_ppm: hour_ppm / 6.5f64.sqrt(),
-            six_and_half_measured: false,
-        },
+    let (six_and_half_hours_ppm, six_and_half_measured) =
+        match binned_scatter_ppm(t_days, &f, 6.5 / 24.0) {
+            Some(v) => (v, true),
+            None => (hour_ppm / 6.5f64.sqrt(), false),
+        };
+    Precision {
+        plate_ppm,
+        hour_ppm,
+        hour_measured,
+        six_and_half_hours_ppm,
+        six_and_half_measured,
     }
 }
 
