@@ -36,8 +36,8 @@ pub struct Setup {
 pub struct StarMeasure {
     pub x_px: f64,
     pub y_px: f64,
-    /// Aperture fluxes (one per radius of the setup) and the PSF-fit flux, e⁻ (NaN when a measurement
-    /// failed).
+    /// Aperture fluxes (one per radius of the setup), the PSF-fit flux and the sky per pixel, e⁻ (NaN when a
+    /// measurement failed).
     pub aperture_e: Vec<f64>,
     pub psf_e: f64,
     pub sky_e: f64,
@@ -58,8 +58,10 @@ pub fn measure_window(
         .collect();
     let c = (n / 2) as f64;
     // the sky and a first centroid (first moment within 3 px of the window's centre, sky subtracted)
-    let sky = annulus_sky(&e, n, n, c, c, setup.annulus_in_px, setup.annulus_out_px)
-        .map_or(0.0, |(s, _)| s);
+    // no sky pixel: the centroid and the fit start from 0, the measurement reports no sky (NaN)
+    let measured_sky =
+        annulus_sky(&e, n, n, c, c, setup.annulus_in_px, setup.annulus_out_px).map(|(s, _)| s);
+    let sky = measured_sky.unwrap_or(0.0);
     let (mut sx, mut sy, mut sw) = (0.0, 0.0, 0.0);
     for y in 0..n {
         for x in 0..n {
@@ -123,7 +125,7 @@ pub fn measure_window(
         y_px: y,
         aperture_e,
         psf_e,
-        sky_e: sky,
+        sky_e: measured_sky.unwrap_or(f64::NAN),
     }
 }
 
