@@ -14,6 +14,8 @@
 //!   Under the rolling readout the shared window is all but ≈ 0.1 % of the exposure.
 //! * **static** (Gaussian ACE or no ACE): `S = r · T · K_blurred(X − x, Y − y)`, one look-up per pixel.
 
+use super::convolve::{RowRuns, add_convolution};
+use super::exact_core::ExactCore;
 use super::kernel::{IntraPixelMap, PixelKernel, subpixel_sum};
 use super::track::Track;
 use crate::optics::psf::PsfTable;
@@ -219,6 +221,31 @@ fn sample_extent(
 }
 
 impl Histogram {
+    /// A histogram made elsewhere ([`super::exact_core`]): `data` on the box at nodes `(u0, v0)`, `nu × nv`,
+    /// for a star at `(ox, oy)` px from the stamp origin on a grid of `g` nodes per pixel.
+    #[allow(clippy::too_many_arguments)]
+    pub(crate) fn from_parts(
+        u0: i64,
+        v0: i64,
+        nu: usize,
+        nv: usize,
+        data: Vec<f64>,
+        ox_px: f64,
+        oy_px: f64,
+        g: f64,
+    ) -> Self {
+        Self {
+            u0,
+            v0,
+            nu,
+            nv,
+            data,
+            ox_px,
+            oy_px,
+            g,
+        }
+    }
+
     /// An empty histogram whose box holds the displacements of `extent` (min_x, max_x, min_y, max_y; px) for
     /// a star at `star − origin`, or `None` when the box would exceed [`MAX_HISTOGRAM_NODES`] or the extent
     /// is empty.
@@ -297,79 +324,27 @@ impl Histogram {
         }
     }
 
-    /// For each row, the first and one-past-last non-zero column (empty rows: start == end).
-    pub fn row_runs(&self) -> Vec<(usize, usize)> {
-        (0..self.nv)
-            .map(|r| {
+    /// The non-zero run of each row (empty rows left out), with its origin moved down by `dv` nodes.
+    fn runs(&self, dv: i64) -> RowRuns<'_> {
+        let runs = (0..self.nv)
+            .filter_map(|r| {
                 let row = &self.data[r * self.nu..(r + 1) * self.nu];
-                match row.iter().position(|v| *v != 0.0) {
-                    Some(a) => {
-                        let b = self.nu - row.iter().rev().position(|v| *v != 0.0).unwrap_or(0);
-                        (a, b)
-                    }
-                    None => (0, 0),
-                }
+                let a = row.iter().position(|v| *v != 0.0)?;
+                let b = self.nu - row.iter().rev().position(|v| *v != 0.0).unwrap_or(0);
+                Some((r, a, b, &row[a..b]))
             })
-            .collect()
-    }
-}
-
-/// A histogram's non-zero run of each row, stored reversed along u, so that `Σ_u H(u) K(P − u)` walks both
-/// tables forward: a contiguous dot product per row ([`crate::numerics::dot`]).
-struct ReversedRuns {
-    u0: i64,
-    v0: i64,
-    /// (histogram row, first column a, one-past-last column b, offset of the run in `values`)
-    runs: Vec<(usize, usize, usize, usize)>,
-    /// `values[offset + i] = H(row, b − 1 − i)`.
-    values: Vec<f64>,
-}
-
-impl ReversedRuns {
-    fn of(h: &Histogram) -> Self {
-        let mut runs = Vec::new();
-        let mut values = Vec::new();
-        for (r, (a, b)) in h.row_runs().into_iter().enumerate() {
-            if a == b {
-                continue;
-            }
-            runs.push((r, a, b, values.len()));
-            values.extend(h.data[r * h.nu + a..r * h.nu + b].iter().rev());
-        }
-        Self {
-            u0: h.u0,
-            v0: h.v0,
+            .collect();
+        RowRuns {
+            u0: self.u0,
+            v0: self.v0 - dv,
             runs,
-            values,
         }
-    }
-
-    /// `Σ_u H(u) K(P − u)` for the pixel at node coordinates P = (pu, pv) relative to the stamp origin.
-    fn convolve_at(&self, kernel: &PixelKernel, pu: i64, pv: i64) -> f64 {
-        let h = kernel.half_nodes as i64;
-        let n = kernel.n() as i64;
-        let base = pu - self.u0 + h;
-        crate::numerics::dot::sum_of_dots(self.runs.iter().filter_map(|&(r, a, b, off)| {
-            let ky = pv - (self.v0 + r as i64) + h;
-            if ky < 0 || ky >= n {
-                return None;
-            }
-            // K column for histogram column c: base − c, valid in [0, n)
-            let c_lo = (base - (n - 1)).max(a as i64);
-            let c_hi = base.min(b as i64 - 1);
-            if c_hi < c_lo {
-                return None;
-            }
-            let len = (c_hi - c_lo + 1) as usize;
-            let i0 = off + (b as i64 - 1 - c_hi) as usize;
-            let k0 = (ky * n + base - c_hi) as usize;
-            Some((&self.values[i0..i0 + len], &kernel.data[k0..k0 + len]))
-        }))
     }
 }
 
-/// The part of the exposure every pixel of a frame shares (`fidelity.deposit_phases` = Q > 0), deposited
-/// once at the (Q + 1)² star phases `(a, b)/Q` of a node: a star's histogram of it is the bilinear
+/// The part of the exposure every pixel of a frame shares, deposited once. By default exactly, grouped by cell
+/// ([`ExactCore`]: a star's histogram of it is read at its own phase, equal to its own deposit to rounding).
+/// With `fidelity.deposit_phases` = Q > 0 it is deposited at the (Q + 1)² star phases `(a, b)/Q` of a node: a star's histogram of it is the bilinear
 /// interpolation of the four phases around its own, shifted by its whole nodes — so each star deposits only
 /// the rest of its stamp's shared window (under the rolling readout ≤ one read sweep, ≈ 10 % of the samples)
 /// instead of all of it.
@@ -378,30 +353,47 @@ impl ReversedRuns {
 /// interpolation. What it changes is the spread: a sample's weight is piecewise linear in the phase with a
 /// kink at each node, so between grid phases the interpolated histogram is a little smoother than the exact
 /// one (by at most a 1/(2Q) node in the kink's neighbourhood). `jsim bench --parts bulge` measures the cost
-/// against Q = 0 (every star deposits its whole track, exact).
+/// against Q = 0 (exact).
 #[derive(Debug, Clone)]
 pub struct SharedCore {
     /// The window every pixel of the frame shares.
     pub window: super::track::WindowWeights,
-    q: usize,
     g: usize,
-    /// Box of every table, in nodes relative to the star's whole node.
-    u0: i64,
-    v0: i64,
-    nu: usize,
-    nv: usize,
-    /// `tables[b·(Q + 1) + a]`: the histogram of a star at phase (a/Q, b/Q) of a node.
-    tables: Vec<Vec<f64>>,
+    kind: CoreKind,
+}
+
+#[derive(Debug, Clone)]
+enum CoreKind {
+    /// Exact for a star at any phase ([`ExactCore`]): `fidelity.deposit_phases` = 0, the default.
+    Exact(ExactCore),
+    /// Deposited at (Q + 1)² phases and interpolated.
+    Phases {
+        q: usize,
+        /// Box of every table, in nodes relative to the star's whole node.
+        u0: i64,
+        v0: i64,
+        nu: usize,
+        nv: usize,
+        /// `tables[b·(Q + 1) + a]`: the histogram of a star at phase (a/Q, b/Q) of a node.
+        tables: Vec<Vec<f64>>,
+    },
 }
 
 impl SharedCore {
-    /// Deposit the frame's shared window `[a_s, b_s)` at the (Q + 1)² phases; `None` when the window is
-    /// empty or the box too large.
+    /// Deposit the frame's shared window `[a_s, b_s)`: exactly, grouped by cell, when `q` = 0, else at the
+    /// (Q + 1)² phases; `None` when the window is empty or the box too large.
     pub fn new(track: &Track, a_s: f64, b_s: f64, g: usize, q: usize) -> Option<Self> {
-        if q == 0 || track.is_empty() || !(b_s > a_s) {
+        if track.is_empty() || !(b_s > a_s) {
             return None;
         }
         let window = track.window(a_s, b_s);
+        if q == 0 {
+            return Some(Self {
+                window,
+                g,
+                kind: CoreKind::Exact(ExactCore::new(track, &window, g)?),
+            });
+        }
         let (xmin, xmax, ymin, ymax) = track.summary().extent;
         let gf = g as f64;
         // every sample of any phase in [0, 1] node, with its cloud-in-cell neighbour and a node of margin
@@ -435,13 +427,15 @@ impl SharedCore {
             .collect();
         Some(Self {
             window,
-            q,
             g,
-            u0,
-            v0,
-            nu,
-            nv,
-            tables,
+            kind: CoreKind::Phases {
+                q,
+                u0,
+                v0,
+                nu,
+                nv,
+                tables,
+            },
         })
     }
 
@@ -450,18 +444,31 @@ impl SharedCore {
         self.g
     }
 
-    /// The shared window's histogram for a star at `(ox, oy)` px from a stamp origin: the four phase tables
-    /// around its phase, interpolated, in a box that holds every sample of the track.
-    fn histogram_at(&self, ox_px: f64, oy_px: f64) -> Histogram {
+    /// The shared window's histogram for a star at `(ox, oy)` px from a stamp origin, in a box that holds
+    /// every sample of the track: exact, or the four phase tables around its phase interpolated.
+    fn histogram_at(&self, ox_px: f64, oy_px: f64, track: &Track) -> Histogram {
+        let (q, u0, v0, nu, nv, tables) = match &self.kind {
+            CoreKind::Exact(core) => {
+                return core.histogram_at(ox_px, oy_px, track.summary().extent);
+            }
+            CoreKind::Phases {
+                q,
+                u0,
+                v0,
+                nu,
+                nv,
+                tables,
+            } => (*q, *u0, *v0, *nu, *nv, tables),
+        };
         let gf = self.g as f64;
         let (xu, xv) = (ox_px * gf, oy_px * gf);
         let (nu_s, nv_s) = (xu.floor(), xv.floor());
-        let qf = self.q as f64;
+        let qf = q as f64;
         let (pu, pv) = ((xu - nu_s) * qf, (xv - nv_s) * qf);
-        let (ia, ib) = ((pu as usize).min(self.q - 1), (pv as usize).min(self.q - 1));
+        let (ia, ib) = ((pu as usize).min(q - 1), (pv as usize).min(q - 1));
         let (ta, tb) = (pu - ia as f64, pv - ib as f64);
-        let row = self.q + 1;
-        let t = |a: usize, b: usize| &self.tables[b * row + a];
+        let row = q + 1;
+        let t = |a: usize, b: usize| &tables[b * row + a];
         let (t00, t10, t01, t11) = (t(ia, ib), t(ia + 1, ib), t(ia, ib + 1), t(ia + 1, ib + 1));
         let (w00, w10, w01, w11) = (
             (1.0 - ta) * (1.0 - tb),
@@ -469,14 +476,14 @@ impl SharedCore {
             (1.0 - ta) * tb,
             ta * tb,
         );
-        let data = (0..self.nu * self.nv)
+        let data = (0..nu * nv)
             .map(|k| w00 * t00[k] + w10 * t10[k] + w01 * t01[k] + w11 * t11[k])
             .collect();
         Histogram {
-            u0: nu_s as i64 + self.u0,
-            v0: nv_s as i64 + self.v0,
-            nu: self.nu,
-            nv: self.nv,
+            u0: nu_s as i64 + u0,
+            v0: nv_s as i64 + v0,
+            nu,
+            nv,
             data,
             ox_px,
             oy_px,
@@ -492,7 +499,8 @@ impl SharedCore {
 /// beyond that (under the rolling readout a row's pixels start within one row time, ≈ 4 samples, of each
 /// other, where the whole stamp spans ≈ 4 samples per row); a pixel's value is `(H + E) ⊛ K` at its centre
 /// plus K looked up for its own few samples beyond its row's window. With a [`SharedCore`] the stamp's
-/// histogram starts from the frame's shared part, interpolated to the star's phase.
+/// histogram starts from the frame's shared part read at the star's phase (exactly, or interpolated
+/// between deposit phases).
 pub fn fast_stamp(
     star: &StarSpec,
     kernel: &PixelKernel,
@@ -525,7 +533,7 @@ pub fn fast_stamp(
     let base = match core {
         // the frame's shared part interpolated, then the rest of the stamp's window exactly
         Some(c) if c.window.first >= common.first && c.window.last <= common.last => {
-            let mut h = c.histogram_at(ox, oy);
+            let mut h = c.histogram_at(ox, oy, track);
             for_each_extra(&common, &c.window, |j, e| h.add_sample(track, j, e));
             h
         }
@@ -538,9 +546,9 @@ pub fn fast_stamp(
             None => return direct_stamp(star, kernel, track, timing, bounds),
         },
     };
-    let base = ReversedRuns::of(&base);
     let gi = g as i64;
     let mut data = vec![0.0; nx * ny];
+    add_convolution(&mut data, nx, ny, &base.runs(0), kernel);
     for iy in 0..ny {
         let y = y0 + iy as i64;
         let row_windows = &windows[iy * nx..(iy + 1) * nx];
@@ -549,32 +557,28 @@ pub fn fast_stamp(
         let row = track.window(ra, rb);
         let mut extra: Vec<(usize, f64)> = Vec::new();
         for_each_extra(&row, &common, |j, e| extra.push((j, e)));
-        let extra = Histogram::empty_in(
+        let out_row = &mut data[iy * nx..(iy + 1) * nx];
+        if let Some(mut h) = Histogram::empty_in(
             star,
             sample_extent(track, extra.iter().map(|&(j, _)| j..=j)),
             origin,
             g,
-        )
-        .map(|mut h| {
+        ) {
             for &(j, e) in &extra {
                 h.add_sample(track, j, e);
             }
-            ReversedRuns::of(&h)
-        });
-        for ix in 0..nx {
+            add_convolution(out_row, nx, 1, &h.runs(iy as i64 * gi), kernel);
+        }
+        for (ix, out) in out_row.iter_mut().enumerate() {
             let x = x0 + ix as i64;
-            let (pu, pv) = (ix as i64 * gi, iy as i64 * gi);
-            let mut acc = base.convolve_at(kernel, pu, pv);
-            if let Some(e) = &extra {
-                acc += e.convolve_at(kernel, pu, pv);
-            }
+            let mut acc = *out;
             // this pixel's samples outside its row's window
             let own = track.window(row_windows[ix].0, row_windows[ix].1);
             let (bx, by) = (x as f64 - star.x_px, y as f64 - star.y_px);
             for_each_extra(&own, &row, |j, e| {
                 acc += e * kernel.eval(bx - track.dx_px[j], by - track.dy_px[j]);
             });
-            data[iy * nx + ix] = acc * star.rate_e_per_s * track.dt_s;
+            *out = acc * star.rate_e_per_s * track.dt_s;
         }
     }
     Stamp {
@@ -712,7 +716,7 @@ mod tests {
             let s = star(q, 0.5, 0.5);
             // the interpolated histogram has the exact deposit's weight and mean, to rounding
             let core = SharedCore::new(&track, a, b, k.nodes_per_px, q).expect("core");
-            let interpolated = core.histogram_at(s.x_px, s.y_px);
+            let interpolated = core.histogram_at(s.x_px, s.y_px, &track);
             let exact = Histogram::deposit(&s, &track, &core.window, (0, 0), k.nodes_per_px)
                 .expect("deposit");
             let (mi, me) = (moments(&interpolated), moments(&exact));
@@ -735,6 +739,71 @@ mod tests {
             assert!(w[1] < w[0] / 2.5, "error does not fall as Q⁻²: {errs:?}");
         }
         assert!(errs[3] < 1e-4, "{errs:?}");
+    }
+
+    /// The exact shared core (`deposit_phases` = 0): for stars at phases anywhere in a node — on a node, a
+    /// rounding away from the next, at random places — its histogram equals the plain deposit node by
+    /// node, and the stamp equals the direct method (no histogram at all).
+    #[test]
+    fn exact_core_equals_the_plain_deposit_at_any_phase() {
+        let psf = crate::testkit::synthetic_psf(8, 6);
+        let k = PixelKernel::build(&psf, &IntraPixelMap::uniform(4)).expect("kernel");
+        let g = k.nodes_per_px;
+        let track = wiggly_track(3000, 1e-3, 0.9);
+        let t = timing(ReadoutOrder::Rolling, 2.5);
+        let (a, b) = t.shared_window_s(200);
+        let core = SharedCore::new(&track, a, b, g, 0).expect("core");
+        let gf = g as f64;
+        for (i, (fx, fy)) in [
+            (0.0, 0.0),
+            (1.0 - 1e-13, 0.5),
+            (0.37, 1.0 - 1e-13),
+            (0.913, 0.071),
+            (0.5, 0.5),
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            let star = StarSpec {
+                x_px: 40.0 + (3.0 + fx) / gf,
+                y_px: 61.0 + (i as f64 + fy) / gf,
+                rate_e_per_s: 1000.0,
+            };
+            let bnd = stamp_bounds(star.x_px, star.y_px, Some(&track), 6, 200).expect("on");
+            let (ox, oy) = (star.x_px - bnd.0 as f64, star.y_px - bnd.1 as f64);
+            let exact = core.histogram_at(ox, oy, &track);
+            let plain = Histogram::deposit(&star, &track, &core.window, (bnd.0, bnd.1), g)
+                .expect("deposit");
+            let at = |h: &Histogram, u: i64, v: i64| {
+                let (ru, rv) = (u - h.u0, v - h.v0);
+                if ru < 0 || rv < 0 || ru >= h.nu as i64 || rv >= h.nv as i64 {
+                    0.0
+                } else {
+                    h.data[rv as usize * h.nu + ru as usize]
+                }
+            };
+            let mut worst: f64 = 0.0;
+            for v in exact.v0.min(plain.v0)..exact.v0.max(plain.v0) + exact.nv.max(plain.nv) as i64
+            {
+                for u in
+                    exact.u0.min(plain.u0)..exact.u0.max(plain.u0) + exact.nu.max(plain.nu) as i64
+                {
+                    worst = worst.max((at(&exact, u, v) - at(&plain, u, v)).abs());
+                }
+            }
+            let total: f64 = plain.data.iter().sum();
+            assert!(
+                worst < 1e-13 * total,
+                "phase ({fx}, {fy}): node error {worst:e} of {total}"
+            );
+            let d = direct_stamp(&star, &k, &track, &t, bnd);
+            let f = fast_stamp(&star, &k, &track, &t, bnd, Some(&core));
+            assert!(
+                max_error(&f, &d) < 1e-12,
+                "phase ({fx}, {fy}): stamp {:e}",
+                max_error(&f, &d)
+            );
+        }
     }
 
     #[test]

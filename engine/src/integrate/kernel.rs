@@ -201,6 +201,8 @@ pub struct PixelKernel {
     pub light_fraction: f64,
     /// [`PixelKernel::envelope`], made on first use.
     envelope: std::sync::OnceLock<Vec<f64>>,
+    /// [`PixelKernel::polyphase`], made on first use.
+    polyphase: std::sync::OnceLock<super::convolve::Polyphase>,
 }
 
 impl PixelKernel {
@@ -234,6 +236,7 @@ impl PixelKernel {
             data,
             light_fraction: psf.sum() * mean_w,
             envelope: std::sync::OnceLock::new(),
+            polyphase: std::sync::OnceLock::new(),
         })
     }
 
@@ -260,6 +263,7 @@ impl PixelKernel {
             data,
             light_fraction: 0.0,
             envelope: std::sync::OnceLock::new(),
+            polyphase: std::sync::OnceLock::new(),
         };
         k.light_fraction = k.pixel_sum(0.0, 0.0);
         k
@@ -267,6 +271,13 @@ impl PixelKernel {
 
     pub fn n(&self) -> usize {
         2 * self.half_nodes + 1
+    }
+
+    /// K by column residue, for the fast method's blocked convolution ([`super::convolve`]); made on
+    /// first use, so kernels only the GPU or the direct method reads never hold it.
+    pub fn polyphase(&self) -> &super::convolve::Polyphase {
+        self.polyphase
+            .get_or_init(|| super::convolve::Polyphase::of(self))
     }
 
     /// Stamp half-size that keeps all of K's light for a star anywhere in its pixel:

@@ -45,7 +45,7 @@ pub fn bulge_knobs(base: &Config) -> Vec<(String, Vec<(String, Config)>, bool)> 
         ),
         (
             "deposit phases (bulge, realistic ACE)".into(),
-            settings(&reach, &[2, 4, 8, 16, 0], "whole tracks (exact)", |c, q| {
+            settings(&reach, &[2, 4, 8, 16, 0], "exact shared core", |c, q| {
                 c.fidelity.deposit_phases = q;
                 format!("{q} phases")
             }),
