@@ -642,7 +642,7 @@ pub struct Fidelity {
     /// The CPU fast method deposits the part of the exposure every pixel of an array shares once, at this
     /// many star phases per kernel node, and interpolates each star's histogram of it (exact in the mean,
     /// smoother by ≤ a 1/(2Q) node in the spread); 0 = exact: that part is deposited once grouped by cell
-    /// and read at each star's own phase ([`crate::integrate::exact_core`]). The GPU always deposits whole
+    /// and read at each star's own phase (`integrate::exact_core`). The GPU always deposits whole
     /// tracks. `jsim bench --parts bulge` reports the time and the error.
     pub deposit_phases: usize,
 }
