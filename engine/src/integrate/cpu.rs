@@ -221,31 +221,6 @@ fn sample_extent(
 }
 
 impl Histogram {
-    /// A histogram made elsewhere ([`super::exact_core`]): `data` on the box at nodes `(u0, v0)`, `nu × nv`,
-    /// for a star at `(ox, oy)` px from the stamp origin on a grid of `g` nodes per pixel.
-    #[allow(clippy::too_many_arguments)]
-    pub(crate) fn from_parts(
-        u0: i64,
-        v0: i64,
-        nu: usize,
-        nv: usize,
-        data: Vec<f64>,
-        ox_px: f64,
-        oy_px: f64,
-        g: f64,
-    ) -> Self {
-        Self {
-            u0,
-            v0,
-            nu,
-            nv,
-            data,
-            ox_px,
-            oy_px,
-            g,
-        }
-    }
-
     /// An empty histogram whose box holds the displacements of `extent` (min_x, max_x, min_y, max_y; px) for
     /// a star at `star − origin`, or `None` when the box would exceed [`MAX_HISTOGRAM_NODES`] or the extent
     /// is empty.
@@ -449,7 +424,17 @@ impl SharedCore {
     fn histogram_at(&self, ox_px: f64, oy_px: f64, track: &Track) -> Histogram {
         let (q, u0, v0, nu, nv, tables) = match &self.kind {
             CoreKind::Exact(core) => {
-                return core.histogram_at(ox_px, oy_px, track.summary().extent);
+                let t = core.histogram_at(ox_px, oy_px, track.summary().extent);
+                return Histogram {
+                    u0: t.u0,
+                    v0: t.v0,
+                    nu: t.nu,
+                    nv: t.nv,
+                    data: t.data,
+                    ox_px,
+                    oy_px,
+                    g: self.g as f64,
+                };
             }
             CoreKind::Phases {
                 q,

@@ -11,8 +11,17 @@
 //! where a plain deposit computes and scatters four weights per sample for every star; the histogram is the
 //! same (the same terms summed in another order: equal to rounding, ≈ 1e-15 relative).
 
-use super::cpu::Histogram;
 use super::track::{Track, WindowWeights};
+
+/// A star's histogram of the shared window: `data[r·nu + c]` at nodes `(u0 + c, v0 + r)` from the stamp origin.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NodeTable {
+    pub u0: i64,
+    pub v0: i64,
+    pub nu: usize,
+    pub nv: usize,
+    pub data: Vec<f64>,
+}
 
 /// A frame's shared window, its samples grouped by cell (at star phase 0).
 #[derive(Debug, Clone)]
@@ -111,7 +120,7 @@ impl ExactCore {
     /// The shared window's histogram of a star at `(ox, oy)` px from a stamp origin, in a box that also
     /// holds every other sample of the track whose displacements lie in `extent` (px: min x, max x, min y,
     /// max y), so the rest of the star's window can be added to it sample by sample.
-    pub fn histogram_at(&self, ox_px: f64, oy_px: f64, extent: (f64, f64, f64, f64)) -> Histogram {
+    pub fn histogram_at(&self, ox_px: f64, oy_px: f64, extent: (f64, f64, f64, f64)) -> NodeTable {
         let (xu, xv) = (ox_px * self.g, oy_px * self.g);
         let (nu_s, nv_s) = (xu.floor(), xv.floor());
         let (px, py) = (xu - nu_s, xv - nv_s);
@@ -179,6 +188,12 @@ impl ExactCore {
                 data[i + nu + 1] += suv;
             }
         }
-        Histogram::from_parts(u0, v0, nu, nv, data, ox_px, oy_px, self.g)
+        NodeTable {
+            u0,
+            v0,
+            nu,
+            nv,
+            data,
+        }
     }
 }
