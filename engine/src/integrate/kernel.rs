@@ -303,11 +303,16 @@ impl PixelKernel {
         let g = self.nodes_per_px as f64;
         let h = self.half_nodes as f64;
         let (u, v) = (dx_px * g + h, dy_px * g + h);
-        let (fu, fv) = (u.floor(), v.floor());
+        // below the table (or NaN): zero; above 0 truncation is the floor (one instruction, where `floor`
+        // is a library call on the baseline x86-64 target)
+        if !(u >= 0.0 && v >= 0.0) {
+            return 0.0;
+        }
+        let (fu, fv) = ((u as usize) as f64, (v as usize) as f64);
         let n = self.n();
         // the outermost ring of nodes is zero (the table extends one node past the support), so
         // everything at or beyond it is zero
-        if fu < 0.0 || fv < 0.0 || fu >= (n - 1) as f64 || fv >= (n - 1) as f64 {
+        if fu >= (n - 1) as f64 || fv >= (n - 1) as f64 {
             return 0.0;
         }
         let (tu, tv) = (u - fu, v - fv);

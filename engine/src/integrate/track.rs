@@ -171,8 +171,16 @@ impl Track {
         // sample j covers [t0 + (j − ½)dt, t0 + (j + ½)dt)
         let ua = (a_s - self.t0_s) / self.dt_s + 0.5;
         let ub = (b_s - self.t0_s) / self.dt_s + 0.5;
-        let first = (ua.floor().max(0.0) as usize).min(n - 1);
-        let last = ((ub.ceil() - 1.0).max(0.0) as usize).min(n - 1);
+        // ⌊ua⌋ and ⌈ub⌉ − 1 clamped to the samples, by truncation (the same values; `floor` and `ceil` are
+        // library calls on the baseline x86-64 target, and every pixel of every stamp asks for its window)
+        let first = if ua > 0.0 { ua as usize } else { 0 }.min(n - 1);
+        let last = if ub > 1.0 {
+            let t = ub as usize;
+            if (t as f64) < ub { t } else { t - 1 }
+        } else {
+            0
+        }
+        .min(n - 1);
         if first == last {
             return WindowWeights {
                 first,
