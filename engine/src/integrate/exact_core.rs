@@ -4,12 +4,13 @@
 //! A sample at `D = track·G` (nodes) lands, for a star whose offset is `N + φ` nodes (N whole, φ ∈ [0, 1)),
 //! at `N + D + φ`: in the cell `N + ⌊D⌋ + c` with `c = [frac D + φ ≥ 1]` and fractions `t = frac D + φ − c`
 //! per axis. Its cloud-in-cell weights are bilinear in t, so what a cell's samples give its four nodes is
-//! a linear combination of the sums `Σ ω (1, f_u, f_v, f_u f_v)` (f = frac D, ω the window weight) over
-//! each of the four carry quadrants. The samples of a cell are stored sorted by f_u with running sums, so
-//! the u-carry set is a prefix found by a binary search and the sums over it a look-up; one pass over the
-//! cell with the v-carry mask gives the rest. That is a few operations per sample and no scattered writes,
-//! where a plain deposit computes and scatters four weights per sample for every star; the histogram is the
-//! same (the same terms summed in another order: equal to rounding, ≈ 1e-15 relative).
+//! a linear combination of the sums `Σ (1, f_u, f_v, f_u f_v)` (f = frac D) over each of the four carry
+//! quadrants. The samples are stored cell by cell as their two fractions (16 bytes a sample, read in order),
+//! each cell sorted by decreasing f_u so that the u-carries are a prefix (a binary search); one pass sums the
+//! moments under the v-carry mask, with no scattered writes (a plain deposit computes and scatters four
+//! weights per sample). The window's two end samples (fractional weights) are
+//! deposited apart. The histogram is the same as a plain deposit (the same terms summed in another order:
+//! equal to rounding, ≈ 1e-15 relative).
 
 use super::track::{Track, WindowWeights};
 
@@ -32,14 +33,14 @@ pub struct ExactCore {
     b0: i64,
     na: usize,
     nb: usize,
-    /// Occupied cells: (u-cell offset, v-cell offset, first sample, one past the last).
-    cells: Vec<(usize, usize, usize, usize)>,
-    /// Per sample, cell by cell, sorted by decreasing `f_u`: `f_u`, `f_v`, `ω·(1, f_u, f_v, f_u f_v)`, and
-    /// the running sum of the moments within its cell (inclusive).
+    /// Occupied cells: (u-cell offset, v-cell offset, first sample, one past the last) and the moments
+    /// `Σ (1, f_u, f_v, f_u f_v)` of all its samples.
+    cells: Vec<(usize, usize, usize, usize, [f64; 4])>,
+    /// The interior samples' fractions, cell by cell.
     fu: Vec<f64>,
     fv: Vec<f64>,
-    m: Vec<[f64; 4]>,
-    running: Vec<[f64; 4]>,
+    /// The window's end samples (u-cell, v-cell, f_u, f_v, weight), deposited apart.
+    ends: Vec<(i64, i64, f64, f64, f64)>,
 }
 
 impl ExactCore {
@@ -50,59 +51,66 @@ impl ExactCore {
             return None;
         }
         let gf = g as f64;
-        let js = window.first..=window.last;
         let cell_of = |j: usize| {
             let (du, dv) = (track.dx_px[j] * gf, track.dy_px[j] * gf);
             let (a, b) = (du.floor(), dv.floor());
             (a as i64, b as i64, du - a, dv - b)
         };
         let (mut a0, mut a1, mut b0, mut b1) = (i64::MAX, i64::MIN, i64::MAX, i64::MIN);
-        for j in js.clone() {
+        for j in window.first..=window.last {
             let (a, b, _, _) = cell_of(j);
             (a0, a1, b0, b1) = (a0.min(a), a1.max(a), b0.min(b), b1.max(b));
         }
         let (na, nb) = ((a1 - a0 + 1) as usize, (b1 - b0 + 1) as usize);
-        // counting sort by cell, then each cell by decreasing f_u
-        let mut count = vec![0usize; na * nb + 1];
-        let mut sample_cell = Vec::with_capacity(window.last - window.first + 1);
-        for j in js.clone() {
-            let (a, b, fu, fv) = cell_of(j);
-            let c = (b - b0) as usize * na + (a - a0) as usize;
-            count[c + 1] += 1;
-            sample_cell.push((c, fu, fv, window.weight(j)));
-        }
+        let ends: Vec<(i64, i64, f64, f64, f64)> = [window.first, window.last]
+            .into_iter()
+            .take(if window.last > window.first { 2 } else { 1 })
+            .map(|j| {
+                let (a, b, fu, fv) = cell_of(j);
+                (a, b, fu, fv, window.weight(j))
+            })
+            .collect();
+        // counting sort of the interior samples by cell
+        let mut start = vec![0usize; na * nb + 1];
+        let samples: Vec<(usize, f64, f64)> = (window.first + 1..window.last)
+            .map(|j| {
+                let (a, b, fu, fv) = cell_of(j);
+                let c = (b - b0) as usize * na + (a - a0) as usize;
+                start[c + 1] += 1;
+                (c, fu, fv)
+            })
+            .collect();
         for c in 0..na * nb {
-            count[c + 1] += count[c];
+            start[c + 1] += start[c];
         }
-        let mut slot = count.clone();
-        let mut sorted = vec![(0.0, 0.0, 0.0); sample_cell.len()];
-        for &(c, fu, fv, w) in &sample_cell {
-            sorted[slot[c]] = (fu, fv, w);
+        let mut slot = start.clone();
+        let (mut fu, mut fv) = (vec![0.0; samples.len()], vec![0.0; samples.len()]);
+        for &(c, u, v) in &samples {
+            (fu[slot[c]], fv[slot[c]]) = (u, v);
             slot[c] += 1;
         }
-        let mut cells = Vec::new();
-        let (mut fus, mut fvs) = (Vec::with_capacity(sorted.len()), Vec::new());
-        let (mut m, mut running) = (Vec::with_capacity(sorted.len()), Vec::new());
+        // each cell by decreasing f_u: a star's u-carries are then a prefix
+        let mut pairs: Vec<(f64, f64)> = Vec::new();
         for c in 0..na * nb {
-            let (s, e) = (count[c], count[c + 1]);
-            if s == e {
-                continue;
+            let (s, e) = (start[c], start[c + 1]);
+            pairs.clear();
+            pairs.extend(fu[s..e].iter().copied().zip(fv[s..e].iter().copied()));
+            pairs.sort_by(|x, y| y.0.total_cmp(&x.0));
+            for (k, &(u, v)) in pairs.iter().enumerate() {
+                (fu[s + k], fv[s + k]) = (u, v);
             }
-            let cell = &mut sorted[s..e];
-            cell.sort_by(|x, y| y.0.total_cmp(&x.0));
-            let mut run = [0.0; 4];
-            for &(fu, fv, w) in cell.iter() {
-                let mk = [w, w * fu, w * fv, w * fu * fv];
-                for k in 0..4 {
-                    run[k] += mk[k];
-                }
-                fus.push(fu);
-                fvs.push(fv);
-                m.push(mk);
-                running.push(run);
-            }
-            cells.push((c % na, c / na, s, e));
         }
+        let cells = (0..na * nb)
+            .filter(|&c| start[c + 1] > start[c])
+            .map(|c| {
+                let (s, e) = (start[c], start[c + 1]);
+                let mut t = [0.0; 4];
+                for (u, v) in fu[s..e].iter().zip(&fv[s..e]) {
+                    t = [t[0] + 1.0, t[1] + u, t[2] + v, t[3] + u * v];
+                }
+                (c % na, c / na, s, e, t)
+            })
+            .collect();
         Some(Self {
             g: gf,
             a0,
@@ -110,17 +118,33 @@ impl ExactCore {
             na,
             nb,
             cells,
-            fu: fus,
-            fv: fvs,
-            m,
-            running,
+            fu,
+            fv,
+            ends,
         })
     }
 
     /// The shared window's histogram of a star at `(ox, oy)` px from a stamp origin, in a box that also
     /// holds every other sample of the track whose displacements lie in `extent` (px: min x, max x, min y,
     /// max y), so the rest of the star's window can be added to it sample by sample.
+    #[allow(unsafe_code)] // calling the AVX2 build after checking the processor has AVX2: nothing else
     pub fn histogram_at(&self, ox_px: f64, oy_px: f64, extent: (f64, f64, f64, f64)) -> NodeTable {
+        #[cfg(target_arch = "x86_64")]
+        if std::is_x86_feature_detected!("avx2") {
+            // SAFETY: the processor has AVX2 (checked just above).
+            return unsafe { self.histogram_at_avx2(ox_px, oy_px, extent) };
+        }
+        self.histogram_at_body(ox_px, oy_px, extent)
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn histogram_at_avx2(&self, ox_px: f64, oy_px: f64, extent: (f64, f64, f64, f64)) -> NodeTable {
+        self.histogram_at_body(ox_px, oy_px, extent)
+    }
+
+    #[inline(always)]
+    fn histogram_at_body(&self, ox_px: f64, oy_px: f64, extent: (f64, f64, f64, f64)) -> NodeTable {
         let (xu, xv) = (ox_px * self.g, oy_px * self.g);
         let (nu_s, nv_s) = (xu.floor(), xv.floor());
         let (px, py) = (xu - nu_s, xv - nv_s);
@@ -134,59 +158,39 @@ impl ExactCore {
         let v1 = (nv_i + self.b0 + self.nb as i64 + 2).max(node(oy_px, extent.3) + 2);
         let (nu, nv) = ((u1 - u0 + 1) as usize, (v1 - v0 + 1) as usize);
         let mut data = vec![0.0; nu * nv];
-        for &(ca, cb, s, e) in &self.cells {
-            // samples s..nx carry along u (f_u + φ_u ≥ 1: a prefix, f_u decreasing)
-            let nx = s + self.fu[s..e].partition_point(|&f| f + px >= 1.0);
-            let total = self.running[e - 1];
-            let sx = if nx > s {
-                self.running[nx - 1]
-            } else {
-                [0.0; 4]
-            };
-            // the v-carry sums over the u-carry prefix and over the rest
-            let masked = |r: std::ops::Range<usize>| {
-                let mut acc = [0.0; 4];
-                for (fv, mk) in self.fv[r.clone()].iter().zip(&self.m[r]) {
-                    let c = if fv + py >= 1.0 { 1.0 } else { 0.0 };
-                    for k in 0..4 {
-                        acc[k] += c * mk[k];
-                    }
-                }
-                acc
-            };
-            let sxy = masked(s..nx);
-            let rest = masked(nx..e);
-            let q = |k: usize| {
-                let sy = sxy[k] + rest[k];
-                [
-                    total[k] - sx[k] - sy + sxy[k], // no carry
-                    sx[k] - sxy[k],                 // carry along u
-                    sy - sxy[k],                    // carry along v
-                    sxy[k],                         // both
-                ]
-            };
-            let (q0, q1, q2, q3) = (q(0), q(1), q(2), q(3));
-            for (quad, (cu, cv)) in [(0i64, 0i64), (1, 0), (0, 1), (1, 1)]
-                .into_iter()
-                .enumerate()
-            {
-                let (m0, m1, m2, m3) = (q0[quad], q1[quad], q2[quad], q3[quad]);
-                if m0 == 0.0 {
-                    continue;
-                }
-                // t_u = f_u + α_u, t_v = f_v + α_v for this quadrant's samples
-                let (au, av) = (px - cu as f64, py - cv as f64);
-                let su = m1 + au * m0;
-                let sv = m2 + av * m0;
-                let suv = m3 + av * m1 + au * m2 + au * av * m0;
-                let iu = (nu_i + self.a0 + ca as i64 + cu - u0) as usize;
-                let iv = (nv_i + self.b0 + cb as i64 + cv - v0) as usize;
-                let i = iv * nu + iu;
-                data[i] += m0 - su - sv + suv;
-                data[i + 1] += su - suv;
-                data[i + nu] += sv - suv;
-                data[i + nu + 1] += suv;
+        // what the samples of cell (a, b) carried by (cu, cv) with moments m give the cell's four nodes
+        let mut put = |a: i64, b: i64, cu: i64, cv: i64, m: [f64; 4]| {
+            if m[0] == 0.0 {
+                return;
             }
+            // t_u = f_u + α_u, t_v = f_v + α_v for these samples
+            let (au, av) = (px - cu as f64, py - cv as f64);
+            let su = m[1] + au * m[0];
+            let sv = m[2] + av * m[0];
+            let suv = m[3] + av * m[1] + au * m[2] + au * av * m[0];
+            let i = (nv_i + b + cv - v0) as usize * nu + (nu_i + a + cu - u0) as usize;
+            data[i] += m[0] - su - sv + suv;
+            data[i + 1] += su - suv;
+            data[i + nu] += sv - suv;
+            data[i + nu + 1] += suv;
+        };
+        for &(ca, cb, s, e, total) in &self.cells {
+            let (sx, sy, sxy) = carried_sums(&self.fu[s..e], &self.fv[s..e], px, py);
+            let (a, b) = (self.a0 + ca as i64, self.b0 + cb as i64);
+            put(
+                a,
+                b,
+                0,
+                0,
+                std::array::from_fn(|k| total[k] - sx[k] - sy[k] + sxy[k]),
+            );
+            put(a, b, 1, 0, std::array::from_fn(|k| sx[k] - sxy[k]));
+            put(a, b, 0, 1, std::array::from_fn(|k| sy[k] - sxy[k]));
+            put(a, b, 1, 1, sxy);
+        }
+        for &(a, b, fu, fv, w) in &self.ends {
+            let (cu, cv) = ((fu + px >= 1.0) as i64, (fv + py >= 1.0) as i64);
+            put(a, b, cu, cv, [w, w * fu, w * fv, w * fu * fv]);
         }
         NodeTable {
             u0,
@@ -196,4 +200,29 @@ impl ExactCore {
             data,
         }
     }
+}
+
+/// The moments `Σ (1, f_u, f_v, f_u f_v)` of the samples that carry along u (`f_u + φ_u ≥ 1`: a prefix, the
+/// cell sorted by decreasing f_u), along v (`f_v + φ_v ≥ 1`), and both ways.
+#[inline(always)]
+fn carried_sums(fu: &[f64], fv: &[f64], px: f64, py: f64) -> ([f64; 4], [f64; 4], [f64; 4]) {
+    let nx = fu.partition_point(|&f| f + px >= 1.0);
+    let (mut sx, mut sxy, mut rest) = ([0.0; 4], [0.0; 4], [0.0; 4]);
+    for (&u, &v) in fu[..nx].iter().zip(&fv[..nx]) {
+        let m = [1.0, u, v, u * v];
+        let c = if v + py >= 1.0 { 1.0 } else { 0.0 };
+        for k in 0..4 {
+            sx[k] += m[k];
+            sxy[k] += c * m[k];
+        }
+    }
+    for (&u, &v) in fu[nx..].iter().zip(&fv[nx..]) {
+        let m = [1.0, u, v, u * v];
+        let c = if v + py >= 1.0 { 1.0 } else { 0.0 };
+        for k in 0..4 {
+            rest[k] += c * m[k];
+        }
+    }
+    let sy = std::array::from_fn(|k| sxy[k] + rest[k]);
+    (sx, sy, sxy)
 }
