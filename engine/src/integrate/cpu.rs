@@ -362,24 +362,26 @@ impl SharedCore {
             return None;
         }
         let window = track.window(a_s, b_s);
-        if q == 0 {
-            return Some(Self {
-                window,
-                g,
-                kind: CoreKind::Exact(ExactCore::new(track, &window, g)?),
-            });
-        }
         let (xmin, xmax, ymin, ymax) = track.summary().extent;
         let gf = g as f64;
-        // every sample of any phase in [0, 1] node, with its cloud-in-cell neighbour and a node of margin
+        // every sample of any phase in [0, 1] node, with its cloud-in-cell neighbour and a node of margin: the
+        // box each star's histogram takes (either kind), bounded as a star's own deposit is
         let (u0, v0) = (
             (xmin * gf).floor() as i64 - 1,
             (ymin * gf).floor() as i64 - 1,
         );
         let nu = ((xmax * gf).floor() as i64 + 4 - u0) as usize;
         let nv = ((ymax * gf).floor() as i64 + 4 - v0) as usize;
-        if nu.saturating_mul(nv).saturating_mul((q + 1) * (q + 1)) > MAX_HISTOGRAM_NODES {
+        let tables = if q == 0 { 1 } else { (q + 1) * (q + 1) };
+        if nu.saturating_mul(nv).saturating_mul(tables) > MAX_HISTOGRAM_NODES {
             return None;
+        }
+        if q == 0 {
+            return Some(Self {
+                window,
+                g,
+                kind: CoreKind::Exact(ExactCore::new(track, &window, g)?),
+            });
         }
         let phases: Vec<(usize, usize)> =
             (0..=q).flat_map(|b| (0..=q).map(move |a| (a, b))).collect();
@@ -789,6 +791,22 @@ mod tests {
                 max_error(&f, &d)
             );
         }
+    }
+
+    /// A jitter track hundreds of pixels wide: no shared core of either kind is built (each star's histogram
+    /// would pass [`MAX_HISTOGRAM_NODES`]), so the fast method falls back as a star's own deposit does.
+    #[test]
+    fn no_shared_core_beyond_the_histogram_bound() {
+        let g = 8;
+        let n = 1000;
+        let d: Vec<f64> = (0..n).map(|j| 600.0 * j as f64 / n as f64).collect();
+        let track = Track::new(1e-3, 0.0, d.clone(), d);
+        // 600 px × 8 nodes on each side of a square box: > 2²⁴ nodes
+        for q in [0, 4] {
+            assert!(SharedCore::new(&track, 0.0, 0.9, g, q).is_none(), "Q = {q}");
+        }
+        let small = Track::new(1e-3, 0.0, vec![0.0; n], vec![0.0; n]);
+        assert!(SharedCore::new(&small, 0.0, 0.9, g, 0).is_some());
     }
 
     #[test]

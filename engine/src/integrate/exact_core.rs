@@ -70,47 +70,31 @@ impl ExactCore {
                 (a, b, fu, fv, window.weight(j))
             })
             .collect();
-        // counting sort of the interior samples by cell
-        let mut start = vec![0usize; na * nb + 1];
-        let samples: Vec<(usize, f64, f64)> = (window.first + 1..window.last)
+        // the interior samples by cell, each cell by decreasing f_u (a star's u-carries are then a prefix)
+        let mut samples: Vec<(usize, usize, f64, f64)> = (window.first + 1..window.last)
             .map(|j| {
                 let (a, b, fu, fv) = cell_of(j);
-                let c = (b - b0) as usize * na + (a - a0) as usize;
-                start[c + 1] += 1;
-                (c, fu, fv)
+                ((b - b0) as usize, (a - a0) as usize, fu, fv)
             })
             .collect();
-        for c in 0..na * nb {
-            start[c + 1] += start[c];
-        }
-        let mut slot = start.clone();
-        let (mut fu, mut fv) = (vec![0.0; samples.len()], vec![0.0; samples.len()]);
-        for &(c, u, v) in &samples {
-            (fu[slot[c]], fv[slot[c]]) = (u, v);
-            slot[c] += 1;
-        }
-        // each cell by decreasing f_u: a star's u-carries are then a prefix
-        let mut pairs: Vec<(f64, f64)> = Vec::new();
-        for c in 0..na * nb {
-            let (s, e) = (start[c], start[c + 1]);
-            pairs.clear();
-            pairs.extend(fu[s..e].iter().copied().zip(fv[s..e].iter().copied()));
-            pairs.sort_by(|x, y| y.0.total_cmp(&x.0));
-            for (k, &(u, v)) in pairs.iter().enumerate() {
-                (fu[s + k], fv[s + k]) = (u, v);
+        samples.sort_by(|x, y| (x.0, x.1).cmp(&(y.0, y.1)).then(y.2.total_cmp(&x.2)));
+        let fu: Vec<f64> = samples.iter().map(|x| x.2).collect();
+        let fv: Vec<f64> = samples.iter().map(|x| x.3).collect();
+        let mut cells = Vec::new();
+        let mut s = 0;
+        while s < samples.len() {
+            let cell = (samples[s].0, samples[s].1);
+            let e = s + samples[s..]
+                .iter()
+                .position(|x| (x.0, x.1) != cell)
+                .unwrap_or(samples.len() - s);
+            let mut t = [0.0; 4];
+            for (u, v) in fu[s..e].iter().zip(&fv[s..e]) {
+                t = [t[0] + 1.0, t[1] + u, t[2] + v, t[3] + u * v];
             }
+            cells.push((cell.1, cell.0, s, e, t));
+            s = e;
         }
-        let cells = (0..na * nb)
-            .filter(|&c| start[c + 1] > start[c])
-            .map(|c| {
-                let (s, e) = (start[c], start[c + 1]);
-                let mut t = [0.0; 4];
-                for (u, v) in fu[s..e].iter().zip(&fv[s..e]) {
-                    t = [t[0] + 1.0, t[1] + u, t[2] + v, t[3] + u * v];
-                }
-                (c % na, c / na, s, e, t)
-            })
-            .collect();
         Some(Self {
             g: gf,
             a0,
