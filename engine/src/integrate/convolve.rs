@@ -8,6 +8,10 @@
 //! multiply-add, no horizontal sums. It is the same sum as a dot product per pixel (exact: every term is
 //! the bilinear K look-up of [`super::kernel`]), in a fixed order that does not depend on the machine: the
 //! AVX2 build selected at run time and the portable one give the same bits (no fused multiply-adds).
+//!
+//! Histogram rows are taken by their residue mod G: rows G apart read the same K rows one pixel row
+//! apart, so what one row loads is still in the L1 cache for the next (7 % less time than row by row on the
+//! realistic-ACE bulge field). A one-row stamp (a row's own histogram) is summed in blocks of one row, not four.
 
 use super::kernel::PixelKernel;
 
@@ -109,6 +113,56 @@ fn add_convolution_body(
     p: &Polyphase,
     half: usize,
 ) {
+    if ny == 1 {
+        add_row_blocks(out, nx, hist, p, half);
+    } else {
+        // histogram rows taken by residue mod G: rows G apart read the same K rows (pixel row i of row
+        // v + G reads what pixel row i − 1 of row v does), so the K lines one row loads are still in
+        // the nearest cache for the next
+        let mut order: Vec<&(usize, usize, usize, &[f64])> = hist.runs.iter().collect();
+        order.sort_by_key(|run| (run.0 % p.g, run.0));
+        add_blocks(out, nx, ny, hist, &order, p, half);
+    }
+}
+
+/// K's residue columns at `s … s + 7` of one row.
+#[inline(always)]
+fn block(row: &[f64], s: usize) -> [f64; LANES] {
+    row[s..s + LANES]
+        .try_into()
+        .expect("a block of LANES look-ups")
+}
+
+/// Where a histogram row meets a block of pixels: its columns `c_lo ..= c_hi` whose K blocks meet the
+/// table, and the residue position (q, ρ) of the first (`t − c = G·q + ρ`); `None` when none does.
+#[inline(always)]
+fn columns(t: i64, a: usize, b: usize, m: i64, g: i64) -> Option<(usize, usize, i64, i64)> {
+    // −7 ≤ q < m
+    let c_lo = (a as i64).max(t - m * g + 1);
+    let c_hi = (b as i64 - 1).min(t + (LANES as i64 - 1) * g);
+    if c_hi < c_lo {
+        return None;
+    }
+    let d = t - c_lo;
+    Some((
+        (c_lo - a as i64) as usize,
+        (c_hi - a as i64) as usize,
+        d.div_euclid(g),
+        d.rem_euclid(g),
+    ))
+}
+
+/// The stamp in blocks of [`ROWS`] pixel rows × [`LANES`] pixels.
+#[inline(always)]
+fn add_blocks(
+    out: &mut [f64],
+    nx: usize,
+    ny: usize,
+    hist: &RowRuns<'_>,
+    order: &[&(usize, usize, usize, &[f64])],
+    p: &Polyphase,
+    half: usize,
+) {
     let (g, h) = (p.g as i64, half as i64);
     let (m, len) = (p.m as i64, p.len);
     for iy0 in (0..ny).step_by(ROWS) {
@@ -117,27 +171,16 @@ fn add_convolution_body(
                 ([0.0f64; LANES], [0.0; LANES], [0.0; LANES], [0.0; LANES]);
             // K column of pixel ix0 + i for histogram column c: t − c + i·G with t = ix0·G + h − u0
             let t = ix0 as i64 * g + h - hist.u0;
-            for &(r, a, b, values) in &hist.runs {
+            for &&(r, a, b, values) in order {
                 let ky0 = iy0 as i64 * g + h - (hist.v0 + r as i64);
                 let rows: [&[f64]; ROWS] = std::array::from_fn(|k| p.row(ky0 + k as i64 * g));
                 if rows.iter().all(|row| row.as_ptr() == p.zeros.as_ptr()) {
                     continue;
                 }
-                // columns whose block of residue-columns q … q + 7 meets the table: −7 ≤ q < m, with
-                // t − c = G·q + ρ
-                let c_lo = (a as i64).max(t - m * g + 1);
-                let c_hi = (b as i64 - 1).min(t + (LANES as i64 - 1) * g);
-                if c_hi < c_lo {
+                let Some((i0, i1, mut q, mut rho)) = columns(t, a, b, m, g) else {
                     continue;
-                }
-                let d = t - c_lo;
-                let (mut q, mut rho) = (d.div_euclid(g), d.rem_euclid(g));
-                let block = |row: &[f64], s: usize| -> [f64; LANES] {
-                    row[s..s + LANES]
-                        .try_into()
-                        .expect("a block of LANES look-ups")
                 };
-                for &hv in &values[(c_lo - a as i64) as usize..=(c_hi - a as i64) as usize] {
+                for &hv in &values[i0..=i1] {
                     let s = rho as usize * len + (q + PAD as i64) as usize;
                     let (k0, k1, k2, k3) = (
                         block(rows[0], s),
@@ -168,6 +211,41 @@ fn add_convolution_body(
                     *o += v;
                 }
             }
+        }
+    }
+}
+
+/// A one-row stamp in blocks of [`LANES`] pixels (a row's own histogram: no rows to share).
+#[inline(always)]
+fn add_row_blocks(out: &mut [f64], nx: usize, hist: &RowRuns<'_>, p: &Polyphase, half: usize) {
+    let (g, h) = (p.g as i64, half as i64);
+    let (m, len) = (p.m as i64, p.len);
+    for ix0 in (0..nx).step_by(LANES) {
+        let mut acc = [0.0f64; LANES];
+        let t = ix0 as i64 * g + h - hist.u0;
+        for &(r, a, b, values) in &hist.runs {
+            let row = p.row(h - (hist.v0 + r as i64));
+            if row.as_ptr() == p.zeros.as_ptr() {
+                continue;
+            }
+            let Some((i0, i1, mut q, mut rho)) = columns(t, a, b, m, g) else {
+                continue;
+            };
+            for &hv in &values[i0..=i1] {
+                let k0 = block(row, rho as usize * len + (q + PAD as i64) as usize);
+                for i in 0..LANES {
+                    acc[i] += hv * k0[i];
+                }
+                rho -= 1;
+                if rho < 0 {
+                    rho = g - 1;
+                    q -= 1;
+                }
+            }
+        }
+        let w = LANES.min(nx - ix0);
+        for (o, v) in out[ix0..ix0 + w].iter_mut().zip(&acc) {
+            *o += v;
         }
     }
 }
