@@ -421,12 +421,36 @@ impl SharedCore {
         self.g
     }
 
+    /// A reader for stars taken one after another (see [`CoreReader`]).
+    pub fn reader(&self) -> CoreReader<'_> {
+        CoreReader {
+            core: self,
+            cursor: super::exact_core::Cursor::default(),
+        }
+    }
+}
+
+/// A reading of a [`SharedCore`] by one run of stars taken in order: the exact kind's
+/// [`super::exact_core::Cursor`] follows their phases (each star read costs the samples whose carry its
+/// phase changes, not a pass over all). One reader per run, so the stamps do not depend on how runs are
+/// spread over threads.
+pub struct CoreReader<'a> {
+    pub core: &'a SharedCore,
+    cursor: super::exact_core::Cursor,
+}
+
+impl CoreReader<'_> {
+    /// (samples moved, fresh passes) of the exact kind's cursor so far.
+    pub fn cursor_work(&self) -> (usize, usize) {
+        (self.cursor.moved, self.cursor.passes)
+    }
+
     /// The shared window's histogram for a star at `(ox, oy)` px from a stamp origin, in a box that holds
     /// every sample of the track: exact, or the four phase tables around its phase interpolated.
-    fn histogram_at(&self, ox_px: f64, oy_px: f64, track: &Track) -> Histogram {
-        let (q, u0, v0, nu, nv, tables) = match &self.kind {
+    fn histogram_at(&mut self, ox_px: f64, oy_px: f64, track: &Track) -> Histogram {
+        let (q, u0, v0, nu, nv, tables) = match &self.core.kind {
             CoreKind::Exact(core) => {
-                let t = core.histogram_at(ox_px, oy_px, track.summary().extent);
+                let t = core.histogram_with(&mut self.cursor, ox_px, oy_px, track.summary().extent);
                 return Histogram {
                     u0: t.u0,
                     v0: t.v0,
@@ -435,7 +459,7 @@ impl SharedCore {
                     data: t.data,
                     ox_px,
                     oy_px,
-                    g: self.g as f64,
+                    g: self.core.g as f64,
                 };
             }
             CoreKind::Phases {
@@ -447,7 +471,7 @@ impl SharedCore {
                 tables,
             } => (*q, *u0, *v0, *nu, *nv, tables),
         };
-        let gf = self.g as f64;
+        let gf = self.core.g as f64;
         let (xu, xv) = (ox_px * gf, oy_px * gf);
         let (nu_s, nv_s) = (xu.floor(), xv.floor());
         let qf = q as f64;
@@ -494,7 +518,7 @@ pub fn fast_stamp(
     track: &Track,
     timing: &ReadoutTiming,
     bounds: (i64, i64, usize, usize),
-    core: Option<&SharedCore>,
+    core: Option<&mut CoreReader<'_>>,
 ) -> Stamp {
     let (x0, y0, nx, ny) = bounds;
     let windows: Vec<(f64, f64)> = (0..ny)
@@ -519,9 +543,9 @@ pub fn fast_stamp(
     let (ox, oy) = (star.x_px - x0 as f64, star.y_px - y0 as f64);
     let base = match core {
         // the frame's shared part interpolated, then the rest of the stamp's window exactly
-        Some(c) if c.window.first >= common.first && c.window.last <= common.last => {
+        Some(c) if c.core.window.first >= common.first && c.core.window.last <= common.last => {
             let mut h = c.histogram_at(ox, oy, track);
-            for_each_extra(&common, &c.window, |j, e| h.add_sample(track, j, e));
+            for_each_extra(&common, &c.core.window, |j, e| h.add_sample(track, j, e));
             h
         }
         // the box of the whole track holds every window's samples
@@ -688,7 +712,10 @@ mod tests {
             let core = SharedCore::new(&track, a, b, k.nodes_per_px, q).expect("core");
             let bnd = stamp_bounds(s.x_px, s.y_px, Some(&track), 6, 200).expect("on");
             let d = direct_stamp(s, &k, &track, &t, bnd);
-            (fast_stamp(s, &k, &track, &t, bnd, Some(&core)), d)
+            (
+                fast_stamp(s, &k, &track, &t, bnd, Some(&mut core.reader())),
+                d,
+            )
         };
         // on the grid of phases
         let (f, d) = run(4, &star(4, 3.0, 7.0));
@@ -703,7 +730,7 @@ mod tests {
             let s = star(q, 0.5, 0.5);
             // the interpolated histogram has the exact deposit's weight and mean, to rounding
             let core = SharedCore::new(&track, a, b, k.nodes_per_px, q).expect("core");
-            let interpolated = core.histogram_at(s.x_px, s.y_px, &track);
+            let interpolated = core.reader().histogram_at(s.x_px, s.y_px, &track);
             let exact = Histogram::deposit(&s, &track, &core.window, (0, 0), k.nodes_per_px)
                 .expect("deposit");
             let (mi, me) = (moments(&interpolated), moments(&exact));
@@ -728,9 +755,10 @@ mod tests {
         assert!(errs[3] < 1e-4, "{errs:?}");
     }
 
-    /// The exact shared core (`deposit_phases` = 0): for stars at phases anywhere in a node — on a node, a
-    /// rounding away from the next, at random places — its histogram equals the plain deposit node by
-    /// node, and the stamp equals the direct method (no histogram at all).
+    /// The exact shared core (`deposit_phases` = 0), read by one cursor through a run of stars: at phases
+    /// anywhere in a node — on a node, a rounding away from the next, at random places far apart (fresh
+    /// passes), in small steps there and back (moves only, 300 of them) — its histogram equals the plain
+    /// deposit node by node, and the stamp equals the direct method (no histogram at all).
     #[test]
     fn exact_core_equals_the_plain_deposit_at_any_phase() {
         let psf = crate::testkit::synthetic_psf(8, 6);
@@ -740,25 +768,33 @@ mod tests {
         let t = timing(ReadoutOrder::Rolling, 2.5);
         let (a, b) = t.shared_window_s(200);
         let core = SharedCore::new(&track, a, b, g, 0).expect("core");
+        let mut reader = core.reader();
         let gf = g as f64;
-        for (i, (fx, fy)) in [
+        let mut phases = vec![
             (0.0, 0.0),
             (1.0 - 1e-13, 0.5),
             (0.37, 1.0 - 1e-13),
             (0.913, 0.071),
             (0.5, 0.5),
-        ]
-        .into_iter()
-        .enumerate()
-        {
+        ];
+        // small steps out and back, each moving a few samples; then the edge phases again after them
+        let steps: Vec<(f64, f64)> = (0..300)
+            .map(|i| {
+                let s = if i < 150 { i } else { 300 - i } as f64;
+                (0.2 + 0.004 * s, 0.9 - 0.005 * s)
+            })
+            .collect();
+        phases.extend(steps);
+        phases.extend([(0.0, 0.0), (1.0 - 1e-13, 1.0 - 1e-13), (0.21, 0.13)]);
+        for (i, &(fx, fy)) in phases.iter().enumerate() {
             let star = StarSpec {
                 x_px: 40.0 + (3.0 + fx) / gf,
-                y_px: 61.0 + (i as f64 + fy) / gf,
+                y_px: 61.0 + ((i % 7) as f64 + fy) / gf,
                 rate_e_per_s: 1000.0,
             };
             let bnd = stamp_bounds(star.x_px, star.y_px, Some(&track), 6, 200).expect("on");
             let (ox, oy) = (star.x_px - bnd.0 as f64, star.y_px - bnd.1 as f64);
-            let exact = core.histogram_at(ox, oy, &track);
+            let exact = reader.histogram_at(ox, oy, &track);
             let plain = Histogram::deposit(&star, &track, &core.window, (bnd.0, bnd.1), g)
                 .expect("deposit");
             let at = |h: &Histogram, u: i64, v: i64| {
@@ -783,14 +819,20 @@ mod tests {
                 worst < 1e-13 * total,
                 "phase ({fx}, {fy}): node error {worst:e} of {total}"
             );
-            let d = direct_stamp(&star, &k, &track, &t, bnd);
-            let f = fast_stamp(&star, &k, &track, &t, bnd, Some(&core));
-            assert!(
-                max_error(&f, &d) < 1e-12,
-                "phase ({fx}, {fy}): stamp {:e}",
-                max_error(&f, &d)
-            );
+            if i % 20 == 0 {
+                let d = direct_stamp(&star, &k, &track, &t, bnd);
+                let f = fast_stamp(&star, &k, &track, &t, bnd, Some(&mut reader));
+                assert!(
+                    max_error(&f, &d) < 1e-12,
+                    "phase ({fx}, {fy}): stamp {:e}",
+                    max_error(&f, &d)
+                );
+            }
         }
+        // both ways of reading were taken: fresh passes for the far jumps, moves for the small steps
+        let (moved, passes) = reader.cursor_work();
+        assert!((4..20).contains(&passes), "{passes} fresh passes");
+        assert!(moved > 300, "{moved} samples moved");
     }
 
     /// A jitter track hundreds of pixels wide: no shared core of either kind is built (each star's histogram

@@ -5,12 +5,13 @@
 //! at `N + D + φ`: in the cell `N + ⌊D⌋ + c` with `c = [frac D + φ ≥ 1]` and fractions `t = frac D + φ − c`
 //! per axis. Its cloud-in-cell weights are bilinear in t, so what a cell's samples give its four nodes is
 //! a linear combination of the sums `Σ (1, f_u, f_v, f_u f_v)` (f = frac D) over each of the four carry
-//! quadrants. The samples are stored cell by cell as their two fractions (16 bytes a sample, read in order),
-//! each cell sorted by decreasing f_u so that the u-carries are a prefix (a binary search); one pass sums the
-//! moments under the v-carry mask, with no scattered writes (a plain deposit computes and scatters four
-//! weights per sample). The window's two end samples (fractional weights) are
-//! deposited apart. The histogram is the same as a plain deposit (the same terms summed in another order:
-//! equal to rounding, ≈ 1e-15 relative).
+//! quadrants. Those sums are kept in a [`Cursor`] that follows the stars a thread reads: stars taken in
+//! order of phase, the next star moves only the samples whose fraction lies between its phase and the
+//! last one's from one quadrant to another (the samples sorted by each fraction make the carried ones a
+//! prefix, so the movers are the difference of two prefixes); a star far from the last is summed afresh,
+//! cell by cell. The window's two end samples (fractional weights) are deposited apart. The histogram is
+//! the same as a plain deposit (the same terms summed in another order: equal to rounding, ≈ 1e-15
+//! relative).
 
 use super::track::{Track, WindowWeights};
 
@@ -33,14 +34,39 @@ pub struct ExactCore {
     b0: i64,
     na: usize,
     nb: usize,
-    /// Occupied cells: (u-cell offset, v-cell offset, first sample, one past the last) and the moments
-    /// `Σ (1, f_u, f_v, f_u f_v)` of all its samples.
-    cells: Vec<(usize, usize, usize, usize, [f64; 4])>,
+    /// Occupied cells: (u-cell offset, v-cell offset, first sample, one past the last).
+    cells: Vec<(usize, usize, usize, usize)>,
     /// The interior samples' fractions, cell by cell.
     fu: Vec<f64>,
     fv: Vec<f64>,
     /// The window's end samples (u-cell, v-cell, f_u, f_v, weight), deposited apart.
     ends: Vec<(i64, i64, f64, f64, f64)>,
+    /// The interior samples as (cell index, f_u, f_v), by decreasing f_u and by decreasing f_v: a star's
+    /// u-carried samples are a prefix of the one, its v-carried samples of the other.
+    by_u: Vec<(u32, f64, f64)>,
+    by_v: Vec<(u32, f64, f64)>,
+}
+
+/// A running read of an [`ExactCore`] for stars taken one after another: the moments of each cell's four
+/// carry quadrants at the last star's phase. The next star's phase changes the quadrant of only the samples
+/// whose fraction lies between the two phases (found as the difference of two prefixes of `by_u`, `by_v`),
+/// so stars taken in order of phase cost a few of those moves each instead of a pass over every sample.
+/// The sums are those of a fresh pass to rounding (each move adds and subtracts the same moments; a
+/// quadrant whose count returns to 0 is reset to exact zeros), and a star far from the last is read by
+/// a fresh pass.
+#[derive(Debug, Clone, Default)]
+pub struct Cursor {
+    /// The phase the sums hold (none before the first read).
+    phase: Option<(f64, f64)>,
+    /// `by_u[..iu]` are u-carried, `by_v[..iv]` v-carried.
+    iu: usize,
+    iv: usize,
+    /// Per cell, the moments `Σ (1, f_u, f_v, f_u f_v)` of quadrants `(c_u, c_v)` = (0, 0), (1, 0), (0, 1),
+    /// (1, 1).
+    quad: Vec<[[f64; 4]; 4]>,
+    /// Samples moved and fresh passes so far (for the benchmark's report).
+    pub moved: usize,
+    pub passes: usize,
 }
 
 impl ExactCore {
@@ -88,13 +114,16 @@ impl ExactCore {
                 .iter()
                 .position(|x| (x.0, x.1) != cell)
                 .unwrap_or(samples.len() - s);
-            let mut t = [0.0; 4];
-            for (u, v) in fu[s..e].iter().zip(&fv[s..e]) {
-                t = [t[0] + 1.0, t[1] + u, t[2] + v, t[3] + u * v];
-            }
-            cells.push((cell.1, cell.0, s, e, t));
+            cells.push((cell.1, cell.0, s, e));
             s = e;
         }
+        let mut by_u: Vec<(u32, f64, f64)> = Vec::with_capacity(fu.len());
+        for (c, &(_, _, s, e)) in cells.iter().enumerate() {
+            by_u.extend((s..e).map(|j| (c as u32, fu[j], fv[j])));
+        }
+        let mut by_v = by_u.clone();
+        by_u.sort_by(|x, y| y.1.total_cmp(&x.1));
+        by_v.sort_by(|x, y| y.2.total_cmp(&x.2));
         Some(Self {
             g: gf,
             a0,
@@ -105,34 +134,78 @@ impl ExactCore {
             fu,
             fv,
             ends,
+            by_u,
+            by_v,
         })
+    }
+
+    /// A cursor for reading stars one after another ([`ExactCore::histogram_with`]).
+    pub fn cursor(&self) -> Cursor {
+        Cursor::default()
+    }
+
+    /// Bring the cursor's quadrant sums to phase `(px, py)`: move the samples whose carry changes, or,
+    /// when they are more than a third of all, sum every cell afresh.
+    fn follow(&self, c: &mut Cursor, px: f64, py: f64) {
+        let iu = self.by_u.partition_point(|x| x.1 + px >= 1.0);
+        let iv = self.by_v.partition_point(|x| x.2 + py >= 1.0);
+        let Some((_, py0)) = c.phase else {
+            return self.fresh(c, px, py, iu, iv);
+        };
+        if iu.abs_diff(c.iu) + iv.abs_diff(c.iv) > self.by_u.len() / 3 {
+            return self.fresh(c, px, py, iu, iv);
+        }
+        // u first (at the old v-phase), then v (at the new u-phase)
+        let mut moved = 0;
+        let (lo, hi, to) = (c.iu.min(iu), c.iu.max(iu), iu > c.iu);
+        for &(cell, fu, fv) in &self.by_u[lo..hi] {
+            let cv = (fv + py0 >= 1.0) as usize;
+            move_sample(&mut c.quad[cell as usize], fu, fv, 2 * cv, 2 * cv + 1, to);
+        }
+        moved += hi - lo;
+        let (lo, hi, to) = (c.iv.min(iv), c.iv.max(iv), iv > c.iv);
+        for &(cell, fu, fv) in &self.by_v[lo..hi] {
+            let cu = (fu + px >= 1.0) as usize;
+            move_sample(&mut c.quad[cell as usize], fu, fv, cu, cu + 2, to);
+        }
+        moved += hi - lo;
+        c.moved += moved;
+        (c.iu, c.iv, c.phase) = (iu, iv, Some((px, py)));
+    }
+
+    /// The quadrant sums at phase `(px, py)`, every sample summed.
+    fn fresh(&self, c: &mut Cursor, px: f64, py: f64, iu: usize, iv: usize) {
+        c.quad.clear();
+        c.quad.resize(self.cells.len(), [[0.0; 4]; 4]);
+        for (q, &(_, _, s, e)) in c.quad.iter_mut().zip(&self.cells) {
+            for (&u, &v) in self.fu[s..e].iter().zip(&self.fv[s..e]) {
+                let k = (u + px >= 1.0) as usize + 2 * (v + py >= 1.0) as usize;
+                let m = [1.0, u, v, u * v];
+                for (t, mi) in q[k].iter_mut().zip(m) {
+                    *t += mi;
+                }
+            }
+        }
+        c.passes += 1;
+        (c.iu, c.iv, c.phase) = (iu, iv, Some((px, py)));
     }
 
     /// The shared window's histogram of a star at `(ox, oy)` px from a stamp origin, in a box that also
     /// holds every other sample of the track whose displacements lie in `extent` (px: min x, max x, min y,
-    /// max y), so the rest of the star's window can be added to it sample by sample.
-    #[allow(unsafe_code)] // calling the AVX2 build after checking the processor has AVX2: nothing else
-    pub fn histogram_at(&self, ox_px: f64, oy_px: f64, extent: (f64, f64, f64, f64)) -> NodeTable {
-        #[cfg(target_arch = "x86_64")]
-        if std::is_x86_feature_detected!("avx2") {
-            // SAFETY: the processor has AVX2 (checked just above).
-            return unsafe { self.histogram_at_avx2(ox_px, oy_px, extent) };
-        }
-        self.histogram_at_body(ox_px, oy_px, extent)
-    }
-
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
-    fn histogram_at_avx2(&self, ox_px: f64, oy_px: f64, extent: (f64, f64, f64, f64)) -> NodeTable {
-        self.histogram_at_body(ox_px, oy_px, extent)
-    }
-
-    #[inline(always)]
-    fn histogram_at_body(&self, ox_px: f64, oy_px: f64, extent: (f64, f64, f64, f64)) -> NodeTable {
+    /// max y), so the rest of the star's window can be added to it sample by sample. `cursor` holds the
+    /// last star's quadrant sums and follows this star's phase.
+    pub fn histogram_with(
+        &self,
+        cursor: &mut Cursor,
+        ox_px: f64,
+        oy_px: f64,
+        extent: (f64, f64, f64, f64),
+    ) -> NodeTable {
         let (xu, xv) = (ox_px * self.g, oy_px * self.g);
         let (nu_s, nv_s) = (xu.floor(), xv.floor());
         let (px, py) = (xu - nu_s, xv - nv_s);
         let (nu_i, nv_i) = (nu_s as i64, nv_s as i64);
+        self.follow(cursor, px, py);
         // the box: this window's cells with their carries and a node of margin, and every sample of the
         // track (the same arithmetic as a sample's own deposit, with a node of margin)
         let node = |o: f64, d: f64| ((o + d) * self.g).floor() as i64;
@@ -143,7 +216,7 @@ impl ExactCore {
         let (nu, nv) = ((u1 - u0 + 1) as usize, (v1 - v0 + 1) as usize);
         let mut data = vec![0.0; nu * nv];
         // what the samples of cell (a, b) carried by (cu, cv) with moments m give the cell's four nodes
-        let mut put = |a: i64, b: i64, cu: i64, cv: i64, m: [f64; 4]| {
+        let mut put = |a: i64, b: i64, cu: i64, cv: i64, m: &[f64; 4]| {
             if m[0] == 0.0 {
                 return;
             }
@@ -158,23 +231,15 @@ impl ExactCore {
             data[i + nu] += sv - suv;
             data[i + nu + 1] += suv;
         };
-        for &(ca, cb, s, e, total) in &self.cells {
-            let (sx, sy, sxy) = carried_sums(&self.fu[s..e], &self.fv[s..e], px, py);
+        for (&(ca, cb, _, _), q) in self.cells.iter().zip(&cursor.quad) {
             let (a, b) = (self.a0 + ca as i64, self.b0 + cb as i64);
-            put(
-                a,
-                b,
-                0,
-                0,
-                std::array::from_fn(|k| total[k] - sx[k] - sy[k] + sxy[k]),
-            );
-            put(a, b, 1, 0, std::array::from_fn(|k| sx[k] - sxy[k]));
-            put(a, b, 0, 1, std::array::from_fn(|k| sy[k] - sxy[k]));
-            put(a, b, 1, 1, sxy);
+            for (k, m) in q.iter().enumerate() {
+                put(a, b, (k & 1) as i64, (k >> 1) as i64, m);
+            }
         }
         for &(a, b, fu, fv, w) in &self.ends {
             let (cu, cv) = ((fu + px >= 1.0) as i64, (fv + py >= 1.0) as i64);
-            put(a, b, cu, cv, [w, w * fu, w * fv, w * fu * fv]);
+            put(a, b, cu, cv, &[w, w * fu, w * fv, w * fu * fv]);
         }
         NodeTable {
             u0,
@@ -186,27 +251,17 @@ impl ExactCore {
     }
 }
 
-/// The moments `Σ (1, f_u, f_v, f_u f_v)` of the samples that carry along u (`f_u + φ_u ≥ 1`: a prefix, the
-/// cell sorted by decreasing f_u), along v (`f_v + φ_v ≥ 1`), and both ways.
+/// Move one sample's moments from quadrant `from` to `to_k` (`forward`), or back.
 #[inline(always)]
-fn carried_sums(fu: &[f64], fv: &[f64], px: f64, py: f64) -> ([f64; 4], [f64; 4], [f64; 4]) {
-    let nx = fu.partition_point(|&f| f + px >= 1.0);
-    let (mut sx, mut sxy, mut rest) = ([0.0; 4], [0.0; 4], [0.0; 4]);
-    for (&u, &v) in fu[..nx].iter().zip(&fv[..nx]) {
-        let m = [1.0, u, v, u * v];
-        let c = if v + py >= 1.0 { 1.0 } else { 0.0 };
-        for k in 0..4 {
-            sx[k] += m[k];
-            sxy[k] += c * m[k];
-        }
+fn move_sample(q: &mut [[f64; 4]; 4], fu: f64, fv: f64, from: usize, to_k: usize, forward: bool) {
+    let (src, dst) = if forward { (from, to_k) } else { (to_k, from) };
+    let m = [1.0, fu, fv, fu * fv];
+    for k in 0..4 {
+        q[src][k] -= m[k];
+        q[dst][k] += m[k];
     }
-    for (&u, &v) in fu[nx..].iter().zip(&fv[nx..]) {
-        let m = [1.0, u, v, u * v];
-        let c = if v + py >= 1.0 { 1.0 } else { 0.0 };
-        for k in 0..4 {
-            rest[k] += c * m[k];
-        }
+    if q[src][0] == 0.0 {
+        // the count is exact: an emptied quadrant holds exact zeros, not the rounding of its moves
+        q[src] = [0.0; 4];
     }
-    let sy = std::array::from_fn(|k| sxy[k] + rest[k]);
-    (sx, sy, sxy)
 }
