@@ -503,13 +503,55 @@ impl CoreReader<'_> {
     }
 }
 
+/// Stamp rows whose shared window is summed as one histogram ⊛ K (the blocked convolution's rows).
+const BLOCK_ROWS: usize = 4;
+
+/// A stamp's samples of one window beyond another, deposited in a histogram of their own and summed over
+/// some of the stamp's rows.
+struct ExtraSum<'a> {
+    star: &'a StarSpec,
+    kernel: &'a PixelKernel,
+    track: &'a Track,
+    origin: (i64, i64),
+}
+
+impl ExtraSum<'_> {
+    /// Add `(outer − inner) ⊛ K` to the `rows` stamp rows from `iy0` (`out`: those rows).
+    fn add(
+        &self,
+        out: &mut [f64],
+        iy0: usize,
+        rows: usize,
+        outer: &super::track::WindowWeights,
+        inner: &super::track::WindowWeights,
+    ) {
+        let mut extra: Vec<(usize, f64)> = Vec::new();
+        for_each_extra(outer, inner, |j, e| extra.push((j, e)));
+        let g = self.kernel.nodes_per_px;
+        let Some(mut h) = Histogram::empty_in(
+            self.star,
+            sample_extent(self.track, extra.iter().map(|&(j, _)| j..=j)),
+            self.origin,
+            g,
+        ) else {
+            return;
+        };
+        for &(j, e) in &extra {
+            h.add_sample(self.track, j, e);
+        }
+        let nx = out.len() / rows;
+        add_convolution(out, nx, rows, &h.runs((iy0 * g) as i64), self.kernel);
+    }
+}
+
 /// Fast method: shared windows by histogram ⊛ K, plus each pixel's own edge samples.
 ///
-/// Two levels of sharing, both exact: the window all pixels of the stamp share is deposited once (its
-/// histogram H); each stamp row deposits, in a small histogram E of its own, the samples its pixels share
-/// beyond that (under the rolling readout a row's pixels start within one row time, ≈ 4 samples, of each
-/// other, where the whole stamp spans ≈ 4 samples per row); a pixel's value is `(H + E) ⊛ K` at its centre
-/// plus K looked up for its own few samples beyond its row's window. With a [`SharedCore`] the stamp's
+/// Three levels of sharing, all exact: the window all pixels of the stamp share is deposited once (its
+/// histogram H); each block of four stamp rows deposits, in a small histogram B of its own, the samples its
+/// pixels share beyond that, and each row, in a smaller one E, those its pixels share beyond its block's
+/// (under the rolling readout a row's pixels start within one row time, ≈ 4 samples, of each other, where
+/// the whole stamp spans ≈ 4 samples per row); a pixel's value is `(H + B + E) ⊛ K` at its centre plus K
+/// looked up for its own few samples beyond its row's window. With a [`SharedCore`] the stamp's
 /// histogram starts from the frame's shared part read at the star's phase (exactly, or interpolated
 /// between deposit phases).
 pub fn fast_stamp(
@@ -557,39 +599,45 @@ pub fn fast_stamp(
             None => return direct_stamp(star, kernel, track, timing, bounds),
         },
     };
-    let gi = g as i64;
     let mut data = vec![0.0; nx * ny];
     add_convolution(&mut data, nx, ny, &base.runs(0), kernel);
-    for iy in 0..ny {
-        let y = y0 + iy as i64;
-        let row_windows = &windows[iy * nx..(iy + 1) * nx];
-        let (ra, rb) = shared(row_windows);
-        // the row's shared window holds the stamp's (ra ≤ a_max, rb ≥ b_min): its extra samples
-        let row = track.window(ra, rb);
-        let mut extra: Vec<(usize, f64)> = Vec::new();
-        for_each_extra(&row, &common, |j, e| extra.push((j, e)));
-        let out_row = &mut data[iy * nx..(iy + 1) * nx];
-        if let Some(mut h) = Histogram::empty_in(
-            star,
-            sample_extent(track, extra.iter().map(|&(j, _)| j..=j)),
-            origin,
-            g,
-        ) {
-            for &(j, e) in &extra {
-                h.add_sample(track, j, e);
+    let extra = ExtraSum {
+        star,
+        kernel,
+        track,
+        origin,
+    };
+    for iy0 in (0..ny).step_by(BLOCK_ROWS) {
+        let rows = BLOCK_ROWS.min(ny - iy0);
+        // the window these rows share holds the stamp's: its extra samples, summed over the rows at once
+        let (ba, bb) = shared(&windows[iy0 * nx..(iy0 + rows) * nx]);
+        let block = track.window(ba, bb);
+        extra.add(
+            &mut data[iy0 * nx..(iy0 + rows) * nx],
+            iy0,
+            rows,
+            &block,
+            &common,
+        );
+        for iy in iy0..iy0 + rows {
+            let y = y0 + iy as i64;
+            let row_windows = &windows[iy * nx..(iy + 1) * nx];
+            let (ra, rb) = shared(row_windows);
+            // the row's shared window holds its block's: the row's own extra samples
+            let row = track.window(ra, rb);
+            let out_row = &mut data[iy * nx..(iy + 1) * nx];
+            extra.add(out_row, iy, 1, &row, &block);
+            for (ix, out) in out_row.iter_mut().enumerate() {
+                let x = x0 + ix as i64;
+                let mut acc = *out;
+                // this pixel's samples outside its row's window
+                let own = track.window(row_windows[ix].0, row_windows[ix].1);
+                let (bx, by) = (x as f64 - star.x_px, y as f64 - star.y_px);
+                for_each_extra(&own, &row, |j, e| {
+                    acc += e * kernel.eval(bx - track.dx_px[j], by - track.dy_px[j]);
+                });
+                *out = acc * star.rate_e_per_s * track.dt_s;
             }
-            add_convolution(out_row, nx, 1, &h.runs(iy as i64 * gi), kernel);
-        }
-        for (ix, out) in out_row.iter_mut().enumerate() {
-            let x = x0 + ix as i64;
-            let mut acc = *out;
-            // this pixel's samples outside its row's window
-            let own = track.window(row_windows[ix].0, row_windows[ix].1);
-            let (bx, by) = (x as f64 - star.x_px, y as f64 - star.y_px);
-            for_each_extra(&own, &row, |j, e| {
-                acc += e * kernel.eval(bx - track.dx_px[j], by - track.dy_px[j]);
-            });
-            *out = acc * star.rate_e_per_s * track.dt_s;
         }
     }
     Stamp {
