@@ -584,7 +584,8 @@ pub fn fast_stamp(
     let origin = (x0, y0);
     let (ox, oy) = (star.x_px - x0 as f64, star.y_px - y0 as f64);
     let base = match core {
-        // the frame's shared part interpolated, then the rest of the stamp's window exactly
+        // the frame's shared part read at the star's phase (exactly, or interpolated), then the rest of the
+        // stamp's window sample by sample
         Some(c) if c.core.window.first >= common.first && c.core.window.last <= common.last => {
             let mut h = c.histogram_at(ox, oy, track);
             for_each_extra(&common, &c.core.window, |j, e| h.add_sample(track, j, e));

@@ -64,7 +64,7 @@ pub struct Cursor {
     /// Per cell, the moments `Σ (1, f_u, f_v, f_u f_v)` of quadrants `(c_u, c_v)` = (0, 0), (1, 0), (0, 1),
     /// (1, 1).
     quad: Vec<[[f64; 4]; 4]>,
-    /// Samples moved and fresh passes so far (for the benchmark's report).
+    /// Samples moved and fresh passes so far (what a test reads to see that both ways of reading ran).
     pub moved: usize,
     pub passes: usize,
 }
@@ -96,7 +96,9 @@ impl ExactCore {
                 (a, b, fu, fv, window.weight(j))
             })
             .collect();
-        // the interior samples by cell, each cell by decreasing f_u (a star's u-carries are then a prefix)
+        // the interior samples by cell; within a cell by decreasing f_u — no longer needed by the cursor (it
+        // finds the carried samples in `by_u`, `by_v`), kept because it fixes the order a fresh pass sums them
+        // in, and so the rounding of every image made since
         let mut samples: Vec<(usize, usize, f64, f64)> = (window.first + 1..window.last)
             .map(|j| {
                 let (a, b, fu, fv) = cell_of(j);
