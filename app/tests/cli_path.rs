@@ -79,7 +79,7 @@ fn worker_frame(cfg: &Config, index: usize, cm: Countermeasure) -> FrameResult {
 /// The image, its truth and its file written once; both paths analyse exposure `INDEX` of it.
 const INDEX: usize = 1;
 
-fn written_image(name: &str) -> (Config, std::path::PathBuf, std::path::PathBuf) {
+fn written_image(name: &str) -> (Config, engine::testkit::Scratch, std::path::PathBuf) {
     let cfg = small_config();
     let dir = temp_dir(name);
     let sim = Session::new().new_simulator(&cfg).expect("a simulator");

@@ -99,14 +99,38 @@ pub fn software_gpu() -> Option<GpuIntegrator> {
     }
 }
 
-/// A fresh, empty scratch directory for one test (under the system temporary directory).
-pub fn temp_dir(name: &str) -> std::path::PathBuf {
+/// A fresh, empty scratch directory for one test (under the system temporary directory), removed with
+/// everything in it when the value is dropped — at the test's end, passed or panicked.
+pub fn temp_dir(name: &str) -> Scratch {
     let d = std::env::temp_dir().join(format!("jsim-test-{name}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&d);
     if let Err(e) = std::fs::create_dir_all(&d) {
         panic!("cannot create {}: {e}", d.display());
     }
-    d
+    Scratch(d)
+}
+
+/// A test's scratch directory: derefs to its path; removed (recursively) on drop.
+#[derive(Debug)]
+pub struct Scratch(std::path::PathBuf);
+
+impl std::ops::Deref for Scratch {
+    type Target = std::path::Path;
+    fn deref(&self) -> &std::path::Path {
+        &self.0
+    }
+}
+
+impl AsRef<std::path::Path> for Scratch {
+    fn as_ref(&self) -> &std::path::Path {
+        &self.0
+    }
+}
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
 }
 
 /// A measured star matched to truth star `truth`, fitted at `(x + dx, y + dy)` for a true position `(x, y)`

@@ -8,8 +8,10 @@ fn jsim() -> Command {
     Command::new(env!("CARGO_BIN_EXE_jsim"))
 }
 
+/// A fresh, empty scratch directory for one test, in Cargo's scratch area for integration tests (`target/tmp`).
 fn temp(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("jsim-cli-{name}-{}", std::process::id()));
+    let d = Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .join(format!("jsim-cli-{name}-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&d);
     std::fs::create_dir_all(&d).expect("tmp");
     d
@@ -157,6 +159,38 @@ fn bad_values_are_named_errors_and_write_nothing() {
         stderr_of(&out)
     );
     assert!(!exp_dir.exists());
+}
+
+/// A run that probes for a GPU with no `XDG_RUNTIME_DIR` set prints no Mesa warning and leaves nothing in
+/// the temporary directory (the CLI points the variable at it instead of creating a directory per run).
+#[test]
+fn a_gpu_probe_leaves_the_temporary_directory_as_it_was() {
+    let dir = temp("xdg");
+    let cfg = small_toml(&dir);
+    let tmp = dir.join("tmp");
+    std::fs::create_dir_all(&tmp).expect("tmp");
+    let out = jsim()
+        .env_remove("XDG_RUNTIME_DIR")
+        .env("TMPDIR", &tmp)
+        .args(["simulate", "--config"])
+        .arg(&cfg)
+        .args(["--images", "1", "--backend", "auto", "--out"])
+        .arg(dir.join("sim"))
+        .output()
+        .expect("run");
+    assert!(out.status.success(), "{}", stderr_of(&out));
+    assert!(
+        !stderr_of(&out).contains("XDG_RUNTIME_DIR"),
+        "{}",
+        stderr_of(&out)
+    );
+    let left: Vec<_> = std::fs::read_dir(&tmp)
+        .expect("read tmp")
+        .flatten()
+        .map(|e| e.file_name())
+        .collect();
+    assert!(left.is_empty(), "left behind in TMPDIR: {left:?}");
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]

@@ -26,9 +26,11 @@ fn jsim() -> Command {
     Command::new(env!("CARGO_BIN_EXE_jsim"))
 }
 
-/// A fresh, empty scratch directory for one test.
+/// A fresh, empty scratch directory for one test, in Cargo's scratch area for integration tests
+/// (`target/tmp`: the quick sweep's reference is shared by several tests, so nothing removes it at a test's end).
 fn scratch(name: &str) -> PathBuf {
-    let d = std::env::temp_dir().join(format!("jsim-sweep-test-{}-{name}", std::process::id()));
+    let d = Path::new(env!("CARGO_TARGET_TMPDIR"))
+        .join(format!("jsim-sweep-test-{}-{name}", std::process::id()));
     let _ = std::fs::remove_dir_all(&d);
     std::fs::create_dir_all(&d).expect("scratch dir");
     d

@@ -685,8 +685,7 @@ mod tests {
 
     #[test]
     fn a_primary_image_has_no_extname_and_every_table_column_a_unit() {
-        let dir = std::env::temp_dir().join(format!("jsim-fits-meta-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).expect("dir");
+        let dir = crate::testkit::temp_dir("fits-meta");
         let path = dir.join("m.fits");
         let data = vec![0.0f32; 4];
         write(
@@ -726,8 +725,7 @@ mod tests {
 
     #[test]
     fn a_header_double_reads_back_as_as_header_f64_says() {
-        let dir = std::env::temp_dir().join(format!("jsim-fits-f64-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).expect("dir");
+        let dir = crate::testkit::temp_dir("fits-f64");
         let path = dir.join("k.fits");
         let values = [471.269_843_752_123_4, 1.0 / 3.0, 2.0f64.sqrt() * 1e-7, 12.5];
         let cards: Vec<Card> = values
@@ -745,8 +743,7 @@ mod tests {
 
     #[test]
     fn round_trip_image_table_and_text() {
-        let dir = std::env::temp_dir().join(format!("jsim-fits-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).expect("tmp");
+        let dir = crate::testkit::temp_dir("fits");
         let path = dir.join("t.fits");
         let (nx, ny) = (5usize, 3usize);
         let img: Vec<u16> = (0..15).map(|v| v * 1000).collect();

@@ -181,8 +181,7 @@ mod tests {
 
     #[test]
     fn catalogue_parsing_and_errors() {
-        let dir = std::env::temp_dir().join(format!("jsim-cat-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).expect("tmp");
+        let dir = crate::testkit::temp_dir("catalogue");
         let good = dir.join("good.csv");
         std::fs::write(
             &good,

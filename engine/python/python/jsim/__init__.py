@@ -20,10 +20,11 @@ import os as _os
 import tempfile as _tempfile
 
 # Mesa's Vulkan loader prints "XDG_RUNTIME_DIR is invalid or not set" when the engine probes for a GPU
-# without a session directory: harmless but alarming. Give it a private one (as the jsim CLI does), only
-# when none is set.
+# without a session directory: harmless but alarming. The check is only that the variable names an absolute
+# path, so point it at the system temporary directory (as the jsim CLI does) — nothing is created, nothing
+# left behind — only when none is set.
 if not _os.environ.get("XDG_RUNTIME_DIR"):
-    _os.environ["XDG_RUNTIME_DIR"] = _tempfile.mkdtemp(prefix="jsim-xdg-")
+    _os.environ["XDG_RUNTIME_DIR"] = _tempfile.gettempdir()
 
 from ._jsim import (  # noqa: F401, E402
     COUNTERMEASURES,

@@ -416,13 +416,15 @@ fn parse_crowding(s: &str) -> Result<engine::analysis::crowding::Crowding, Strin
     engine::analysis::crowding::Crowding::parse(s)
 }
 
-/// Mesa's Vulkan loader prints "XDG_RUNTIME_DIR is invalid or not set" when probing for a GPU without a
-/// session directory: harmless, but alarming. Give it a private one before any thread exists.
+/// Mesa's Vulkan loader (its Wayland probe) prints "XDG_RUNTIME_DIR is invalid or not set" when probing for a
+/// GPU without a session directory: harmless, but alarming. Its check is only that the variable names an
+/// absolute path, so point it at the system temporary directory — nothing is created, nothing left behind.
+/// Done before any thread exists.
 #[allow(unsafe_code)]
 fn quiet_mesa() {
     if std::env::var_os("XDG_RUNTIME_DIR").is_none() {
-        let dir = std::env::temp_dir().join(format!("jsim-xdg-{}", std::process::id()));
-        if std::fs::create_dir_all(&dir).is_ok() {
+        let dir = std::env::temp_dir();
+        if dir.is_absolute() && dir.is_dir() {
             // SAFETY: called first thing in main, before any other thread is started.
             unsafe { std::env::set_var("XDG_RUNTIME_DIR", &dir) };
         }
