@@ -362,8 +362,9 @@ fn jsim_analyze_on_a_saved_crowded_exposure_gives_jsim_crowdeds_bins() {
                 None => l.split(',').collect::<Vec<_>>(),
             })
             .filter(|c| c[1] == cm)
+            // the columns both write (the undetected stars' shifts that follow are `jsim crowded`'s alone)
             .map(|c| {
-                c[2..]
+                c[2..19]
                     .iter()
                     .map(|v| v.parse::<f64>().unwrap_or(f64::NAN))
                     .collect()

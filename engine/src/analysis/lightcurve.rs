@@ -360,7 +360,7 @@ mod tests {
         let (nx, ny, sig, flux, sky) = (64usize, 64usize, 1.6, 1.0e5, 40.0);
         let (x0, y0) = (31.3, 32.6);
         // each pixel the integral of the Gaussian over it (erf differences)
-        let cdf = |u: f64| 0.5 * (1.0 + libm_erf(u / (sig * std::f64::consts::SQRT_2)));
+        let cdf = |u: f64| 0.5 * (1.0 + crate::testkit::erf(u / (sig * std::f64::consts::SQRT_2)));
         let mut img = vec![0.0; nx * ny];
         for j in 0..ny {
             for i in 0..nx {
@@ -407,18 +407,6 @@ mod tests {
         // off the image: none
         assert!(aperture_flux(&img, nx, ny, 1.0, 30.0, 4.0, 12.0, 18.0).is_none());
         assert!(aperture_flux(&img, nx, ny, 30.0, 30.0, 4.0, 3.0, 18.0).is_none());
-    }
-
-    /// erf by Abramowitz & Stegun 7.1.26 (|error| < 1.5·10⁻⁷): enough for a test image.
-    fn libm_erf(x: f64) -> f64 {
-        let t = 1.0 / (1.0 + 0.327_591_1 * x.abs());
-        let y = 1.0
-            - (((((1.061_405_429 * t - 1.453_152_027) * t) + 1.421_413_741) * t - 0.284_496_736)
-                * t
-                + 0.254_829_592)
-                * t
-                * (-x * x).exp();
-        y.copysign(x)
     }
 
     #[test]

@@ -287,7 +287,7 @@ pub fn analyse_crowded_image(
     let t0 = std::time::Instant::now();
     // an empty field is a result (no star, the reason in the summary's fallback), not an error: a study
     // over the focal plane reports its empty arrays; a caller that needs stars checks
-    let c = crate::analysis::crowded::analyse(img, cfg, supplied.model_psf);
+    let c = crate::analysis::crowded::analyse(img, cfg, supplied.model_psf, supplied.catalogue);
     let stars = star_results(&c.fits);
     let summary = CrowdedSummary::of(&c, t0.elapsed().as_secs_f64());
     let mut report = Report {
@@ -372,6 +372,9 @@ pub fn exact_epsf(kernel: &PixelKernel, half_px: usize) -> Epsf {
 #[derive(Debug, Clone, Copy, Default)]
 pub struct Supplied<'a> {
     pub reference: Option<&'a [(f64, f64)]>,
+    /// The reference catalogue the crowded-field analysis holds its missed stars from
+    /// (`analysis.crowded_forced_catalogue`): the product, or a simulated survey's at its default errors.
+    pub catalogue: Option<&'a [(f64, f64)]>,
     /// Reference catalogues at the catalogue errors (mas) a plan asks for, as a simulated survey draws them
     /// (used where no product is given).
     pub reference_by_error: &'a [(f64, Vec<(f64, f64)>)],

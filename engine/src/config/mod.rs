@@ -768,6 +768,10 @@ pub struct Analysis {
     /// Detection threshold of the crowded-field analysis (`analysis::crowded`): S/N of a peak in
     /// the matched-filtered (3 × 3 binomial) image, and of a residual peak against its local noise.
     pub crowded_detect_sigma: f64,
+    /// Hold the reference catalogue's stars that the crowded-field detection missed at their catalogue
+    /// positions with a fitted flux, their light subtracted from their neighbours' fits
+    /// (`analysis::crowded::forced`); no effect without a reference catalogue.
+    pub crowded_forced_catalogue: bool,
     /// Maximum Gauss–Newton iterations per star fit.
     pub fit_max_iter: usize,
     /// Sigma-clipping threshold for the ePSF stacking.
@@ -819,6 +823,7 @@ impl Default for Analysis {
             epsf_zones: 4,
             detect_sigma: 10.0,
             crowded_detect_sigma: 3.0,
+            crowded_forced_catalogue: true,
             fit_max_iter: 30,
             clip_sigma: 3.0,
             flat_field: FlatField::Calibrated {

@@ -23,7 +23,7 @@ use crate::sky::focal_plane::FocalPlane;
 use std::path::Path;
 
 /// Columns of `crowded_bins.csv`.
-pub const BINS_HEADER: [&str; 19] = [
+pub const BINS_HEADER: [&str; 22] = [
     "case",
     "countermeasure",
     "hw_lo",
@@ -43,6 +43,9 @@ pub const BINS_HEADER: [&str; 19] = [
     "merged_n",
     "merged_mas",
     "merged_crlb_mas",
+    "isolated_undetected_mas",
+    "isolated_undetected_faint_mas",
+    "isolated_predicted_mas",
 ];
 
 fn class_cells(c: &ClassStats, ratio: bool) -> Vec<Cell> {
@@ -75,6 +78,11 @@ pub fn bin_rows(case: &str, countermeasure: &str, bins: &[MagBin]) -> Vec<Vec<Ce
             r.extend(class_cells(&b.isolated, true));
             r.extend(class_cells(&b.crowded, false));
             r.extend(class_cells(&b.merged, false));
+            r.extend([
+                Cell::F(b.isolated_undetected_mas),
+                Cell::F(b.isolated_undetected_faint_mas),
+                Cell::F(b.isolated_predicted_mas()),
+            ]);
             r
         })
         .collect()

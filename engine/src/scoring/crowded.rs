@@ -17,6 +17,7 @@
 //!   Cramér–Rao bound of the same stars.
 
 use super::image::ScoredStar;
+use super::undetected::Undetected;
 use crate::analysis::crowded::neighbours::Neighbours;
 use crate::analysis::epsf::fit::flags;
 use crate::analysis::report::StarResult;
@@ -123,6 +124,31 @@ pub struct ArrayStars<'a> {
     pub stars: &'a [ScoredStar],
     pub truth: &'a [TruthRow],
     pub n_px: usize,
+    /// The array's undetected stars, for the shifts their light gives the isolated stars (none: not computed).
+    pub undetected: Option<&'a Undetected>,
+}
+
+impl ArrayStars<'_> {
+    /// (x px, y px, flux e⁻, Hw) of the truth stars on the array that no fit matched.
+    pub fn unmatched(
+        stars: &[ScoredStar],
+        truth: &[TruthRow],
+        n_px: usize,
+    ) -> Vec<(f64, f64, f64, f64)> {
+        let mut found = vec![false; truth.len()];
+        for k in stars.iter().filter_map(|s| s.truth) {
+            found[k] = true;
+        }
+        let on = |t: &TruthRow| {
+            t.x_px >= 0.0 && t.y_px >= 0.0 && t.x_px < n_px as f64 && t.y_px < n_px as f64
+        };
+        truth
+            .iter()
+            .zip(&found)
+            .filter(|(t, f)| !**f && on(t))
+            .map(|(t, _)| (t.x_px, t.y_px, t.flux_e, t.mag_hw))
+            .collect()
+    }
 }
 
 /// Accuracy and bound of one class in one bin (NaN with fewer than 3 stars).
@@ -156,6 +182,19 @@ pub struct MagBin {
     pub isolated: ClassStats,
     pub crowded: ClassStats,
     pub merged: ClassStats,
+    /// The rms shift the undetected stars' light gives the isolated stars' fits (per axis, mas;
+    /// [`super::undetected`]): from all of them, and from those fainter than the reference catalogue's limit.
+    /// NaN when not computed or with fewer than 3 stars.
+    pub isolated_undetected_mas: f64,
+    pub isolated_undetected_faint_mas: f64,
+}
+
+impl MagBin {
+    /// The isolated stars' accuracy if only the photon noise (their bound) and the undetected stars' light
+    /// acted: `√(bound² + undetected²)`, mas.
+    pub fn isolated_predicted_mas(&self) -> f64 {
+        self.isolated.crlb_mas.hypot(self.isolated_undetected_mas)
+    }
 }
 
 fn class_stats(d: &[(f64, f64, f64)]) -> ClassStats {
@@ -176,6 +215,15 @@ fn class_stats(d: &[(f64, f64, f64)]) -> ClassStats {
     }
 }
 
+/// `√(mean)` of squares (NaN for fewer than 3).
+fn rms(sq: impl ExactSizeIterator<Item = f64>) -> f64 {
+    let n = sq.len();
+    if n < 3 {
+        return f64::NAN;
+    }
+    (sq.sum::<f64>() / n as f64).sqrt()
+}
+
 /// Bins of true Hw `[edges[i], edges[i+1])` over the arrays (see the module's documentation).
 pub fn mag_bins(arrays: &[ArrayStars<'_>], scale_mas: f64, edges: &[f64]) -> Vec<MagBin> {
     let nb = edges.len().saturating_sub(1);
@@ -185,6 +233,8 @@ pub fn mag_bins(arrays: &[ArrayStars<'_>], scale_mas: f64, edges: &[f64]) -> Vec
     let mut n_blend = vec![0usize; nb];
     let mut n_sat = vec![0usize; nb];
     let mut per: Vec<[Vec<(f64, f64, f64)>; 3]> = (0..nb).map(|_| Default::default()).collect();
+    // the isolated stars' squared shifts from the undetected stars (all, faint), per axis, mas²
+    let mut und: Vec<Vec<(f64, f64)>> = vec![Vec::new(); nb];
     for a in arrays {
         let on = |t: &TruthRow| {
             t.x_px >= 0.0 && t.y_px >= 0.0 && t.x_px < a.n_px as f64 && t.y_px < a.n_px as f64
@@ -221,7 +271,17 @@ pub fn mag_bins(arrays: &[ArrayStars<'_>], scale_mas: f64, edges: &[f64]) -> Vec
                 ((s.crlb_x_px.powi(2) + s.crlb_y_px.powi(2)) / 2.0).sqrt() * scale_mas,
             );
             match c {
-                Class::Isolated => per[b][0].push(v),
+                Class::Isolated => {
+                    per[b][0].push(v);
+                    if let Some(sh) = a
+                        .undetected
+                        .and_then(|u| u.star(s.x, s.y, s.flux_e, s.sky_e))
+                    {
+                        let sq =
+                            |d: (f64, f64)| (d.0 * d.0 + d.1 * d.1) / 2.0 * scale_mas * scale_mas;
+                        und[b].push((sq(sh.all_px), sq(sh.faint_px)));
+                    }
+                }
                 Class::Crowded => per[b][1].push(v),
                 Class::Merged => per[b][2].push(v),
                 Class::Saturated => {}
@@ -252,6 +312,8 @@ pub fn mag_bins(arrays: &[ArrayStars<'_>], scale_mas: f64, edges: &[f64]) -> Vec
                 isolated: class_stats(&per[b][0]),
                 crowded: class_stats(&per[b][1]),
                 merged: class_stats(&per[b][2]),
+                isolated_undetected_mas: rms(und[b].iter().map(|v| v.0)),
+                isolated_undetected_faint_mas: rms(und[b].iter().map(|v| v.1)),
             }
         })
         .collect()

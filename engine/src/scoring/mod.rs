@@ -8,6 +8,8 @@
 //!   report of SPEC §7, the ACE prediction beside it.
 //! * [`crowded`] — the crowded-field match (position and flux), star classes and magnitude bins;
 //!   [`focal_plane`] — the four arrays of a focal-plane exposure scored together, their deviation maps.
+//! * [`undetected`] — the shift the undetected stars' light gives each fitted position (the crowded
+//!   field's floor, explained star by star).
 //! * [`vectors`] — the deviation vector map of an image; [`dataset`] — a dataset's scored results.
 //!
 //! With no truth the accuracy is absent (NaN; `null` in JSON, empty in CSV), never 0.
@@ -18,6 +20,7 @@ pub mod dataset;
 pub mod focal_plane;
 pub mod image;
 pub mod solution;
+pub mod undetected;
 pub mod vectors;
 
 pub use catalogue::*;

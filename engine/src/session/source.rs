@@ -15,7 +15,7 @@ use crate::analysis::pipeline::{
 };
 use crate::analysis::response::{FitNoise, FitResponse};
 use crate::analysis::{AnalysisError, countermeasures::CountermeasureError};
-use crate::config::{AceCase, Analysis as AnalysisCfg, FlatField};
+use crate::config::{AceCase, Analysis as AnalysisCfg, Crowding, FlatField};
 use crate::detector::DetectorImage;
 use crate::io::instrument::{self, SurveyModel};
 use crate::numerics::stats;
@@ -102,6 +102,9 @@ pub struct SourceProducts {
     /// The reference catalogue a survey gives of the field ([`instrument::reference_catalogue`]: the default
     /// survey model with its floor at each catalogue error of the plan's `plate-*@catalogue`), in pixels.
     pub references: Vec<(f64, Vec<(f64, f64)>)>,
+    /// The reference catalogue at the default survey model, in pixels, when the analysis is crowded and
+    /// holds the catalogue's missed stars (`analysis.crowded_forced_catalogue`); else empty.
+    pub catalogue: Vec<(f64, f64)>,
     /// The attitude recorded at each telemetry quality of the plan (none for a static ACE).
     pub telemetry: Vec<(TelemetryQuality, TelemetryRecord)>,
     pub readout: ExposureReadout,
@@ -114,6 +117,8 @@ impl SourceProducts {
     pub fn supplied<'a>(&'a self, reference: Option<&'a [(f64, f64)]>) -> Supplied<'a> {
         Supplied {
             reference,
+            catalogue: reference
+                .or((!self.catalogue.is_empty()).then_some(self.catalogue.as_slice())),
             reference_by_error: &self.references,
             model_psf: Some(&self.model_psf),
             telemetry: None,
@@ -195,9 +200,18 @@ impl Source<'_> {
             true => self.exact_epsf(cfg)?,
             false => None,
         };
+        let catalogue = if cfg.crowding != Crowding::Off && cfg.crowded_forced_catalogue {
+            instrument::reference_catalogue(self.sim, &SurveyModel::default(), 0)
+                .iter()
+                .map(|s| (s.x_px, s.y_px))
+                .collect()
+        } else {
+            Vec::new()
+        };
         Ok(SourceProducts {
             model_psf: instrument::model_psf_product(self.sim)?,
             references,
+            catalogue,
             telemetry,
             readout: self.readout(),
             exact_epsf,

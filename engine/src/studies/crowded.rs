@@ -13,8 +13,10 @@ use crate::analysis::AnalysisError;
 use crate::analysis::countermeasures::Plan;
 use crate::analysis::pipeline::offered_in_crowded_field;
 use crate::config::Crowding;
+use crate::io::instrument::SurveyModel;
 use crate::scoring::crowded as report;
 use crate::scoring::image::{ScoredImage, score_image};
+use crate::scoring::undetected::Undetected;
 use crate::session::{Source, SourceError, analysis_image};
 use crate::simulate::{FocalPlaneExposure, FocalPlaneSimulator};
 use std::time::Instant;
@@ -50,8 +52,11 @@ pub fn analyse_focal_plane(
     let t0 = Instant::now();
     let scale = fps.cfg.instrument.plate_scale_mas();
     let mut per_array: Vec<ScoredImage> = Vec::with_capacity(fps.arrays.len());
+    // each array's fit noise (read/quantisation floor, flat error), for the undetected stars' shifts
+    let mut noise: Vec<(f64, f64)> = Vec::with_capacity(fps.arrays.len());
     for (sim, e) in fps.arrays.iter().zip(&exp.arrays) {
         let img = analysis_image(sim, &e.image);
+        noise.push((img.var_floor_e2, img.flat_sigma));
         // the array's own configuration with the study's analysis, crowded by design
         let mut c = sim.cfg.clone();
         c.analysis = cfg.clone();
@@ -81,12 +86,31 @@ pub fn analyse_focal_plane(
                 epsf: ia.global.epsf.clone(),
             })
             .collect();
+        // each array's undetected truth stars, for the shifts their light gives the isolated stars' fits
+        let undetected: Vec<Undetected> = arrays
+            .iter()
+            .zip(&noise)
+            .map(|(a, &(floor, flat_sigma))| {
+                Undetected::new(
+                    a.epsf.clone(),
+                    report::ArrayStars::unmatched(&a.stars, &a.truth, a.n_px),
+                    (a.n_px * a.n_px) as f64,
+                    floor,
+                    flat_sigma,
+                    cfg.fit_radius_px,
+                    cfg.fit_sky,
+                    SurveyModel::default().limit_hw,
+                )
+            })
+            .collect();
         let views: Vec<report::ArrayStars<'_>> = arrays
             .iter()
-            .map(|a| report::ArrayStars {
+            .zip(&undetected)
+            .map(|(a, u)| report::ArrayStars {
                 stars: &a.stars,
                 truth: &a.truth,
                 n_px: a.n_px,
+                undetected: Some(u),
             })
             .collect();
         let bins = report::mag_bins(&views, scale, edges);

@@ -41,6 +41,9 @@ pub struct Member {
     /// Held at these values: subtracted from its neighbours' pixels, never fitted (a bright star's wing
     /// feature, see [`super::WING_VETO_RATIO`]).
     pub fixed: bool,
+    /// A forced catalogue star ([`super::forced`]): its position held, its flux fitted with its group; not
+    /// a detected neighbour (a group of one detected star and forced ones is not flagged grouped).
+    pub forced: bool,
 }
 
 impl Member {
@@ -51,6 +54,7 @@ impl Member {
             flux,
             saturated: false,
             fixed: false,
+            forced: false,
         }
     }
 }
@@ -176,8 +180,10 @@ pub fn fit_group_with<P: Profile>(
             if saturated[k] {
                 sat += SATURATED_MODEL_ERROR * (f * psi).abs() + f.abs() * node_error;
             }
-            jac.push((3 * k, -f * gx));
-            jac.push((3 * k + 1, -f * gy));
+            if !members[k].forced {
+                jac.push((3 * k, -f * gx));
+                jac.push((3 * k + 1, -f * gy));
+            }
             jac.push((3 * k + 2, psi));
         }
         if opt.fit_sky {
@@ -298,7 +304,8 @@ pub fn fit_group_with<P: Profile>(
                 fisher[j * np + k] = 0.0;
             }
             fisher[k * np + k] = 1.0;
-            if k < 3 * n {
+            // a forced star's position is held, not unconstrained
+            if k < 3 * n && !(members[k / 3].forced && k % 3 < 2) {
                 unconstrained[k / 3] = true;
             }
         }
@@ -320,7 +327,7 @@ pub fn fit_group_with<P: Profile>(
                 n_pix: own[k].len(),
                 ..Default::default()
             };
-            if n > 1 {
+            if members.iter().filter(|m| !m.forced).count() > 1 {
                 f.flags |= flags::GROUPED;
             }
             if few || own[k].len() < 5 {
@@ -342,6 +349,12 @@ pub fn fit_group_with<P: Profile>(
                 f.flags |= flags::NONPOSITIVE_FLUX;
             }
             match &inv {
+                // a forced star: its flux's bound only (its position is the catalogue's)
+                Some(v) if m.forced && !unconstrained[k] => {
+                    f.crlb_x = f64::INFINITY;
+                    f.crlb_y = f64::INFINITY;
+                    f.crlb_flux = v[(3 * k + 2) * np + 3 * k + 2].max(0.0).sqrt();
+                }
                 Some(v)
                     if !unconstrained[k]
                         && v[(3 * k) * np + 3 * k] > 0.0

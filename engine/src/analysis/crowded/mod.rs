@@ -12,6 +12,9 @@
 //!    k-d tree ([`neighbours`]): O(N log N).
 //! 4. **Residual detection**: peaks of image − model that no star accounts for (merged companions) are added
 //!    and everything is fitted again (twice, so each group sees its neighbours' final models).
+//! 5. **Forced catalogue stars** ([`forced`]): before the last pass, the reference catalogue's stars that no
+//!    star of the model claims join it, held at their catalogue positions, their fluxes fitted with their
+//!    groups (never reported): a faint companion under a bright star's core no longer pulls its fit.
 //!
 //! Saturated cores are masked; such a star is fitted from its unsaturated wings and flagged, and never
 //! builds the ePSF. With fewer than [`MIN_EPSF_STARS`] candidates the ePSF is not built: the instrument's
@@ -19,6 +22,7 @@
 
 pub mod detect;
 pub mod epsf;
+pub mod forced;
 pub mod group_fit;
 pub mod neighbours;
 pub mod pass;
@@ -144,7 +148,12 @@ fn prune(fits: &[StarFit], stars: &[Member], from_residual: &[bool]) -> Vec<usiz
 /// The crowded-field analysis of one image (see the module's steps). `model_epsf` stands in for the ePSF
 /// when the image has fewer than [`MIN_EPSF_STARS`] candidates (else a Gaussian of the stars' second
 /// moment). An image without a detected star gives no fits (and says so in `fallback`).
-pub fn analyse(img: &AnalysisImage, cfg: &AnalysisCfg, model_epsf: Option<&Epsf>) -> Crowded {
+pub fn analyse(
+    img: &AnalysisImage,
+    cfg: &AnalysisCfg,
+    model_epsf: Option<&Epsf>,
+    catalogue: Option<&[(f64, f64)]>,
+) -> Crowded {
     let opts = build_options(cfg);
     let pd = img.pixels();
     let (sky, noise) = sky_and_noise(img);
@@ -284,38 +293,53 @@ pub fn analyse(img: &AnalysisImage, cfg: &AnalysisCfg, model_epsf: Option<&Epsf>
     // leaves out without sharing a real neighbour's (which it could otherwise take over or keep from
     // settling), and is never reported
     let kept_fits: Vec<StarFit> = keep.iter().map(|&k| fits[k]).collect();
-    let wing = wings(&kept_fits, &from_residual, &epsf);
-    let stars: Vec<Member> = stars
+    let mut wing = wings(&kept_fits, &from_residual, &epsf);
+    let mut stars: Vec<Member> = stars
         .into_iter()
         .zip(&wing)
         .map(|(s, w)| Member { fixed: *w, ..s })
         .collect();
+    // the reference catalogue's stars the detection missed, held at their catalogue positions: their light
+    // is subtracted from their neighbours' fits (forced; never reported)
+    let n_found = stars.len();
+    if let Some(cat) = catalogue.filter(|_| cfg.crowded_forced_catalogue) {
+        stars.extend(forced::forced_members(img, &epsf, &stars, cat, cfg));
+    }
+    let forced: Vec<bool> = (0..stars.len()).map(|k| k >= n_found).collect();
+    let mut from_residual = from_residual;
+    from_residual.resize(stars.len(), false);
+    wing.resize(stars.len(), false);
+    // not a reported star nor a neighbour: a wing or a forced star
+    let held: Vec<bool> = wing.iter().zip(&forced).map(|(w, f)| *w || *f).collect();
     let (mut fits, groups) = fit_pass(img, &epsf, &stars, node_error, cfg);
     for (f, r) in fits.iter_mut().zip(&from_residual) {
         if *r {
             f.flags |= flags::RESIDUAL_FOUND;
         }
     }
+    // the final model: a wing held; a forced star stays forced (a refit, e.g. the telemetry forward model's,
+    // fits its flux again with its group's own profiles)
     let model: Vec<Member> = members_of(&fits, &stars, img.nx, img.ny)
         .into_iter()
         .zip(&wing)
         .map(|(m, w)| Member { fixed: *w, ..m })
         .collect();
-    // a neighbour is a neighbour whether or not its own fit is reported — but a bright star's wing is not
+    // a neighbour is a neighbour whether or not its own fit is reported — but a bright star's wing is not,
+    // nor a forced catalogue star (not a detection)
     let mut stars_only: Vec<StarFit> = (0..fits.len())
-        .filter(|&k| !wing[k])
+        .filter(|&k| !held[k])
         .map(|k| fits[k])
         .collect();
     flags::mark_blends(&mut stars_only, flags::blend_radius_px(cfg.fit_radius_px));
-    for (k, f) in (0..fits.len()).filter(|&k| !wing[k]).zip(stars_only) {
+    for (k, f) in (0..fits.len()).filter(|&k| !held[k]).zip(stars_only) {
         fits[k] = f;
     }
     // report what the fits confirm (see MIN_REPORT_SNR; a star detected on a saturated core always is),
-    // never a bright star's wing (WING_VETO_RATIO)
+    // never a bright star's wing (WING_VETO_RATIO) nor a forced star
     let confirmed: Vec<bool> = fits
         .iter()
         .zip(&stars)
-        .zip(&wing)
+        .zip(&held)
         .map(|((f, s), w)| {
             !w && (s.saturated
                 || (f.crlb_flux.is_finite() && f.flux >= MIN_REPORT_SNR * f.crlb_flux))

@@ -209,6 +209,7 @@ pub(super) fn members_of(fits: &[StarFit], prev: &[Member], nx: usize, ny: usize
             if f.flags & failed == 0 && inside {
                 Member {
                     saturated: f.flags & flags::SATURATED != 0,
+                    forced: p.forced,
                     ..Member::new(f.x, f.y, f.flux)
                 }
             } else {

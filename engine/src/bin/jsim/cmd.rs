@@ -716,6 +716,8 @@ fn analyze_focal_plane(
                         stars,
                         truth,
                         n_px: *n_px,
+                        // the undetected stars' shifts are `jsim crowded`'s (they need the arrays' ePSFs)
+                        undetected: None,
                     },
                 )
                 .collect();

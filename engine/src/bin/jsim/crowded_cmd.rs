@@ -191,11 +191,11 @@ fn print_bins(case: &str, cm: &str, r: &FocalPlaneAnalysis) {
 /// `jsim analyze` on a focal-plane file with its truth).
 pub fn print_bin_table(bins: &[engine::scoring::crowded::MagBin]) {
     println!(
-        "  Hw bin      true  found  compl.  blend  sat.  | isolated: n  mas   CRLB  ratio | crowded: n  mas   | merged: n  mas"
+        "  Hw bin      true  found  compl.  blend  sat.  | isolated: n  mas   CRLB  ratio undet. faint pred. | crowded: n  mas   | merged: n  mas"
     );
     for b in bins {
         println!(
-            "  {:5.2}-{:5.2} {:6} {:6} {:6.3} {:6.3} {:5.3} | {:6} {:6.2} {:6.2} {:5.2} | {:6} {:6.2} | {:5} {:6.2}",
+            "  {:5.2}-{:5.2} {:6} {:6} {:6.3} {:6.3} {:5.3} | {:6} {:6.2} {:6.2} {:5.2} {:6.2} {:5.2} {:5.2} | {:6} {:6.2} | {:5} {:6.2}",
             b.hw_lo,
             b.hw_hi,
             b.n_true,
@@ -207,6 +207,9 @@ pub fn print_bin_table(bins: &[engine::scoring::crowded::MagBin]) {
             b.isolated.accuracy_mas,
             b.isolated.crlb_mas,
             b.isolated.ratio(),
+            b.isolated_undetected_mas,
+            b.isolated_undetected_faint_mas,
+            b.isolated_predicted_mas(),
             b.crowded.n,
             b.crowded.accuracy_mas,
             b.merged.n,
