@@ -823,7 +823,7 @@ impl Default for Analysis {
             epsf_zones: 4,
             detect_sigma: 10.0,
             crowded_detect_sigma: 3.0,
-            crowded_forced_catalogue: true,
+            crowded_forced_catalogue: false,
             fit_max_iter: 30,
             clip_sigma: 3.0,
             flat_field: FlatField::Calibrated {

@@ -190,17 +190,12 @@ mod tests {
         let (dx, dy) = (fit.x - x0, fit.y - y0);
         // no mean to remove (an area so large the mean light is nil); the neighbour is Hw 16 against a limit
         // of 16.5: in `all`, not in `faint`
-        let und = Undetected::new(
-            e,
-            vec![(u, v, f, 16.0)],
-            1e300,
-            floor,
-            0.0,
-            2.5,
-            false,
-            16.5,
-        );
-        let s = und.star(x0, y0, flux, sky).expect("shift");
+        let shift_of = |stars: Vec<(f64, f64, f64, f64)>| {
+            Undetected::new(e.clone(), stars, 1e300, floor, 0.0, 2.5, false, 16.5)
+                .star(x0, y0, flux, sky)
+                .expect("shift")
+        };
+        let s = shift_of(vec![(u, v, f, 16.0)]);
         assert!(
             dx > 1e-3 && dy < -1e-4,
             "the fit moves towards the neighbour: {dx} {dy}"
@@ -220,32 +215,9 @@ mod tests {
             "{s:?}"
         );
         // as faint as the limit: both
-        let und = Undetected::new(
-            gaussian_epsf(1.0),
-            vec![(u, v, f, 16.5)],
-            1e300,
-            floor,
-            0.0,
-            2.5,
-            false,
-            16.5,
-        );
-        let t = und.star(x0, y0, flux, sky).expect("shift");
+        let t = shift_of(vec![(u, v, f, 16.5)]);
         assert_eq!(t.all_px, t.faint_px);
         // nothing undetected: no shift
-        let none = Undetected::new(
-            gaussian_epsf(1.0),
-            vec![],
-            1.0,
-            floor,
-            0.0,
-            2.5,
-            false,
-            16.5,
-        );
-        assert_eq!(
-            none.star(x0, y0, flux, sky).expect("shift").all_px,
-            (0.0, 0.0)
-        );
+        assert_eq!(shift_of(vec![]).all_px, (0.0, 0.0));
     }
 }
