@@ -6,10 +6,11 @@
 //! isolated stars' 1.17–1.21 × their bound). The reference catalogue (an instrument product, a survey's
 //! positions to Hw 16.5) knows many of them. Each star of the model claims its nearest catalogue star within
 //! [`FORCED_MATCH_PX`] (after the catalogue's common offset from the brightest fits); each unclaimed one
-//! becomes a star of the model: its flux the weighted least-squares amplitude of the ePSF at its position in the residual image
-//! (image − model of every star found, less the annulus sky), `f = Σ wᵢ ψᵢ rᵢ / Σ wᵢ ψᵢ²` over the fit
-//! radius (at least 1 e⁻: a neighbour's fit may have taken its light); in the last pass its flux is fitted
-//! with its group, its position held; never reported, never a neighbour that flags a blend.
+//! becomes a star of the model. It starts with the weighted least-squares amplitude of the ePSF at its
+//! position in the residual image (image − model of every star found, less the annulus sky),
+//! `f = Σ wᵢ ψᵢ rᵢ / Σ wᵢ ψᵢ²` over the fit radius (at least 1 e⁻: a neighbour's fit may have taken its
+//! light); in the last pass its flux is fitted with its group, its position held. It is never reported and
+//! never a neighbour that flags a blend. Off by default (`analysis.crowded_forced_catalogue`).
 
 use super::group_fit::Member;
 use super::neighbours::Neighbours;
