@@ -33,7 +33,8 @@ fn sky_of(c: &Config, k: usize, x: f64, y: f64) -> (f64, f64) {
     w.pixel_to_sky(x, y).expect("sky")
 }
 
-fn write_catalogue(name: &str, rows: &[(f64, f64, f64)]) -> PathBuf {
+/// The catalogue file and its scratch directory (removed when the guard is dropped: keep it alive).
+fn write_catalogue(name: &str, rows: &[(f64, f64, f64)]) -> (engine::testkit::Scratch, PathBuf) {
     let dir = temp_dir(name);
     let path = dir.join("stars.csv");
     let mut text = String::from("ra,dec,hw,j_h\n");
@@ -41,7 +42,7 @@ fn write_catalogue(name: &str, rows: &[(f64, f64, f64)]) -> PathBuf {
         text += &format!("{ra:.12},{dec:.12},{hw},2.0\n");
     }
     std::fs::write(&path, text).expect("write catalogue");
-    path
+    (dir, path)
 }
 
 #[test]
@@ -54,7 +55,7 @@ fn every_star_is_placed_or_counted_and_hard_cases_land_where_they_should() {
     let axis = (c.sky.ra_deg, c.sky.dec_deg); // the optical axis: the cross-shaped gap
     let antipode = ((c.sky.ra_deg + 180.0) % 360.0, -c.sky.dec_deg);
     let far = (c.sky.ra_deg, c.sky.dec_deg + 10.0);
-    let path = write_catalogue(
+    let (_dir, path) = write_catalogue(
         "fp-hard",
         &[
             (centre0.0, centre0.1, 12.0),
@@ -152,7 +153,8 @@ fn the_jitter_is_common_to_the_arrays_and_turned_into_each() {
         })
         .collect();
     c.scene.kind = SceneKind::Catalogue;
-    c.scene.catalogue = Some(write_catalogue("fp-jitter", &rows));
+    let (_dir, path) = write_catalogue("fp-jitter", &rows);
+    c.scene.catalogue = Some(path);
     let fps = FocalPlaneSimulator::new(&c).expect("focal plane");
     let exp = fps.exposure(0).expect("exposure");
     let n = c.instrument.detector_px as i64;

@@ -10,7 +10,11 @@ use engine::config::{AceCase, Config, SceneKind};
 use engine::detector::dq;
 use engine::simulate::Simulator;
 
-fn catalogue(name: &str, rows: &[(f64, f64, f64)]) -> std::path::PathBuf {
+/// The catalogue file and its scratch directory (removed when the guard is dropped: keep it alive).
+fn catalogue(
+    name: &str,
+    rows: &[(f64, f64, f64)],
+) -> (engine::testkit::Scratch, std::path::PathBuf) {
     let dir = temp_dir(name);
     let p = dir.join("stars.csv");
     let mut s = String::from("x,y,hw,j_h\n");
@@ -18,7 +22,7 @@ fn catalogue(name: &str, rows: &[(f64, f64, f64)]) -> std::path::PathBuf {
         s.push_str(&format!("{x},{y},{m},2.0\n"));
     }
     std::fs::write(&p, s).expect("write catalogue");
-    p
+    (dir, p)
 }
 
 fn finite(e: &engine::simulate::Exposure) -> bool {
@@ -87,7 +91,7 @@ fn stars_on_detector_and_channel_edges() {
     let mut c = small_config();
     c.scene.kind = SceneKind::Catalogue;
     // partly off the detector, in the border, across the channel boundaries at x = 128, 256
-    c.scene.catalogue = Some(catalogue(
+    let (_dir, path) = catalogue(
         "edges",
         &[
             (-3.0, 100.0, 12.0),
@@ -97,7 +101,8 @@ fn stars_on_detector_and_channel_edges() {
             (509.7, 509.9, 12.0),
             (300.0, 300.0, 12.0),
         ],
-    ));
+    );
+    c.scene.catalogue = Some(path);
     c.detector.shot_noise = false;
     c.detector.read_noise = false;
     let sim = Simulator::new(&c).expect("sim");
@@ -158,7 +163,8 @@ fn saturated_dark_noise_floor_blended_and_edge_stars() {
     let edge = rows.len();
     rows.push((1.3, 250.2, 12.5));
     c.scene.kind = SceneKind::Catalogue;
-    c.scene.catalogue = Some(catalogue("difficult", &rows));
+    let (_dir, path) = catalogue("difficult", &rows);
+    c.scene.catalogue = Some(path);
     let sim = Simulator::new(&c).expect("sim");
     let e = sim.exposure(0).expect("exp");
     assert!(finite(&e));
