@@ -191,6 +191,22 @@ pub fn common_offset(pos: &[(f64, f64)], refs: &[(f64, f64)], search_px: f64) ->
     }
 }
 
+/// [`common_offset`] from the `n` brightest positions alone (`flux[k]` of position k; bright stars are rarely
+/// mismatched).
+pub fn common_offset_of_brightest(
+    pos: &[(f64, f64)],
+    flux: &[f64],
+    refs: &[(f64, f64)],
+    n: usize,
+    search_px: f64,
+) -> (f64, f64) {
+    let mut bright: Vec<usize> = (0..pos.len()).collect();
+    bright.sort_by(|&a, &b| flux[b].total_cmp(&flux[a]));
+    bright.truncate(n);
+    let bpos: Vec<(f64, f64)> = bright.iter().map(|&k| pos[k]).collect();
+    common_offset(&bpos, refs, search_px)
+}
+
 /// For each position, the index of the nearest reference position within `radius_px` of the position minus
 /// `offset` (a grid of cells one radius wide: O(n) for any number of stars).
 pub fn nearest_within(

@@ -36,12 +36,9 @@ pub const MERGE_FLUX_RATIO: f64 = 0.1;
 pub fn match_catalogue(fits: &[StarResult], truth: &[TruthRow]) -> Vec<Option<usize>> {
     let pos: Vec<(f64, f64)> = fits.iter().map(|f| (f.x, f.y)).collect();
     let refs: Vec<(f64, f64)> = truth.iter().map(|t| (t.x_px, t.y_px)).collect();
-    // the common offset from the brightest fits' nearest truth stars (bright stars are rarely mismatched)
-    let mut bright: Vec<usize> = (0..fits.len()).collect();
-    bright.sort_by(|&a, &b| fits[b].flux_e.total_cmp(&fits[a].flux_e));
-    bright.truncate(500);
-    let bpos: Vec<(f64, f64)> = bright.iter().map(|&k| pos[k]).collect();
-    let off = crate::analysis::detection::common_offset(&bpos, &refs, 20.0);
+    // the common offset from the brightest fits' nearest truth stars
+    let flux: Vec<f64> = fits.iter().map(|f| f.flux_e).collect();
+    let off = crate::analysis::detection::common_offset_of_brightest(&pos, &flux, &refs, 500, 20.0);
     let nb = Neighbours::new(&refs);
     let mut pairs: Vec<(f64, usize, usize)> = Vec::new();
     for (k, f) in fits.iter().enumerate() {
@@ -139,16 +136,18 @@ impl ArrayStars<'_> {
         for k in stars.iter().filter_map(|s| s.truth) {
             found[k] = true;
         }
-        let on = |t: &TruthRow| {
-            t.x_px >= 0.0 && t.y_px >= 0.0 && t.x_px < n_px as f64 && t.y_px < n_px as f64
-        };
         truth
             .iter()
             .zip(&found)
-            .filter(|(t, f)| !**f && on(t))
+            .filter(|(t, f)| !**f && on_array(t, n_px))
             .map(|(t, _)| (t.x_px, t.y_px, t.flux_e, t.mag_hw))
             .collect()
     }
+}
+
+/// Whether a truth star lies on an array of `n_px`² pixels.
+fn on_array(t: &TruthRow, n_px: usize) -> bool {
+    t.x_px >= 0.0 && t.y_px >= 0.0 && t.x_px < n_px as f64 && t.y_px < n_px as f64
 }
 
 /// Accuracy and bound of one class in one bin (NaN with fewer than 3 stars).
@@ -236,9 +235,7 @@ pub fn mag_bins(arrays: &[ArrayStars<'_>], scale_mas: f64, edges: &[f64]) -> Vec
     // the isolated stars' squared shifts from the undetected stars (all, faint), per axis, mas²
     let mut und: Vec<Vec<(f64, f64)>> = vec![Vec::new(); nb];
     for a in arrays {
-        let on = |t: &TruthRow| {
-            t.x_px >= 0.0 && t.y_px >= 0.0 && t.x_px < a.n_px as f64 && t.y_px < a.n_px as f64
-        };
+        let on = |t: &TruthRow| on_array(t, a.n_px);
         for t in a.truth.iter().filter(|t| on(t)) {
             if let Some(b) = bin_of(t.mag_hw) {
                 n_true[b] += 1;

@@ -28,8 +28,9 @@ pub struct Undetected {
     /// (x px, y px, flux e⁻, Hw) of the undetected stars.
     stars: Vec<(f64, f64, f64, f64)>,
     index: Neighbours,
-    /// Their mean light per pixel, e⁻.
+    /// Their mean light per pixel, and that of those at least `faint_from_hw` faint, e⁻.
     mean_e: f64,
+    mean_faint_e: f64,
 }
 
 /// The shifts (px) a star's fit takes from the undetected stars' light: all of them, and those fainter than
@@ -53,11 +54,19 @@ impl Undetected {
         faint_from_hw: f64,
     ) -> Self {
         let pos: Vec<(f64, f64)> = stars.iter().map(|s| (s.0, s.1)).collect();
-        let mean_e = if area_px2 > 0.0 {
-            stars.iter().map(|s| s.2).sum::<f64>() / area_px2
-        } else {
-            0.0
+        let mean = |faint_only: bool| {
+            if area_px2 > 0.0 {
+                stars
+                    .iter()
+                    .filter(|s| !faint_only || s.3 >= faint_from_hw)
+                    .map(|s| s.2)
+                    .sum::<f64>()
+                    / area_px2
+            } else {
+                0.0
+            }
         };
+        let (mean_e, mean_faint_e) = (mean(false), mean(true));
         Self {
             epsf,
             var_floor_e2,
@@ -68,6 +77,7 @@ impl Undetected {
             index: Neighbours::new(&pos),
             stars,
             mean_e,
+            mean_faint_e,
         }
     }
 
@@ -96,7 +106,8 @@ impl Undetected {
             let star = flux_e * psi;
             let w = 1.0 / pixel_variance(star + sky_e, star, self.var_floor_e2, self.flat_sigma);
             let j = [-flux_e * gx, -flux_e * gy, psi, 1.0];
-            let (mut r_all, mut r_faint) = (-self.mean_e, -self.mean_e);
+            // each less the mean light the sky absorbs
+            let (mut r_all, mut r_faint) = (-self.mean_e, -self.mean_faint_e);
             for &k in &near {
                 let (u, v, f, hw) = self.stars[k];
                 let light = f * self.epsf.value(px - u, py - v);
@@ -105,8 +116,6 @@ impl Undetected {
                     r_faint += light;
                 }
             }
-            // the faint stars' mean light is absorbed by the sky too
-            r_faint += self.mean_e - self.mean_faint_e();
             for a in 0..np {
                 for b in 0..np {
                     m[a * np + b] += w * j[a] * j[b];
@@ -124,21 +133,6 @@ impl Undetected {
             all_px: shift(&g_all),
             faint_px: shift(&g_faint),
         })
-    }
-
-    /// The faint stars' mean light per pixel, e⁻.
-    fn mean_faint_e(&self) -> f64 {
-        let all: f64 = self.stars.iter().map(|s| s.2).sum();
-        if all <= 0.0 {
-            return 0.0;
-        }
-        let faint: f64 = self
-            .stars
-            .iter()
-            .filter(|s| s.3 >= self.faint_from_hw)
-            .map(|s| s.2)
-            .sum();
-        self.mean_e * faint / all
     }
 }
 

@@ -171,6 +171,14 @@ impl Source<'_> {
             .map(|j| exact_epsf(&j.kernel, cfg.epsf_radius_px)))
     }
 
+    /// The positions (pixels) of the reference catalogue a survey of this model gives of the field.
+    fn catalogue_px(&self, survey: &SurveyModel) -> Vec<(f64, f64)> {
+        instrument::reference_catalogue(self.sim, survey, 0)
+            .iter()
+            .map(|s| (s.x_px, s.y_px))
+            .collect()
+    }
+
     /// What the simulated instrument delivers beside this exposure for the countermeasures of `plan`.
     pub fn products(&self, plan: &Plan, cfg: &AnalysisCfg) -> Result<SourceProducts, SourceError> {
         let mut telemetry: Vec<(TelemetryQuality, TelemetryRecord)> = Vec::new();
@@ -186,8 +194,7 @@ impl Source<'_> {
                     floor_mas: *error_mas,
                     ..SurveyModel::default()
                 };
-                let stars = instrument::reference_catalogue(self.sim, &survey, 0);
-                references.push((*error_mas, stars.iter().map(|s| (s.x_px, s.y_px)).collect()));
+                references.push((*error_mas, self.catalogue_px(&survey)));
             }
             if let Some(q) = cm.telemetry_quality()
                 && !telemetry.iter().any(|(k, _)| *k == q)
@@ -201,10 +208,7 @@ impl Source<'_> {
             false => None,
         };
         let catalogue = if cfg.crowding != Crowding::Off && cfg.crowded_forced_catalogue {
-            instrument::reference_catalogue(self.sim, &SurveyModel::default(), 0)
-                .iter()
-                .map(|s| (s.x_px, s.y_px))
-                .collect()
+            self.catalogue_px(&SurveyModel::default())
         } else {
             Vec::new()
         };

@@ -16,7 +16,7 @@ use super::group_fit::Member;
 use super::neighbours::Neighbours;
 use super::pass::model_image;
 use crate::analysis::epsf::Epsf;
-use crate::analysis::epsf::fit::{PixelData, annulus_sky, pixel_variance};
+use crate::analysis::epsf::fit::{PixelData, annulus_sky, pixel_variance, select_disc};
 use crate::analysis::image::AnalysisImage;
 use crate::config::Analysis as AnalysisCfg;
 use rayon::prelude::*;
@@ -42,11 +42,15 @@ pub fn forced_members(
     if catalogue.is_empty() || stars.is_empty() {
         return Vec::new();
     }
-    let mut bright: Vec<usize> = (0..stars.len()).collect();
-    bright.sort_by(|&a, &b| stars[b].flux.total_cmp(&stars[a].flux));
-    bright.truncate(OFFSET_STARS);
-    let bpos: Vec<(f64, f64)> = bright.iter().map(|&k| (stars[k].x, stars[k].y)).collect();
-    let off = crate::analysis::detection::common_offset(&bpos, catalogue, OFFSET_SEARCH_PX);
+    let pos: Vec<(f64, f64)> = stars.iter().map(|s| (s.x, s.y)).collect();
+    let flux: Vec<f64> = stars.iter().map(|s| s.flux).collect();
+    let off = crate::analysis::detection::common_offset_of_brightest(
+        &pos,
+        &flux,
+        catalogue,
+        OFFSET_STARS,
+        OFFSET_SEARCH_PX,
+    );
     let (w, h) = (img.nx as f64, img.ny as f64);
     let cat: Vec<(f64, f64)> = catalogue
         .iter()
@@ -84,7 +88,7 @@ pub fn forced_members(
         .par_iter()
         .filter_map(|&(x, y)| {
             let sky = annulus_sky(&rd, x, y, r_in, r_out)?;
-            let f = amplitude(img, &rd, &model, epsf, x, y, sky, cfg.fit_radius_px)?;
+            let f = amplitude(&rd, &model, epsf, (x, y), sky, cfg.fit_radius_px)?;
             // a neighbour's fit may have taken its light (the residual there ≤ 0): it starts faint, and its
             // group's fit shares the light out
             Some(Member {
@@ -95,37 +99,23 @@ pub fn forced_members(
         .collect()
 }
 
-/// `Σ wᵢ ψᵢ (rᵢ − s) / Σ wᵢ ψᵢ²` over the usable pixels within `radius_px` of (x, y), weights from the image's
-/// model `model + s` (the star's own light is faint beside it); `None` without a pixel.
-#[allow(clippy::too_many_arguments)]
+/// `Σ wᵢ ψᵢ (rᵢ − s) / Σ wᵢ ψᵢ²` over the usable pixels within `radius_px` of (x, y) of the residual `rd`,
+/// weights from the image's model `model + s` (the star's own light is faint beside it); `None` without a
+/// pixel.
 fn amplitude(
-    img: &AnalysisImage,
     rd: &PixelData<'_>,
     model: &[f64],
     epsf: &Epsf,
-    x: f64,
-    y: f64,
+    (x, y): (f64, f64),
     sky: f64,
     radius_px: f64,
 ) -> Option<f64> {
-    let r = radius_px.ceil() as i64;
-    let (cx, cy) = (x.round() as i64, y.round() as i64);
     let (mut num, mut den) = (0.0, 0.0);
-    for py in (cy - r).max(0)..=(cy + r).min(img.ny as i64 - 1) {
-        for px in (cx - r).max(0)..=(cx + r).min(img.nx as i64 - 1) {
-            let (fx, fy) = (px as f64, py as f64);
-            if (fx - x).powi(2) + (fy - y).powi(2) > radius_px * radius_px {
-                continue;
-            }
-            let i = py as usize * img.nx + px as usize;
-            if img.bad[i] {
-                continue;
-            }
-            let psi = epsf.value(fx - x, fy - y);
-            let wgt = 1.0 / pixel_variance(model[i] + sky, 0.0, img.var_floor_e2, 0.0);
-            num += wgt * psi * (rd.e[i] - sky);
-            den += wgt * psi * psi;
-        }
+    for (i, px, py) in select_disc(rd, x, y, radius_px).0 {
+        let psi = epsf.value(px - x, py - y);
+        let wgt = 1.0 / pixel_variance(model[i] + sky, 0.0, rd.var_floor_e2, 0.0);
+        num += wgt * psi * (rd.e[i] - sky);
+        den += wgt * psi * psi;
     }
     (den > 0.0).then(|| num / den)
 }

@@ -301,16 +301,18 @@ pub fn analyse(
         .collect();
     // the reference catalogue's stars the detection missed, held at their catalogue positions: their light
     // is subtracted from their neighbours' fits (forced; never reported)
-    let n_found = stars.len();
     if let Some(cat) = catalogue.filter(|_| cfg.crowded_forced_catalogue) {
         stars.extend(forced::forced_members(img, &epsf, &stars, cat, cfg));
     }
-    let forced: Vec<bool> = (0..stars.len()).map(|k| k >= n_found).collect();
     let mut from_residual = from_residual;
     from_residual.resize(stars.len(), false);
     wing.resize(stars.len(), false);
     // not a reported star nor a neighbour: a wing or a forced star
-    let held: Vec<bool> = wing.iter().zip(&forced).map(|(w, f)| *w || *f).collect();
+    let held: Vec<bool> = wing
+        .iter()
+        .zip(&stars)
+        .map(|(w, s)| *w || s.forced)
+        .collect();
     let (mut fits, groups) = fit_pass(img, &epsf, &stars, node_error, cfg);
     for (f, r) in fits.iter_mut().zip(&from_residual) {
         if *r {

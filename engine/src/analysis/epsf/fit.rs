@@ -199,7 +199,9 @@ pub(crate) fn select(
 /// Largest growth of a fit disc around a saturated core, px.
 pub const MAX_RADIUS_GROWTH_PX: f64 = 8.0;
 
-fn select_disc(
+/// The usable pixels (index, X, Y) of the disc of `radius` around (x, y), and whether it met the image edge
+/// or masked pixels.
+pub(crate) fn select_disc(
     img: &PixelData<'_>,
     x: f64,
     y: f64,
