@@ -189,14 +189,17 @@ pub const REFCAT_HEADER: [&str; 8] = [
 /// survey: a 2-mas floor (the plate model's `DEFAULT_CATALOGUE_ERROR_MAS`, a Gaia-DR3-like star of
 /// G ≈ 17–18 propagated to the epoch), the knee at Hw 14, a limit of Hw 16.5 (the JASMINE pilot
 /// catalogue's completeness in Hw, from 2MASS + SIRIUS + VVV: JASMINE-Mission/pilot_catalog) and 98 %
-/// completeness above it. The catalogue is at the observation epoch (jsim's stars do not move yet): no
-/// proper motions, no epoch propagation.
+/// completeness above it. Its magnitudes carry a Gaussian error of 0.05 mag (chosen: VVV/SIRIUS photometry
+/// of a few hundredths at these magnitudes, plus the transformation from their bands to Hw). The catalogue
+/// is at the observation epoch (jsim's stars do not move yet): no proper motions, no epoch propagation.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SurveyModel {
     pub floor_mas: f64,
     pub knee_hw: f64,
     pub limit_hw: f64,
     pub completeness: f64,
+    /// Error of its magnitudes, mag (Gaussian): a survey's photometry transformed to Hw from its own bands.
+    pub phot_sigma_mag: f64,
 }
 
 impl Default for SurveyModel {
@@ -206,6 +209,7 @@ impl Default for SurveyModel {
             knee_hw: 14.0,
             limit_hw: 16.5,
             completeness: 0.98,
+            phot_sigma_mag: 0.05,
         }
     }
 }
@@ -228,6 +232,12 @@ impl SurveyModel {
             return Err(format!(
                 "--refcat-completeness {}: allowed (0, 1]",
                 self.completeness
+            ));
+        }
+        if !(0.0..=5.0).contains(&self.phot_sigma_mag) {
+            return Err(format!(
+                "--refcat-phot-sigma-mag {}: allowed [0, 5] mag",
+                self.phot_sigma_mag
             ));
         }
         Ok(())
@@ -270,6 +280,9 @@ pub fn reference_catalogue(sim: &Simulator, survey: &SurveyModel, array: u32) ->
             let (zx, zy): (f64, f64) =
                 (StandardNormal.sample(&mut r), StandardNormal.sample(&mut r));
             let kept = r.random::<f64>() < survey.completeness;
+            // drawn after the others, so that the positions and the kept stars are those of a catalogue
+            // without photometric errors
+            let zm: f64 = StandardNormal.sample(&mut r);
             kept.then(|| {
                 let (x, y) = (s.x_px + zx * sigma / scale, s.y_px + zy * sigma / scale);
                 let (ra, dec) = sim
@@ -283,7 +296,7 @@ pub fn reference_catalogue(sim: &Simulator, survey: &SurveyModel, array: u32) ->
                     dec_deg: dec,
                     x_px: x,
                     y_px: y,
-                    hw: s.mag_hw,
+                    hw: s.mag_hw + zm * survey.phot_sigma_mag,
                     sigma_mas: sigma,
                 }
             })

@@ -236,6 +236,9 @@ pub struct SurveyArgs {
     /// Reference catalogue: completeness above the limit, (0, 1].
     #[arg(long = "refcat-completeness", default_value_t = engine::io::instrument::SurveyModel::default().completeness)]
     pub completeness: f64,
+    /// Reference catalogue: error of its magnitudes (Hw), mag.
+    #[arg(long = "refcat-phot-sigma-mag", default_value_t = engine::io::instrument::SurveyModel::default().phot_sigma_mag)]
+    pub phot_sigma_mag: f64,
 }
 
 impl SurveyArgs {
@@ -246,6 +249,7 @@ impl SurveyArgs {
             knee_hw: self.knee_hw,
             limit_hw: self.limit_hw,
             completeness: self.completeness,
+            phot_sigma_mag: self.phot_sigma_mag,
         };
         m.validate().map_err(anyhow::Error::msg)?;
         Ok(m)
