@@ -374,7 +374,7 @@ pub struct Supplied<'a> {
     pub reference: Option<&'a [(f64, f64)]>,
     /// The reference catalogue the crowded-field analysis holds its missed stars from
     /// (`analysis.crowded_forced_catalogue`): the product, or a simulated survey's at its default errors.
-    pub catalogue: Option<&'a [(f64, f64)]>,
+    pub catalogue: Option<&'a [crate::analysis::crowded::forced::CatalogueStar]>,
     /// Reference catalogues at the catalogue errors (mas) a plan asks for, as a simulated survey draws them
     /// (used where no product is given).
     pub reference_by_error: &'a [(f64, Vec<(f64, f64)>)],

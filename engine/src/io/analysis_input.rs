@@ -8,6 +8,7 @@ use super::fits::{self, ImageFacts};
 use super::instrument::{self, CalibrationFlat};
 use crate::analysis::AnalysisImage;
 use crate::analysis::countermeasures::telemetry::ExposureReadout;
+use crate::analysis::crowded::forced::CatalogueStar;
 use crate::config::Config;
 use crate::detector::dq;
 use crate::truth::TruthRow;
@@ -130,6 +131,8 @@ pub struct AnalysisInput {
     pub assumptions: Vec<String>,
     /// The reference catalogue product's positions in this image's pixels (`refcat.csv`), when there is one.
     pub reference: Option<Vec<(f64, f64)>>,
+    /// The same catalogue's stars with their Hw (the crowded analysis' forced stars and their photometry).
+    pub catalogue: Option<Vec<CatalogueStar>>,
     /// The design model PSF product (`psf_model.fits`), when there is one.
     pub model_psf: Option<crate::analysis::epsf::Epsf>,
     /// The attitude telemetry product of this exposure (`telemetry_NNN.fits`), when there is one.
@@ -197,6 +200,7 @@ impl AnalysisInput {
         .and_then(|mut input| {
             input.assumptions.extend(products.assumed);
             input.reference = products.reference;
+            input.catalogue = products.catalogue;
             input.model_psf = products.model_psf;
             input.telemetry = read_telemetry_for(path, telemetry_path)?;
             input.with_readout(path, None, fallback)
@@ -275,6 +279,7 @@ impl AnalysisInput {
             plate_scale_mas,
             assumptions,
             reference: None,
+            catalogue: None,
             model_psf: None,
             telemetry: None,
             readout: None,
@@ -375,6 +380,7 @@ impl AnalysisInput {
         .map(|mut input| {
             input.assumptions.extend(products.assumed);
             input.reference = products.reference;
+            input.catalogue = products.catalogue;
             input.model_psf = products.model_psf;
             input
         })
@@ -429,6 +435,7 @@ fn array_truth(path: &Path, array: usize) -> Result<Vec<TruthRow>, IoError> {
 struct Products {
     flat: Option<CalibrationFlat>,
     reference: Option<Vec<(f64, f64)>>,
+    catalogue: Option<Vec<CatalogueStar>>,
     model_psf: Option<crate::analysis::epsf::Epsf>,
     assumed: Vec<String>,
 }
@@ -452,7 +459,10 @@ impl Products {
         };
         let mut assumed = Vec::new();
         let array = k.map_or(0, |k| k as u32 + 1);
-        let reference = read_reference(image, refcat_path, array, &mut assumed)?;
+        let catalogue = read_reference(image, refcat_path, array, &mut assumed)?;
+        let reference = catalogue
+            .as_ref()
+            .map(|c| c.iter().map(|s| (s.x_px, s.y_px)).collect());
         let model_psf = match instrument::find_model_psf(image, None) {
             Some(p) => Some(instrument::read_model_psf(
                 &p,
@@ -463,26 +473,36 @@ impl Products {
         Ok(Self {
             flat,
             reference,
+            catalogue,
             model_psf,
             assumed,
         })
     }
 }
 
-/// The reference catalogue product for an image (array `array`, 0 for a single one): the positions of its
-/// stars in the image's pixels, or `None` (said in `assumptions`) when there is none.
+/// The reference catalogue product for an image (array `array`, 0 for a single one): its stars' positions in
+/// the image's pixels and their Hw, or `None` (said in `assumptions`) when there is none.
 fn read_reference(
     image: &Path,
     given: Option<&Path>,
     array: u32,
     assumptions: &mut Vec<String>,
-) -> Result<Option<Vec<(f64, f64)>>, IoError> {
+) -> Result<Option<Vec<CatalogueStar>>, IoError> {
     match instrument::find_reference_catalogue(image, given) {
         Some(p) => {
             let stars = instrument::read_reference_catalogue(&p, array)?;
             let ext = (array > 0).then(|| format!("ARRAY{array}"));
             check_pointing(image, ext.as_deref(), &p, &stars)?;
-            Ok(Some(stars.iter().map(|s| (s.x_px, s.y_px)).collect()))
+            Ok(Some(
+                stars
+                    .iter()
+                    .map(|s| CatalogueStar {
+                        x_px: s.x_px,
+                        y_px: s.y_px,
+                        hw: s.hw,
+                    })
+                    .collect(),
+            ))
         }
         None => {
             assumptions.push(format!(

@@ -194,7 +194,7 @@ impl Session {
         let oracle = source::oracle_reference(&plan, truth);
         let supplied = Supplied {
             reference: input.reference.as_deref(),
-            catalogue: input.reference.as_deref(),
+            catalogue: input.catalogue.as_deref(),
             model_psf: input.model_psf.as_ref(),
             telemetry: input.telemetry.as_ref(),
             readout: input.readout,

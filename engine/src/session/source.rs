@@ -8,6 +8,7 @@
 
 use crate::analysis::countermeasures::telemetry::{ExposureReadout, TelemetryRecord};
 use crate::analysis::countermeasures::{Countermeasure, Plan, Reference, TelemetryQuality};
+use crate::analysis::crowded::forced::CatalogueStar;
 use crate::analysis::epsf::Epsf;
 use crate::analysis::image::AnalysisImage;
 use crate::analysis::pipeline::{
@@ -104,7 +105,7 @@ pub struct SourceProducts {
     pub references: Vec<(f64, Vec<(f64, f64)>)>,
     /// The reference catalogue at the default survey model, in pixels, when the analysis is crowded and
     /// holds the catalogue's missed stars (`analysis.crowded_forced_catalogue`); else empty.
-    pub catalogue: Vec<(f64, f64)>,
+    pub catalogue: Vec<CatalogueStar>,
     /// The attitude recorded at each telemetry quality of the plan (none for a static ACE).
     pub telemetry: Vec<(TelemetryQuality, TelemetryRecord)>,
     pub readout: ExposureReadout,
@@ -113,11 +114,16 @@ pub struct SourceProducts {
 }
 
 impl SourceProducts {
-    /// The products as the pipeline takes them; `reference`: the reference catalogue product, if any.
-    pub fn supplied<'a>(&'a self, reference: Option<&'a [(f64, f64)]>) -> Supplied<'a> {
+    /// The products as the pipeline takes them; `reference`, `catalogue`: the reference catalogue product's
+    /// positions and stars, if any.
+    pub fn supplied<'a>(
+        &'a self,
+        reference: Option<&'a [(f64, f64)]>,
+        catalogue: Option<&'a [CatalogueStar]>,
+    ) -> Supplied<'a> {
         Supplied {
             reference,
-            catalogue: reference
+            catalogue: catalogue
                 .or((!self.catalogue.is_empty()).then_some(self.catalogue.as_slice())),
             reference_by_error: &self.references,
             model_psf: Some(&self.model_psf),
@@ -173,9 +179,21 @@ impl Source<'_> {
 
     /// The positions (pixels) of the reference catalogue a survey of this model gives of the field.
     fn catalogue_px(&self, survey: &SurveyModel) -> Vec<(f64, f64)> {
-        instrument::reference_catalogue(self.sim, survey, 0)
+        self.catalogue_stars(survey)
             .iter()
             .map(|s| (s.x_px, s.y_px))
+            .collect()
+    }
+
+    /// The reference catalogue a survey of this model gives of the field: positions (pixels) and Hw.
+    fn catalogue_stars(&self, survey: &SurveyModel) -> Vec<CatalogueStar> {
+        instrument::reference_catalogue(self.sim, survey, 0)
+            .iter()
+            .map(|s| CatalogueStar {
+                x_px: s.x_px,
+                y_px: s.y_px,
+                hw: s.hw,
+            })
             .collect()
     }
 
@@ -208,7 +226,7 @@ impl Source<'_> {
             false => None,
         };
         let catalogue = if cfg.crowding != Crowding::Off && cfg.crowded_forced_catalogue {
-            self.catalogue_px(&SurveyModel::default())
+            self.catalogue_stars(&SurveyModel::default())
         } else {
             Vec::new()
         };
@@ -245,7 +263,7 @@ impl Source<'_> {
         }
         let cfg = &config.analysis;
         let products = self.products(plan, cfg)?;
-        let mut s = products.supplied(supplied.reference);
+        let mut s = products.supplied(supplied.reference, supplied.catalogue);
         s.model_psf = supplied.model_psf.or(s.model_psf);
         s.telemetry = supplied.telemetry;
         s.readout = supplied.readout.or(s.readout);

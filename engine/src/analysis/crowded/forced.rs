@@ -11,8 +11,15 @@
 //! `f = Σ wᵢ ψᵢ rᵢ / Σ wᵢ ψᵢ²` over the fit radius (at least 1 e⁻: a neighbour's fit may have taken its
 //! light); in the last pass its flux is fitted with its group, its position held. It is never reported and
 //! never a neighbour that flags a blend. Off by default (`analysis.crowded_forced_catalogue`).
+//!
+//! Its flux carries the catalogue's photometry as a prior: `f_cat = Z · 10^(−0.4 Hw)`, with the image's zero
+//! point Z the median of `f · 10^(0.4 Hw)` over the brightest unsaturated fits that claimed a catalogue star,
+//! and σ = [`FORCED_FLUX_PRIOR_MAG`] (a survey's photometry, transformed to Hw) — so that a faint star held under a
+//! bright star's core, whose free flux the fit can hardly tell from the bright star's, neither takes that
+//! star's light nor leaves its own. The catalogue's Hw in the simulated product is the stars' own; the prior's
+//! width stands for a real survey's error. A catalogue without Hw (NaN) leaves the flux free.
 
-use super::group_fit::Member;
+use super::group_fit::{FluxPrior, Member};
 use super::neighbours::Neighbours;
 use super::pass::model_image;
 use crate::analysis::epsf::Epsf;
@@ -23,6 +30,21 @@ use rayon::prelude::*;
 
 /// The least start flux of a forced star, e⁻ (its group's fit sets the flux).
 const MIN_START_FLUX_E: f64 = 1.0;
+/// Width of a forced star's flux prior, mag: a survey's photometry transformed to Hw.
+pub const FORCED_FLUX_PRIOR_MAG: f64 = 0.1;
+/// The zero point is the median over at most this many of the brightest unsaturated matched fits …
+const ZERO_POINT_STARS: usize = 500;
+/// … and needs at least this many.
+const ZERO_POINT_MIN_STARS: usize = 10;
+
+/// One star of the reference catalogue as the analysis reads it: its position in this image's pixels (through
+/// the design WCS) and its magnitude (NaN when the catalogue has none).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CatalogueStar {
+    pub x_px: f64,
+    pub y_px: f64,
+    pub hw: f64,
+}
 /// A catalogue star this close to a star of the model (after the common offset) is that star (px).
 pub const FORCED_MATCH_PX: f64 = 1.0;
 /// The common offset of the catalogue from the fits is found with this many of the brightest fits …
@@ -36,7 +58,7 @@ pub fn forced_members(
     img: &AnalysisImage,
     epsf: &Epsf,
     stars: &[Member],
-    catalogue: &[(f64, f64)],
+    catalogue: &[CatalogueStar],
     cfg: &AnalysisCfg,
 ) -> Vec<Member> {
     if catalogue.is_empty() || stars.is_empty() {
@@ -44,31 +66,42 @@ pub fn forced_members(
     }
     let pos: Vec<(f64, f64)> = stars.iter().map(|s| (s.x, s.y)).collect();
     let flux: Vec<f64> = stars.iter().map(|s| s.flux).collect();
+    let cat_pos: Vec<(f64, f64)> = catalogue.iter().map(|c| (c.x_px, c.y_px)).collect();
     let off = crate::analysis::detection::common_offset_of_brightest(
         &pos,
         &flux,
-        catalogue,
+        &cat_pos,
         OFFSET_STARS,
         OFFSET_SEARCH_PX,
     );
     let (w, h) = (img.nx as f64, img.ny as f64);
-    let cat: Vec<(f64, f64)> = catalogue
+    let cat: Vec<CatalogueStar> = catalogue
         .iter()
-        .map(|&(x, y)| (x + off.0, y + off.1))
-        .filter(|&(x, y)| x >= -0.5 && y >= -0.5 && x < w - 0.5 && y < h - 0.5)
+        .map(|c| CatalogueStar {
+            x_px: c.x_px + off.0,
+            y_px: c.y_px + off.1,
+            hw: c.hw,
+        })
+        .filter(|c| c.x_px >= -0.5 && c.y_px >= -0.5 && c.x_px < w - 0.5 && c.y_px < h - 0.5)
         .collect();
     // each star of the model claims its nearest catalogue star within the match radius; the unclaimed
     // are missed (a faint companion under a bright star's fit included)
-    let nb = Neighbours::new(&cat);
+    let nb = Neighbours::new(&cat.iter().map(|c| (c.x_px, c.y_px)).collect::<Vec<_>>());
     let mut claimed = vec![false; cat.len()];
+    // (fit flux, catalogue Hw) of the unsaturated stars that claimed one: the zero point's sample
+    let mut pairs: Vec<(f64, f64)> = Vec::new();
     for s in stars {
         let near = nb.within(s.x, s.y, FORCED_MATCH_PX);
-        let d2 = |k: usize| (cat[k].0 - s.x).powi(2) + (cat[k].1 - s.y).powi(2);
+        let d2 = |k: usize| (cat[k].x_px - s.x).powi(2) + (cat[k].y_px - s.y).powi(2);
         if let Some(k) = near.into_iter().min_by(|&a, &b| d2(a).total_cmp(&d2(b))) {
             claimed[k] = true;
+            if !s.saturated && !s.fixed && s.flux > 0.0 && cat[k].hw.is_finite() {
+                pairs.push((s.flux, cat[k].hw));
+            }
         }
     }
-    let missed: Vec<(f64, f64)> = cat
+    let zero_point = zero_point_e(&mut pairs);
+    let missed: Vec<CatalogueStar> = cat
         .iter()
         .zip(&claimed)
         .filter(|(_, c)| !**c)
@@ -86,17 +119,50 @@ pub fn forced_members(
     let (r_in, r_out) = crate::analysis::detection::sky_annulus(cfg);
     missed
         .par_iter()
-        .filter_map(|&(x, y)| {
-            let sky = annulus_sky(&rd, x, y, r_in, r_out)?;
-            let f = amplitude(&rd, &model, epsf, (x, y), sky, cfg.fit_radius_px)?;
-            // a neighbour's fit may have taken its light (the residual there ≤ 0): it starts faint, and its
-            // group's fit shares the light out
+        .filter_map(|c| {
+            let (x, y) = (c.x_px, c.y_px);
+            let prior = zero_point
+                .filter(|_| c.hw.is_finite())
+                .map(|z| flux_prior(z, c.hw));
+            let start = match prior {
+                Some(q) => q.mean_e,
+                None => {
+                    let sky = annulus_sky(&rd, x, y, r_in, r_out)?;
+                    amplitude(&rd, &model, epsf, (x, y), sky, cfg.fit_radius_px)?
+                }
+            };
+            // without a prior a neighbour's fit may have taken its light (the residual there ≤ 0): it starts
+            // faint, and its group's fit shares the light out
             Some(Member {
                 forced: true,
-                ..Member::new(x, y, f.max(MIN_START_FLUX_E))
+                flux_prior: prior,
+                ..Member::new(x, y, start.max(MIN_START_FLUX_E))
             })
         })
         .collect()
+}
+
+/// The image's zero point `Z` (e⁻ of a Hw = 0 star): the median of `f · 10^(0.4 Hw)` over the
+/// [`ZERO_POINT_STARS`] brightest (fit flux, catalogue Hw) pairs; `None` with fewer than
+/// [`ZERO_POINT_MIN_STARS`].
+fn zero_point_e(pairs: &mut [(f64, f64)]) -> Option<f64> {
+    pairs.sort_by(|a, b| b.0.total_cmp(&a.0));
+    let z: Vec<f64> = pairs
+        .iter()
+        .take(ZERO_POINT_STARS)
+        .map(|&(f, hw)| f * 10f64.powf(0.4 * hw))
+        .collect();
+    (z.len() >= ZERO_POINT_MIN_STARS).then(|| crate::numerics::stats::median(&z))
+}
+
+/// A catalogue star's flux prior: `Z · 10^(−0.4 Hw)` with the relative width of [`FORCED_FLUX_PRIOR_MAG`]
+/// (`σ_f / f = 0.4 ln 10 · σ_m`).
+fn flux_prior(zero_point_e: f64, hw: f64) -> FluxPrior {
+    let mean_e = zero_point_e * 10f64.powf(-0.4 * hw);
+    FluxPrior {
+        mean_e,
+        sigma_e: mean_e * 0.4 * std::f64::consts::LN_10 * FORCED_FLUX_PRIOR_MAG,
+    }
 }
 
 /// `Σ wᵢ ψᵢ (rᵢ − s) / Σ wᵢ ψᵢ²` over the usable pixels within `radius_px` of (x, y) of the residual `rd`,

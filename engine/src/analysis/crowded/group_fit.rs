@@ -30,6 +30,14 @@ fn scaled_inverse(a: &[f64], n: usize) -> Option<Vec<f64>> {
     Some((0..n * n).map(|i| inv[i] * s[i / n] * s[i % n]).collect())
 }
 
+/// A Gaussian prior on a member's flux (e⁻): its fit adds `((f − mean_e)/sigma_e)²` to the group's χ² (a
+/// forced catalogue star's photometry, [`super::forced`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FluxPrior {
+    pub mean_e: f64,
+    pub sigma_e: f64,
+}
+
 /// A member's starting values.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Member {
@@ -44,6 +52,8 @@ pub struct Member {
     /// A forced catalogue star ([`super::forced`]): its position held, its flux fitted with its group; not
     /// a detected neighbour (a group of one detected star and forced ones is not flagged grouped).
     pub forced: bool,
+    /// A prior on its flux (a forced star's catalogue photometry); `None`: the flux is free.
+    pub flux_prior: Option<FluxPrior>,
 }
 
 impl Member {
@@ -55,6 +65,7 @@ impl Member {
             saturated: false,
             fixed: false,
             forced: false,
+            flux_prior: None,
         }
     }
 }
@@ -195,6 +206,22 @@ pub fn fit_group_with<P: Profile>(
     let variance = |mu: f64, star: f64, model_e: f64| {
         pixel_variance(mu, star, img.var_floor_e2, img.flat_sigma) + model_e * model_e
     };
+    // the members' flux priors: (parameter index, mean, 1/σ²)
+    let priors: Vec<(usize, f64, f64)> = members
+        .iter()
+        .enumerate()
+        .filter_map(|(k, m)| {
+            m.flux_prior
+                .filter(|q| q.sigma_e > 0.0 && q.mean_e.is_finite())
+                .map(|q| (3 * k + 2, q.mean_e, 1.0 / (q.sigma_e * q.sigma_e)))
+        })
+        .collect();
+    let prior_chi2 = |p: &[f64]| -> f64 {
+        priors
+            .iter()
+            .map(|&(i, mean, w)| w * (p[i] - mean).powi(2))
+            .sum()
+    };
     let chi2_of = |p: &[f64]| -> f64 {
         let s = sky_of(p);
         let mut j = Vec::new();
@@ -205,7 +232,8 @@ pub fn fit_group_with<P: Profile>(
                 let mu = star + s + o;
                 (img.e[i] - mu).powi(2) / variance(mu, star, sat + os)
             })
-            .sum()
+            .sum::<f64>()
+            + prior_chi2(p)
     };
     // normal equations at p: (JᵀWJ, JᵀW r, χ²)
     let normal = |p: &[f64]| -> (Vec<f64>, Vec<f64>, f64) {
@@ -226,6 +254,12 @@ pub fn fit_group_with<P: Profile>(
                     a[ia * np + ib] += w * ja * jb;
                 }
             }
+        }
+        // a prior is one more residual, (mean − f)/σ, of Jacobian 1/σ in its flux
+        for &(i, mean, w) in &priors {
+            a[i * np + i] += w;
+            b[i] += w * (mean - p[i]);
+            chi2 += w * (mean - p[i]).powi(2);
         }
         (a, b, chi2)
     };
@@ -519,5 +553,61 @@ mod tests {
             f[1].crlb_x,
             alone.crlb_x
         );
+    }
+
+    /// A flux prior combines with the pixels as two Gaussian measurements do: a forced star's flux with a
+    /// prior (μ, σₚ) is `(f_d/σ_d² + μ/σₚ²) / (1/σ_d² + 1/σₚ²)` and its bound `(1/σ_d² + 1/σₚ²)^(−1/2)`, where
+    /// f_d, σ_d are the same fit's without the prior (an analytic result, not the code's own sum).
+    #[test]
+    fn a_flux_prior_combines_with_the_pixels_as_two_gaussian_measurements() {
+        let e = gaussian_epsf();
+        let n = 32;
+        // a sky far above the star's light, so that the weights hardly follow the model
+        let mut img = image(&e, n, &[(15.3, 16.8, 2.0e3)], 2.0e4);
+        for (k, v) in img.iter_mut().enumerate() {
+            *v += 500.0 * (((k * 7919) % 101) as f64 / 101.0 - 0.5);
+        }
+        let bad = vec![false; n * n];
+        let pd = pixels(&img, &bad, n, 0.0);
+        let opt = FitOptions {
+            radius_px: 2.5,
+            max_iter: 50,
+            fit_sky: false,
+        };
+        let held = Member {
+            forced: true,
+            ..Member::new(15.3, 16.8, 1.5e3)
+        };
+        let none = Outsiders { stars: &[] };
+        let free = fit_group(&pd, &e, &[held], &none, 2.0e4, 0.0, &opt)[0];
+        assert!(
+            free.crlb_flux > 0.0 && free.crlb_flux.is_finite(),
+            "{free:?}"
+        );
+        assert_eq!((free.x, free.y), (15.3, 16.8), "the position is held");
+        for (mean_e, sigma_e) in [(1.0e3, free.crlb_flux), (3.0e3, 0.5 * free.crlb_flux)] {
+            let with = Member {
+                flux_prior: Some(FluxPrior { mean_e, sigma_e }),
+                ..held
+            };
+            let f = fit_group(&pd, &e, &[with], &none, 2.0e4, 0.0, &opt)[0];
+            let (wd, wp) = (free.crlb_flux.powi(-2), sigma_e.powi(-2));
+            let expect = (free.flux * wd + mean_e * wp) / (wd + wp);
+            // the weights follow the model (sky + star), so the two fits weigh the pixels a little
+            // differently: 1 % of the prior's pull
+            let pull = (expect - free.flux).abs();
+            assert!(
+                (f.flux - expect).abs() < 0.01 * pull,
+                "prior ({mean_e}, {sigma_e}): {} against {expect} (free {})",
+                f.flux,
+                free.flux
+            );
+            let bound = (wd + wp).powf(-0.5);
+            assert!(
+                (f.crlb_flux / bound - 1.0).abs() < 0.01,
+                "{} vs {bound}",
+                f.crlb_flux
+            );
+        }
     }
 }

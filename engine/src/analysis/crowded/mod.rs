@@ -152,7 +152,7 @@ pub fn analyse(
     img: &AnalysisImage,
     cfg: &AnalysisCfg,
     model_epsf: Option<&Epsf>,
-    catalogue: Option<&[(f64, f64)]>,
+    catalogue: Option<&[forced::CatalogueStar]>,
 ) -> Crowded {
     let opts = build_options(cfg);
     let pd = img.pixels();

@@ -210,6 +210,7 @@ pub(super) fn members_of(fits: &[StarFit], prev: &[Member], nx: usize, ny: usize
                 Member {
                     saturated: f.flags & flags::SATURATED != 0,
                     forced: p.forced,
+                    flux_prior: p.flux_prior,
                     ..Member::new(f.x, f.y, f.flux)
                 }
             } else {
