@@ -462,23 +462,32 @@ mod tests {
             .collect()
     }
 
+    /// One star on a sky with a fixed pseudo-random pattern of peak-to-peak `noise_e` added.
+    fn noisy_image(e: &Epsf, n: usize, star: (f64, f64, f64), sky: f64, noise_e: f64) -> Vec<f64> {
+        let mut img = image(e, n, &[star], sky);
+        for (k, v) in img.iter_mut().enumerate() {
+            *v += noise_e * (((k * 7919) % 101) as f64 / 101.0 - 0.5);
+        }
+        img
+    }
+
+    /// The one-star fits' options.
+    const ONE_STAR: FitOptions = FitOptions {
+        radius_px: 2.5,
+        max_iter: 50,
+        fit_sky: false,
+    };
+
     /// A group of one is the single-star fit (another implementation of the same estimator): same
     /// position, flux and bound on a noisy star.
     #[test]
     fn a_group_of_one_is_the_single_star_fit() {
         let e = gaussian_epsf();
         let n = 32;
-        let mut img = image(&e, n, &[(15.3, 16.8, 3.0e4)], 200.0);
-        for (k, v) in img.iter_mut().enumerate() {
-            *v += 30.0 * (((k * 7919) % 101) as f64 / 101.0 - 0.5);
-        }
+        let img = noisy_image(&e, n, (15.3, 16.8, 3.0e4), 200.0, 30.0);
         let bad = vec![false; n * n];
         let pd = pixels(&img, &bad, n, 0.001);
-        let opt = FitOptions {
-            radius_px: 2.5,
-            max_iter: 50,
-            fit_sky: false,
-        };
+        let opt = ONE_STAR;
         let single = fit_star(&pd, &e, 15.0, 17.0, 2.5e4, 200.0, &opt);
         let m = Member::new(15.0, 17.0, 2.5e4);
         let g = fit_group(&pd, &e, &[m], &Outsiders { stars: &[] }, 200.0, 0.0, &opt)[0];
@@ -563,17 +572,10 @@ mod tests {
         let e = gaussian_epsf();
         let n = 32;
         // a sky far above the star's light, so that the weights hardly follow the model
-        let mut img = image(&e, n, &[(15.3, 16.8, 2.0e3)], 2.0e4);
-        for (k, v) in img.iter_mut().enumerate() {
-            *v += 500.0 * (((k * 7919) % 101) as f64 / 101.0 - 0.5);
-        }
+        let img = noisy_image(&e, n, (15.3, 16.8, 2.0e3), 2.0e4, 500.0);
         let bad = vec![false; n * n];
         let pd = pixels(&img, &bad, n, 0.0);
-        let opt = FitOptions {
-            radius_px: 2.5,
-            max_iter: 50,
-            fit_sky: false,
-        };
+        let opt = ONE_STAR;
         let held = Member {
             forced: true,
             ..Member::new(15.3, 16.8, 1.5e3)
