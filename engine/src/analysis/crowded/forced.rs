@@ -6,18 +6,19 @@
 //! isolated stars' 1.17–1.21 × their bound). The reference catalogue (an instrument product, a survey's
 //! positions to Hw 16.5) knows many of them. Each star of the model claims its nearest catalogue star within
 //! [`FORCED_MATCH_PX`] (after the catalogue's common offset from the brightest fits); each unclaimed one
-//! becomes a star of the model. It starts with the weighted least-squares amplitude of the ePSF at its
-//! position in the residual image (image − model of every star found, less the annulus sky),
-//! `f = Σ wᵢ ψᵢ rᵢ / Σ wᵢ ψᵢ²` over the fit radius (at least 1 e⁻: a neighbour's fit may have taken its
-//! light); in the last pass its flux is fitted with its group, its position held. It is never reported and
+//! becomes a star of the model. It starts at its catalogue flux (below) or, without one, with the weighted
+//! least-squares amplitude of the ePSF at its position in the residual image (image − model of every star
+//! found, less the annulus sky), `f = Σ wᵢ ψᵢ rᵢ / Σ wᵢ ψᵢ²` over the fit radius (at least 1 e⁻: a
+//! neighbour's fit may have taken its light); in the last pass its flux is fitted with its group, its
+//! position held. It is never reported and
 //! never a neighbour that flags a blend. Off by default (`analysis.crowded_forced_catalogue`).
 //!
 //! Its flux carries the catalogue's photometry as a prior: `f_cat = Z · 10^(−0.4 Hw)`, with the image's zero
 //! point Z the median of `f · 10^(0.4 Hw)` over the brightest unsaturated fits that claimed a catalogue star,
 //! and σ = [`FORCED_FLUX_PRIOR_MAG`] (a survey's photometry, transformed to Hw) — so that a faint star held under a
 //! bright star's core, whose free flux the fit can hardly tell from the bright star's, neither takes that
-//! star's light nor leaves its own. The catalogue's Hw in the simulated product is the stars' own; the prior's
-//! width stands for a real survey's error. A catalogue without Hw (NaN) leaves the flux free.
+//! star's light nor leaves its own. The simulated product's Hw carry a 0.05-mag error
+//! (`--refcat-phot-sigma-mag`); the prior is twice as wide. A catalogue without Hw (NaN) leaves the flux free.
 
 use super::group_fit::{FluxPrior, Member};
 use super::neighbours::Neighbours;
