@@ -149,7 +149,7 @@ impl PyExposure {
                 input.reference = Some(
                     reference_catalogue(&self.sim, &SurveyModel::default(), 0)
                         .iter()
-                        .map(|s| (s.x_px, s.y_px))
+                        .map(engine::io::instrument::RefStar::catalogue_star)
                         .collect(),
                 );
                 // the design model PSF, as `write_fits` writes it (f32 in the file, as read back there)

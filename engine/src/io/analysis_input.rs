@@ -129,10 +129,9 @@ pub struct AnalysisInput {
     pub plate_scale_mas: f64,
     /// What was assumed because the image did not say.
     pub assumptions: Vec<String>,
-    /// The reference catalogue product's positions in this image's pixels (`refcat.csv`), when there is one.
-    pub reference: Option<Vec<(f64, f64)>>,
-    /// The same catalogue's stars with their Hw (the crowded analysis' forced stars and their photometry).
-    pub catalogue: Option<Vec<CatalogueStar>>,
+    /// The reference catalogue product's stars (`refcat.csv`): positions in this image's pixels and Hw, when
+    /// there is one.
+    pub reference: Option<Vec<CatalogueStar>>,
     /// The design model PSF product (`psf_model.fits`), when there is one.
     pub model_psf: Option<crate::analysis::epsf::Epsf>,
     /// The attitude telemetry product of this exposure (`telemetry_NNN.fits`), when there is one.
@@ -200,7 +199,6 @@ impl AnalysisInput {
         .and_then(|mut input| {
             input.assumptions.extend(products.assumed);
             input.reference = products.reference;
-            input.catalogue = products.catalogue;
             input.model_psf = products.model_psf;
             input.telemetry = read_telemetry_for(path, telemetry_path)?;
             input.with_readout(path, None, fallback)
@@ -279,7 +277,6 @@ impl AnalysisInput {
             plate_scale_mas,
             assumptions,
             reference: None,
-            catalogue: None,
             model_psf: None,
             telemetry: None,
             readout: None,
@@ -380,7 +377,6 @@ impl AnalysisInput {
         .map(|mut input| {
             input.assumptions.extend(products.assumed);
             input.reference = products.reference;
-            input.catalogue = products.catalogue;
             input.model_psf = products.model_psf;
             input
         })
@@ -434,8 +430,7 @@ fn array_truth(path: &Path, array: usize) -> Result<Vec<TruthRow>, IoError> {
 /// missing.
 struct Products {
     flat: Option<CalibrationFlat>,
-    reference: Option<Vec<(f64, f64)>>,
-    catalogue: Option<Vec<CatalogueStar>>,
+    reference: Option<Vec<CatalogueStar>>,
     model_psf: Option<crate::analysis::epsf::Epsf>,
     assumed: Vec<String>,
 }
@@ -459,10 +454,7 @@ impl Products {
         };
         let mut assumed = Vec::new();
         let array = k.map_or(0, |k| k as u32 + 1);
-        let catalogue = read_reference(image, refcat_path, array, &mut assumed)?;
-        let reference = catalogue
-            .as_ref()
-            .map(|c| c.iter().map(|s| (s.x_px, s.y_px)).collect());
+        let reference = read_reference(image, refcat_path, array, &mut assumed)?;
         let model_psf = match instrument::find_model_psf(image, None) {
             Some(p) => Some(instrument::read_model_psf(
                 &p,
@@ -473,7 +465,6 @@ impl Products {
         Ok(Self {
             flat,
             reference,
-            catalogue,
             model_psf,
             assumed,
         })
@@ -496,11 +487,7 @@ fn read_reference(
             Ok(Some(
                 stars
                     .iter()
-                    .map(|s| CatalogueStar {
-                        x_px: s.x_px,
-                        y_px: s.y_px,
-                        hw: s.hw,
-                    })
+                    .map(instrument::RefStar::catalogue_star)
                     .collect(),
             ))
         }

@@ -263,6 +263,17 @@ pub struct RefStar {
     pub sigma_mas: f64,
 }
 
+impl RefStar {
+    /// The star as the analysis reads it: position in its array's pixels and Hw.
+    pub fn catalogue_star(&self) -> crate::analysis::crowded::forced::CatalogueStar {
+        crate::analysis::crowded::forced::CatalogueStar {
+            x_px: self.x_px,
+            y_px: self.y_px,
+            hw: self.hw,
+        }
+    }
+}
+
 /// The reference catalogue a survey would give of a simulator's stars (seeded: its own stream of the run
 /// seed, per star): those brighter than the limit, each kept with the survey's completeness, at its true
 /// position plus a Gaussian error of σ(Hw) per axis.

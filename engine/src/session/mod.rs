@@ -192,9 +192,13 @@ impl Session {
         };
         let truth = input.truth.as_deref();
         let oracle = source::oracle_reference(&plan, truth);
+        let reference_px = input
+            .reference
+            .as_deref()
+            .map(crate::analysis::crowded::forced::positions_px);
         let supplied = Supplied {
-            reference: input.reference.as_deref(),
-            catalogue: input.catalogue.as_deref(),
+            reference: reference_px.as_deref(),
+            catalogue: input.reference.as_deref(),
             model_psf: input.model_psf.as_ref(),
             telemetry: input.telemetry.as_ref(),
             readout: input.readout,

@@ -8,7 +8,7 @@
 
 use crate::analysis::countermeasures::telemetry::{ExposureReadout, TelemetryRecord};
 use crate::analysis::countermeasures::{Countermeasure, Plan, Reference, TelemetryQuality};
-use crate::analysis::crowded::forced::CatalogueStar;
+use crate::analysis::crowded::forced::{CatalogueStar, positions_px};
 use crate::analysis::epsf::Epsf;
 use crate::analysis::image::AnalysisImage;
 use crate::analysis::pipeline::{
@@ -179,21 +179,14 @@ impl Source<'_> {
 
     /// The positions (pixels) of the reference catalogue a survey of this model gives of the field.
     fn catalogue_px(&self, survey: &SurveyModel) -> Vec<(f64, f64)> {
-        self.catalogue_stars(survey)
-            .iter()
-            .map(|s| (s.x_px, s.y_px))
-            .collect()
+        positions_px(&self.catalogue_stars(survey))
     }
 
     /// The reference catalogue a survey of this model gives of the field: positions (pixels) and Hw.
     fn catalogue_stars(&self, survey: &SurveyModel) -> Vec<CatalogueStar> {
         instrument::reference_catalogue(self.sim, survey, 0)
             .iter()
-            .map(|s| CatalogueStar {
-                x_px: s.x_px,
-                y_px: s.y_px,
-                hw: s.hw,
-            })
+            .map(instrument::RefStar::catalogue_star)
             .collect()
     }
 

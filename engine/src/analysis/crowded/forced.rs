@@ -46,6 +46,11 @@ pub struct CatalogueStar {
     pub y_px: f64,
     pub hw: f64,
 }
+/// The positions (px) of catalogue stars.
+pub fn positions_px(stars: &[CatalogueStar]) -> Vec<(f64, f64)> {
+    stars.iter().map(|c| (c.x_px, c.y_px)).collect()
+}
+
 /// A catalogue star this close to a star of the model (after the common offset) is that star (px).
 pub const FORCED_MATCH_PX: f64 = 1.0;
 /// The common offset of the catalogue from the fits is found with this many of the brightest fits …
@@ -67,11 +72,10 @@ pub fn forced_members(
     }
     let pos: Vec<(f64, f64)> = stars.iter().map(|s| (s.x, s.y)).collect();
     let flux: Vec<f64> = stars.iter().map(|s| s.flux).collect();
-    let cat_pos: Vec<(f64, f64)> = catalogue.iter().map(|c| (c.x_px, c.y_px)).collect();
     let off = crate::analysis::detection::common_offset_of_brightest(
         &pos,
         &flux,
-        &cat_pos,
+        &positions_px(catalogue),
         OFFSET_STARS,
         OFFSET_SEARCH_PX,
     );
@@ -87,7 +91,7 @@ pub fn forced_members(
         .collect();
     // each star of the model claims its nearest catalogue star within the match radius; the unclaimed
     // are missed (a faint companion under a bright star's fit included)
-    let nb = Neighbours::new(&cat.iter().map(|c| (c.x_px, c.y_px)).collect::<Vec<_>>());
+    let nb = Neighbours::new(&positions_px(&cat));
     let mut claimed = vec![false; cat.len()];
     // (fit flux, catalogue Hw) of the unsaturated stars that claimed one: the zero point's sample
     let mut pairs: Vec<(f64, f64)> = Vec::new();
