@@ -289,10 +289,7 @@ fn a_plate_model_after_the_forward_model_removes_a_telemetry_drift() {
     c.ace.sigma_mas = 200.0;
     let sim = Simulator::new(&c).expect("sim");
     let e = sim.exposure(0).expect("exposure");
-    let src = Source {
-        sim: &sim,
-        index: 0,
-    };
+    let src = Source::new(&sim, 0);
     let plan = Plan::parse(
         &["telemetry-model", "telemetry-model+plate-poly:3@oracle"],
         TelemetryQuality::IDEAL,
@@ -354,10 +351,7 @@ fn the_deconvolved_epsf_approaches_the_static_profile() {
     let e = sim.exposure(0).expect("exposure");
     let img = engine::session::source::analysis_image(&sim, &e.image);
     let (plain, _) = analyze_prepared(&img, &Options::new(&c.analysis)).expect("analysis");
-    let src = engine::session::source::Source {
-        sim: &sim,
-        index: 0,
-    };
+    let src = engine::session::source::Source::new(&sim, 0);
     let rec = src
         .telemetry_record(&TelemetryQuality::IDEAL)
         .expect("record")

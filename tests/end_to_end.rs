@@ -376,26 +376,20 @@ fn the_telemetry_product_corrects_as_the_in_memory_telemetry_does() {
         .expect("analysis with the product");
     // in memory: the simulated instrument records the same telemetry; the pipeline corrects with it
     let plan = engine::analysis::countermeasures::Plan::new(vec![cm]).expect("plan");
-    let in_memory = engine::session::Source {
-        sim: &sim,
-        index: 1,
-    }
-    .analyse_scored(
-        &engine::session::analysis_image(&sim, &exp.image),
-        Some(&exp.truth),
-        &cfg,
-        &plan,
-        &Default::default(),
-    )
-    .expect("analysis from the simulation")
-    .into_of(&cm)
-    .expect("telemetry applies");
+    let in_memory = engine::session::Source::new(&sim, 1)
+        .analyse_scored(
+            &engine::session::analysis_image(&sim, &exp.image),
+            Some(&exp.truth),
+            &cfg,
+            &plan,
+            &Default::default(),
+        )
+        .expect("analysis from the simulation")
+        .into_of(&cm)
+        .expect("telemetry applies");
     // the analysis knobs may differ from the simulator's; the simulation may not: an image is analysed with
     // the configuration it was simulated with
-    let src = engine::session::Source {
-        sim: &sim,
-        index: 1,
-    };
+    let src = engine::session::Source::new(&sim, 1);
     let img = engine::session::analysis_image(&sim, &exp.image);
     let mut knobs = cfg.clone();
     knobs.analysis.epsf_iterations += 1;

@@ -349,12 +349,9 @@ fn too_few_stars_for_an_epsf_fall_back_to_a_stated_psf() {
     let e = sim.exposure(0).expect("exp");
     let img = AnalysisImage::from_detector(&c, &e.image);
     let plan = Plan::default();
-    let with_model = Source {
-        sim: &sim,
-        index: 0,
-    }
-    .analyse_scored(&img, Some(&e.truth), &c, &plan, &Default::default())
-    .expect("analysis");
+    let with_model = Source::new(&sim, 0)
+        .analyse_scored(&img, Some(&e.truth), &c, &plan, &Default::default())
+        .expect("analysis");
     let r = &with_model.global.report;
     assert_eq!((r.epsf_stars, r.n_used), (4, 4), "{r:?}");
     assert!(r.epsf_fallback.contains("model PSF"), "{r:?}");

@@ -131,6 +131,16 @@ fn bad_values_are_named_errors_and_write_nothing() {
         stderr_of(&out)
     );
     assert!(!out_dir.exists());
+    // the crowded study's survey is checked before anything is written
+    let out = jsim()
+        .args(["crowded", "--refcat-limit-hw", "99", "--out"])
+        .arg(&out_dir)
+        .output()
+        .expect("run");
+    assert_eq!(out.status.code(), Some(1));
+    let err = stderr_of(&out);
+    assert!(err.contains("--refcat-limit-hw 99: allowed"), "{err}");
+    assert!(!out_dir.exists());
     let out = jsim()
         .args(["analyze", "--image", "/nonexistent/img.fits", "--out"])
         .arg(dir.join("an"))
@@ -317,6 +327,10 @@ fn jsim_analyze_on_a_saved_crowded_exposure_gives_jsim_crowdeds_bins() {
         "scene.bulge.density_per_arcmin2=25",
         "--set",
         "fidelity.images=1",
+        // the catalogue's missed stars held, from the product: the study's survey (a shallower one than
+        // the default, so that a study that read the default survey's would differ) is the one it saves
+        "--set",
+        "analysis.crowded_forced_catalogue=true",
     ];
     let study = dir.join("study");
     let out = jsim()
@@ -330,6 +344,8 @@ fn jsim_analyze_on_a_saved_crowded_exposure_gives_jsim_crowdeds_bins() {
             "realistic",
             "--countermeasures",
             "none,telemetry,plate-affine@catalogue",
+            "--refcat-limit-hw",
+            "16",
             "--save-images",
             "--out",
         ])

@@ -210,7 +210,7 @@ impl EngineState {
         let t1 = Instant::now();
         let plan = r.plan().map_err(failed(Stage::Image))?;
         let img = analysis_image(&sim, &exp.image);
-        let res = Source { sim: &sim, index }
+        let res = Source::new(&sim, index)
             .analyse_scored(&img, Some(&exp.truth), cfg, &plan, &Default::default())
             .map_err(failed(Stage::Image))?;
         let analyse_s = t1.elapsed().as_secs_f64();
@@ -383,7 +383,7 @@ impl EngineState {
         };
         let b = &r.cfg.scene.bulge;
         let edges = engine::scoring::crowded::edges(b.hw_min, b.hw_max, 0.5);
-        let run = crowded::analyse_focal_plane(fps, exp, &plan, &edges)
+        let run = crowded::analyse_focal_plane(fps, exp, &plan, &edges, &Default::default())
             .map_err(failed(Stage::Image))?
             .pop()
             .ok_or_else(|| Stop::Failed(Stage::Image, "no analysis".into()))?;
@@ -445,7 +445,7 @@ impl EngineState {
         let exp = self.exposure(&sim, index, Stage::Twin)?;
         out.check()?;
         let img = analysis_image(&sim, &exp.image);
-        let report = Source { sim: &sim, index }
+        let report = Source::new(&sim, index)
             .analyse_scored(
                 &img,
                 Some(&exp.truth),

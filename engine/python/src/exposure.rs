@@ -156,10 +156,7 @@ impl PyExposure {
                 input.model_psf = engine::io::instrument::model_psf_product(&self.sim).ok();
                 // the attitude telemetry (the default quality) and the readout timing, as `write_fits`
                 // writes them beside and in the image
-                let source = engine::session::Source {
-                    sim: &self.sim,
-                    index: self.exp.index,
-                };
+                let source = engine::session::Source::new(&self.sim, self.exp.index);
                 input.readout = Some(source.readout());
                 input.telemetry = source
                     .telemetry_record(&engine::analysis::countermeasures::TelemetryQuality::DEFAULT)

@@ -182,10 +182,7 @@ impl Session {
                 c.fidelity.backend = Backend::Cpu;
                 c.fidelity.images = index + 1;
                 let sim = self.simulator(&c)?;
-                let src = Source {
-                    sim: &sim,
-                    index: *index,
-                };
+                let src = Source::new(&sim, *index);
                 src.exact_epsf(&analysis_cfg)?
             }
             _ => None,

@@ -94,16 +94,30 @@ pub struct Source<'a> {
     pub sim: &'a Simulator,
     /// The exposure's index in the simulator's dataset.
     pub index: usize,
+    /// The survey the reference catalogue product comes from: the forced stars' catalogue, and the plate
+    /// models' `@catalogue` reference at its own error floor.
+    pub survey: SurveyModel,
+}
+
+impl<'a> Source<'a> {
+    /// Exposure `index` of `sim`, its reference catalogue from the default survey.
+    pub fn new(sim: &'a Simulator, index: usize) -> Self {
+        Self {
+            sim,
+            index,
+            survey: SurveyModel::default(),
+        }
+    }
 }
 
 /// What a simulated instrument delivers beside one exposure (owned; lend it with [`SourceProducts::supplied`]).
 pub struct SourceProducts {
     /// The design model PSF (design wavefront, pixel-integrated, no jitter).
     pub model_psf: Epsf,
-    /// The reference catalogue a survey gives of the field ([`instrument::reference_catalogue`]: the default
-    /// survey model with its floor at each catalogue error of the plan's `plate-*@catalogue`), in pixels.
+    /// The reference catalogue a survey gives of the field ([`instrument::reference_catalogue`]: the source's
+    /// survey with its floor at each catalogue error of the plan's `plate-*@catalogue`), in pixels.
     pub references: Vec<(f64, Vec<(f64, f64)>)>,
-    /// The reference catalogue at the default survey model, in pixels, when the analysis is crowded and
+    /// The reference catalogue of the source's survey, in pixels, when the analysis is crowded and
     /// holds the catalogue's missed stars (`analysis.crowded_forced_catalogue`); else empty.
     pub catalogue: Vec<CatalogueStar>,
     /// The attitude recorded at each telemetry quality of the plan (none for a static ACE).
@@ -203,7 +217,7 @@ impl Source<'_> {
             {
                 let survey = SurveyModel {
                     floor_mas: *error_mas,
-                    ..SurveyModel::default()
+                    ..self.survey
                 };
                 references.push((*error_mas, self.catalogue_px(&survey)));
             }
@@ -219,7 +233,7 @@ impl Source<'_> {
             false => None,
         };
         let catalogue = if cfg.crowding != Crowding::Off && cfg.crowded_forced_catalogue {
-            self.catalogue_stars(&SurveyModel::default())
+            self.catalogue_stars(&self.survey)
         } else {
             Vec::new()
         };

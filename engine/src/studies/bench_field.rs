@@ -205,8 +205,13 @@ pub fn crowded_analysis(
         let fps = session.new_focal_plane(&c)?;
         let exp = fps.exposure(0)?;
         let t0 = Instant::now();
-        let run =
-            super::crowded::analyse_focal_plane(&fps, &exp, &plan, &[12.0, 14.0, 16.0, 17.0])?;
+        let run = super::crowded::analyse_focal_plane(
+            &fps,
+            &exp,
+            &plan,
+            &[12.0, 14.0, 16.0, 17.0],
+            &crate::io::instrument::SurveyModel::default(),
+        )?;
         let t = t0.elapsed().as_secs_f64();
         let r = &run[0];
         let (bright, faint) = (&r.bins[0], &r.bins[2]);

@@ -43,7 +43,7 @@ pub fn forward_model(
             .enumerate()
             .map(|(index, (img, truth))| {
                 let t0 = Instant::now();
-                let s = Source { sim: &sim, index }.analyse_scored(
+                let s = Source::new(&sim, index).analyse_scored(
                     img,
                     Some(truth),
                     cfg,

@@ -39,13 +39,15 @@ pub fn check_plan(plan: &Plan) -> Result<(), AnalysisError> {
 /// Analyse one focal-plane exposure under every countermeasure of `plan`, binning accuracy by true Hw at
 /// `edges`: each array's image through the pipeline's crowded analysis (`Source::analyse` with crowding on,
 /// as `jsim analyze` runs it on the exposure's file) with the products its simulated instrument delivers
-/// (calibration flat, design model PSF, reference catalogue, telemetry); the truth only scores (and is the
-/// `@oracle` control's reference).
+/// (calibration flat, design model PSF, telemetry, and the reference catalogue `survey` gives: the forced
+/// stars' and the limit of the undetected stars' "beyond the catalogue" share); the truth only scores (and
+/// is the `@oracle` control's reference).
 pub fn analyse_focal_plane(
     fps: &FocalPlaneSimulator,
     exp: &FocalPlaneExposure,
     plan: &Plan,
     edges: &[f64],
+    survey: &SurveyModel,
 ) -> Result<Vec<FocalPlaneAnalysis>, SourceError> {
     check_plan(plan)?;
     let cfg = &fps.cfg.analysis;
@@ -64,6 +66,7 @@ pub fn analyse_focal_plane(
         let analysis = Source {
             sim,
             index: exp.index,
+            survey: *survey,
         }
         .analyse(&img, Some(&e.truth), &c, plan, &Default::default())?;
         per_array.push(score_image(&analysis, Some(&e.truth), scale));
@@ -99,7 +102,7 @@ pub fn analyse_focal_plane(
                     flat_sigma,
                     cfg.fit_radius_px,
                     cfg.fit_sky,
-                    SurveyModel::default().limit_hw,
+                    survey.limit_hw,
                 )
             })
             .collect();

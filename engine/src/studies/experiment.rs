@@ -60,7 +60,7 @@ pub fn analyse_in_stare(
     let exp = sim.exposure(index)?;
     let t1 = Instant::now();
     let img = analysis_image(sim, &exp.image);
-    let analysis = Source { sim, index }.analyse(
+    let analysis = Source::new(sim, index).analyse(
         &img,
         Some(&exp.truth),
         &sim.cfg,
@@ -100,13 +100,7 @@ pub fn finish_stare(
     let scored = analyses
         .iter()
         .zip(&exposures)
-        .map(|(a, e)| {
-            Source {
-                sim,
-                index: e.index,
-            }
-            .score(a, &e.truth, &sim.cfg.analysis, scale)
-        })
+        .map(|(a, e)| Source::new(sim, e.index).score(a, &e.truth, &sim.cfg.analysis, scale))
         .collect::<Result<Vec<_>, _>>()?;
     Ok(scored
         .into_iter()

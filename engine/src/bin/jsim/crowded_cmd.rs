@@ -2,8 +2,8 @@
 //! Galactic-centre field by default), per ACE case and countermeasure, with completeness and the blended
 //! and saturated fractions; vector maps of the four arrays. Products: [`engine::io::crowded`].
 
-use crate::TelemetryArgs;
 use crate::options::CrowdedConfigArgs;
+use crate::{SurveyArgs, TelemetryArgs};
 use anyhow::{Result, bail};
 use clap::Args;
 use engine::config::{AceCase, SceneKind};
@@ -25,6 +25,10 @@ pub struct CrowdedArgs {
     pub countermeasures: Vec<String>,
     #[command(flatten)]
     pub tel: TelemetryArgs,
+    /// The survey the reference catalogue product comes from (the forced stars' catalogue with
+    /// `analysis.crowded_forced_catalogue`, and the one written with --save-images).
+    #[command(flatten)]
+    pub survey: SurveyArgs,
     /// Width of the magnitude bins (0.1 … 2).
     #[arg(long, default_value_t = 0.5)]
     pub bin_mag: f64,
@@ -54,6 +58,7 @@ pub fn crowded(a: &CrowdedArgs) -> Result<()> {
         bail!("--aces: give at least one ACE case");
     }
     let plan = a.tel.plan(&a.countermeasures)?;
+    let survey = a.survey.model()?;
     crowded::check_plan(&plan)?;
     let telemetry_quality = plan
         .countermeasures
@@ -97,11 +102,7 @@ pub fn crowded(a: &CrowdedArgs) -> Result<()> {
             outputs.add(&dir.join(engine::io::instrument::FLAT_NAME));
             engine::io::instrument::write_focal_plane_flats(&dir, &fps)?;
             outputs.add(&dir.join(engine::io::instrument::REFCAT_NAME));
-            engine::io::instrument::write_focal_plane_reference_catalogue(
-                &dir,
-                &fps,
-                &engine::io::instrument::SurveyModel::default(),
-            )?;
+            engine::io::instrument::write_focal_plane_reference_catalogue(&dir, &fps, &survey)?;
             outputs.add(&dir.join(engine::io::instrument::MODEL_PSF_NAME));
             engine::io::instrument::write_focal_plane_model_psfs(&dir, &fps)?;
             // the telescope's attitude as recorded at the plan's telemetry quality (one record for
@@ -110,7 +111,7 @@ pub fn crowded(a: &CrowdedArgs) -> Result<()> {
             engine::io::instrument::write_telemetry(&dir, &fps.arrays[0], 0, &telemetry_quality)?;
         }
         crate::outputs::interrupted()?;
-        let analyses = crowded::analyse_focal_plane(&fps, &exp, &plan, &edges)?;
+        let analyses = crowded::analyse_focal_plane(&fps, &exp, &plan, &edges, &survey)?;
         let stars: usize = fps.arrays.iter().map(|s| s.stars.len()).sum();
         eprintln!(
             "{case}: {stars} stars simulated in {sim_s:.1} s; analysed (4 arrays, {} countermeasure(s)) in {:.1} s",

@@ -181,7 +181,13 @@ pub fn run_exposure(
     let t = Instant::now();
     let (lo, hi) = (base.scene.bulge.hw_min, base.scene.bulge.hw_max);
     let edges = crate::scoring::crowded::edges(lo, hi, 1.0);
-    let analyses = crate::studies::crowded::analyse_focal_plane(&fps, &exp, cm, &edges)?;
+    let analyses = crate::studies::crowded::analyse_focal_plane(
+        &fps,
+        &exp,
+        cm,
+        &edges,
+        &crate::io::instrument::SurveyModel::default(),
+    )?;
     let analyse_s = t.elapsed().as_secs_f64();
     let first = analyses
         .first()
