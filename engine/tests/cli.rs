@@ -142,6 +142,18 @@ fn bad_values_are_named_errors_and_write_nothing() {
     assert!(err.contains("--refcat-limit-hw 99: allowed"), "{err}");
     assert!(!out_dir.exists());
     let out = jsim()
+        .args(["crowded", "--reference-error-mas", "5", "--out"])
+        .arg(&out_dir)
+        .output()
+        .expect("run");
+    assert_eq!(out.status.code(), Some(1));
+    let err = stderr_of(&out);
+    assert!(
+        err.contains("--refcat-floor-mas 2 and --reference-error-mas 5"),
+        "{err}"
+    );
+    assert!(!out_dir.exists());
+    let out = jsim()
         .args(["analyze", "--image", "/nonexistent/img.fits", "--out"])
         .arg(dir.join("an"))
         .output()

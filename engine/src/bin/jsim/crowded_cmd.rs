@@ -59,6 +59,14 @@ pub fn crowded(a: &CrowdedArgs) -> Result<()> {
     }
     let plan = a.tel.plan(&a.countermeasures)?;
     let survey = a.survey.model()?;
+    // one catalogue: the plate models' reference, the held stars' and the saved refcat.csv
+    if survey.floor_mas != a.tel.reference_error_mas {
+        bail!(
+            "--refcat-floor-mas {} and --reference-error-mas {}: jsim crowded has one reference catalogue, give both the same floor",
+            survey.floor_mas,
+            a.tel.reference_error_mas
+        );
+    }
     crowded::check_plan(&plan)?;
     let telemetry_quality = plan
         .countermeasures
