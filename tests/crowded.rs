@@ -67,6 +67,16 @@ fn saturate(img: &mut AnalysisImage, full_well_e: f64) {
     }
 }
 
+/// The focal-plane study with the default survey's reference catalogue.
+fn study(
+    fps: &engine::simulate::FocalPlaneSimulator,
+    exp: &engine::simulate::FocalPlaneExposure,
+    plan: &engine::analysis::countermeasures::Plan,
+    edges: &[f64],
+) -> Result<Vec<engine::studies::crowded::FocalPlaneAnalysis>, engine::session::SourceError> {
+    engine::studies::crowded::analyse_focal_plane(fps, exp, plan, edges, &Default::default())
+}
+
 #[test]
 fn pairs_at_half_and_one_pixel_are_flagged_and_fitted_or_reported_as_one() {
     let n = 200;
@@ -358,14 +368,7 @@ fn a_star_in_the_gap_is_neither_found_nor_missed_and_empty_arrays_say_so() {
     ])
     .expect("plan");
     let edges = report::edges(11.0, 13.0, 1.0);
-    let runs = engine::studies::crowded::analyse_focal_plane(
-        &fps,
-        &exp,
-        &plan,
-        &edges,
-        &Default::default(),
-    )
-    .expect("analysis");
+    let runs = study(&fps, &exp, &plan, &edges).expect("analysis");
     let r = &runs[0];
     assert_eq!(r.arrays.len(), 4);
     let total_true: usize = r.bins.iter().map(|b| b.n_true).sum();
@@ -409,14 +412,7 @@ fn the_focal_plane_study_corrects_each_array_and_refuses_single_star_countermeas
     )
     .expect("plan");
     let edges = report::edges(8.0, 17.0, 1.0);
-    let runs = engine::studies::crowded::analyse_focal_plane(
-        &fps,
-        &exp,
-        &plan,
-        &edges,
-        &Default::default(),
-    )
-    .expect("study");
+    let runs = study(&fps, &exp, &plan, &edges).expect("study");
     assert_eq!(runs.len(), 3);
     let (none, tel) = (&runs[0], &runs[1]);
     // the forward model refits every group through its members' own windows: the isolated stars of
@@ -471,14 +467,7 @@ fn the_focal_plane_study_corrects_each_array_and_refuses_single_star_countermeas
     c_forced.analysis.crowded_forced_catalogue = true;
     let fps_forced = engine::simulate::FocalPlaneSimulator::new(&c_forced).expect("focal plane");
     let tel_only = Plan::parse(&["telemetry"], TelemetryQuality::IDEAL, 2.0).expect("plan");
-    let forced = engine::studies::crowded::analyse_focal_plane(
-        &fps_forced,
-        &exp,
-        &tel_only,
-        &edges,
-        &Default::default(),
-    )
-    .expect("study");
+    let forced = study(&fps_forced, &exp, &tel_only, &edges).expect("study");
     let (r_forced, _) = pooled_of(&forced[0].bins);
     eprintln!("Hw 10–14 × bound, telemetry with the catalogue's missed stars held: {r_forced:.3}");
     assert!(
@@ -520,14 +509,7 @@ fn the_focal_plane_study_corrects_each_array_and_refuses_single_star_countermeas
     }
     for name in ["yzones", "exact-epsf"] {
         let p = Plan::parse(&[name], TelemetryQuality::DEFAULT, 2.0).expect("plan");
-        let e = engine::studies::crowded::analyse_focal_plane(
-            &fps,
-            &exp,
-            &p,
-            &edges,
-            &Default::default(),
-        )
-        .expect_err("refused");
+        let e = study(&fps, &exp, &p, &edges).expect_err("refused");
         assert!(e.to_string().contains(name), "{e}");
     }
 }

@@ -51,7 +51,7 @@ fn print_default_parses_to_the_builtin_default() {
 fn bad_values_are_named_errors_and_write_nothing() {
     let dir = temp("bad");
     let out_dir = dir.join("out");
-    for (args, needle) in [
+    let simulate = [
         (
             vec!["--set", "detector.exposure_s=-1"],
             "detector.exposure_s",
@@ -102,9 +102,28 @@ fn bad_values_are_named_errors_and_write_nothing() {
             vec!["--set", "detector.persistence.lookback_s=1e6"],
             "detector.persistence.lookback_s",
         ),
-    ] {
+    ];
+    let cases = simulate
+        .into_iter()
+        .map(|(mut args, needle)| {
+            args.insert(0, "simulate");
+            (args, needle)
+        })
+        // a bench part that does not exist is named, not skipped; the crowded study's survey (one
+        // catalogue for its plate models and held stars) is checked before anything is written
+        .chain([
+            (vec!["bench", "--parts", "methods,nope"], "--parts nope"),
+            (
+                vec!["crowded", "--refcat-limit-hw", "99"],
+                "--refcat-limit-hw 99: allowed",
+            ),
+            (
+                vec!["crowded", "--reference-error-mas", "5"],
+                "--refcat-floor-mas 2 and --reference-error-mas 5",
+            ),
+        ]);
+    for (args, needle) in cases {
         let out = jsim()
-            .arg("simulate")
             .args(&args)
             .arg("--out")
             .arg(&out_dir)
@@ -118,41 +137,6 @@ fn bad_values_are_named_errors_and_write_nothing() {
         assert!(err.matches("os error").count() <= 1, "{err}");
         assert!(!out_dir.exists(), "{args:?} created its output directory");
     }
-    // a bench part that does not exist is named, not skipped
-    let out = jsim()
-        .args(["bench", "--parts", "methods,nope", "--out"])
-        .arg(&out_dir)
-        .output()
-        .expect("run");
-    assert_eq!(out.status.code(), Some(1));
-    assert!(
-        stderr_of(&out).contains("--parts nope"),
-        "{}",
-        stderr_of(&out)
-    );
-    assert!(!out_dir.exists());
-    // the crowded study's survey is checked before anything is written
-    let out = jsim()
-        .args(["crowded", "--refcat-limit-hw", "99", "--out"])
-        .arg(&out_dir)
-        .output()
-        .expect("run");
-    assert_eq!(out.status.code(), Some(1));
-    let err = stderr_of(&out);
-    assert!(err.contains("--refcat-limit-hw 99: allowed"), "{err}");
-    assert!(!out_dir.exists());
-    let out = jsim()
-        .args(["crowded", "--reference-error-mas", "5", "--out"])
-        .arg(&out_dir)
-        .output()
-        .expect("run");
-    assert_eq!(out.status.code(), Some(1));
-    let err = stderr_of(&out);
-    assert!(
-        err.contains("--refcat-floor-mas 2 and --reference-error-mas 5"),
-        "{err}"
-    );
-    assert!(!out_dir.exists());
     let out = jsim()
         .args(["analyze", "--image", "/nonexistent/img.fits", "--out"])
         .arg(dir.join("an"))
