@@ -373,7 +373,7 @@ pub fn exact_epsf(kernel: &PixelKernel, half_px: usize) -> Epsf {
 pub struct Supplied<'a> {
     pub reference: Option<&'a [(f64, f64)]>,
     /// The reference catalogue the crowded-field analysis holds its missed stars from
-    /// (`analysis.crowded_forced_catalogue`): the product, or a simulated survey's at its default errors.
+    /// (`analysis.crowded_forced_catalogue`): the product, or the simulated source's survey's.
     pub catalogue: Option<&'a [crate::analysis::crowded::forced::CatalogueStar]>,
     /// Reference catalogues at the catalogue errors (mas) a plan asks for, as a simulated survey draws them
     /// (used where no product is given).

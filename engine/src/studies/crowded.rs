@@ -40,8 +40,8 @@ pub fn check_plan(plan: &Plan) -> Result<(), AnalysisError> {
 /// `edges`: each array's image through the pipeline's crowded analysis (`Source::analyse` with crowding on,
 /// as `jsim analyze` runs it on the exposure's file) with the products its simulated instrument delivers
 /// (calibration flat, design model PSF, telemetry, and the reference catalogue `survey` gives: the forced
-/// stars' and the limit of the undetected stars' "beyond the catalogue" share); the truth only scores (and
-/// is the `@oracle` control's reference).
+/// stars', the `@catalogue` plate models' at their own floor, and the limit of the undetected stars' "beyond
+/// the catalogue" share); the truth only scores (and is the `@oracle` control's reference).
 pub fn analyse_focal_plane(
     fps: &FocalPlaneSimulator,
     exp: &FocalPlaneExposure,

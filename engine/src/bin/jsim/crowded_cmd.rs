@@ -26,7 +26,8 @@ pub struct CrowdedArgs {
     #[command(flatten)]
     pub tel: TelemetryArgs,
     /// The survey the reference catalogue product comes from (the forced stars' catalogue with
-    /// `analysis.crowded_forced_catalogue`, and the one written with --save-images).
+    /// `analysis.crowded_forced_catalogue`, the `@catalogue` plate models' reference, and the one written
+    /// with --save-images).
     #[command(flatten)]
     pub survey: SurveyArgs,
     /// Width of the magnitude bins (0.1 … 2).
