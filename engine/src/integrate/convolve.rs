@@ -16,6 +16,14 @@
 //! blocks of 8 × 4 spent 15 % of them there). The look-ups in the inner loop are unchecked (their bounds
 //! follow from the run's columns, stated where they are read); with both, the convolution takes ≈ 8 % less
 //! time on the bulge field, every sum the same bits (each pixel adds the same terms in the same order).
+//!
+//! A block at the edge of a node's reach multiplies K's zeros: on the realistic-ACE bulge field 7.9 % of the
+//! multiply-adds were rows of a block beyond K's table and 14.1 % lanes beyond it (counted over the default
+//! exposure). A histogram row's run now leaves out the block's rows beyond the table, and its nodes whose
+//! eight look-ups lie half beyond it (≥ 4 lanes) take only the other half's lanes; a product with zero adds
+//! nothing to a sum, so every sum keeps its bits. The sums' share of the exposure's profile fell from 43.4
+//! to 42.7 % (6–8 % less time against the rest of the integration); the default exposure's MEF is
+//! byte-identical.
 
 use super::kernel::PixelKernel;
 
@@ -179,11 +187,10 @@ impl Sums<'_, '_> {
     /// `Σ H · K` for the L pixels from `ix0` of the R rows from `iy0` (pixels beyond the stamp are summed and
     /// dropped): each histogram node adds `H · K_ρ[q … q + L]` of R K rows to R × L accumulators.
     #[inline(always)]
-    #[allow(unsafe_code)] // unchecked look-ups, bounds proven below
     fn block<const L: usize, const R: usize>(&mut self, ix0: usize, iy0: usize) {
         let p = self.p;
         let (g, h) = (p.g as i64, self.half as i64);
-        let (m, len) = (p.m as i64, p.len);
+        let m = p.m as i64;
         let mut acc = [[0.0f64; L]; R];
         // K column of pixel ix0 + i for histogram column c: t − c + i·G with t = ix0·G + h − u0
         let t = ix0 as i64 * g + h - self.hist.u0;
@@ -201,31 +208,26 @@ impl Sums<'_, '_> {
             let Some((i0, i1, q, rho)) = columns(t, a, b, m, g, L) else {
                 continue;
             };
-            // the look-up of node c is at s = ρ·len + PAD + q; the next node's is one residue down (ρ − 1), or
-            // the last residue of the column before (ρ = G − 1, q − 1)
-            let mut s = rho as usize * len + (q + PAD as i64) as usize;
-            let mut rho = rho;
-            let wrap = (p.g - 1) * len - 1;
-            for &hv in &values[i0..=i1] {
-                // SAFETY: `columns` keeps −L < q < m for every node of the run and 0 ≤ ρ < G, so
-                // PAD + q ≥ 1 and PAD + q + L ≤ m + 2·PAD = len: s + L ≤ G·len, the length of every row
-                // (a K row's residues or the row of zeros); `read_unaligned` takes any alignment.
-                let k: [[f64; L]; R] = std::array::from_fn(|kk| {
-                    debug_assert!(s + L <= rows[kk].len());
-                    unsafe { std::ptr::read_unaligned(rows[kk].as_ptr().add(s).cast::<[f64; L]>()) }
-                });
-                for (acc_k, k_k) in acc.iter_mut().zip(&k) {
-                    for i in 0..L {
-                        acc_k[i] += hv * k_k[i];
-                    }
-                }
-                if rho == 0 {
-                    rho = g - 1;
-                    s += wrap;
-                } else {
-                    rho -= 1;
-                    s -= len;
-                }
+            let values = &values[i0..=i1];
+            // the rows beyond K's table (zeros) are left out: only the rows from the first K row in the table
+            // to the last take the run (adding a product with zero changes no sum)
+            let k0 = rows
+                .iter()
+                .take_while(|r| r.as_ptr() == p.zeros.as_ptr())
+                .count();
+            let k1 = R - rows
+                .iter()
+                .rev()
+                .take_while(|r| r.as_ptr() == p.zeros.as_ptr())
+                .count();
+            match (R, k0, k1) {
+                (4, 1, 4) => run(&mut acc, &rows, values, q, rho, p, 1, 4),
+                (4, 2, 4) => run(&mut acc, &rows, values, q, rho, p, 2, 4),
+                (4, 3, 4) => run(&mut acc, &rows, values, q, rho, p, 3, 4),
+                (4, 0, 3) => run(&mut acc, &rows, values, q, rho, p, 0, 3),
+                (4, 0, 2) => run(&mut acc, &rows, values, q, rho, p, 0, 2),
+                (4, 0, 1) => run(&mut acc, &rows, values, q, rho, p, 0, 1),
+                _ => run(&mut acc, &rows, values, q, rho, p, 0, R),
             }
         }
         let nx = self.nx;
@@ -238,6 +240,102 @@ impl Sums<'_, '_> {
             {
                 *o += v;
             }
+        }
+    }
+}
+
+/// One histogram row's nodes (the first at residue position (q, ρ)) into accumulator rows `k0 … k1 − 1`. Nodes
+/// whose look-ups lie half beyond K's table (≥ 4 of a block's 8 lanes read its zeros: the block is at the edge
+/// of their reach) go only into the other half's lanes. Called with constant rows, so that each case compiles
+/// to its own loop.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn run<const L: usize, const R: usize>(
+    acc: &mut [[f64; L]; R],
+    rows: &[&[f64]; R],
+    values: &[f64],
+    q: i64,
+    rho: i64,
+    p: &Polyphase,
+    k0: usize,
+    k1: usize,
+) {
+    let (g, m, len) = (p.g as i64, p.m as i64, p.len);
+    let mut at = Cursor {
+        s: rho as usize * len + (q + PAD as i64) as usize,
+        rho,
+        g,
+        len,
+        wrap: (p.g - 1) * len - 1,
+    };
+    let half = LANES / 2;
+    if L == LANES && m >= L as i64 {
+        // along the run q falls by one every G nodes: first the nodes with q ≥ m − 4 (lanes ≥ m − q read
+        // zeros: the upper half), then the whole blocks, then those with q ≤ −4 (lanes < −q: the lower half)
+        let n = values.len() as i64;
+        let d0 = q * g + rho;
+        let lower_end = (d0 - (m - half as i64) * g + 1).clamp(0, n) as usize;
+        let upper_start = (d0 + (half as i64 - 1) * g + 1).clamp(lower_end as i64, n) as usize;
+        nodes(acc, rows, &values[..lower_end], &mut at, k0, k1, 0, half);
+        nodes(
+            acc,
+            rows,
+            &values[lower_end..upper_start],
+            &mut at,
+            k0,
+            k1,
+            0,
+            L,
+        );
+        nodes(acc, rows, &values[upper_start..], &mut at, k0, k1, half, L);
+    } else {
+        nodes(acc, rows, values, &mut at, k0, k1, 0, L);
+    }
+}
+
+/// Where a run's next look-up is: `s = ρ·len + PAD + q`; the next node's is one residue down (ρ − 1), or
+/// the last residue of the column before (ρ = G − 1, q − 1).
+struct Cursor {
+    s: usize,
+    rho: i64,
+    g: i64,
+    len: usize,
+    wrap: usize,
+}
+
+/// `acc[k][i] += H · K_k[s + i]` for each node, rows `k0 … k1 − 1`, lanes `i0 … i1 − 1`.
+#[inline(always)]
+#[allow(unsafe_code)] // unchecked look-ups, bounds proven below
+#[allow(clippy::too_many_arguments)]
+fn nodes<const L: usize, const R: usize>(
+    acc: &mut [[f64; L]; R],
+    rows: &[&[f64]; R],
+    values: &[f64],
+    at: &mut Cursor,
+    k0: usize,
+    k1: usize,
+    i0: usize,
+    i1: usize,
+) {
+    for &hv in values {
+        let s = at.s;
+        for k in k0..k1 {
+            // SAFETY: `columns` keeps −L < q < m for every node of the run and 0 ≤ ρ < G, so PAD + q ≥ 1 and
+            // PAD + q + L ≤ m + 2·PAD = len: s + L ≤ G·len, the length of every row (a K row's residues or
+            // the row of zeros); `read_unaligned` takes any alignment.
+            debug_assert!(s + L <= rows[k].len());
+            let kv: [f64; L] =
+                unsafe { std::ptr::read_unaligned(rows[k].as_ptr().add(s).cast::<[f64; L]>()) };
+            for i in i0..i1 {
+                acc[k][i] += hv * kv[i];
+            }
+        }
+        if at.rho == 0 {
+            at.rho = at.g - 1;
+            at.s += at.wrap;
+        } else {
+            at.rho -= 1;
+            at.s -= at.len;
         }
     }
 }
@@ -275,12 +373,21 @@ mod tests {
     /// The blocked convolution against the plain double sum over histogram nodes with K's own node look-up
     /// (no residue layout, no blocks): stamps of sizes that are not multiples of the block, histograms that
     /// reach past K's table on every side, one-row stamps; and the AVX2 build gives the portable one's bits.
+    /// Two tables: one narrower than a block of eight columns per residue, and one wider, whose blocks at the
+    /// edge of a node's reach take only half their lanes (and rows beyond the table none).
     #[test]
     fn blocked_convolution_equals_the_plain_sum() {
         let g = 4usize;
-        let k = PixelKernel::tabulated(g, 3, |dx, dy| {
-            (-(dx * dx + 0.7 * dy * dy) / 2.0).exp() * (1.0 + 0.3 * dx) + 0.01 * dy
-        });
+        for half_px in [3, 9] {
+            let k = PixelKernel::tabulated(g, half_px, |dx, dy| {
+                (-(dx * dx + 0.7 * dy * dy) / 8.0).exp() * (1.0 + 0.3 * dx) + 0.01 * dy
+            });
+            assert_eq!(k.polyphase().m >= LANES, half_px == 9);
+            plain_sum_cases(&k, g);
+        }
+    }
+
+    fn plain_sum_cases(k: &PixelKernel, g: usize) {
         let h = k.half_nodes as i64;
         // (stamp nx, ny, histogram origin u0, v0 relative to the stamp, size nu × nv)
         for &(nx, ny, u0, v0, nu, nv) in &[
@@ -291,6 +398,7 @@ mod tests {
             (30, 13, 60, 30, 11, 12),
             (12, 6, 10, 8, 40, 30),
             (4, 2, 5, 3, 8, 7),
+            (40, 30, 70, 50, 30, 26),
         ] {
             let data: Vec<f64> = (0..nu * nv)
                 .map(|i| {
@@ -323,7 +431,7 @@ mod tests {
                 }
             }
             let mut fast = vec![1.0; nx * ny];
-            add_convolution(&mut fast, nx, ny, &runs, &k);
+            add_convolution(&mut fast, nx, ny, &runs, k);
             let peak = plain.iter().fold(0.0f64, |m, v| m.max(v.abs()));
             for (f, p) in fast.iter().zip(&plain) {
                 assert!(
