@@ -196,30 +196,19 @@ impl Sums<'_, '_> {
         let t = ix0 as i64 * g + h - self.hist.u0;
         for &&(r, a, b, values) in self.order {
             let ky0 = iy0 as i64 * g + h - (self.hist.v0 + r as i64);
-            let mut rows: [&[f64]; R] = [&p.zeros; R];
-            let mut any = false;
-            for (k, row) in rows.iter_mut().enumerate() {
-                *row = p.row(ky0 + k as i64 * g);
-                any |= row.as_ptr() != p.zeros.as_ptr();
-            }
-            if !any {
+            let rows: [&[f64]; R] = std::array::from_fn(|k| p.row(ky0 + k as i64 * g));
+            // the rows beyond K's table (its row of zeros) are left out: only the rows from the first K row in
+            // the table to the last take the run (adding a product with zero changes no sum); none, none do
+            let beyond = |row: &&&[f64]| row.as_ptr() == p.zeros.as_ptr();
+            let k0 = rows.iter().take_while(beyond).count();
+            if k0 == R {
                 continue;
             }
+            let k1 = R - rows.iter().rev().take_while(beyond).count();
             let Some((i0, i1, q, rho)) = columns(t, a, b, m, g, L) else {
                 continue;
             };
             let values = &values[i0..=i1];
-            // the rows beyond K's table (zeros) are left out: only the rows from the first K row in the table
-            // to the last take the run (adding a product with zero changes no sum)
-            let k0 = rows
-                .iter()
-                .take_while(|r| r.as_ptr() == p.zeros.as_ptr())
-                .count();
-            let k1 = R - rows
-                .iter()
-                .rev()
-                .take_while(|r| r.as_ptr() == p.zeros.as_ptr())
-                .count();
             match (R, k0, k1) {
                 (4, 1, 4) => run(&mut acc, &rows, values, q, rho, p, 1, 4),
                 (4, 2, 4) => run(&mut acc, &rows, values, q, rho, p, 2, 4),
