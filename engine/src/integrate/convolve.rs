@@ -72,12 +72,26 @@ impl Polyphase {
     }
 
     /// The residues of K's row `ky` (`G · len` values), zeros outside the table.
+    #[inline(always)]
     fn row(&self, ky: i64) -> &[f64] {
         if ky < 0 || ky >= self.n as i64 {
             return &self.zeros;
         }
         let w = self.g * self.len;
         &self.data[ky as usize * w..(ky as usize + 1) * w]
+    }
+}
+
+impl Polyphase {
+    /// `K(ky, kx + G·i)` for `i = 0 … count − 1`: what a row of pixels reads of one node offset, contiguous in
+    /// this layout; `None` unless `ky < n` and `kx + G·(count − 1) < n`.
+    pub(super) fn along_row(&self, ky: usize, kx: usize, count: usize) -> Option<&[f64]> {
+        if ky >= self.n || count == 0 || kx + self.g * (count - 1) >= self.n {
+            return None;
+        }
+        let (mm, rho) = (kx / self.g, kx % self.g);
+        let s = (ky * self.g + rho) * self.len + PAD + mm;
+        self.data.get(s..s + count)
     }
 }
 
@@ -169,34 +183,19 @@ struct Sums<'a, 'h> {
 
 impl Sums<'_, '_> {
     /// Pixel rows `iy0 … iy0 + R − 1` in blocks of [`LANES`] pixels; the last pixels (≤ 4 of them) in one
-    /// block of four.
+    /// block of four. Which K rows each histogram row reads for these pixel rows (and which of them lie in
+    /// the table) is the same for every block of the row, so it is found once here.
     #[inline(always)]
     fn row_of_blocks<const R: usize>(&mut self, iy0: usize) {
-        let nx = self.nx;
-        let whole = nx - nx % LANES;
-        for ix0 in (0..whole).step_by(LANES) {
-            self.block::<LANES, R>(ix0, iy0);
-        }
-        match nx - whole {
-            0 => {}
-            1..=4 => self.block::<4, R>(whole, iy0),
-            _ => self.block::<LANES, R>(whole, iy0),
-        }
-    }
-
-    /// `Σ H · K` for the L pixels from `ix0` of the R rows from `iy0` (pixels beyond the stamp are summed and
-    /// dropped): each histogram node adds `H · K_ρ[q … q + L]` of R K rows to R × L accumulators.
-    #[inline(always)]
-    fn block<const L: usize, const R: usize>(&mut self, ix0: usize, iy0: usize) {
         let p = self.p;
         let (g, h) = (p.g as i64, self.half as i64);
-        let m = p.m as i64;
-        let mut acc = [[0.0f64; L]; R];
-        // K column of pixel ix0 + i for histogram column c: t − c + i·G with t = ix0·G + h − u0
-        let t = ix0 as i64 * g + h - self.hist.u0;
+        let mut reads: Vec<RunRows<'_, R>> = Vec::with_capacity(self.order.len());
         for &&(r, a, b, values) in self.order {
             let ky0 = iy0 as i64 * g + h - (self.hist.v0 + r as i64);
-            let rows: [&[f64]; R] = std::array::from_fn(|k| p.row(ky0 + k as i64 * g));
+            let mut rows = [p.zeros.as_slice(); R];
+            for (k, row) in rows.iter_mut().enumerate() {
+                *row = p.row(ky0 + k as i64 * g);
+            }
             // the rows beyond K's table (its row of zeros) are left out: only the rows from the first K row in
             // the table to the last take the run (adding a product with zero changes no sum); none, none do
             let beyond = |row: &&&[f64]| row.as_ptr() == p.zeros.as_ptr();
@@ -205,18 +204,55 @@ impl Sums<'_, '_> {
                 continue;
             }
             let k1 = R - rows.iter().rev().take_while(beyond).count();
-            let Some((i0, i1, q, rho)) = columns(t, a, b, m, g, L) else {
+            reads.push(RunRows {
+                a,
+                b,
+                values,
+                rows,
+                k0,
+                k1,
+            });
+        }
+        let nx = self.nx;
+        let whole = nx - nx % LANES;
+        for ix0 in (0..whole).step_by(LANES) {
+            self.block::<LANES, R>(&reads, ix0, iy0);
+        }
+        match nx - whole {
+            0 => {}
+            1..=4 => self.block::<4, R>(&reads, whole, iy0),
+            _ => self.block::<LANES, R>(&reads, whole, iy0),
+        }
+    }
+
+    /// `Σ H · K` for the L pixels from `ix0` of the R rows from `iy0` (pixels beyond the stamp are summed and
+    /// dropped): each histogram node adds `H · K_ρ[q … q + L]` of R K rows to R × L accumulators.
+    #[inline(always)]
+    fn block<const L: usize, const R: usize>(
+        &mut self,
+        reads: &[RunRows<'_, R>],
+        ix0: usize,
+        iy0: usize,
+    ) {
+        let p = self.p;
+        let (g, h) = (p.g as i64, self.half as i64);
+        let m = p.m as i64;
+        let mut acc = [[0.0f64; L]; R];
+        // K column of pixel ix0 + i for histogram column c: t − c + i·G with t = ix0·G + h − u0
+        let t = ix0 as i64 * g + h - self.hist.u0;
+        for read in reads {
+            let Some((i0, i1, q, rho)) = columns(t, read.a, read.b, m, g, L) else {
                 continue;
             };
-            let values = &values[i0..=i1];
-            match (R, k0, k1) {
-                (4, 1, 4) => run(&mut acc, &rows, values, q, rho, p, 1, 4),
-                (4, 2, 4) => run(&mut acc, &rows, values, q, rho, p, 2, 4),
-                (4, 3, 4) => run(&mut acc, &rows, values, q, rho, p, 3, 4),
-                (4, 0, 3) => run(&mut acc, &rows, values, q, rho, p, 0, 3),
-                (4, 0, 2) => run(&mut acc, &rows, values, q, rho, p, 0, 2),
-                (4, 0, 1) => run(&mut acc, &rows, values, q, rho, p, 0, 1),
-                _ => run(&mut acc, &rows, values, q, rho, p, 0, R),
+            let (rows, values) = (&read.rows, &read.values[i0..=i1]);
+            match (R, read.k0, read.k1) {
+                (4, 1, 4) => run(&mut acc, rows, values, q, rho, p, 1, 4),
+                (4, 2, 4) => run(&mut acc, rows, values, q, rho, p, 2, 4),
+                (4, 3, 4) => run(&mut acc, rows, values, q, rho, p, 3, 4),
+                (4, 0, 3) => run(&mut acc, rows, values, q, rho, p, 0, 3),
+                (4, 0, 2) => run(&mut acc, rows, values, q, rho, p, 0, 2),
+                (4, 0, 1) => run(&mut acc, rows, values, q, rho, p, 0, 1),
+                _ => run(&mut acc, rows, values, q, rho, p, 0, R),
             }
         }
         let nx = self.nx;
@@ -231,6 +267,17 @@ impl Sums<'_, '_> {
             }
         }
     }
+}
+
+/// A histogram row's run as a row of blocks reads it: its columns `a … b − 1` and values, the R K rows
+/// (residue layout) its pixel rows read, and the first and one-past-last of them in the table.
+struct RunRows<'a, const R: usize> {
+    a: usize,
+    b: usize,
+    values: &'a [f64],
+    rows: [&'a [f64]; R],
+    k0: usize,
+    k1: usize,
 }
 
 /// One histogram row's nodes (the first at residue position (q, ρ)) into accumulator rows `k0 … k1 − 1`. Nodes

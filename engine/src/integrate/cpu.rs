@@ -17,6 +17,7 @@
 use super::convolve::{RowRuns, add_convolution};
 use super::exact_core::ExactCore;
 use super::kernel::{IntraPixelMap, PixelKernel, subpixel_sum};
+use super::own_samples::add_own_samples;
 use super::track::Track;
 use crate::optics::psf::PsfTable;
 use crate::readout::ReadoutTiming;
@@ -174,30 +175,6 @@ pub struct Histogram {
     ox_px: f64,
     oy_px: f64,
     g: f64,
-}
-
-/// Every sample where `outer` weighs more than `inner` (a window it contains), with the difference:
-/// the head `outer.first..=inner.first` and the tail `inner.last..=outer.last`, each sample once.
-#[inline]
-fn for_each_extra(
-    outer: &super::track::WindowWeights,
-    inner: &super::track::WindowWeights,
-    mut f: impl FnMut(usize, f64),
-) {
-    let head_end = inner.first.min(outer.last);
-    for j in outer.first..=head_end {
-        let e = outer.weight(j) - inner.weight(j);
-        if e != 0.0 {
-            f(j, e);
-        }
-    }
-    let tail_start = inner.last.max(head_end + 1).max(outer.first);
-    for j in tail_start..=outer.last {
-        let e = outer.weight(j) - inner.weight(j);
-        if e != 0.0 {
-            f(j, e);
-        }
-    }
 }
 
 /// (min_x, max_x, min_y, max_y) of the track over sample ranges (infinite bounds when they hold none).
@@ -526,7 +503,7 @@ impl ExtraSum<'_> {
         inner: &super::track::WindowWeights,
     ) {
         let mut extra: Vec<(usize, f64)> = Vec::new();
-        for_each_extra(outer, inner, |j, e| extra.push((j, e)));
+        outer.for_each_extra(inner, |j, e| extra.push((j, e)));
         let g = self.kernel.nodes_per_px;
         let Some(mut h) = Histogram::empty_in(
             self.star,
@@ -588,7 +565,7 @@ pub fn fast_stamp(
         // stamp's window sample by sample
         Some(c) if c.core.window.first >= common.first && c.core.window.last <= common.last => {
             let mut h = c.histogram_at(ox, oy, track);
-            for_each_extra(&common, &c.core.window, |j, e| h.add_sample(track, j, e));
+            common.for_each_extra(&c.core.window, |j, e| h.add_sample(track, j, e));
             h
         }
         // the box of the whole track holds every window's samples
@@ -608,6 +585,10 @@ pub fn fast_stamp(
         track,
         origin,
     };
+    let bx_px: Vec<f64> = (0..nx)
+        .map(|ix| (x0 + ix as i64) as f64 - star.x_px)
+        .collect();
+    let mut owns = Vec::with_capacity(nx);
     for iy0 in (0..ny).step_by(BLOCK_ROWS) {
         let rows = BLOCK_ROWS.min(ny - iy0);
         // the window these rows share holds the stamp's: its extra samples, summed over the rows at once
@@ -628,16 +609,13 @@ pub fn fast_stamp(
             let row = track.window(ra, rb);
             let out_row = &mut data[iy * nx..(iy + 1) * nx];
             extra.add(out_row, iy, 1, &row, &block);
-            for (ix, out) in out_row.iter_mut().enumerate() {
-                let x = x0 + ix as i64;
-                let mut acc = *out;
-                // this pixel's samples outside its row's window
-                let own = track.window(row_windows[ix].0, row_windows[ix].1);
-                let (bx, by) = (x as f64 - star.x_px, y as f64 - star.y_px);
-                for_each_extra(&own, &row, |j, e| {
-                    acc += e * kernel.eval(bx - track.dx_px[j], by - track.dy_px[j]);
-                });
-                *out = acc * star.rate_e_per_s * track.dt_s;
+            // each pixel's samples outside its row's window
+            owns.clear();
+            owns.extend(row_windows.iter().map(|w| track.window(w.0, w.1)));
+            let by_px = y as f64 - star.y_px;
+            add_own_samples(out_row, &owns, &row, &bx_px, by_px, track, kernel);
+            for out in out_row.iter_mut() {
+                *out = *out * star.rate_e_per_s * track.dt_s;
             }
         }
     }

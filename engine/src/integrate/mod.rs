@@ -4,6 +4,7 @@
 //! * [`track`]: the jitter track on the time grid and window weights;
 //! * [`cpu`]: reference, direct and fast methods on the CPU (rayon over stars);
 //! * [`convolve`]: the fast method's histogram ⊛ K at the pixel centres, blocked for the vector units;
+//! * [`own_samples`]: the fast method's pixels' own few samples, looked up across a row at once;
 //! * the same direct and fast methods on the GPU live in [`crate::integrate::gpu`] (WGSL in `shaders/`).
 //!
 //! Cost grows with what the scene holds: stamps only around stars, one kernel per distinct PSF, and the
@@ -14,6 +15,7 @@ pub mod cpu;
 pub mod exact_core;
 pub mod gpu;
 pub mod kernel;
+pub mod own_samples;
 pub mod track;
 
 use crate::config::{Backend, Method};

@@ -55,6 +55,26 @@ impl WindowWeights {
         }
     }
 
+    /// Every sample where this window weighs more than `inner` (a window it contains), with the difference:
+    /// the head `self.first..=inner.first` and the tail `inner.last..=self.last`, each sample once.
+    #[inline(always)]
+    pub fn for_each_extra(&self, inner: &WindowWeights, mut f: impl FnMut(usize, f64)) {
+        let head_end = inner.first.min(self.last);
+        for j in self.first..=head_end {
+            let e = self.weight(j) - inner.weight(j);
+            if e != 0.0 {
+                f(j, e);
+            }
+        }
+        let tail_start = inner.last.max(head_end + 1).max(self.first);
+        for j in tail_start..=self.last {
+            let e = self.weight(j) - inner.weight(j);
+            if e != 0.0 {
+                f(j, e);
+            }
+        }
+    }
+
     /// Σ of the weights (window length / Δt).
     pub fn total(&self) -> f64 {
         if self.last == self.first {
