@@ -97,6 +97,7 @@ impl Polyphase {
 
 /// A histogram on K's node grid, given by its non-zero run of each row: row `v0 + r` holds `values` at
 /// columns `u0 + a … u0 + b − 1` (node coordinates relative to the stamp origin).
+#[derive(Clone)]
 pub struct RowRuns<'a> {
     pub u0: i64,
     pub v0: i64,
@@ -104,9 +105,16 @@ pub struct RowRuns<'a> {
     pub runs: Vec<(usize, usize, usize, &'a [f64])>,
 }
 
-/// `out[iy·nx + ix] += Σ H(v, u) K(ix·G − u + h, iy·G − v + h)` for the `nx × ny` pixels of a stamp.
+/// `out[iy·nx + ix] += Σ H(v, u) K(ix·G − u + h, iy·G − v + h)` for the `nx × ny` pixels of a stamp (the
+/// histogram's runs are put in the order they are summed in: by row residue mod G).
 #[allow(unsafe_code)] // calling the AVX2 build after checking the processor has AVX2: nothing else
-pub fn add_convolution(out: &mut [f64], nx: usize, ny: usize, hist: &RowRuns<'_>, k: &PixelKernel) {
+pub fn add_convolution(
+    out: &mut [f64],
+    nx: usize,
+    ny: usize,
+    hist: &mut RowRuns<'_>,
+    k: &PixelKernel,
+) {
     let p = k.polyphase();
     #[cfg(target_arch = "x86_64")]
     if std::is_x86_feature_detected!("avx2") {
@@ -123,7 +131,7 @@ fn add_convolution_avx2(
     out: &mut [f64],
     nx: usize,
     ny: usize,
-    hist: &RowRuns<'_>,
+    hist: &mut RowRuns<'_>,
     p: &Polyphase,
     half: usize,
 ) {
@@ -135,7 +143,7 @@ fn add_convolution_body(
     out: &mut [f64],
     nx: usize,
     ny: usize,
-    hist: &RowRuns<'_>,
+    hist: &mut RowRuns<'_>,
     p: &Polyphase,
     half: usize,
 ) {
@@ -143,17 +151,16 @@ fn add_convolution_body(
     // v + G reads what pixel row i − 1 of row v does), so the K lines one row loads are still in the
     // nearest cache for the next; a one-row stamp (a row's own histogram) has no rows to share and keeps
     // the histogram's order
-    let mut order: Vec<&(usize, usize, usize, &[f64])> = hist.runs.iter().collect();
     if ny > 1 {
-        order.sort_by_key(|run| (run.0 % p.g, run.0));
+        hist.runs.sort_by_key(|run| (run.0 % p.g, run.0));
     }
     let mut s = Sums {
         out,
         nx,
         hist,
-        order: &order,
         p,
         half,
+        reads: Vec::with_capacity(hist.runs.len()),
     };
     // whole blocks of ROWS rows, then the last rows in blocks of two and one (no accumulators spent on rows
     // beyond the stamp)
@@ -176,34 +183,36 @@ struct Sums<'a, 'h> {
     out: &'a mut [f64],
     nx: usize,
     hist: &'a RowRuns<'h>,
-    order: &'a [&'a (usize, usize, usize, &'h [f64])],
     p: &'a Polyphase,
     half: usize,
+    /// What the current row of blocks reads of each histogram row (filled by `row_of_blocks`).
+    reads: Vec<RunRows<'a>>,
 }
 
-impl Sums<'_, '_> {
+impl<'a> Sums<'a, '_> {
     /// Pixel rows `iy0 … iy0 + R − 1` in blocks of [`LANES`] pixels; the last pixels (≤ 4 of them) in one
     /// block of four. Which K rows each histogram row reads for these pixel rows (and which of them lie in
     /// the table) is the same for every block of the row, so it is found once here.
     #[inline(always)]
     fn row_of_blocks<const R: usize>(&mut self, iy0: usize) {
-        let p = self.p;
+        let p: &'a Polyphase = self.p;
         let (g, h) = (p.g as i64, self.half as i64);
-        let mut reads: Vec<RunRows<'_, R>> = Vec::with_capacity(self.order.len());
-        for &&(r, a, b, values) in self.order {
+        let mut reads = std::mem::take(&mut self.reads);
+        reads.clear();
+        for &(r, a, b, values) in &self.hist.runs {
             let ky0 = iy0 as i64 * g + h - (self.hist.v0 + r as i64);
-            let mut rows = [p.zeros.as_slice(); R];
-            for (k, row) in rows.iter_mut().enumerate() {
-                *row = p.row(ky0 + k as i64 * g);
-            }
             // the rows beyond K's table (its row of zeros) are left out: only the rows from the first K row in
             // the table to the last take the run (adding a product with zero changes no sum); none, none do
+            let mut rows = [p.zeros.as_slice(); ROWS];
+            for (k, row) in rows.iter_mut().take(R).enumerate() {
+                *row = p.row(ky0 + k as i64 * g);
+            }
             let beyond = |row: &&&[f64]| row.as_ptr() == p.zeros.as_ptr();
-            let k0 = rows.iter().take_while(beyond).count();
+            let k0 = rows[..R].iter().take_while(beyond).count();
             if k0 == R {
                 continue;
             }
-            let k1 = R - rows.iter().rev().take_while(beyond).count();
+            let k1 = R - rows[..R].iter().rev().take_while(beyond).count();
             reads.push(RunRows {
                 a,
                 b,
@@ -223,6 +232,7 @@ impl Sums<'_, '_> {
             1..=4 => self.block::<4, R>(&reads, whole, iy0),
             _ => self.block::<LANES, R>(&reads, whole, iy0),
         }
+        self.reads = reads;
     }
 
     /// `Σ H · K` for the L pixels from `ix0` of the R rows from `iy0` (pixels beyond the stamp are summed and
@@ -230,7 +240,7 @@ impl Sums<'_, '_> {
     #[inline(always)]
     fn block<const L: usize, const R: usize>(
         &mut self,
-        reads: &[RunRows<'_, R>],
+        reads: &[RunRows<'_>],
         ix0: usize,
         iy0: usize,
     ) {
@@ -244,7 +254,10 @@ impl Sums<'_, '_> {
             let Some((i0, i1, q, rho)) = columns(t, read.a, read.b, m, g, L) else {
                 continue;
             };
-            let (rows, values) = (&read.rows, &read.values[i0..=i1]);
+            let Some(rows) = read.rows.first_chunk::<R>() else {
+                continue;
+            };
+            let values = &read.values[i0..=i1];
             match (R, read.k0, read.k1) {
                 (4, 1, 4) => run(&mut acc, rows, values, q, rho, p, 1, 4),
                 (4, 2, 4) => run(&mut acc, rows, values, q, rho, p, 2, 4),
@@ -269,13 +282,13 @@ impl Sums<'_, '_> {
     }
 }
 
-/// A histogram row's run as a row of blocks reads it: its columns `a … b − 1` and values, the R K rows
-/// (residue layout) its pixel rows read, and the first and one-past-last of them in the table.
-struct RunRows<'a, const R: usize> {
+/// A histogram row's run as a row of blocks reads it: its columns `a … b − 1` and values, the K rows (residue
+/// layout) its R ≤ [`ROWS`] pixel rows read, and the first and one-past-last of them in the table.
+struct RunRows<'a> {
     a: usize,
     b: usize,
     values: &'a [f64],
-    rows: [&'a [f64]; R],
+    rows: [&'a [f64]; ROWS],
     k0: usize,
     k1: usize,
 }
@@ -467,7 +480,7 @@ mod tests {
                 }
             }
             let mut fast = vec![1.0; nx * ny];
-            add_convolution(&mut fast, nx, ny, &runs, k);
+            add_convolution(&mut fast, nx, ny, &mut runs.clone(), k);
             let peak = plain.iter().fold(0.0f64, |m, v| m.max(v.abs()));
             for (f, p) in fast.iter().zip(&plain) {
                 assert!(
@@ -476,7 +489,14 @@ mod tests {
                 );
             }
             let mut portable = vec![1.0; nx * ny];
-            add_convolution_body(&mut portable, nx, ny, &runs, k.polyphase(), h as usize);
+            add_convolution_body(
+                &mut portable,
+                nx,
+                ny,
+                &mut runs.clone(),
+                k.polyphase(),
+                h as usize,
+            );
             assert_eq!(portable, fast, "{nx}×{ny}: the AVX2 build's bits");
         }
     }

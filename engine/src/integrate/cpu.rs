@@ -207,6 +207,17 @@ impl Histogram {
         origin: (i64, i64),
         g: usize,
     ) -> Option<Self> {
+        Self::empty_reusing(star, extent, origin, g, Vec::new())
+    }
+
+    /// [`Histogram::empty_in`] in `buffer`'s memory (a histogram's data taken back after use).
+    fn empty_reusing(
+        star: &StarSpec,
+        extent: (f64, f64, f64, f64),
+        origin: (i64, i64),
+        g: usize,
+        mut buffer: Vec<f64>,
+    ) -> Option<Self> {
         let (umin, umax, vmin, vmax) = extent;
         if !(umin <= umax && vmin <= vmax) {
             return None;
@@ -221,12 +232,14 @@ impl Histogram {
         if nu.saturating_mul(nv) > MAX_HISTOGRAM_NODES {
             return None;
         }
+        buffer.clear();
+        buffer.resize(nu * nv, 0.0);
         Some(Self {
             u0,
             v0,
             nu,
             nv,
-            data: vec![0.0; nu * nv],
+            data: buffer,
             ox_px,
             oy_px,
             g: gf,
@@ -484,40 +497,48 @@ impl CoreReader<'_> {
 const BLOCK_ROWS: usize = 4;
 
 /// A stamp's samples of one window beyond another, deposited in a histogram of their own and summed over
-/// some of the stamp's rows.
+/// some of the stamp's rows (≈ 44 of them a bulge stamp: one per block of rows and one per row, each with
+/// a few to a few hundred samples, so their lists and histograms reuse one allocation).
 struct ExtraSum<'a> {
     star: &'a StarSpec,
     kernel: &'a PixelKernel,
     track: &'a Track,
     origin: (i64, i64),
+    /// The samples and weights of the current sum.
+    extra: Vec<(usize, f64)>,
+    /// The last histogram's data, for the next.
+    buffer: Vec<f64>,
 }
 
 impl ExtraSum<'_> {
     /// Add `(outer − inner) ⊛ K` to the `rows` stamp rows from `iy0` (`out`: those rows).
     fn add(
-        &self,
+        &mut self,
         out: &mut [f64],
         iy0: usize,
         rows: usize,
         outer: &super::track::WindowWeights,
         inner: &super::track::WindowWeights,
     ) {
-        let mut extra: Vec<(usize, f64)> = Vec::new();
+        let mut extra = std::mem::take(&mut self.extra);
+        extra.clear();
         outer.for_each_extra(inner, |j, e| extra.push((j, e)));
         let g = self.kernel.nodes_per_px;
-        let Some(mut h) = Histogram::empty_in(
+        if let Some(mut h) = Histogram::empty_reusing(
             self.star,
             sample_extent(self.track, extra.iter().map(|&(j, _)| j..=j)),
             self.origin,
             g,
-        ) else {
-            return;
-        };
-        for &(j, e) in &extra {
-            h.add_sample(self.track, j, e);
+            std::mem::take(&mut self.buffer),
+        ) {
+            for &(j, e) in &extra {
+                h.add_sample(self.track, j, e);
+            }
+            let nx = out.len() / rows;
+            add_convolution(out, nx, rows, &mut h.runs((iy0 * g) as i64), self.kernel);
+            self.buffer = h.data;
         }
-        let nx = out.len() / rows;
-        add_convolution(out, nx, rows, &h.runs((iy0 * g) as i64), self.kernel);
+        self.extra = extra;
     }
 }
 
@@ -578,12 +599,14 @@ pub fn fast_stamp(
         },
     };
     let mut data = vec![0.0; nx * ny];
-    add_convolution(&mut data, nx, ny, &base.runs(0), kernel);
-    let extra = ExtraSum {
+    add_convolution(&mut data, nx, ny, &mut base.runs(0), kernel);
+    let mut extra = ExtraSum {
         star,
         kernel,
         track,
         origin,
+        extra: Vec::new(),
+        buffer: Vec::new(),
     };
     let bx_px: Vec<f64> = (0..nx)
         .map(|ix| (x0 + ix as i64) as f64 - star.x_px)

@@ -148,6 +148,7 @@ fn own_samples_body(
 /// The pixels of a row whose node column `u` (one sample's, ≥ 0 and truncated: the floor) lies inside the
 /// table (`lo … hi`), and the first one's column, when their columns are G apart to the bit and the pixels
 /// before and after lie below and beyond it; `None` otherwise (looked up one by one).
+#[inline(always)]
 fn lanes_in_table(u: &[f64], last_node: i32, g: usize) -> Option<(usize, usize, usize)> {
     let lo = u.iter().position(|&ui| ui >= 0.0).unwrap_or(u.len());
     let hi = lo

@@ -60,14 +60,9 @@ impl WindowWeights {
     #[inline(always)]
     pub fn for_each_extra(&self, inner: &WindowWeights, mut f: impl FnMut(usize, f64)) {
         let head_end = inner.first.min(self.last);
-        for j in self.first..=head_end {
-            let e = self.weight(j) - inner.weight(j);
-            if e != 0.0 {
-                f(j, e);
-            }
-        }
         let tail_start = inner.last.max(head_end + 1).max(self.first);
-        for j in tail_start..=self.last {
+        // one loop over both parts: `f` is called from one place, so it is inlined
+        for j in (self.first..=head_end).chain(tail_start..=self.last) {
             let e = self.weight(j) - inner.weight(j);
             if e != 0.0 {
                 f(j, e);
