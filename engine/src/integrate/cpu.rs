@@ -17,7 +17,7 @@
 use super::convolve::{RowRuns, add_convolution};
 use super::exact_core::ExactCore;
 use super::kernel::{IntraPixelMap, PixelKernel, subpixel_sum};
-use super::own_samples::add_own_samples;
+use super::own_samples::{RowScratch, add_own_samples};
 use super::track::Track;
 use crate::optics::psf::PsfTable;
 use crate::readout::ReadoutTiming;
@@ -612,6 +612,7 @@ pub fn fast_stamp(
         .map(|ix| (x0 + ix as i64) as f64 - star.x_px)
         .collect();
     let mut owns = Vec::with_capacity(nx);
+    let mut scratch = RowScratch::default();
     for iy0 in (0..ny).step_by(BLOCK_ROWS) {
         let rows = BLOCK_ROWS.min(ny - iy0);
         // the window these rows share holds the stamp's: its extra samples, summed over the rows at once
@@ -636,7 +637,16 @@ pub fn fast_stamp(
             owns.clear();
             owns.extend(row_windows.iter().map(|w| track.window(w.0, w.1)));
             let by_px = y as f64 - star.y_px;
-            add_own_samples(out_row, &owns, &row, &bx_px, by_px, track, kernel);
+            add_own_samples(
+                out_row,
+                &owns,
+                &row,
+                &bx_px,
+                by_px,
+                track,
+                kernel,
+                &mut scratch,
+            );
             for out in out_row.iter_mut() {
                 *out = *out * star.rate_e_per_s * track.dt_s;
             }

@@ -41,10 +41,11 @@ pub struct ExactCore {
     fv: Vec<f64>,
     /// The window's end samples (u-cell, v-cell, f_u, f_v, weight), deposited apart.
     ends: Vec<(i64, i64, f64, f64, f64)>,
-    /// The interior samples as (cell index, f_u, f_v), by decreasing f_u and by decreasing f_v: a star's
-    /// u-carried samples are a prefix of the one, its v-carried samples of the other.
-    by_u: Vec<(u32, f64, f64)>,
-    by_v: Vec<(u32, f64, f64)>,
+    /// The interior samples as (cell index, moments `(1, f_u, f_v, f_u f_v)`), by decreasing f_u and by
+    /// decreasing f_v: a star's u-carried samples are a prefix of the one, its v-carried samples of the
+    /// other. The moments are what a move adds and subtracts (four lanes at once).
+    by_u: Vec<(u32, [f64; 4])>,
+    by_v: Vec<(u32, [f64; 4])>,
 }
 
 /// A running read of an [`ExactCore`] for stars taken one after another: the moments of each cell's four
@@ -119,13 +120,13 @@ impl ExactCore {
             cells.push((cell.1, cell.0, s, e));
             s = e;
         }
-        let mut by_u: Vec<(u32, f64, f64)> = Vec::with_capacity(fu.len());
+        let mut by_u: Vec<(u32, [f64; 4])> = Vec::with_capacity(fu.len());
         for (c, &(_, _, s, e)) in cells.iter().enumerate() {
-            by_u.extend((s..e).map(|j| (c as u32, fu[j], fv[j])));
+            by_u.extend((s..e).map(|j| (c as u32, [1.0, fu[j], fv[j], fu[j] * fv[j]])));
         }
         let mut by_v = by_u.clone();
-        by_u.sort_by(|x, y| y.1.total_cmp(&x.1));
-        by_v.sort_by(|x, y| y.2.total_cmp(&x.2));
+        by_u.sort_by(|x, y| y.1[1].total_cmp(&x.1[1]));
+        by_v.sort_by(|x, y| y.1[2].total_cmp(&x.1[2]));
         Some(Self {
             g: gf,
             a0,
@@ -149,8 +150,8 @@ impl ExactCore {
     /// Bring the cursor's quadrant sums to phase `(px, py)`: move the samples whose carry changes, or,
     /// when they are more than a third of all, sum every cell afresh.
     fn follow(&self, c: &mut Cursor, px: f64, py: f64) {
-        let iu = self.by_u.partition_point(|x| x.1 + px >= 1.0);
-        let iv = self.by_v.partition_point(|x| x.2 + py >= 1.0);
+        let iu = self.by_u.partition_point(|x| x.1[1] + px >= 1.0);
+        let iv = self.by_v.partition_point(|x| x.1[2] + py >= 1.0);
         let Some((_, py0)) = c.phase else {
             return self.fresh(c, px, py, iu, iv);
         };
@@ -160,15 +161,15 @@ impl ExactCore {
         // u first (at the old v-phase), then v (at the new u-phase)
         let mut moved = 0;
         let (lo, hi, to) = (c.iu.min(iu), c.iu.max(iu), iu > c.iu);
-        for &(cell, fu, fv) in &self.by_u[lo..hi] {
-            let cv = (fv + py0 >= 1.0) as usize;
-            move_sample(&mut c.quad[cell as usize], fu, fv, 2 * cv, 2 * cv + 1, to);
+        for (cell, m) in &self.by_u[lo..hi] {
+            let cv = (m[2] + py0 >= 1.0) as usize;
+            move_sample(&mut c.quad[*cell as usize], m, 2 * cv, 2 * cv + 1, to);
         }
         moved += hi - lo;
         let (lo, hi, to) = (c.iv.min(iv), c.iv.max(iv), iv > c.iv);
-        for &(cell, fu, fv) in &self.by_v[lo..hi] {
-            let cu = (fu + px >= 1.0) as usize;
-            move_sample(&mut c.quad[cell as usize], fu, fv, cu, cu + 2, to);
+        for (cell, m) in &self.by_v[lo..hi] {
+            let cu = (m[1] + px >= 1.0) as usize;
+            move_sample(&mut c.quad[*cell as usize], m, cu, cu + 2, to);
         }
         moved += hi - lo;
         c.moved += moved;
@@ -217,31 +218,50 @@ impl ExactCore {
         let v1 = (nv_i + self.b0 + self.nb as i64 + 2).max(node(oy_px, extent.3) + 2);
         let (nu, nv) = ((u1 - u0 + 1) as usize, (v1 - v0 + 1) as usize);
         let mut data = vec![0.0; nu * nv];
-        // what the samples of cell (a, b) carried by (cu, cv) with moments m give the cell's four nodes
-        let mut put = |a: i64, b: i64, cu: i64, cv: i64, m: &[f64; 4]| {
-            if m[0] == 0.0 {
-                return;
-            }
-            // t_u = f_u + α_u, t_v = f_v + α_v for these samples
+        // what the samples of a cell carried by (cu, cv) with moments m give the cell's four nodes: (1 − t_u)(1 − t_v),
+        // t_u (1 − t_v), (1 − t_u) t_v, t_u t_v summed, with t_u = f_u + α_u, t_v = f_v + α_v
+        let weights = |cu: usize, cv: usize, m: &[f64; 4]| {
             let (au, av) = (px - cu as f64, py - cv as f64);
             let su = m[1] + au * m[0];
             let sv = m[2] + av * m[0];
             let suv = m[3] + av * m[1] + au * m[2] + au * av * m[0];
-            let i = (nv_i + b + cv - v0) as usize * nu + (nu_i + a + cu - u0) as usize;
-            data[i] += m[0] - su - sv + suv;
-            data[i + 1] += su - suv;
-            data[i + nu] += sv - suv;
-            data[i + nu + 1] += suv;
+            [m[0] - su - sv + suv, su - suv, sv - suv, suv]
         };
+        let at = |a: i64, b: i64| (nv_i + b - v0) as usize * nu + (nu_i + a - u0) as usize;
         for (&(ca, cb, _, _), q) in self.cells.iter().zip(&cursor.quad) {
-            let (a, b) = (self.a0 + ca as i64, self.b0 + cb as i64);
+            // the cell's 3 × 3 nodes (its four quadrants reach one node further each way) summed in registers:
+            // each node takes the quadrants' terms in the same order as one by one in memory, so the same bits
+            let i = at(self.a0 + ca as i64, self.b0 + cb as i64);
+            let mut nodes = [[0.0; 3]; 3];
+            for (r, row) in nodes.iter_mut().enumerate() {
+                row.copy_from_slice(&data[i + r * nu..i + r * nu + 3]);
+            }
             for (k, m) in q.iter().enumerate() {
-                put(a, b, (k & 1) as i64, (k >> 1) as i64, m);
+                if m[0] == 0.0 {
+                    continue;
+                }
+                let (cu, cv) = (k & 1, k >> 1);
+                let w = weights(cu, cv, m);
+                nodes[cv][cu] += w[0];
+                nodes[cv][cu + 1] += w[1];
+                nodes[cv + 1][cu] += w[2];
+                nodes[cv + 1][cu + 1] += w[3];
+            }
+            for (r, row) in nodes.iter().enumerate() {
+                data[i + r * nu..i + r * nu + 3].copy_from_slice(row);
             }
         }
-        for &(a, b, fu, fv, w) in &self.ends {
-            let (cu, cv) = ((fu + px >= 1.0) as i64, (fv + py >= 1.0) as i64);
-            put(a, b, cu, cv, &[w, w * fu, w * fv, w * fu * fv]);
+        for &(a, b, fu, fv, wt) in &self.ends {
+            let (cu, cv) = ((fu + px >= 1.0) as usize, (fv + py >= 1.0) as usize);
+            if wt == 0.0 {
+                continue;
+            }
+            let w = weights(cu, cv, &[wt, wt * fu, wt * fv, wt * fu * fv]);
+            let i = at(a + cu as i64, b + cv as i64);
+            data[i] += w[0];
+            data[i + 1] += w[1];
+            data[i + nu] += w[2];
+            data[i + nu + 1] += w[3];
         }
         NodeTable {
             u0,
@@ -253,11 +273,10 @@ impl ExactCore {
     }
 }
 
-/// Move one sample's moments from quadrant `from` to `to_k` (`forward`), or back.
+/// Move one sample's moments `m` from quadrant `from` to `to_k` (`forward`), or back.
 #[inline(always)]
-fn move_sample(q: &mut [[f64; 4]; 4], fu: f64, fv: f64, from: usize, to_k: usize, forward: bool) {
+fn move_sample(q: &mut [[f64; 4]; 4], m: &[f64; 4], from: usize, to_k: usize, forward: bool) {
     let (src, dst) = if forward { (from, to_k) } else { (to_k, from) };
-    let m = [1.0, fu, fv, fu * fv];
     for k in 0..4 {
         q[src][k] -= m[k];
         q[dst][k] += m[k];

@@ -14,6 +14,17 @@
 use super::kernel::PixelKernel;
 use super::track::{Track, WindowWeights};
 
+/// The memory a row's look-ups work in, kept from row to row of a stamp.
+#[derive(Debug, Default)]
+pub struct RowScratch {
+    /// Each sample's weight beyond the row's, pixel by pixel.
+    e: Vec<f64>,
+    /// Whether any pixel has a weight for each sample.
+    any: Vec<bool>,
+    /// One sample's node column, pixel by pixel.
+    u: Vec<f64>,
+}
+
 /// `out[ix] += Σ_j e_ix(j) · K(bx_px[ix] − dx_j, by_px − dy_j)` over every sample where some pixel's window
 /// `owns[ix]` weighs more than the row's `row` (which each of them holds).
 #[allow(unsafe_code)] // calling the AVX2 build after checking the processor has AVX2: nothing else
@@ -25,14 +36,15 @@ pub fn add_own_samples(
     by_px: f64,
     track: &Track,
     k: &PixelKernel,
+    scratch: &mut RowScratch,
 ) {
     #[cfg(target_arch = "x86_64")]
     if std::is_x86_feature_detected!("avx2") {
         // SAFETY: the processor has AVX2 (checked just above).
-        unsafe { own_samples_avx2(out, owns, row, bx_px, by_px, track, k) };
+        unsafe { own_samples_avx2(out, owns, row, bx_px, by_px, track, k, scratch) };
         return;
     }
-    own_samples_body(out, owns, row, bx_px, by_px, track, k);
+    own_samples_body(out, owns, row, bx_px, by_px, track, k, scratch);
 }
 
 #[cfg(target_arch = "x86_64")]
@@ -45,8 +57,9 @@ fn own_samples_avx2(
     by_px: f64,
     track: &Track,
     k: &PixelKernel,
+    scratch: &mut RowScratch,
 ) {
-    own_samples_body(out, owns, row, bx_px, by_px, track, k);
+    own_samples_body(out, owns, row, bx_px, by_px, track, k, scratch);
 }
 
 #[inline(always)]
@@ -58,6 +71,7 @@ fn own_samples_body(
     by_px: f64,
     track: &Track,
     k: &PixelKernel,
+    scratch: &mut RowScratch,
 ) {
     let nx = out.len();
     debug_assert!(owns.len() == nx && bx_px.len() == nx);
@@ -81,8 +95,11 @@ fn own_samples_body(
         }
     };
     // e[s·nx + ix]: pixel ix's weight beyond the row's for the s-th of those samples (0 where it has none)
-    let mut e = vec![0.0; n_samples * nx];
-    let mut any = vec![false; n_samples];
+    let RowScratch { e, any, u } = scratch;
+    e.clear();
+    e.resize(n_samples * nx, 0.0);
+    any.clear();
+    any.resize(n_samples, false);
     for (ix, w) in owns.iter().enumerate() {
         w.for_each_extra(row, |j, ej| {
             let s = slot(j);
@@ -94,11 +111,12 @@ fn own_samples_body(
     // the table's last node as a bound (the outermost ring is zero: at or beyond it a look-up is zero)
     let last_node = (k.n() - 1) as i32;
     let p = k.polyphase();
-    let mut u = vec![0.0; nx];
+    u.clear();
+    u.resize(nx, 0.0);
     let samples = (first..=head_end).chain(tail_start..=last);
     for (j, e) in samples
         .zip(e.chunks_exact(nx))
-        .zip(&any)
+        .zip(any.iter())
         .filter_map(|(je, a)| a.then_some(je))
     {
         let (dxj, dyj) = (track.dx_px[j], track.dy_px[j]);
@@ -113,7 +131,7 @@ fn own_samples_body(
         for (ui, bx) in u.iter_mut().zip(bx_px) {
             *ui = (bx - dxj) * g + h;
         }
-        let Some((lo, hi, ku)) = lanes_in_table(&u, last_node, k.nodes_per_px) else {
+        let Some((lo, hi, ku)) = lanes_in_table(u, last_node, k.nodes_per_px) else {
             // a node column within rounding of a whole node (or pixels not a pixel apart): one by one
             for ((o, &ei), bx) in out.iter_mut().zip(e).zip(bx_px) {
                 if ei != 0.0 {
@@ -134,10 +152,11 @@ fn own_samples_body(
             continue;
         };
         let lanes = out[lo..hi].iter_mut().zip(&e[lo..hi]).zip(&u[lo..hi]);
-        for (i, ((o, &ei), &ui)) in lanes.enumerate() {
+        let nodes = a0.iter().zip(b0).zip(a1.iter().zip(b1));
+        for (((o, &ei), &ui), ((&k00, &k01), (&k10, &k11))) in lanes.zip(nodes) {
             let tu = ui - (ui as i32) as f64;
-            let val = (1.0 - tv) * ((1.0 - tu) * a0[i] + tu * b0[i])
-                + tv * ((1.0 - tu) * a1[i] + tu * b1[i]);
+            let val =
+                (1.0 - tv) * ((1.0 - tu) * k00 + tu * k01) + tv * ((1.0 - tu) * k10 + tu * k11);
             if ei != 0.0 {
                 *o += ei * val;
             }
@@ -189,6 +208,7 @@ mod tests {
         let dx = (0..n).map(|j| 0.7 * (j as f64 * 0.05).sin()).collect();
         let dy = (0..n).map(|j| 0.5 * (j as f64 * 0.037).cos()).collect();
         let track = Track::new(dt_s, 0.0, dx, dy);
+        let mut scratch = RowScratch::default();
         // (first pixel's offset from the star, pixel spacing, row offset, pixels)
         for &(bx0, step, by, nx) in &[
             (-6.3, 1.0, 0.4, 13usize),
@@ -223,10 +243,28 @@ mod tests {
                 });
             }
             let mut at_once = start.clone();
-            add_own_samples(&mut at_once, &owns, &row, &bx_px, by, &track, &k);
+            add_own_samples(
+                &mut at_once,
+                &owns,
+                &row,
+                &bx_px,
+                by,
+                &track,
+                &k,
+                &mut scratch,
+            );
             assert_eq!(at_once, plain, "row at ({bx0}, {by}), step {step}");
             let mut portable = start.clone();
-            own_samples_body(&mut portable, &owns, &row, &bx_px, by, &track, &k);
+            own_samples_body(
+                &mut portable,
+                &owns,
+                &row,
+                &bx_px,
+                by,
+                &track,
+                &k,
+                &mut scratch,
+            );
             assert_eq!(portable, plain, "the portable build at ({bx0}, {by})");
         }
     }
