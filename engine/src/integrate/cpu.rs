@@ -17,7 +17,7 @@
 use super::convolve::{RowRuns, add_convolution};
 use super::exact_core::ExactCore;
 use super::kernel::{IntraPixelMap, PixelKernel, subpixel_sum};
-use super::own_samples::{RowScratch, add_own_samples};
+use super::own_samples::{RowScratch, RowWindows, add_own_samples};
 use super::track::Track;
 use crate::optics::psf::PsfTable;
 use crate::readout::ReadoutTiming;
@@ -637,16 +637,13 @@ pub fn fast_stamp(
             owns.clear();
             owns.extend(row_windows.iter().map(|w| track.window(w.0, w.1)));
             let by_px = y as f64 - star.y_px;
-            add_own_samples(
-                out_row,
-                &owns,
-                &row,
-                &bx_px,
+            let r = RowWindows {
+                owns: &owns,
+                row: &row,
+                bx_px: &bx_px,
                 by_px,
-                track,
-                kernel,
-                &mut scratch,
-            );
+            };
+            add_own_samples(out_row, &r, track, kernel, &mut scratch);
             for out in out_row.iter_mut() {
                 *out = *out * star.rate_e_per_s * track.dt_s;
             }

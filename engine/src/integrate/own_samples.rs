@@ -14,6 +14,16 @@
 use super::kernel::PixelKernel;
 use super::track::{Track, WindowWeights};
 
+/// One stamp row: each pixel's window, the row's shared window (which each holds), and the pixels' offsets
+/// from the star (px: `x − x_star` of each, `y − y_star` of the row).
+#[derive(Debug, Clone, Copy)]
+pub struct RowWindows<'a> {
+    pub owns: &'a [WindowWeights],
+    pub row: &'a WindowWeights,
+    pub bx_px: &'a [f64],
+    pub by_px: f64,
+}
+
 /// The memory a row's look-ups work in, kept from row to row of a stamp.
 #[derive(Debug, Default)]
 pub struct RowScratch {
@@ -26,14 +36,11 @@ pub struct RowScratch {
 }
 
 /// `out[ix] += Σ_j e_ix(j) · K(bx_px[ix] − dx_j, by_px − dy_j)` over every sample where some pixel's window
-/// `owns[ix]` weighs more than the row's `row` (which each of them holds).
+/// `owns[ix]` weighs more than the row's `row` (which each of them holds; [`RowWindows`]).
 #[allow(unsafe_code)] // calling the AVX2 build after checking the processor has AVX2: nothing else
 pub fn add_own_samples(
     out: &mut [f64],
-    owns: &[WindowWeights],
-    row: &WindowWeights,
-    bx_px: &[f64],
-    by_px: f64,
+    r: &RowWindows<'_>,
     track: &Track,
     k: &PixelKernel,
     scratch: &mut RowScratch,
@@ -41,38 +48,38 @@ pub fn add_own_samples(
     #[cfg(target_arch = "x86_64")]
     if std::is_x86_feature_detected!("avx2") {
         // SAFETY: the processor has AVX2 (checked just above).
-        unsafe { own_samples_avx2(out, owns, row, bx_px, by_px, track, k, scratch) };
+        unsafe { own_samples_avx2(out, r, track, k, scratch) };
         return;
     }
-    own_samples_body(out, owns, row, bx_px, by_px, track, k, scratch);
+    own_samples_body(out, r, track, k, scratch);
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 fn own_samples_avx2(
     out: &mut [f64],
-    owns: &[WindowWeights],
-    row: &WindowWeights,
-    bx_px: &[f64],
-    by_px: f64,
+    r: &RowWindows<'_>,
     track: &Track,
     k: &PixelKernel,
     scratch: &mut RowScratch,
 ) {
-    own_samples_body(out, owns, row, bx_px, by_px, track, k, scratch);
+    own_samples_body(out, r, track, k, scratch);
 }
 
 #[inline(always)]
 fn own_samples_body(
     out: &mut [f64],
-    owns: &[WindowWeights],
-    row: &WindowWeights,
-    bx_px: &[f64],
-    by_px: f64,
+    r: &RowWindows<'_>,
     track: &Track,
     k: &PixelKernel,
     scratch: &mut RowScratch,
 ) {
+    let RowWindows {
+        owns,
+        row,
+        bx_px,
+        by_px,
+    } = *r;
     let nx = out.len();
     debug_assert!(owns.len() == nx && bx_px.len() == nx);
     let (Some(first), Some(last)) = (
@@ -242,29 +249,17 @@ mod tests {
                     *o += e * k.eval(bx - track.dx_px[j], by - track.dy_px[j]);
                 });
             }
+            let r = RowWindows {
+                owns: &owns,
+                row: &row,
+                bx_px: &bx_px,
+                by_px: by,
+            };
             let mut at_once = start.clone();
-            add_own_samples(
-                &mut at_once,
-                &owns,
-                &row,
-                &bx_px,
-                by,
-                &track,
-                &k,
-                &mut scratch,
-            );
+            add_own_samples(&mut at_once, &r, &track, &k, &mut scratch);
             assert_eq!(at_once, plain, "row at ({bx0}, {by}), step {step}");
             let mut portable = start.clone();
-            own_samples_body(
-                &mut portable,
-                &owns,
-                &row,
-                &bx_px,
-                by,
-                &track,
-                &k,
-                &mut scratch,
-            );
+            own_samples_body(&mut portable, &r, &track, &k, &mut scratch);
             assert_eq!(portable, plain, "the portable build at ({bx0}, {by})");
         }
     }
