@@ -80,18 +80,16 @@ impl Polyphase {
         let w = self.g * self.len;
         &self.data[ky as usize * w..(ky as usize + 1) * w]
     }
-}
 
-impl Polyphase {
     /// `K(ky, kx + G·i)` for `i = 0 … count − 1`: what a row of pixels reads of one node offset, contiguous in
-    /// this layout; `None` unless `ky < n` and `kx + G·(count − 1) < n`.
+    /// this layout (residue ρ = kx mod G of K's row `ky`, from column ⌊kx/G⌋); `None` unless `ky < n` and
+    /// `kx + G·(count − 1) < n`.
     pub(super) fn along_row(&self, ky: usize, kx: usize, count: usize) -> Option<&[f64]> {
         if ky >= self.n || count == 0 || kx + self.g * (count - 1) >= self.n {
             return None;
         }
-        let (mm, rho) = (kx / self.g, kx % self.g);
-        let s = (ky * self.g + rho) * self.len + PAD + mm;
-        self.data.get(s..s + count)
+        let s = (kx % self.g) * self.len + PAD + kx / self.g;
+        self.row(ky as i64).get(s..s + count)
     }
 }
 

@@ -252,10 +252,10 @@ impl ExactCore {
             }
         }
         for &(a, b, fu, fv, wt) in &self.ends {
-            let (cu, cv) = ((fu + px >= 1.0) as usize, (fv + py >= 1.0) as usize);
             if wt == 0.0 {
                 continue;
             }
+            let (cu, cv) = ((fu + px >= 1.0) as usize, (fv + py >= 1.0) as usize);
             let w = weights(cu, cv, &[wt, wt * fu, wt * fv, wt * fu * fv]);
             let i = at(a + cu as i64, b + cv as i64);
             data[i] += w[0];
