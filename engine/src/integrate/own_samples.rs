@@ -88,10 +88,17 @@ fn own_samples_body(
     ) else {
         return;
     };
-    // the samples where a pixel's weight can differ from the row's: up to the row's first, from its last
-    // (inside the row's window every pixel weighs 1, as the row does) — each pixel's own are among them
-    let head_end = row.first.min(last);
-    let tail_start = row.last.max(row.first + 1);
+    // the samples where a pixel's weight can differ from the row's: those of the pixels' windows together up to
+    // the row's first and from its last (inside the row's window every pixel weighs 1, as the row does) —
+    // each pixel's own are among them
+    let together = WindowWeights {
+        first,
+        last,
+        w_first: 1.0,
+        w_last: 1.0,
+    };
+    let (head, tail) = together.extra_ranges(row);
+    let (head_end, tail_start) = (*head.end(), *tail.start());
     let n_head = (head_end + 1).saturating_sub(first);
     let n_samples = n_head + (last + 1).saturating_sub(tail_start);
     let slot = |j: usize| {
@@ -120,7 +127,7 @@ fn own_samples_body(
     let p = k.polyphase();
     u.clear();
     u.resize(nx, 0.0);
-    let samples = (first..=head_end).chain(tail_start..=last);
+    let samples = head.chain(tail);
     for (j, e) in samples
         .zip(e.chunks_exact(nx))
         .zip(any.iter())
@@ -229,17 +236,16 @@ mod tests {
         ] {
             let bx_px: Vec<f64> = (0..nx).map(|i| bx0 + step * i as f64).collect();
             // windows of 2.5 s starting within 0.04 s (four samples) of each other, at fractions of a sample
-            let owns: Vec<WindowWeights> = (0..nx)
-                .map(|i| {
-                    let a = 1.0033 + 0.0037 * ((i * 7) % 11) as f64;
-                    track.window(a, a + 2.5)
-                })
-                .collect();
-            let (a_max, b_min) = (0..nx)
+            let windows_s: Vec<(f64, f64)> = (0..nx)
                 .map(|i| {
                     let a = 1.0033 + 0.0037 * ((i * 7) % 11) as f64;
                     (a, a + 2.5)
                 })
+                .collect();
+            let owns: Vec<WindowWeights> =
+                windows_s.iter().map(|w| track.window(w.0, w.1)).collect();
+            let (a_max, b_min) = windows_s
+                .iter()
                 .fold((f64::MIN, f64::MAX), |(a, b), w| (a.max(w.0), b.min(w.1)));
             let row = track.window(a_max, b_min);
             let start: Vec<f64> = (0..nx).map(|i| 0.5 + i as f64).collect();

@@ -55,14 +55,28 @@ impl WindowWeights {
         }
     }
 
-    /// Every sample where this window weighs more than `inner` (a window it contains), with the difference:
-    /// the head `self.first..=inner.first` and the tail `inner.last..=self.last`, each sample once.
+    /// The samples where this window can weigh more than `inner` (a window it contains): the head
+    /// `self.first..=inner.first` and the tail `inner.last..=self.last`, each sample in one of them.
     #[inline(always)]
-    pub fn for_each_extra(&self, inner: &WindowWeights, mut f: impl FnMut(usize, f64)) {
+    pub fn extra_ranges(
+        &self,
+        inner: &WindowWeights,
+    ) -> (
+        std::ops::RangeInclusive<usize>,
+        std::ops::RangeInclusive<usize>,
+    ) {
         let head_end = inner.first.min(self.last);
         let tail_start = inner.last.max(head_end + 1).max(self.first);
+        (self.first..=head_end, tail_start..=self.last)
+    }
+
+    /// Every sample where this window weighs more than `inner` (a window it contains), with the difference
+    /// ([`WindowWeights::extra_ranges`]).
+    #[inline(always)]
+    pub fn for_each_extra(&self, inner: &WindowWeights, mut f: impl FnMut(usize, f64)) {
+        let (head, tail) = self.extra_ranges(inner);
         // one loop over both parts: `f` is called from one place, so it is inlined
-        for j in (self.first..=head_end).chain(tail_start..=self.last) {
+        for j in head.chain(tail) {
             let e = self.weight(j) - inner.weight(j);
             if e != 0.0 {
                 f(j, e);
