@@ -265,6 +265,96 @@ impl Histogram {
         hi[1] += w * tu * tv;
     }
 
+    /// Deposit the samples of `run` with weight 1, in order: the same terms in the same order as
+    /// [`Histogram::add_sample`] with `w = 1` one by one (a weight of 1 multiplies exactly, so the same bits),
+    /// the positions and cloud-in-cell weights of four samples at a time worked out side by side in the
+    /// vector units; the additions stay one sample after another.
+    #[allow(unsafe_code)] // calling the AVX2 build after checking the processor has AVX2: nothing else
+    fn add_unit_run(&mut self, track: &Track, run: std::ops::Range<usize>) {
+        #[cfg(target_arch = "x86_64")]
+        if std::is_x86_feature_detected!("avx2") {
+            // SAFETY: the processor has AVX2 (checked just above).
+            unsafe { self.add_unit_run_avx2(track, run) };
+            return;
+        }
+        self.add_unit_run_body(track, run);
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx2")]
+    fn add_unit_run_avx2(&mut self, track: &Track, run: std::ops::Range<usize>) {
+        self.add_unit_run_body(track, run);
+    }
+
+    #[inline(always)]
+    fn add_unit_run_body(&mut self, track: &Track, run: std::ops::Range<usize>) {
+        const B: usize = 4;
+        let (dx, dy) = (&track.dx_px[run.clone()], &track.dy_px[run.clone()]);
+        let (ox, oy, g) = (self.ox_px, self.oy_px, self.g);
+        let (u0, v0) = (self.u0 as f64, self.v0 as f64);
+        let nu = self.nu;
+        let mut xs = dx.chunks_exact(B);
+        let mut ys = dy.chunks_exact(B);
+        for (x, y) in (&mut xs).zip(&mut ys) {
+            // the arithmetic of `add_sample`, lane by lane
+            let (mut iu, mut iv) = ([0i32; B], [0i32; B]);
+            let mut w = [[0.0f64; B]; 4];
+            for k in 0..B {
+                let u = (ox + x[k]) * g - u0;
+                let v = (oy + y[k]) * g - v0;
+                (iu[k], iv[k]) = (u as i32, v as i32);
+                let (tu, tv) = (u - iu[k] as f64, v - iv[k] as f64);
+                w[0][k] = (1.0 - tu) * (1.0 - tv);
+                w[1][k] = tu * (1.0 - tv);
+                w[2][k] = (1.0 - tu) * tv;
+                w[3][k] = tu * tv;
+            }
+            for k in 0..B {
+                let i = iv[k] as usize * nu + iu[k] as usize;
+                let (lo, hi) = self.data[i..i + nu + 2].split_at_mut(nu);
+                lo[0] += w[0][k];
+                lo[1] += w[1][k];
+                hi[0] += w[2][k];
+                hi[1] += w[3][k];
+            }
+        }
+        let rest = run.end - xs.remainder().len();
+        for j in rest..run.end {
+            self.add_sample(track, j, 1.0);
+        }
+    }
+
+    /// Add the samples where window `outer` weighs more than `inner` (a window it contains), with the
+    /// difference: the same deposits in the same order as [`WindowWeights::for_each_extra`] into
+    /// [`Histogram::add_sample`], each part's interior (weight exactly 1 − 0) through
+    /// [`Histogram::add_unit_run`].
+    fn add_extra(
+        &mut self,
+        track: &Track,
+        outer: &super::track::WindowWeights,
+        inner: &super::track::WindowWeights,
+    ) {
+        let (head, tail) = outer.extra_ranges(inner);
+        for part in [head, tail] {
+            let (lo, hi) = (*part.start(), *part.end());
+            if lo > hi {
+                continue;
+            }
+            let end = |h: &mut Self, j: usize| {
+                let e = outer.weight(j) - inner.weight(j);
+                if e != 0.0 {
+                    h.add_sample(track, j, e);
+                }
+            };
+            end(self, lo);
+            if hi > lo {
+                // strictly inside the part: inside `outer` and outside `inner`, so 1 − 0
+                self.add_unit_run(track, lo + 1..hi);
+                end(self, hi);
+            }
+        }
+    }
+
     /// Deposit positions `q_j = star + track_j − origin` (px) × G with the window's weights.
     pub fn deposit(
         star: &StarSpec,
@@ -498,14 +588,12 @@ const BLOCK_ROWS: usize = 4;
 
 /// A stamp's samples of one window beyond another, deposited in a histogram of their own and summed over
 /// some of the stamp's rows (≈ 44 of them a bulge stamp: one per block of rows and one per row, each with
-/// a few to a few hundred samples, so their lists and histograms reuse one allocation).
+/// a few to a few hundred samples, so their histograms reuse one allocation).
 struct ExtraSum<'a> {
     star: &'a StarSpec,
     kernel: &'a PixelKernel,
     track: &'a Track,
     origin: (i64, i64),
-    /// The samples and weights of the current sum.
-    extra: Vec<(usize, f64)>,
     /// The last histogram's data, for the next.
     buffer: Vec<f64>,
 }
@@ -520,25 +608,39 @@ impl ExtraSum<'_> {
         outer: &super::track::WindowWeights,
         inner: &super::track::WindowWeights,
     ) {
-        let mut extra = std::mem::take(&mut self.extra);
-        extra.clear();
-        outer.for_each_extra(inner, |j, e| extra.push((j, e)));
+        // the box holds the samples of a non-zero difference: each part's interior, and its ends unless
+        // their weights are equal
+        let (head, tail) = outer.extra_ranges(inner);
+        let mut held: [Option<std::ops::RangeInclusive<usize>>; 6] = Default::default();
+        for (part, slots) in [head, tail].into_iter().zip(held.chunks_exact_mut(3)) {
+            let (lo, hi) = (*part.start(), *part.end());
+            if lo > hi {
+                continue;
+            }
+            let differs = |j: usize| outer.weight(j) != inner.weight(j);
+            if differs(lo) {
+                slots[0] = Some(lo..=lo);
+            }
+            if hi > lo {
+                slots[1] = Some(lo + 1..=hi - 1);
+                if differs(hi) {
+                    slots[2] = Some(hi..=hi);
+                }
+            }
+        }
         let g = self.kernel.nodes_per_px;
         if let Some(mut h) = Histogram::empty_reusing(
             self.star,
-            sample_extent(self.track, extra.iter().map(|&(j, _)| j..=j)),
+            sample_extent(self.track, held.into_iter().flatten()),
             self.origin,
             g,
             std::mem::take(&mut self.buffer),
         ) {
-            for &(j, e) in &extra {
-                h.add_sample(self.track, j, e);
-            }
+            h.add_extra(self.track, outer, inner);
             let nx = out.len() / rows;
             add_convolution(out, nx, rows, &mut h.runs((iy0 * g) as i64), self.kernel);
             self.buffer = h.data;
         }
-        self.extra = extra;
     }
 }
 
@@ -586,7 +688,7 @@ pub fn fast_stamp(
         // stamp's window sample by sample
         Some(c) if c.core.window.first >= common.first && c.core.window.last <= common.last => {
             let mut h = c.histogram_at(ox, oy, track);
-            common.for_each_extra(&c.core.window, |j, e| h.add_sample(track, j, e));
+            h.add_extra(track, &common, &c.core.window);
             h
         }
         // the box of the whole track holds every window's samples
@@ -605,7 +707,6 @@ pub fn fast_stamp(
         kernel,
         track,
         origin,
-        extra: Vec::new(),
         buffer: Vec::new(),
     };
     let bx_px: Vec<f64> = (0..nx)
@@ -816,6 +917,39 @@ mod tests {
     /// anywhere in a node — on a node, a rounding away from the next, at random places far apart (fresh
     /// passes), in small steps there and back (moves only, 300 of them) — its histogram equals the plain
     /// deposit node by node, and the stamp equals the direct method (no histogram at all).
+    #[test]
+    fn runs_of_unit_samples_deposit_the_same_bits_as_one_by_one() {
+        // a window's samples beyond an inner one, through `add_extra` (interiors four at a time) and through
+        // `for_each_extra` into `add_sample`: the same terms in the same order, so equal bit for bit
+        let track = wiggly_track(3000, 1e-3, 0.9);
+        let star = StarSpec {
+            x_px: 40.3137,
+            y_px: 61.871,
+            rate_e_per_s: 1.0,
+        };
+        let cases = [
+            ((0.0104, 2.7003), (0.8402, 1.9601)), // head and tail of hundreds of samples
+            ((0.5, 0.5107), (0.5021, 0.5052)), // a few samples each side (runs shorter than four)
+            ((0.3, 2.0), (0.3, 2.0)),          // nothing beyond
+            ((0.30004, 1.3), (0.9, 1.2)),      // fractional ends only
+        ];
+        for ((a, b), (c, d)) in cases {
+            let (outer, inner) = (track.window(a, b), track.window(c, d));
+            let mut one =
+                Histogram::empty_in(&star, track.summary().extent, (30, 50), 16).expect("box");
+            let mut runs = one.clone();
+            outer.for_each_extra(&inner, |j, e| one.add_sample(&track, j, e));
+            runs.add_extra(&track, &outer, &inner);
+            assert!(one.data.iter().any(|v| *v != 0.0) || a == c);
+            let same = one
+                .data
+                .iter()
+                .zip(&runs.data)
+                .all(|(x, y)| x.to_bits() == y.to_bits());
+            assert!(same, "window ({a}, {b}) beyond ({c}, {d})");
+        }
+    }
+
     #[test]
     fn exact_core_equals_the_plain_deposit_at_any_phase() {
         let psf = crate::testkit::synthetic_psf(8, 6);

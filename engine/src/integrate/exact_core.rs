@@ -63,7 +63,8 @@ pub struct Cursor {
     iu: usize,
     iv: usize,
     /// Per cell, the moments `Σ (1, f_u, f_v, f_u f_v)` of quadrants `(c_u, c_v)` = (0, 0), (1, 0), (0, 1),
-    /// (1, 1).
+    /// (1, 1): `quad[cell][moment][quadrant]`, so that the four quadrants of a moment sit side by side in the
+    /// vector units when the cell is read.
     quad: Vec<[[f64; 4]; 4]>,
     /// Samples moved and fresh passes so far (what a test reads to see that both ways of reading ran).
     pub moved: usize,
@@ -184,8 +185,8 @@ impl ExactCore {
             for (&u, &v) in self.fu[s..e].iter().zip(&self.fv[s..e]) {
                 let k = (u + px >= 1.0) as usize + 2 * (v + py >= 1.0) as usize;
                 let m = [1.0, u, v, u * v];
-                for (t, mi) in q[k].iter_mut().zip(m) {
-                    *t += mi;
+                for (t, mi) in q.iter_mut().zip(m) {
+                    t[k] += mi;
                 }
             }
         }
@@ -228,29 +229,8 @@ impl ExactCore {
             [m[0] - su - sv + suv, su - suv, sv - suv, suv]
         };
         let at = |a: i64, b: i64| (nv_i + b - v0) as usize * nu + (nu_i + a - u0) as usize;
-        for (&(ca, cb, _, _), q) in self.cells.iter().zip(&cursor.quad) {
-            // the cell's 3 × 3 nodes (its four quadrants reach one node further each way) summed in registers:
-            // each node takes the quadrants' terms in the same order as one by one in memory, so the same bits
-            let i = at(self.a0 + ca as i64, self.b0 + cb as i64);
-            let mut nodes = [[0.0; 3]; 3];
-            for (r, row) in nodes.iter_mut().enumerate() {
-                row.copy_from_slice(&data[i + r * nu..i + r * nu + 3]);
-            }
-            for (k, m) in q.iter().enumerate() {
-                if m[0] == 0.0 {
-                    continue;
-                }
-                let (cu, cv) = (k & 1, k >> 1);
-                let w = weights(cu, cv, m);
-                nodes[cv][cu] += w[0];
-                nodes[cv][cu + 1] += w[1];
-                nodes[cv + 1][cu] += w[2];
-                nodes[cv + 1][cu + 1] += w[3];
-            }
-            for (r, row) in nodes.iter().enumerate() {
-                data[i + r * nu..i + r * nu + 3].copy_from_slice(row);
-            }
-        }
+        let cell_at = |ca: usize, cb: usize| at(self.a0 + ca as i64, self.b0 + cb as i64);
+        add_cells(&mut data, nu, &self.cells, &cursor.quad, px, py, cell_at);
         for &(a, b, fu, fv, wt) in &self.ends {
             if wt == 0.0 {
                 continue;
@@ -277,12 +257,106 @@ impl ExactCore {
 #[inline(always)]
 fn move_sample(q: &mut [[f64; 4]; 4], m: &[f64; 4], from: usize, to_k: usize, forward: bool) {
     let (src, dst) = if forward { (from, to_k) } else { (to_k, from) };
-    for k in 0..4 {
-        q[src][k] -= m[k];
-        q[dst][k] += m[k];
+    for (qm, mk) in q.iter_mut().zip(m) {
+        qm[src] -= mk;
+        qm[dst] += mk;
     }
-    if q[src][0] == 0.0 {
+    if q[0][src] == 0.0 {
         // the count is exact: an emptied quadrant holds exact zeros, not the rounding of its moves
-        q[src] = [0.0; 4];
+        for qm in q.iter_mut() {
+            qm[src] = 0.0;
+        }
     }
+}
+
+/// What the samples of a cell give its 3 × 3 nodes (`nodes`, row by row, added to): quadrant `(c_u, c_v)`
+/// with moments `m` carried by `α = phase − c` gives its four nodes `(1 − t_u)(1 − t_v)`, `t_u (1 − t_v)`,
+/// `(1 − t_u) t_v`, `t_u t_v` summed over its samples, `t = f + α` — written in the moments. The four
+/// quadrants are worked out side by side; each node then takes its quadrants' terms in the order of the
+/// quadrants. An empty quadrant's moments are exact zeros, so its terms are +0 and change no node.
+#[inline(always)]
+fn add_cell(nodes: &mut [[f64; 3]; 3], q: &[[f64; 4]; 4], px: f64, py: f64) {
+    let [m0, m1, m2, m3] = *q;
+    let au = [px, px - 1.0, px, px - 1.0];
+    let av = [py, py, py - 1.0, py - 1.0];
+    let mut w = [[0.0; 4]; 4];
+    for k in 0..4 {
+        let su = m1[k] + au[k] * m0[k];
+        let sv = m2[k] + av[k] * m0[k];
+        let suv = m3[k] + av[k] * m1[k] + au[k] * m2[k] + au[k] * av[k] * m0[k];
+        w[0][k] = m0[k] - su - sv + suv;
+        w[1][k] = su - suv;
+        w[2][k] = sv - suv;
+        w[3][k] = suv;
+    }
+    // quadrant k = c_u + 2 c_v adds w[0][k] … w[3][k] to nodes (c_v, c_u), (c_v, c_u + 1), (c_v + 1, c_u),
+    // (c_v + 1, c_u + 1); here node by node, quadrants in increasing k
+    nodes[0][0] += w[0][0];
+    nodes[0][1] = nodes[0][1] + w[1][0] + w[0][1];
+    nodes[0][2] += w[1][1];
+    nodes[1][0] = nodes[1][0] + w[2][0] + w[0][2];
+    nodes[1][1] = nodes[1][1] + w[3][0] + w[2][1] + w[1][2] + w[0][3];
+    nodes[1][2] = nodes[1][2] + w[3][1] + w[1][3];
+    nodes[2][0] += w[2][2];
+    nodes[2][1] = nodes[2][1] + w[3][2] + w[2][3];
+    nodes[2][2] += w[3][3];
+}
+
+/// Every occupied cell's quadrants into `data` (row length `nu`, a cell's first node at `at(cell)`).
+#[inline(always)]
+fn add_cells_body(
+    data: &mut [f64],
+    nu: usize,
+    cells: &[(usize, usize, usize, usize)],
+    quad: &[[[f64; 4]; 4]],
+    px: f64,
+    py: f64,
+    at: impl Fn(usize, usize) -> usize,
+) {
+    for (&(ca, cb, _, _), q) in cells.iter().zip(quad) {
+        // the cell's 3 × 3 nodes (its four quadrants reach one node further each way) summed in registers
+        let i = at(ca, cb);
+        let mut nodes = [[0.0; 3]; 3];
+        for (r, row) in nodes.iter_mut().enumerate() {
+            row.copy_from_slice(&data[i + r * nu..i + r * nu + 3]);
+        }
+        add_cell(&mut nodes, q, px, py);
+        for (r, row) in nodes.iter().enumerate() {
+            data[i + r * nu..i + r * nu + 3].copy_from_slice(row);
+        }
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+fn add_cells_avx2(
+    data: &mut [f64],
+    nu: usize,
+    cells: &[(usize, usize, usize, usize)],
+    quad: &[[[f64; 4]; 4]],
+    px: f64,
+    py: f64,
+    at: impl Fn(usize, usize) -> usize,
+) {
+    add_cells_body(data, nu, cells, quad, px, py, at);
+}
+
+/// [`add_cells_body`], in its AVX2 build where the processor has it (the same bits: no fused multiply-adds).
+#[allow(unsafe_code)] // calling the AVX2 build after checking the processor has AVX2: nothing else
+fn add_cells(
+    data: &mut [f64],
+    nu: usize,
+    cells: &[(usize, usize, usize, usize)],
+    quad: &[[[f64; 4]; 4]],
+    px: f64,
+    py: f64,
+    at: impl Fn(usize, usize) -> usize,
+) {
+    #[cfg(target_arch = "x86_64")]
+    if std::is_x86_feature_detected!("avx2") {
+        // SAFETY: the processor has AVX2 (checked just above).
+        unsafe { add_cells_avx2(data, nu, cells, quad, px, py, at) };
+        return;
+    }
+    add_cells_body(data, nu, cells, quad, px, py, at);
 }
