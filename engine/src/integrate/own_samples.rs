@@ -33,6 +33,8 @@ pub struct RowScratch {
     any: Vec<bool>,
     /// One sample's node column, pixel by pixel.
     u: Vec<f64>,
+    /// Each pixel's window: first and last sample (as numbers) and their weights.
+    ends: Vec<[f64; 4]>,
 }
 
 /// `out[ix] += Σ_j e_ix(j) · K(bx_px[ix] − dx_j, by_px − dy_j)` over every sample where some pixel's window
@@ -101,25 +103,41 @@ fn own_samples_body(
     let (head_end, tail_start) = (*head.end(), *tail.start());
     let n_head = (head_end + 1).saturating_sub(first);
     let n_samples = n_head + (last + 1).saturating_sub(tail_start);
-    let slot = |j: usize| {
-        if j <= head_end {
-            j - first
-        } else {
-            n_head + j - tail_start
-        }
-    };
-    // e[s·nx + ix]: pixel ix's weight beyond the row's for the s-th of those samples (0 where it has none)
-    let RowScratch { e, any, u } = scratch;
+    // e[s·nx + ix]: pixel ix's weight beyond the row's for the s-th of those samples, `w_ix(j) − w_row(j)`
+    // ([`WindowWeights::weight`]) for every pixel at once: exactly 0 where the sample is not among the
+    // pixel's own (before its window starts, the row's has not started either; after it ends, neither has
+    // the row's), so the same values as each pixel's own samples (`for_each_extra`) written one by one
+    let RowScratch { e, any, u, ends } = scratch;
+    ends.clear();
+    ends.extend(
+        owns.iter()
+            .map(|w| [w.first as f64, w.last as f64, w.w_first, w.w_last]),
+    );
     e.clear();
     e.resize(n_samples * nx, 0.0);
     any.clear();
     any.resize(n_samples, false);
-    for (ix, w) in owns.iter().enumerate() {
-        w.for_each_extra(row, |j, ej| {
-            let s = slot(j);
-            e[s * nx + ix] = ej;
-            any[s] = true;
-        });
+    for (j, (e_s, any_s)) in head
+        .clone()
+        .chain(tail.clone())
+        .zip(e.chunks_exact_mut(nx).zip(any.iter_mut()))
+    {
+        let (jf, w_row) = (j as f64, row.weight(j));
+        let mut some = false;
+        for (ej, &[first, last, w_first, w_last]) in e_s.iter_mut().zip(ends.iter()) {
+            let w = if jf < first || jf > last {
+                0.0
+            } else if jf == first {
+                w_first
+            } else if jf == last {
+                w_last
+            } else {
+                1.0
+            };
+            *ej = w - w_row;
+            some |= *ej != 0.0;
+        }
+        *any_s = some;
     }
     let (g, h) = (k.nodes_per_px as f64, k.half_nodes as f64);
     // the table's last node as a bound (the outermost ring is zero: at or beyond it a look-up is zero)
