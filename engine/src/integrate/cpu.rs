@@ -987,34 +987,34 @@ mod tests {
             ((0.3, 2.0), (0.3, 2.0)),          // nothing beyond
             ((0.30004, 1.3), (0.9, 1.2)),      // fractional ends only
         ];
+        let empty =
+            || Histogram::empty_in(&star, track.summary().extent, (30, 50), 16).expect("box");
+        let same_bits = |h: &Histogram, k: &Histogram| {
+            h.data
+                .iter()
+                .zip(&k.data)
+                .all(|(x, y)| x.to_bits() == y.to_bits())
+        };
         for ((a, b), (c, d)) in cases {
             let (outer, inner) = (track.window(a, b), track.window(c, d));
-            let mut one =
-                Histogram::empty_in(&star, track.summary().extent, (30, 50), 16).expect("box");
-            let mut runs = one.clone();
+            let (mut one, mut runs) = (empty(), empty());
             outer.for_each_extra(&inner, |j, e| one.add_sample(&track, j, e));
             runs.add_extra(&track, &outer, &inner);
             assert!(one.data.iter().any(|v| *v != 0.0) || a == c);
-            let same = one
-                .data
-                .iter()
-                .zip(&runs.data)
-                .all(|(x, y)| x.to_bits() == y.to_bits());
-            assert!(same, "window ({a}, {b}) beyond ({c}, {d})");
+            assert!(
+                same_bits(&one, &runs),
+                "window ({a}, {b}) beyond ({c}, {d})"
+            );
         }
         // the portable build (what a processor without AVX2 runs) against the one in use here
-        let mut portable =
-            Histogram::empty_in(&star, track.summary().extent, (30, 50), 16).expect("box");
-        let mut in_use = portable.clone();
+        let (mut portable, mut in_use) = (empty(), empty());
         portable.add_unit_run_body(&track, 7..2990);
         in_use.add_unit_run(&track, 7..2990);
         assert!(portable.data.iter().any(|v| *v != 0.0));
-        let same = portable
-            .data
-            .iter()
-            .zip(&in_use.data)
-            .all(|(x, y)| x.to_bits() == y.to_bits());
-        assert!(same, "portable and AVX2 run deposits differ");
+        assert!(
+            same_bits(&portable, &in_use),
+            "portable and AVX2 run deposits differ"
+        );
     }
 
     #[test]

@@ -229,8 +229,15 @@ impl ExactCore {
             [m[0] - su - sv + suv, su - suv, sv - suv, suv]
         };
         let at = |a: i64, b: i64| (nv_i + b - v0) as usize * nu + (nu_i + a - u0) as usize;
-        let cell_at = |ca: usize, cb: usize| at(self.a0 + ca as i64, self.b0 + cb as i64);
-        add_cells(&mut data, nu, &self.cells, &cursor.quad, px, py, cell_at);
+        let read = CellRead {
+            cells: &self.cells,
+            quad: &cursor.quad,
+            px,
+            py,
+            nu,
+            base: at(self.a0, self.b0),
+        };
+        add_cells(&mut data, &read);
         for &(a, b, fu, fv, wt) in &self.ends {
             if wt == 0.0 {
                 continue;
@@ -302,61 +309,49 @@ fn add_cell(nodes: &mut [[f64; 3]; 3], q: &[[f64; 4]; 4], px: f64, py: f64) {
     nodes[2][2] += w[3][3];
 }
 
-/// Every occupied cell's quadrants into `data` (row length `nu`, a cell's first node at `at(cell)`).
-#[inline(always)]
-fn add_cells_body(
-    data: &mut [f64],
-    nu: usize,
-    cells: &[(usize, usize, usize, usize)],
-    quad: &[[[f64; 4]; 4]],
+/// A star's read of the occupied cells: their quadrants' moments at its phase `(px, py)`, into a table of row
+/// length `nu` where cell (0, 0)'s first node is at `base` (cell `(a, b)`'s at `base + b·nu + a`).
+struct CellRead<'a> {
+    cells: &'a [(usize, usize, usize, usize)],
+    quad: &'a [[[f64; 4]; 4]],
     px: f64,
     py: f64,
-    at: impl Fn(usize, usize) -> usize,
-) {
-    for (&(ca, cb, _, _), q) in cells.iter().zip(quad) {
+    nu: usize,
+    base: usize,
+}
+
+/// Every occupied cell's quadrants into `data`.
+#[inline(always)]
+fn add_cells_body(data: &mut [f64], r: &CellRead<'_>) {
+    let nu = r.nu;
+    for (&(ca, cb, _, _), q) in r.cells.iter().zip(r.quad) {
         // the cell's 3 × 3 nodes (its four quadrants reach one node further each way) summed in registers
-        let i = at(ca, cb);
+        let i = r.base + cb * nu + ca;
         let mut nodes = [[0.0; 3]; 3];
-        for (r, row) in nodes.iter_mut().enumerate() {
-            row.copy_from_slice(&data[i + r * nu..i + r * nu + 3]);
+        for (k, row) in nodes.iter_mut().enumerate() {
+            row.copy_from_slice(&data[i + k * nu..i + k * nu + 3]);
         }
-        add_cell(&mut nodes, q, px, py);
-        for (r, row) in nodes.iter().enumerate() {
-            data[i + r * nu..i + r * nu + 3].copy_from_slice(row);
+        add_cell(&mut nodes, q, r.px, r.py);
+        for (k, row) in nodes.iter().enumerate() {
+            data[i + k * nu..i + k * nu + 3].copy_from_slice(row);
         }
     }
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
-fn add_cells_avx2(
-    data: &mut [f64],
-    nu: usize,
-    cells: &[(usize, usize, usize, usize)],
-    quad: &[[[f64; 4]; 4]],
-    px: f64,
-    py: f64,
-    at: impl Fn(usize, usize) -> usize,
-) {
-    add_cells_body(data, nu, cells, quad, px, py, at);
+fn add_cells_avx2(data: &mut [f64], r: &CellRead<'_>) {
+    add_cells_body(data, r);
 }
 
 /// [`add_cells_body`], in its AVX2 build where the processor has it (the same bits: no fused multiply-adds).
 #[allow(unsafe_code)] // calling the AVX2 build after checking the processor has AVX2: nothing else
-fn add_cells(
-    data: &mut [f64],
-    nu: usize,
-    cells: &[(usize, usize, usize, usize)],
-    quad: &[[[f64; 4]; 4]],
-    px: f64,
-    py: f64,
-    at: impl Fn(usize, usize) -> usize,
-) {
+fn add_cells(data: &mut [f64], r: &CellRead<'_>) {
     #[cfg(target_arch = "x86_64")]
     if std::is_x86_feature_detected!("avx2") {
         // SAFETY: the processor has AVX2 (checked just above).
-        unsafe { add_cells_avx2(data, nu, cells, quad, px, py, at) };
+        unsafe { add_cells_avx2(data, r) };
         return;
     }
-    add_cells_body(data, nu, cells, quad, px, py, at);
+    add_cells_body(data, r);
 }
