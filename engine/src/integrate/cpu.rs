@@ -180,7 +180,7 @@ pub struct Histogram {
 /// (min_x, max_x, min_y, max_y) of the track over sample ranges (infinite bounds when they hold none).
 fn sample_extent(
     track: &Track,
-    ranges: impl IntoIterator<Item = std::ops::Range<usize>>,
+    ranges: impl IntoIterator<Item = std::ops::RangeInclusive<usize>>,
 ) -> (f64, f64, f64, f64) {
     let mut e = (
         f64::INFINITY,
@@ -266,9 +266,9 @@ impl Histogram {
     }
 
     /// Deposit the samples of `run` with weight 1, in order: the same terms in the same order as
-    /// [`Histogram::add_sample`] with `w = 1` one by one (a weight of 1 multiplies exactly, so the same bits);
-    /// in the AVX2 build the positions and cloud-in-cell weights of four samples at a time are worked out side
-    /// by side in the vector units, the additions staying one sample after another.
+    /// [`Histogram::add_sample`] with `w = 1` one by one (a weight of 1 multiplies exactly, so the same bits),
+    /// the positions and cloud-in-cell weights of four samples at a time worked out side by side in the
+    /// vector units; the additions stay one sample after another.
     #[allow(unsafe_code)] // calling the AVX2 build after checking the processor has AVX2: nothing else
     fn add_unit_run(&mut self, track: &Track, run: std::ops::Range<usize>) {
         #[cfg(target_arch = "x86_64")]
@@ -340,9 +340,40 @@ impl Histogram {
         }
     }
 
-    /// The portable build: sample by sample.
+    #[inline(always)]
     fn add_unit_run_body(&mut self, track: &Track, run: std::ops::Range<usize>) {
-        for j in run {
+        const B: usize = 4;
+        let (dx, dy) = (&track.dx_px[run.clone()], &track.dy_px[run.clone()]);
+        let (ox, oy, g) = (self.ox_px, self.oy_px, self.g);
+        let (u0, v0) = (self.u0 as f64, self.v0 as f64);
+        let nu = self.nu;
+        let mut xs = dx.chunks_exact(B);
+        let mut ys = dy.chunks_exact(B);
+        for (x, y) in (&mut xs).zip(&mut ys) {
+            // the arithmetic of `add_sample`, lane by lane
+            let (mut iu, mut iv) = ([0i32; B], [0i32; B]);
+            let mut w = [[0.0f64; B]; 4];
+            for k in 0..B {
+                let u = (ox + x[k]) * g - u0;
+                let v = (oy + y[k]) * g - v0;
+                (iu[k], iv[k]) = (u as i32, v as i32);
+                let (tu, tv) = (u - iu[k] as f64, v - iv[k] as f64);
+                w[0][k] = (1.0 - tu) * (1.0 - tv);
+                w[1][k] = tu * (1.0 - tv);
+                w[2][k] = (1.0 - tu) * tv;
+                w[3][k] = tu * tv;
+            }
+            for k in 0..B {
+                let i = iv[k] as usize * nu + iu[k] as usize;
+                let (lo, hi) = self.data[i..i + nu + 2].split_at_mut(nu);
+                lo[0] += w[0][k];
+                lo[1] += w[1][k];
+                hi[0] += w[2][k];
+                hi[1] += w[3][k];
+            }
+        }
+        let rest = run.end - xs.remainder().len();
+        for j in rest..run.end {
             self.add_sample(track, j, 1.0);
         }
     }
@@ -350,20 +381,30 @@ impl Histogram {
     /// Add the samples where window `outer` weighs more than `inner` (a window it contains), with the
     /// difference: the same deposits in the same order as [`WindowWeights::for_each_extra`] into
     /// [`Histogram::add_sample`], each part's interior (weight exactly 1 − 0) through
-    /// [`Histogram::add_unit_run`] ([`WindowWeights::extra_runs`]).
+    /// [`Histogram::add_unit_run`].
     fn add_extra(
         &mut self,
         track: &Track,
         outer: &super::track::WindowWeights,
         inner: &super::track::WindowWeights,
     ) {
-        for (run, e) in outer.extra_runs(inner) {
-            if e == 1.0 {
-                self.add_unit_run(track, run);
-            } else {
-                for j in run {
-                    self.add_sample(track, j, e);
+        let (head, tail) = outer.extra_ranges(inner);
+        for part in [head, tail] {
+            let (lo, hi) = (*part.start(), *part.end());
+            if lo > hi {
+                continue;
+            }
+            let end = |h: &mut Self, j: usize| {
+                let e = outer.weight(j) - inner.weight(j);
+                if e != 0.0 {
+                    h.add_sample(track, j, e);
                 }
+            };
+            end(self, lo);
+            if hi > lo {
+                // strictly inside the part: inside `outer` and outside `inner`, so 1 − 0
+                self.add_unit_run(track, lo + 1..hi);
+                end(self, hi);
             }
         }
     }
@@ -376,12 +417,7 @@ impl Histogram {
         origin: (i64, i64),
         g: usize,
     ) -> Option<Self> {
-        let mut h = Self::empty_in(
-            star,
-            sample_extent(track, std::iter::once(w.first..w.last + 1)),
-            origin,
-            g,
-        )?;
+        let mut h = Self::empty_in(star, sample_extent(track, [w.first..=w.last]), origin, g)?;
         h.add_window(track, w);
         Some(h)
     }
@@ -626,11 +662,30 @@ impl ExtraSum<'_> {
         outer: &super::track::WindowWeights,
         inner: &super::track::WindowWeights,
     ) {
+        // the box holds the samples of a non-zero difference: each part's interior, and its ends unless
+        // their weights are equal
+        let (head, tail) = outer.extra_ranges(inner);
+        let mut held: [Option<std::ops::RangeInclusive<usize>>; 6] = Default::default();
+        for (part, slots) in [head, tail].into_iter().zip(held.chunks_exact_mut(3)) {
+            let (lo, hi) = (*part.start(), *part.end());
+            if lo > hi {
+                continue;
+            }
+            let differs = |j: usize| outer.weight(j) != inner.weight(j);
+            if differs(lo) {
+                slots[0] = Some(lo..=lo);
+            }
+            if hi > lo {
+                slots[1] = Some(lo + 1..=hi - 1);
+                if differs(hi) {
+                    slots[2] = Some(hi..=hi);
+                }
+            }
+        }
         let g = self.kernel.nodes_per_px;
         if let Some(mut h) = Histogram::empty_reusing(
             self.star,
-            // the box holds the samples of a non-zero difference
-            sample_extent(self.track, outer.extra_runs(inner).map(|(run, _)| run)),
+            sample_extent(self.track, held.into_iter().flatten()),
             self.origin,
             g,
             std::mem::take(&mut self.buffer),

@@ -12,7 +12,7 @@
 //! within rounding of a whole node) is looked up pixel by pixel.
 
 use super::kernel::PixelKernel;
-use super::track::{Track, WindowWeights, weight_in};
+use super::track::{Track, WindowWeights};
 
 /// One stamp row: each pixel's window, the row's shared window (which each holds), and the pixels' offsets
 /// from the star (px: `x − x_star` of each, `y − y_star` of the row).
@@ -100,7 +100,9 @@ fn own_samples_body(
         w_last: 1.0,
     };
     let (head, tail) = together.extra_ranges(row);
-    let n_samples = head.clone().count() + tail.clone().count();
+    let (head_end, tail_start) = (*head.end(), *tail.start());
+    let n_head = (head_end + 1).saturating_sub(first);
+    let n_samples = n_head + (last + 1).saturating_sub(tail_start);
     // e[s·nx + ix]: pixel ix's weight beyond the row's for the s-th of those samples, `w_ix(j) − w_row(j)`
     // ([`WindowWeights::weight`]) for every pixel at once: exactly 0 where the sample is not among the
     // pixel's own (before its window starts, the row's has not started either; after it ends, neither has
@@ -123,7 +125,16 @@ fn own_samples_body(
         let (jf, w_row) = (j as f64, row.weight(j));
         let mut some = false;
         for (ej, &[first, last, w_first, w_last]) in e_s.iter_mut().zip(ends.iter()) {
-            *ej = weight_in(jf, first, last, w_first, w_last) - w_row;
+            let w = if jf < first || jf > last {
+                0.0
+            } else if jf == first {
+                w_first
+            } else if jf == last {
+                w_last
+            } else {
+                1.0
+            };
+            *ej = w - w_row;
             some |= *ej != 0.0;
         }
         *any_s = some;

@@ -40,27 +40,19 @@ pub struct WindowWeights {
     pub w_last: f64,
 }
 
-/// The weight of sample `j` in a window of samples `first ..= last` whose end samples weigh `w_first`, `w_last`
-/// (the first's weight where they are one sample): generic so that a row's pixels can evaluate it side by side
-/// on sample numbers held as `f64`.
-#[inline(always)]
-pub fn weight_in<T: PartialOrd>(j: T, first: T, last: T, w_first: f64, w_last: f64) -> f64 {
-    if j < first || j > last {
-        0.0
-    } else if j == first {
-        w_first
-    } else if j == last {
-        w_last
-    } else {
-        1.0
-    }
-}
-
 impl WindowWeights {
     /// Weight of sample j.
     #[inline]
     pub fn weight(&self, j: usize) -> f64 {
-        weight_in(j, self.first, self.last, self.w_first, self.w_last)
+        if j < self.first || j > self.last {
+            0.0
+        } else if j == self.first {
+            self.w_first
+        } else if j == self.last {
+            self.w_last
+        } else {
+            1.0
+        }
     }
 
     /// The samples where this window can weigh more than `inner` (a window it contains): the head
@@ -78,34 +70,8 @@ impl WindowWeights {
         (self.first..=head_end, tail_start..=self.last)
     }
 
-    /// The samples where this window weighs more than `inner` (a window it contains), in order, as runs of one
-    /// difference each: a part's end samples on their own (left out where the two weigh the same) and its
-    /// interior, where the difference is exactly 1 − 0 ([`WindowWeights::extra_ranges`]).
-    pub fn extra_runs(
-        &self,
-        inner: &WindowWeights,
-    ) -> impl Iterator<Item = (std::ops::Range<usize>, f64)> {
-        let (outer, inner) = (*self, *inner);
-        let (head, tail) = outer.extra_ranges(&inner);
-        [head, tail].into_iter().flat_map(move |part| {
-            let (lo, hi) = (*part.start(), *part.end());
-            let end = |j: usize| {
-                let e = outer.weight(j) - inner.weight(j);
-                (e != 0.0).then_some((j..j + 1, e))
-            };
-            let (first, interior, last) = match (lo, hi) {
-                _ if lo > hi => (None, None, None),
-                _ if lo == hi => (end(lo), None, None),
-                // strictly inside the part: inside `outer` and outside `inner`
-                _ => (end(lo), Some((lo + 1..hi, 1.0)), end(hi)),
-            };
-            first.into_iter().chain(interior).chain(last)
-        })
-    }
-
     /// Every sample where this window weighs more than `inner` (a window it contains), with the difference
-    /// ([`WindowWeights::extra_ranges`]), sample by sample: the plain definition the tests hold the run-wise
-    /// deposits to.
+    /// ([`WindowWeights::extra_ranges`]).
     #[inline(always)]
     pub fn for_each_extra(&self, inner: &WindowWeights, mut f: impl FnMut(usize, f64)) {
         let (head, tail) = self.extra_ranges(inner);
