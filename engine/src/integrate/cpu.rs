@@ -266,9 +266,9 @@ impl Histogram {
     }
 
     /// Deposit the samples of `run` with weight 1, in order: the same terms in the same order as
-    /// [`Histogram::add_sample`] with `w = 1` one by one (a weight of 1 multiplies exactly, so the same bits),
-    /// the positions and cloud-in-cell weights of four samples at a time worked out side by side in the
-    /// vector units; the additions stay one sample after another.
+    /// [`Histogram::add_sample`] with `w = 1` one by one (a weight of 1 multiplies exactly, so the same bits);
+    /// in the AVX2 build the positions and cloud-in-cell weights of four samples at a time are worked out side
+    /// by side in the vector units, the additions staying one sample after another.
     #[allow(unsafe_code)] // calling the AVX2 build after checking the processor has AVX2: nothing else
     fn add_unit_run(&mut self, track: &Track, run: std::ops::Range<usize>) {
         #[cfg(target_arch = "x86_64")]
@@ -340,40 +340,9 @@ impl Histogram {
         }
     }
 
-    #[inline(always)]
+    /// The portable build: sample by sample.
     fn add_unit_run_body(&mut self, track: &Track, run: std::ops::Range<usize>) {
-        const B: usize = 4;
-        let (dx, dy) = (&track.dx_px[run.clone()], &track.dy_px[run.clone()]);
-        let (ox, oy, g) = (self.ox_px, self.oy_px, self.g);
-        let (u0, v0) = (self.u0 as f64, self.v0 as f64);
-        let nu = self.nu;
-        let mut xs = dx.chunks_exact(B);
-        let mut ys = dy.chunks_exact(B);
-        for (x, y) in (&mut xs).zip(&mut ys) {
-            // the arithmetic of `add_sample`, lane by lane
-            let (mut iu, mut iv) = ([0i32; B], [0i32; B]);
-            let mut w = [[0.0f64; B]; 4];
-            for k in 0..B {
-                let u = (ox + x[k]) * g - u0;
-                let v = (oy + y[k]) * g - v0;
-                (iu[k], iv[k]) = (u as i32, v as i32);
-                let (tu, tv) = (u - iu[k] as f64, v - iv[k] as f64);
-                w[0][k] = (1.0 - tu) * (1.0 - tv);
-                w[1][k] = tu * (1.0 - tv);
-                w[2][k] = (1.0 - tu) * tv;
-                w[3][k] = tu * tv;
-            }
-            for k in 0..B {
-                let i = iv[k] as usize * nu + iu[k] as usize;
-                let (lo, hi) = self.data[i..i + nu + 2].split_at_mut(nu);
-                lo[0] += w[0][k];
-                lo[1] += w[1][k];
-                hi[0] += w[2][k];
-                hi[1] += w[3][k];
-            }
-        }
-        let rest = run.end - xs.remainder().len();
-        for j in rest..run.end {
+        for j in run {
             self.add_sample(track, j, 1.0);
         }
     }

@@ -12,7 +12,7 @@
 //! within rounding of a whole node) is looked up pixel by pixel.
 
 use super::kernel::PixelKernel;
-use super::track::{Track, WindowWeights};
+use super::track::{Track, WindowWeights, weight_in};
 
 /// One stamp row: each pixel's window, the row's shared window (which each holds), and the pixels' offsets
 /// from the star (px: `x − x_star` of each, `y − y_star` of the row).
@@ -125,16 +125,7 @@ fn own_samples_body(
         let (jf, w_row) = (j as f64, row.weight(j));
         let mut some = false;
         for (ej, &[first, last, w_first, w_last]) in e_s.iter_mut().zip(ends.iter()) {
-            let w = if jf < first || jf > last {
-                0.0
-            } else if jf == first {
-                w_first
-            } else if jf == last {
-                w_last
-            } else {
-                1.0
-            };
-            *ej = w - w_row;
+            *ej = weight_in(jf, first, last, w_first, w_last) - w_row;
             some |= *ej != 0.0;
         }
         *any_s = some;

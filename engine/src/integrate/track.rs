@@ -40,19 +40,27 @@ pub struct WindowWeights {
     pub w_last: f64,
 }
 
+/// The weight of sample `j` in a window of samples `first ..= last` whose end samples weigh `w_first`, `w_last`
+/// (the first's weight where they are one sample): generic so that a row's pixels can evaluate it side by side
+/// on sample numbers held as `f64`.
+#[inline(always)]
+pub fn weight_in<T: PartialOrd>(j: T, first: T, last: T, w_first: f64, w_last: f64) -> f64 {
+    if j < first || j > last {
+        0.0
+    } else if j == first {
+        w_first
+    } else if j == last {
+        w_last
+    } else {
+        1.0
+    }
+}
+
 impl WindowWeights {
     /// Weight of sample j.
     #[inline]
     pub fn weight(&self, j: usize) -> f64 {
-        if j < self.first || j > self.last {
-            0.0
-        } else if j == self.first {
-            self.w_first
-        } else if j == self.last {
-            self.w_last
-        } else {
-            1.0
-        }
+        weight_in(j, self.first, self.last, self.w_first, self.w_last)
     }
 
     /// The samples where this window can weigh more than `inner` (a window it contains): the head
