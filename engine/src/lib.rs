@@ -43,6 +43,7 @@ pub mod config;
 pub mod detector;
 pub mod digest;
 pub mod error;
+pub mod instrument;
 pub mod integrate;
 pub mod io;
 pub mod jitter;

@@ -37,6 +37,8 @@ pub enum Stream {
     SkyReference = 17,
     /// A transit stare's field, its plates' noise and telemetry (`studies::transit`).
     Transit = 18,
+    /// The instrument as built: its deviations from the design, from the instrument's own seed.
+    AsBuilt = 19,
     Test = 99,
 }
 

@@ -6,10 +6,12 @@
 //! Here: the types and their defaults, and derived quantities. `text` reads and writes the TOML (load,
 //! overrides by dotted path, the hash), `validate` checks every field.
 
+mod as_built;
 mod detector;
 mod sky;
 mod text;
 mod validate;
+pub use as_built::{AsBuilt, Knowledge};
 pub use detector::{Detector, IntraPixel, Persistence, Sampling, noise_floor_e2};
 pub use sky::{Bulge, FocalPlaneLayout, Layout, Observation, SipTerm, Sky};
 pub use validate::MAX_ACE_SIGMA_MAS;
@@ -64,6 +66,10 @@ pub struct Config {
     pub focal_plane: FocalPlaneLayout,
     pub fidelity: Fidelity,
     pub analysis: Analysis,
+    /// How the instrument as built departs from the design above (`[as_built]`; all 0 by default). Left out
+    /// of the TOML (and so of the hash) when it is the design, so configurations from before it keep theirs.
+    #[serde(skip_serializing_if = "AsBuilt::is_design")]
+    pub as_built: AsBuilt,
 }
 
 impl Default for Config {
@@ -83,6 +89,7 @@ impl Default for Config {
             focal_plane: FocalPlaneLayout::default(),
             fidelity: Fidelity::default(),
             analysis: Analysis::default(),
+            as_built: AsBuilt::default(),
         }
     }
 }
@@ -290,6 +297,16 @@ pub struct Optics {
     /// multiples of this OPD (nm), and stars that round alike share one PSF (0: one PSF per distinct
     /// position). The speed-against-error knob of the field-dependent PSF.
     pub field_wfe_step_nm: f64,
+    /// Zones of PSF sharing with a field table, px: a star takes the wavefront at the centre of its square
+    /// zone of this side (0: at its own position, the default). With a smooth field variation of gradient
+    /// g (nm per px) a star's wavefront is off by at most g·side/√2; `jsim bench --parts knobs` ("field zones") gives
+    /// the time and the error against 0. Left out of the TOML (and the hash) when 0.
+    #[serde(skip_serializing_if = "is_zero_px")]
+    pub field_zone_px: usize,
+}
+
+fn is_zero_px(v: &usize) -> bool {
+    *v == 0
 }
 
 impl Default for Optics {
@@ -305,6 +322,7 @@ impl Default for Optics {
             fringe: default_fringe(),
             field_table: Vec::new(),
             field_wfe_step_nm: 1.0,
+            field_zone_px: 0,
         }
     }
 }

@@ -50,6 +50,13 @@ impl Config {
             .unwrap_or_else(|| toml::Value::String(value.to_string()));
         let mut root = toml::Value::try_from(self)
             .map_err(|e| invalid(path, value, &format!("cannot represent the config: {e}")))?;
+        // `[as_built]` is left out of a design configuration's TOML: put it back so that it can be overridden
+        if let toml::Value::Table(t) = &mut root
+            && !t.contains_key("as_built")
+            && let Ok(v) = toml::Value::try_from(&self.as_built)
+        {
+            t.insert("as_built".to_string(), v);
+        }
         let keys: Vec<&str> = path.split('.').collect();
         if keys.iter().any(|k| k.is_empty()) {
             return Err(invalid(

@@ -39,6 +39,7 @@ fn check_range_usize(field: &str, v: usize, lo: usize, hi: usize) -> Result<(), 
 impl Config {
     /// Check every field; the error names the field and the allowed range.
     pub fn validate(&self) -> Result<(), ConfigError> {
+        self.as_built.validate()?;
         let i = &self.instrument;
         check_pos("instrument.aperture_diameter_m", i.aperture_diameter_m)?;
         check_nonneg(
@@ -164,6 +165,7 @@ impl Config {
                 "must be ≤ 100 nm",
             ));
         }
+        check_range_usize("optics.field_zone_px", o.field_zone_px, 0, 100_000)?;
 
         let d = &self.detector;
         check_pos("detector.exposure_s", d.exposure_s)?;

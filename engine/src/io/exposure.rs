@@ -278,8 +278,8 @@ pub fn headers(sim: &Simulator, exp: &Exposure) -> Vec<Card> {
     if let Some(counts) = &sim.counts {
         cards.extend(counts_cards(counts));
     }
-    // the world coordinate system (config validated: it always exists)
-    if let Some(w) = sim.wcs() {
+    // the world coordinate system as the products know it: the design's (config validated: it always exists)
+    if let Some(w) = sim.design_wcs() {
         cards.extend(wcs_cards(w));
     }
     cards

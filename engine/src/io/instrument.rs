@@ -295,11 +295,21 @@ pub fn reference_catalogue(sim: &Simulator, survey: &SurveyModel, array: u32) ->
             // without photometric errors
             let zm: f64 = StandardNormal.sample(&mut r);
             kept.then(|| {
+                // a sky catalogue: the star's true direction with the survey's error (through the WCS as
+                // built, where the star truly lies) …
                 let (x, y) = (s.x_px + zx * sigma / scale, s.y_px + zy * sigma / scale);
                 let (ra, dec) = sim
                     .wcs()
                     .and_then(|w| w.pixel_to_sky(x, y))
                     .unwrap_or((f64::NAN, f64::NAN));
+                // … and its pixel columns through the header's (design) WCS; the same pixels when the two agree
+                let (x, y) = if sim.wcs_deviates() {
+                    sim.design_wcs()
+                        .and_then(|w| w.sky_to_pixel(ra, dec))
+                        .unwrap_or((f64::NAN, f64::NAN))
+                } else {
+                    (x, y)
+                };
                 RefStar {
                     id: s.id,
                     array,

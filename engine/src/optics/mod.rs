@@ -103,6 +103,14 @@ impl PsfBank {
     /// The wavefront key of a detector position: `optics.fringe` exactly without a field table, else the
     /// table interpolated to (x, y) and rounded to `optics.field_wfe_step_nm` (exact when it is 0).
     pub fn field_key(&self, x_px: f64, y_px: f64) -> FieldKey {
+        // a zone's stars take the wavefront at the zone's centre (`optics.field_zone_px`)
+        let zone = self.optics.field_zone_px as f64;
+        let (x_px, y_px) = if zone > 0.0 {
+            let centre = |v: f64| ((v / zone).floor() + 0.5) * zone;
+            (centre(x_px), centre(y_px))
+        } else {
+            (x_px, y_px)
+        };
         let coeffs = match &self.grid {
             None => {
                 return FieldKey::Exact(

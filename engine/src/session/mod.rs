@@ -94,9 +94,11 @@ impl Session {
     /// A new simulator of `cfg` (validated) on the session's bank, kernels and integrator.
     pub fn new_simulator(&self, cfg: &Config) -> Result<Simulator, SimError> {
         cfg.validate()?;
+        // the bank of the instrument as built, which takes the images
+        let bank = self.bank(&crate::instrument::realise(cfg)?);
         Simulator::build(
             cfg,
-            self.bank(cfg),
+            bank,
             self.kernels.clone(),
             self.integrator(cfg.fidelity.backend),
         )
@@ -106,9 +108,11 @@ impl Session {
     /// integrator.
     pub fn new_focal_plane(&self, cfg: &Config) -> Result<FocalPlaneSimulator, SimError> {
         cfg.validate()?;
+        // the bank of the instrument as built, which takes the images
+        let bank = self.bank(&crate::instrument::realise(cfg)?);
         FocalPlaneSimulator::build(
             cfg,
-            self.bank(cfg),
+            bank,
             self.kernels.clone(),
             self.integrator(cfg.fidelity.backend),
         )

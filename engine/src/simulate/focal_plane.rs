@@ -40,8 +40,10 @@ impl FocalPlaneSimulator {
         integrator: Integrator,
     ) -> Result<Self, SimError> {
         cfg.validate()?;
-        let bank = PsfBank::serving(bank, cfg);
-        let scene = scene::build(cfg)?;
+        // the instrument as built images the stars (its optics, distortion): each array draws the same one
+        let built = crate::instrument::realise(cfg)?;
+        let bank = PsfBank::serving(bank, &built);
+        let scene = scene::build(&built)?;
         check_memory(
             cfg,
             scene.arrays.iter().map(Vec::len).sum(),

@@ -42,6 +42,8 @@ pub enum SimError {
     NotSingleArray(&'static str),
     #[error("a persistence map of {got} pixels for a {n} × {n} detector")]
     PersistenceMap { got: usize, n: usize },
+    #[error(transparent)]
+    Instrument(#[from] crate::instrument::InstrumentError),
 }
 
 pub mod focal_plane;
@@ -169,14 +171,25 @@ pub fn available_memory_bytes() -> Option<f64> {
 }
 
 /// Shared state of a dataset's simulation.
+///
+/// Two instruments: `cfg` is the configuration the products beside the images are made from (the design;
+/// the as-built instrument only under the `oracle` control `as_built.knowledge = "as-built"`), `built` the
+/// instrument as built (`instrument::realise`), which takes the images: its PSFs, distortion, gain and read
+/// noise. Only the simulation and the scoring may read `built` (docs/ARCHITECTURE.md).
 pub struct Simulator {
     pub cfg: Config,
+    /// The instrument as built: the images' optics, distortion and detector.
+    built: Config,
     /// The stars this array simulates (for a sky scene, some just off the array for their light).
     pub stars: Vec<Star>,
     /// Which array, its turn and its streams' seed.
     pub array: ArrayPlace,
-    /// This array's WCS (`sky::array_wcs`), made on first use.
+    /// This array's WCS as built (`sky::array_wcs`): where the stars truly land; made on first use.
     wcs: std::sync::OnceLock<Option<crate::sky::wcs::ArrayWcs>>,
+    /// This array's WCS from the products' configuration (the design): what the headers state.
+    design_wcs: std::sync::OnceLock<Option<crate::sky::wcs::ArrayWcs>>,
+    /// The PSF bank of the products' optics (the design), when it is not the images' bank.
+    design_bank: std::sync::OnceLock<Arc<PsfBank>>,
     /// Where a sky scene's stars fell (the whole focal plane's account; `None` for pixel scenes).
     pub counts: Option<PlacementCounts>,
     pub timing: ReadoutTiming,
@@ -218,7 +231,8 @@ impl Simulator {
         if crate::sky::array_count(cfg) != 1 {
             return Err(SimError::NotSingleArray("a single-array simulator"));
         }
-        let scene = scene::build(cfg)?;
+        // the stars land where the instrument as built puts them
+        let scene = scene::build(&crate::instrument::realise(cfg)?)?;
         check_memory(cfg, scene.arrays.iter().map(Vec::len).sum(), 1)?;
         let stars = scene.arrays.into_iter().next().unwrap_or_default();
         let spec = ArraySpec {
@@ -243,7 +257,8 @@ impl Simulator {
         integrator: Integrator,
         series: Option<Arc<AceSeries>>,
     ) -> Result<Self, SimError> {
-        let bank = PsfBank::serving(bank, cfg);
+        let built = crate::instrument::realise(cfg)?;
+        let bank = PsfBank::serving(bank, &built);
         let timing = ReadoutTiming::new(cfg);
         let map = IntraPixelMap::from_config(&cfg.detector, cfg.fidelity.subpixels)?;
         let series = match (cfg.ace.case, series) {
@@ -269,10 +284,13 @@ impl Simulator {
             _ => None,
         };
         let mut sim = Self {
-            cfg: cfg.clone(),
+            cfg: crate::instrument::products_config(cfg, &built),
+            built,
             stars: array.stars,
             array: array.place,
             wcs: std::sync::OnceLock::new(),
+            design_wcs: std::sync::OnceLock::new(),
+            design_bank: std::sync::OnceLock::new(),
             counts,
             timing,
             bank,
@@ -288,23 +306,47 @@ impl Simulator {
         Ok(sim)
     }
 
-    /// The configuration the detector stages use: `cfg` with this array's seed (the flat and the noise are
-    /// the array's own).
+    /// The configuration the detector stages use: the instrument as built with this array's seed (the flat
+    /// and the noise are the array's own; the gain and read noise the as-built ones).
     pub fn detector_cfg(&self) -> Cow<'_, Config> {
-        if self.array.seed == self.cfg.seed {
-            Cow::Borrowed(&self.cfg)
+        if self.array.seed == self.built.seed {
+            Cow::Borrowed(&self.built)
         } else {
-            let mut c = self.cfg.clone();
+            let mut c = self.built.clone();
             c.seed = self.array.seed;
             Cow::Owned(c)
         }
     }
 
-    /// This array's WCS (`sky::array_wcs`; made once: with a distortion it fits the inverse).
+    /// `oracle`: the instrument as built (its optics, distortion and detector). For the simulation and the
+    /// scoring only; products come from [`Simulator::cfg`].
+    pub fn as_built_oracle(&self) -> &Config {
+        &self.built
+    }
+
+    /// This array's WCS as built: where the stars truly land (`sky::array_wcs` of the as-built instrument;
+    /// made once: with a distortion it fits the inverse). The truth's sky columns use it; headers use
+    /// [`Simulator::design_wcs`].
     pub fn wcs(&self) -> Option<&crate::sky::wcs::ArrayWcs> {
         self.wcs
+            .get_or_init(|| crate::sky::array_wcs(&self.built, self.array.index).ok())
+            .as_ref()
+    }
+
+    /// This array's WCS as the products state it: the design distortion at the planned pointing (the
+    /// as-built one under the oracle control). What an image header carries.
+    pub fn design_wcs(&self) -> Option<&crate::sky::wcs::ArrayWcs> {
+        if !self.wcs_deviates() {
+            return self.wcs();
+        }
+        self.design_wcs
             .get_or_init(|| crate::sky::array_wcs(&self.cfg, self.array.index).ok())
             .as_ref()
+    }
+
+    /// Whether the header's WCS differs from where the stars truly land (a distortion beyond the design).
+    pub fn wcs_deviates(&self) -> bool {
+        self.cfg.focal_plane != self.built.focal_plane || self.cfg.sky != self.built.sky
     }
 
     /// The PSF bank (shareable with other simulators of the same optics).
@@ -404,13 +446,22 @@ impl Simulator {
         self.design_kernel_with_blur(0.0)
     }
 
-    /// The design pixel kernel blurred by a Gaussian of `blur_px` (a jitter's σ the telemetry reports).
+    /// The design pixel kernel blurred by a Gaussian of `blur_px` (a jitter's σ the telemetry reports): the
+    /// PSF of the products' optics (the design; the as-built optics only under the oracle control).
     pub fn design_kernel_with_blur(&self, blur_px: f64) -> Result<Arc<PixelKernel>, SimError> {
-        let psf = self.in_array_axes(
-            self.bank
-                .get(self.cfg.scene.j_minus_h, &self.bank.centre_key()),
-        );
+        let bank = self.design_bank();
+        let psf = self.in_array_axes(bank.get(self.cfg.scene.j_minus_h, &bank.centre_key()));
         self.kernel_with_blur(&psf, blur_px)
+    }
+
+    /// The PSF bank of the products' optics: the images' bank when the optics are the same.
+    fn design_bank(&self) -> Arc<PsfBank> {
+        if self.bank.serves(&self.cfg) {
+            return self.bank.clone();
+        }
+        self.design_bank
+            .get_or_init(|| Arc::new(PsfBank::new(&self.cfg)))
+            .clone()
     }
 
     /// The nominal window (first pixel's) of exposure `index` on its track.

@@ -584,6 +584,28 @@ pub fn knob_settings(base: &Config, quick: bool) -> Vec<(String, Vec<(String, Co
             true,
         ),
         (
+            "field zones (with a field table)".into(),
+            // the last setting is the reference: every star the wavefront at its own position
+            [984usize, 656, 328, 0]
+                .iter()
+                .map(|&z| {
+                    (
+                        match z {
+                            0 => "exact (each star its own)".to_string(),
+                            z => format!("{z} px"),
+                        },
+                        gauss(&|c| {
+                            c.optics.field_table =
+                                demo_field_table(c.instrument.detector_px as f64);
+                            c.optics.field_wfe_step_nm = 0.0;
+                            c.optics.field_zone_px = z;
+                        }),
+                    )
+                })
+                .collect(),
+            true,
+        ),
+        (
             "stamp radius (flux kept)".into(),
             // the last setting is the reference: 0 = the kernel's reach, every modelled photon kept
             [6usize, 8, 12, 0]

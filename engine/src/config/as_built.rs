@@ -1,0 +1,217 @@
+//! The instrument as built (`[as_built]`): how the telescope that takes the images departs from the design the
+//! rest of the configuration describes, and what the products beside the images are made from.
+//!
+//! The configuration's `instrument`, `optics`, `detector` and `focal_plane` sections are the **design**: what
+//! the documents say. The **as-built** instrument is drawn from it by the seeded deviations below
+//! (`crate::instrument::realise`); the images come from it, while every product an analysis reads (the model
+//! PSF, the header's WCS and gain, the reference catalogue's pixel columns, `design.toml`) comes from the
+//! design — unless `knowledge = "as-built"`, the `oracle` control that hands the analysis the as-built
+//! instrument so that a table can show what honest knowledge costs.
+//!
+//! Every deviation is 0 by default: images and products are then those of the design, bit for bit.
+//! `engine/configs/as_built.toml` sets the typical deviations (the figures and their reasons are there and in
+//! docs/instrument-products.md).
+
+use super::{ConfigError, invalid};
+use serde::{Deserialize, Serialize};
+
+/// What the products beside the images are made from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Knowledge {
+    /// The design (and calibrations with their errors): what a mission has. The default.
+    #[default]
+    Design,
+    /// `oracle`: the as-built instrument itself — the model PSF is the as-built PSF, the header's WCS the
+    /// as-built distortion, the header's gain and read noise the true ones. Never a default.
+    AsBuilt,
+}
+
+impl Knowledge {
+    /// The name used on the command line and in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            Knowledge::Design => "design",
+            Knowledge::AsBuilt => "as-built (oracle)",
+        }
+    }
+}
+
+/// How the instrument as built departs from its design (all 0: the design itself).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct AsBuilt {
+    /// The instrument's own seed: the deviations are drawn from it, not from the run's seed, so every
+    /// exposure of a sequence (each with its own run seed) shares one instrument.
+    pub seed: u64,
+    /// Static low-order wavefront deviation over Fringe Z4–Z11 at the field's centre, nm rms of the
+    /// wavefront (the terms drawn N(0, 1) in rms-normalised units, then scaled to exactly this rms).
+    pub wavefront_rms_nm: f64,
+    /// The deviation's change across the field, linear in x and y: nm rms of the added wavefront at the
+    /// array's corner (a second Z4–Z11 draw per axis).
+    pub wavefront_field_rms_nm: f64,
+    /// Focus (Z4) breathing over the orbit: amplitude, nm rms of the wavefront, of
+    /// `A sin(2π t / P + φ)` (φ drawn from the seed, t the dataset's first mid-exposure in TT seconds).
+    pub focus_breathing_nm: f64,
+    /// Period of the breathing, s (the orbit: 96.7 min = 5802 s at 600 km).
+    pub breathing_period_s: f64,
+    /// Low-order (quadratic) distortion beyond the design: the rms length, px, of the added displacement at
+    /// the array's corner.
+    pub distortion_px: f64,
+    /// Relative 1σ of the as-built conversion gain about the design's `detector.gain_e_per_adu`.
+    pub gain_error: f64,
+    /// Relative 1σ of the as-built read noise about the design's `detector.read_noise_per_read_e`.
+    pub read_noise_error: f64,
+    /// What the products are made from: the design (default) or, as an `oracle` control, the as-built
+    /// instrument.
+    pub knowledge: Knowledge,
+}
+
+impl Default for AsBuilt {
+    fn default() -> Self {
+        Self {
+            seed: 1,
+            wavefront_rms_nm: 0.0,
+            wavefront_field_rms_nm: 0.0,
+            focus_breathing_nm: 0.0,
+            breathing_period_s: 5802.0,
+            distortion_px: 0.0,
+            gain_error: 0.0,
+            read_noise_error: 0.0,
+            knowledge: Knowledge::Design,
+        }
+    }
+}
+
+/// Largest wavefront deviation accepted, nm rms (a quarter wave at 1.4 µm is 350 nm: far beyond a working
+/// telescope).
+pub const MAX_WAVEFRONT_DEVIATION_NM: f64 = 500.0;
+/// Largest distortion beyond the design accepted, px.
+pub const MAX_DISTORTION_DEVIATION_PX: f64 = 10.0;
+/// Largest relative gain or read-noise error accepted.
+pub const MAX_RELATIVE_ERROR: f64 = 0.5;
+
+impl AsBuilt {
+    /// Whether the as-built instrument is the design (every deviation 0) and the products are the design's.
+    pub fn is_design(&self) -> bool {
+        self.has_no_deviation() && self.knowledge == Knowledge::Design
+    }
+
+    /// Whether no deviation is switched on.
+    pub fn has_no_deviation(&self) -> bool {
+        self.wavefront_rms_nm == 0.0
+            && self.wavefront_field_rms_nm == 0.0
+            && self.focus_breathing_nm == 0.0
+            && self.distortion_px == 0.0
+            && self.gain_error == 0.0
+            && self.read_noise_error == 0.0
+    }
+
+    /// The same knobs with every deviation off (what a realised, as-built configuration carries: its
+    /// deviations are already in its optics, distortion and detector).
+    pub fn realised(&self) -> AsBuilt {
+        AsBuilt {
+            seed: self.seed,
+            knowledge: self.knowledge,
+            breathing_period_s: self.breathing_period_s,
+            ..AsBuilt::default()
+        }
+    }
+
+    /// Check every field; the error names the field and the allowed range.
+    pub fn validate(&self) -> Result<(), ConfigError> {
+        let ranges: [(&str, f64, f64, f64); 7] = [
+            (
+                "as_built.wavefront_rms_nm",
+                self.wavefront_rms_nm,
+                0.0,
+                MAX_WAVEFRONT_DEVIATION_NM,
+            ),
+            (
+                "as_built.wavefront_field_rms_nm",
+                self.wavefront_field_rms_nm,
+                0.0,
+                MAX_WAVEFRONT_DEVIATION_NM,
+            ),
+            (
+                "as_built.focus_breathing_nm",
+                self.focus_breathing_nm,
+                0.0,
+                MAX_WAVEFRONT_DEVIATION_NM,
+            ),
+            (
+                "as_built.breathing_period_s",
+                self.breathing_period_s,
+                1.0,
+                1.0e7,
+            ),
+            (
+                "as_built.distortion_px",
+                self.distortion_px,
+                0.0,
+                MAX_DISTORTION_DEVIATION_PX,
+            ),
+            (
+                "as_built.gain_error",
+                self.gain_error,
+                0.0,
+                MAX_RELATIVE_ERROR,
+            ),
+            (
+                "as_built.read_noise_error",
+                self.read_noise_error,
+                0.0,
+                MAX_RELATIVE_ERROR,
+            ),
+        ];
+        for (field, v, lo, hi) in ranges {
+            if !(v.is_finite() && (lo..=hi).contains(&v)) {
+                return Err(invalid(field, v, &format!("must be in [{lo}, {hi}]")));
+            }
+        }
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_default_is_the_design() {
+        assert!(AsBuilt::default().is_design());
+        assert!(AsBuilt::default().validate().is_ok());
+    }
+
+    #[test]
+    fn out_of_range_deviations_name_their_field() {
+        let cases: [(&str, fn(&mut AsBuilt)); 4] = [
+            ("as_built.wavefront_rms_nm", |a| a.wavefront_rms_nm = -1.0),
+            ("as_built.distortion_px", |a| a.distortion_px = f64::NAN),
+            ("as_built.gain_error", |a| a.gain_error = 0.9),
+            ("as_built.breathing_period_s", |a| {
+                a.breathing_period_s = 0.0
+            }),
+        ];
+        for (field, set) in cases {
+            let mut a = AsBuilt::default();
+            set(&mut a);
+            let e = a.validate().expect_err(field).to_string();
+            assert!(e.contains(field), "{e}");
+        }
+    }
+
+    #[test]
+    fn a_realised_instrument_keeps_its_seed_and_knowledge_and_deviates_no_further() {
+        let a = AsBuilt {
+            seed: 7,
+            wavefront_rms_nm: 30.0,
+            distortion_px: 0.03,
+            knowledge: Knowledge::AsBuilt,
+            ..AsBuilt::default()
+        };
+        let r = a.realised();
+        assert!(r.has_no_deviation());
+        assert_eq!((r.seed, r.knowledge), (7, Knowledge::AsBuilt));
+    }
+}
