@@ -5,8 +5,9 @@
 
 use super::budget::{self, Budget};
 use super::observe::{Observation, StareError, StareReadout, observe};
+pub use super::search::{MASK_MARGIN, box_mask, search};
 use super::spec::{Decorrelation, PhotometryKind, Spec};
-use crate::analysis::lightcurve::{BoxFit, binned_scatter_ppm, box_least_squares};
+use crate::analysis::lightcurve::{BoxFit, binned_scatter_ppm};
 use crate::analysis::stare_photometry::{self as phot, Setup, StarMeasure};
 use crate::config::Config;
 use crate::numerics::stats;
@@ -262,41 +263,6 @@ pub fn light_curve(obs: &Observation, m: &[Vec<StarMeasure>]) -> LightCurve {
         in_box,
         regressors,
     }
-}
-
-/// The plates inside a box (its mid-time ± half its duration) widened by `margin` of its duration on each
-/// side.
-pub fn box_mask(t_days: &[f64], b: &BoxFit, margin: f64) -> Vec<bool> {
-    t_days
-        .iter()
-        .map(|t| (t - b.t0_days).abs() <= (0.5 + margin) * b.duration_days)
-        .collect()
-}
-
-/// How much of its duration the transit's mask adds on each side, for the decorrelation and the precision
-/// (a box is a little shorter than the transit it finds: its ingress and egress stay out of it).
-pub const MASK_MARGIN: f64 = 0.25;
-
-/// A single-transit box search: one trial period of twice the stare (no folding, no wrap-around), durations
-/// from 15 min to half the stare in 15-min steps, the points' σ their robust scatter.
-pub fn search(t_days: &[f64], flux: &[f64], stare_h: f64) -> Option<BoxFit> {
-    let good: Vec<f64> = flux.iter().cloned().filter(|v| v.is_finite()).collect();
-    let sigma = stats::mad_sigma(&good);
-    if !(sigma > 0.0) {
-        return None;
-    }
-    let durations: Vec<f64> = (1..)
-        .map(|k| 0.25 * k as f64)
-        .take_while(|h| *h <= 0.5 * stare_h)
-        .map(|h| h / 24.0)
-        .collect();
-    box_least_squares(
-        t_days,
-        flux,
-        &vec![sigma; flux.len()],
-        &[2.0 * stare_h / 24.0],
-        &durations,
-    )
 }
 
 /// The measured scatter of a light curve, leaving out the masked plates.
