@@ -158,6 +158,59 @@ fn an_injected_transit_is_recovered_within_its_error() {
     );
     assert!(rec.pull.abs() < 3.0, "{rec:?}");
     assert!(rec.snr > run::DETECTION_SNR, "{rec:?}");
+    // one significance per transit: the predictions are for the other required depths only
+    assert!(
+        r.detections
+            .iter()
+            .all(|d| (d.depth - spec.depth).abs() > 1e-9),
+        "{:?}",
+        r.detections
+    );
+}
+
+#[test]
+fn the_photometry_reads_the_products_not_the_truth() {
+    // the analysis takes each plate's jitter σ from the attitude record and each window's place from the
+    // catalogue and the telemetry: moving the true stars and erasing the true jitter changes nothing it
+    // measures
+    let spec = Spec {
+        depth: 0.0,
+        ..stare(60)
+    };
+    let mut obs = observe(&cfg(), &spec).expect("stare");
+    let before = analyse(&obs).lc;
+    // the telemetry's σ is the record's: near the true σ (its noise subtracted), never equal to it
+    let scale = obs.cfg.instrument.plate_scale_mas();
+    for (p, t) in obs.plates.iter().zip(&obs.truth) {
+        let truth_mas = t.jitter_sigma_px * scale;
+        assert!(
+            p.telemetry_sigma_mas != truth_mas
+                && (p.telemetry_sigma_mas / truth_mas - 1.0).abs() < 0.05,
+            "telemetry {} mas, truth {truth_mas} mas",
+            p.telemetry_sigma_mas
+        );
+    }
+    // the windows sit where the catalogue puts the stars (within its 2-mas error of the truth)
+    for (s, c) in obs.stars.iter().zip(&obs.catalogue_px) {
+        assert!((s.x_px - c.0).hypot(s.y_px - c.1) < 0.1, "{s:?} {c:?}");
+    }
+    for s in &mut obs.stars {
+        s.x_px += 3.0;
+        s.y_px -= 2.0;
+    }
+    for t in &mut obs.truth {
+        t.jitter_sigma_px = 0.0;
+        t.jitter_mean_px = (5.0, 5.0);
+    }
+    let after = analyse(&obs).lc;
+    assert_eq!(before.x_px, after.x_px);
+    assert_eq!(before.telemetry_sigma_mas, after.telemetry_sigma_mas);
+    let same = |a: &[f64], b: &[f64]| {
+        a.iter()
+            .zip(b)
+            .all(|(x, y)| x == y || (x.is_nan() && y.is_nan()))
+    };
+    assert!(same(&before.flux, &after.flux));
 }
 
 #[test]

@@ -109,7 +109,7 @@ pub fn central_ui(ui: &mut egui::Ui, shown: Option<&Result<TransitShown, String>
 fn light_curve(ui: &mut egui::Ui, r: &TransitShown, stale: bool) {
     let found = match &r.recovery {
         Some(rec) => format!(
-            "; box found: {:.0} ± {:.0} ppm at {:.2} h ({:.1}σ; injected {:.0})",
+            "; box found: {:.0} ± {:.0} ppm at {:.2} h (measured {:.1}σ; injected {:.0})",
             1e6 * rec.depth,
             1e6 * rec.depth_sigma,
             24.0 * rec.t0_days,

@@ -1,8 +1,10 @@
 //! Photometry of a transit stare from what the instrument delivers: each star's window per plate (ADU), the
 //! calibration flat cut to the windows, the design PSF blurred by the telemetry's jitter, and the telemetry.
 //!
-//! Per window: electrons `e = (ADU − bias) g / flat_cal`; the sky per pixel from the annulus' median; the
-//! star's position and flux by a PSF fit (x, y, flux; the sky fixed) with the blurred design PSF (Anderson &
+//! Per window: electrons `e = (ADU − bias) g / flat_cal`; the star's place predicted (the reference
+//! catalogue's position through the design WCS, shifted by the telemetry's mean pointing) and recentred on
+//! the data ([`recentre`]: a sky-subtracted centroid within 3 px, iterated); the sky per pixel from the
+//! annulus' median about that place; the star's position and flux by a PSF fit (x, y, flux; the sky fixed) with the blurred design PSF (Anderson &
 //! King 2000's fit, [`crate::analysis::epsf::fit::fit_star`]); the aperture flux at the fitted position, at
 //! each radius with one sky ([`crate::analysis::lightcurve::aperture_fluxes`]). The light curve is
 //! differential: the target over the
@@ -43,13 +45,54 @@ pub struct StarMeasure {
     pub sky_e: f64,
 }
 
-/// Measure one star's window (`n × n`, ADU) with its calibration flat.
+/// The radius of the centroid that recentres a predicted place, px.
+pub const RECENTRE_RADIUS_PX: f64 = 3.0;
+
+/// How many times [`recentre`] moves its circle to the last centroid.
+pub const RECENTRE_ITERATIONS: usize = 3;
+
+/// Recentre a predicted place `(x, y)` (window px) on the data: the first moment of the sky-subtracted
+/// electrons (negative values as 0) within [`RECENTRE_RADIUS_PX`] of the place, `x̄ = Σ (e − sky) x / Σ (e −
+/// sky)`, the circle moved to it and the moment taken again, [`RECENTRE_ITERATIONS`] times. A place with no
+/// light in its circle (or off the window) stays where it was predicted.
+pub fn recentre(e: &[f64], n: usize, sky: f64, guess: (f64, f64)) -> (f64, f64) {
+    let r2 = RECENTRE_RADIUS_PX * RECENTRE_RADIUS_PX;
+    let inside = |v: f64| v.is_finite() && (0.0..n as f64).contains(&v);
+    let mut at = guess;
+    for _ in 0..RECENTRE_ITERATIONS {
+        let (mut sx, mut sy, mut sw) = (0.0, 0.0, 0.0);
+        for y in 0..n {
+            for x in 0..n {
+                let (dx, dy) = (x as f64 - at.0, y as f64 - at.1);
+                if dx * dx + dy * dy <= r2 {
+                    let v = (e[y * n + x] - sky).max(0.0);
+                    sx += v * x as f64;
+                    sy += v * y as f64;
+                    sw += v;
+                }
+            }
+        }
+        if !(sw > 0.0) {
+            break;
+        }
+        let next = (sx / sw, sy / sw);
+        if !(inside(next.0) && inside(next.1)) {
+            break;
+        }
+        at = next;
+    }
+    at
+}
+
+/// Measure one star's window (`n × n`, ADU) with its calibration flat, starting from the star's predicted
+/// place `guess` (window px: the catalogue's position through the WCS, moved by the telemetry's pointing).
 pub fn measure_window(
     adu: &[f32],
     n: usize,
     flat: &[f32],
     setup: &Setup,
     psf: &Epsf,
+    guess: (f64, f64),
 ) -> StarMeasure {
     let e: Vec<f64> = adu
         .iter()
@@ -57,28 +100,25 @@ pub fn measure_window(
         .map(|(&a, &f)| (a as f64 - setup.bias_adu) * setup.gain_e_per_adu / (f as f64).max(1e-6))
         .collect();
     let c = (n / 2) as f64;
-    // the sky and a first centroid (first moment within 3 px of the window's centre, sky subtracted)
-    // no sky pixel: the centroid and the fit start from 0, the measurement reports no sky (NaN)
-    let measured_sky =
-        annulus_sky(&e, n, n, c, c, setup.annulus_in_px, setup.annulus_out_px).map(|(s, _)| s);
-    let sky = measured_sky.unwrap_or(0.0);
-    let (mut sx, mut sy, mut sw) = (0.0, 0.0, 0.0);
-    for y in 0..n {
-        for x in 0..n {
-            let (dx, dy) = (x as f64 - c, y as f64 - c);
-            if dx * dx + dy * dy <= 9.0 {
-                let v = (e[y * n + x] - sky).max(0.0);
-                sx += v * dx;
-                sy += v * dy;
-                sw += v;
-            }
-        }
-    }
-    let (x0, y0) = if sw > 0.0 {
-        (c + sx / sw, c + sy / sw)
+    let guess = if guess.0.is_finite() && guess.1.is_finite() {
+        guess
     } else {
         (c, c)
     };
+    // the sky about the predicted place, then the place recentred on the data;
+    // no sky pixel: the centroid and the fit start from 0, the measurement reports no sky (NaN)
+    let measured_sky = annulus_sky(
+        &e,
+        n,
+        n,
+        guess.0,
+        guess.1,
+        setup.annulus_in_px,
+        setup.annulus_out_px,
+    )
+    .map(|(s, _)| s);
+    let sky = measured_sky.unwrap_or(0.0);
+    let (x0, y0) = recentre(&e, n, sky, guess);
     let bad = vec![false; n * n];
     let img = PixelData {
         nx: n,
@@ -281,6 +321,27 @@ mod tests {
                 out[p]
             );
         }
+    }
+
+    #[test]
+    fn a_place_predicted_a_pixel_off_is_recentred_on_the_star() {
+        // a Gaussian star (σ 1.2 px) at (15.3, 14.6) on a sky of 10 e⁻ in a 31² window, predicted 1.4 px
+        // away: the iterated centroid lands within 0.05 px of it
+        let n = 31;
+        let (x0, y0, s) = (15.3, 14.6, 1.2);
+        let e: Vec<f64> = (0..n * n)
+            .map(|i| {
+                let (x, y) = ((i % n) as f64 - x0, (i / n) as f64 - y0);
+                10.0 + 1e5 * (-(x * x + y * y) / (2.0 * s * s)).exp()
+            })
+            .collect();
+        let (x, y) = recentre(&e, n, 10.0, (16.3, 13.6));
+        assert!((x - x0).abs() < 0.05 && (y - y0).abs() < 0.05, "({x}, {y})");
+        // no light: the prediction stays
+        assert_eq!(
+            recentre(&vec![10.0; n * n], n, 10.0, (16.3, 13.6)),
+            (16.3, 13.6)
+        );
     }
 
     #[test]

@@ -129,8 +129,8 @@ pub fn transit(a: &TransitArgs) -> Result<()> {
     }
     if let Some(rec) = &r.recovery {
         println!(
-            "transit found at {:.2} h, {:.2} h long: depth {:.0} ± {:.0} ppm ({:.1}σ); injected {:.0} ppm over \
-             the box (pull {:+.2})",
+            "transit found at {:.2} h, {:.2} h long: depth {:.0} ± {:.0} ppm (the error from the scatter out \
+             of the transit), measured significance {:.1}σ; injected {:.0} ppm over the box (pull {:+.2})",
             24.0 * rec.t0_days,
             rec.duration_h,
             1e6 * rec.depth,

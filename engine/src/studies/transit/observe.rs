@@ -15,13 +15,21 @@
 //! into plates; the chunks are independent (the PSD's knee at 0.1 Hz gives a correlation time of 1.6 s, far
 //! below a chunk). **Drift**: `drift_mas_per_h` along `drift_angle_deg`, plus `orbital_drift_mas` per axis at
 //! `orbital_period_min` (x as a sine, y as a cosine), added to the whole plate. **Telemetry**: each plate's
-//! mean pointing (ACE + drift) with a Gaussian error of `telemetry_error_mas`, and its jitter σ.
+//! mean pointing (ACE + drift) with a Gaussian error of `telemetry_error_mas`, and its jitter σ computed
+//! from the attitude record over the plate ([`TelemetryRecord::record`] at the project's default quality,
+//! [`TelemetryQuality::DEFAULT`]: 1 kHz, 20 mas of white noise a sample, 5 mas correlated), never from the
+//! true series. **Windows**: placed on the array at the reference catalogue's positions (the survey's
+//! errors, [`SurveyModel`]) through the design WCS — where the instrument would be told to read — not at
+//! the stars' true places.
 
 use super::spec::Spec;
+use crate::analysis::countermeasures::TelemetryQuality;
+use crate::analysis::countermeasures::telemetry::TelemetryRecord;
 use crate::analysis::lightcurve::aperture_fluxes;
 use crate::config::{AceCase, Config, IntraPixel, ReadoutOrder};
 use crate::integrate::StarJob;
 use crate::integrate::track::Track;
+use crate::io::instrument::{SurveyModel, reference_catalogue};
 use crate::jitter::AceSeries;
 use crate::rng::{self, Stream};
 use crate::scene::Star;
@@ -60,7 +68,8 @@ pub struct Plate {
     pub t_mid_days: f64,
     /// One window per star (row-major `n × n`), ADU.
     pub windows_adu: Vec<Vec<f32>>,
-    /// Telemetry: the mean pointing (ACE + drift) over the plate with its error, and the jitter σ, mas.
+    /// Telemetry: the mean pointing (ACE + drift) over the plate with its error, and the jitter σ from the
+    /// attitude record ([`record_sigma_mas`]), mas.
     pub telemetry_x_mas: f64,
     pub telemetry_y_mas: f64,
     pub telemetry_sigma_mas: f64,
@@ -74,6 +83,8 @@ pub struct PlateTruth {
     /// The drift and the ACE's mean offset over the plate, px.
     pub drift_px: (f64, f64),
     pub jitter_mean_px: (f64, f64),
+    /// The ACE's true σ over the plate (per axis, both averaged), px.
+    pub jitter_sigma_px: f64,
 }
 
 /// The observation: what the instrument delivers and, apart, the truth.
@@ -82,8 +93,13 @@ pub struct Observation {
     /// The configuration the stare ran with (windowed timing, the spec's intra-pixel response).
     pub cfg: Config,
     pub readout: StareReadout,
-    /// Star 0 is the target.
+    /// Truth: the stars (star 0 is the target). The analysis never reads them: it has
+    /// [`Observation::catalogue_px`].
     pub stars: Vec<Star>,
+    /// Each star's place on the array as the reference catalogue gives it (its sky position, with the
+    /// survey's error, through the design WCS), detector px: where the windows were placed and where the
+    /// analysis looks first.
+    pub catalogue_px: Vec<(f64, f64)>,
     pub windows: Vec<Window>,
     /// The calibration flat cut to each window (1 where the analysis is uncalibrated).
     pub calibration_flat: Vec<Vec<f32>>,
@@ -157,6 +173,8 @@ pub enum StareError {
         well_e: f64,
         longest_s: f64,
     },
+    #[error("transit telemetry: {0}")]
+    Telemetry(String),
     #[error(transparent)]
     Sim(#[from] SimError),
 }
@@ -332,14 +350,23 @@ pub fn observe(cfg: &Config, spec: &Spec) -> Result<Observation, StareError> {
     let transit = spec.transit();
     let n = c.instrument.detector_px;
     let half = (spec.window_px / 2) as i64;
-    let windows: Vec<Window> = stars
+    let catalogue_px = catalogue_places(&sim, &stars);
+    let windows: Vec<Window> = catalogue_px
         .iter()
-        .map(|s| Window {
-            x0: s.x_px.round() as i64 - half,
-            y0: s.y_px.round() as i64 - half,
+        .map(|(x, y)| Window {
+            x0: x.round() as i64 - half,
+            y0: y.round() as i64 - half,
             n: spec.window_px,
         })
         .collect();
+    if windows
+        .iter()
+        .any(|w| w.x0 < 0 || w.y0 < 0 || w.x0 as usize + w.n > n || w.y0 as usize + w.n > n)
+    {
+        return Err(StareError::Spec(
+            "transit.field_radius_px: a catalogue position puts a window off the detector".into(),
+        ));
+    }
     let cut = |img: &[f32], w: &Window| -> Vec<f32> {
         let mut out = Vec::with_capacity(w.n * w.n);
         for y in 0..w.n {
@@ -385,6 +412,7 @@ pub fn observe(cfg: &Config, spec: &Spec) -> Result<Observation, StareError> {
         let t_mid = t0 + c.readout.t_overhead_s + 0.5 * spec.plate_s;
         let drift = drift_mas(spec, t_mid);
         let chunk = p / per_chunk;
+        let mut sigma_mas = 0.0;
         let mut track = if realistic {
             if series.as_ref().map(|s| s.0) != Some(chunk) {
                 // two chunks at a time, one per core (each chunk's series is its own stream)
@@ -402,6 +430,13 @@ pub fn observe(cfg: &Config, spec: &Spec) -> Result<Observation, StareError> {
                 };
             }
             let s = &series.as_ref().expect("generated above").1;
+            let start_s = (p % per_chunk) as f64 * cadence + c.readout.t_overhead_s;
+            sigma_mas = record_sigma_mas(
+                s,
+                start_s,
+                spec.plate_s,
+                crate::rng::derive_seed(c.seed, &[chunk as u64]),
+            )?;
             Track::from_series(
                 s,
                 (p % per_chunk) as f64 * cadence,
@@ -518,12 +553,13 @@ pub fn observe(cfg: &Config, spec: &Spec) -> Result<Observation, StareError> {
             windows_adu,
             telemetry_x_mas: (jitter_mean.0 + dxp) * plate_scale + tel_err(),
             telemetry_y_mas: (jitter_mean.1 + dyp) * plate_scale + tel_err(),
-            telemetry_sigma_mas: jitter_sigma_px * plate_scale,
+            telemetry_sigma_mas: sigma_mas,
         });
         truth.push(PlateTruth {
             transit_flux: tf,
             drift_px: (dxp, dyp),
             jitter_mean_px: jitter_mean,
+            jitter_sigma_px,
         });
     }
     let sigmas: Vec<f64> = plates.iter().map(|p| p.telemetry_sigma_mas).collect();
@@ -537,6 +573,7 @@ pub fn observe(cfg: &Config, spec: &Spec) -> Result<Observation, StareError> {
         spec: spec.clone(),
         readout,
         stars,
+        catalogue_px,
         windows,
         calibration_flat,
         plates,
@@ -547,4 +584,63 @@ pub fn observe(cfg: &Config, spec: &Spec) -> Result<Observation, StareError> {
         backend: sim.backend_name(),
         cfg: c,
     })
+}
+
+/// Each star's place on the array from the reference catalogue (every star of the stare is in it: the
+/// target and its comparisons are chosen from it): its sky position, drawn with the survey's error
+/// ([`SurveyModel::default`]: 2 mas per axis brighter than Hw 14), through the array's design WCS; the
+/// catalogue's pixel position where there is no WCS.
+fn catalogue_places(sim: &Simulator, stars: &[Star]) -> Vec<(f64, f64)> {
+    let survey = SurveyModel {
+        completeness: 1.0,
+        limit_hw: f64::INFINITY,
+        ..SurveyModel::default()
+    };
+    let cat = reference_catalogue(sim, &survey, 0);
+    stars
+        .iter()
+        .map(|s| match cat.iter().find(|c| c.id == s.id) {
+            Some(c) => sim
+                .wcs()
+                .and_then(|w| w.sky_to_pixel(c.ra_deg, c.dec_deg))
+                .filter(|(x, y)| x.is_finite() && y.is_finite())
+                .unwrap_or((c.x_px, c.y_px)),
+            None => (s.x_px, s.y_px),
+        })
+        .collect()
+}
+
+/// A plate's jitter σ as the attitude telemetry gives it, mas: the record of the plate
+/// ([`TelemetryRecord::record`] at [`TelemetryQuality::DEFAULT`], over `span_s` from `start_s` of the ACE
+/// series) less its stated white noise, `σ² = (var x + var y)/2 − σ_n²` over the samples within the plate
+/// (floored at 0). The record's correlated error (5 mas) stays in: under 0.1 % of a jitter of 100s of mas.
+pub fn record_sigma_mas(
+    series: &crate::jitter::AceSeries,
+    start_s: f64,
+    span_s: f64,
+    seed: u64,
+) -> Result<f64, StareError> {
+    let q = TelemetryQuality::DEFAULT;
+    let rec = TelemetryRecord::record(series, span_s, start_s, &q, seed)
+        .map_err(|e| StareError::Telemetry(e.to_string()))?;
+    let inside: Vec<usize> = (0..rec.x_mas.len())
+        .filter(|&k| {
+            let t = rec.t0_s + k as f64 * rec.dt_s;
+            t >= start_s && t <= start_s + span_s
+        })
+        .collect();
+    if inside.len() < 2 {
+        return Err(StareError::Telemetry(format!(
+            "{} samples within the plate of {span_s} s",
+            inside.len()
+        )));
+    }
+    let var = |v: &[f64]| {
+        let s: Vec<f64> = inside.iter().map(|&k| v[k]).collect();
+        crate::numerics::stats::std_dev(&s).powi(2)
+    };
+    let noise = rec.stated_noise_mas.unwrap_or(0.0);
+    Ok((0.5 * (var(&rec.x_mas) + var(&rec.y_mas)) - noise * noise)
+        .max(0.0)
+        .sqrt())
 }

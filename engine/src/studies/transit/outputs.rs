@@ -80,7 +80,7 @@ pub fn write(dir: &Path, obs: &Observation, r: &StareResult) -> Result<(), IoErr
             col(
                 "telemetry_sigma",
                 "mas",
-                "jitter sigma in the plate",
+                "jitter sigma in the plate (attitude record)",
                 &lc.telemetry_sigma_mas,
             ),
             col(
@@ -99,6 +99,7 @@ pub fn write(dir: &Path, obs: &Observation, r: &StareResult) -> Result<(), IoErr
     let dy: Vec<f64> = obs.truth.iter().map(|t| t.drift_px.1).collect();
     let jx: Vec<f64> = obs.truth.iter().map(|t| t.jitter_mean_px.0).collect();
     let jy: Vec<f64> = obs.truth.iter().map(|t| t.jitter_mean_px.1).collect();
+    let js: Vec<f64> = obs.truth.iter().map(|t| t.jitter_sigma_px).collect();
     ecsv::write(
         &dir.join("truth.ecsv"),
         &[
@@ -114,6 +115,7 @@ pub fn write(dir: &Path, obs: &Observation, r: &StareResult) -> Result<(), IoErr
             col("drift_y", "pix", "", &dy),
             col("jitter_mean_x", "pix", "ACE mean over the plate", &jx),
             col("jitter_mean_y", "pix", "ACE mean over the plate", &jy),
+            col("jitter_sigma", "pix", "ACE sigma over the plate", &js),
         ],
         &[("seed", obs.cfg.seed.to_string())],
     )?;
@@ -214,6 +216,16 @@ pub fn write_products(dir: &Path, obs: &Observation) -> Result<(), IoError> {
                 Card::i("X0", w.x0, "window's first column (0-based)"),
                 Card::i("Y0", w.y0, "window's first row (0-based)"),
                 Card::f("HW", obs.stars[k].mag_hw, "catalogue magnitude"),
+                Card::f(
+                    "XCAT",
+                    obs.catalogue_px.get(k).map_or(f64::NAN, |c| c.0),
+                    "catalogue x via the design WCS (0-based)",
+                ),
+                Card::f(
+                    "YCAT",
+                    obs.catalogue_px.get(k).map_or(f64::NAN, |c| c.1),
+                    "catalogue y via the design WCS (0-based)",
+                ),
             ],
         });
         hdus.push(Hdu::Image {
@@ -246,7 +258,12 @@ pub fn write_products(dir: &Path, obs: &Observation) -> Result<(), IoError> {
             col("time", "d", "mid-plate", &t),
             col("x", "mas", "mean pointing over the plate", &tx),
             col("y", "mas", "mean pointing over the plate", &ty),
-            col("sigma", "mas", "jitter sigma in the plate", &ts),
+            col(
+                "sigma",
+                "mas",
+                "jitter sigma in the plate (attitude record)",
+                &ts,
+            ),
         ],
         &[("seed", obs.cfg.seed.to_string())],
     )

@@ -5,8 +5,9 @@
 
 use super::budget::{self, Budget};
 use super::observe::{Observation, StareError, StareReadout, observe};
+pub use super::search::{MASK_MARGIN, box_mask, search};
 use super::spec::{Decorrelation, PhotometryKind, Spec};
-use crate::analysis::lightcurve::{BoxFit, binned_scatter_ppm, box_least_squares};
+use crate::analysis::lightcurve::{BoxFit, binned_scatter_ppm};
 use crate::analysis::stare_photometry::{self as phot, Setup, StarMeasure};
 use crate::config::Config;
 use crate::numerics::stats;
@@ -56,7 +57,8 @@ pub struct Precision {
     pub six_and_half_measured: bool,
 }
 
-/// The single-transit significance of a depth at this precision.
+/// The *predicted* single-transit significance of a depth at this precision (a forecast for the mission's
+/// required depths, not a measurement: the injected transit's significance is [`Recovery::snr`]).
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct Detection {
     pub depth: f64,
@@ -68,10 +70,11 @@ pub struct Detection {
 }
 
 impl Detection {
-    /// One line: `a 0.3 % transit of 1.58 h: 38.6σ in one transit (detected)`.
+    /// One line: `predicted for a 0.3 % transit of 1.58 h at the measured 1-h scatter: 38.6σ in one transit
+    /// (detected)`.
     pub fn describe(&self) -> String {
         format!(
-            "a {:.1} % transit of {:.2} h: {:.1}σ in one transit ({})",
+            "predicted for a {:.1} % transit of {:.2} h at the measured 1-h scatter: {:.1}σ in one transit ({})",
             100.0 * self.depth,
             self.duration_h,
             self.snr,
@@ -94,7 +97,9 @@ pub struct Recovery {
     pub t0_days: f64,
     pub duration_h: f64,
     pub depth: f64,
+    /// The depth's 1σ error, from the scatter of the light curve out of the box ([`search`]).
     pub depth_sigma: f64,
+    /// The transit's measured significance, depth / depth_sigma: the one the stare reports for it.
     pub snr: f64,
     /// Scoring (truth): the injected transit's mean depth over the plates of the box, and the pull
     /// (recovered − injected)/σ; whether the box overlaps the injected transit.
@@ -112,6 +117,8 @@ pub struct StareResult {
     pub precision_psf: Precision,
     pub budget: Budget,
     pub recovery: Option<Recovery>,
+    /// Predictions for the required depths ([`REQUIRED_DEPTHS`]) at the measured precision, less the
+    /// injected transit's depth when it was found (its significance is the recovery's).
     pub detections: Vec<Detection>,
     pub simulate_s: f64,
     pub analyse_s: f64,
@@ -124,7 +131,30 @@ pub const REQUIRED_DEPTHS: [f64; 2] = [0.003, 0.001];
 /// The PSF fit's radius, px.
 pub const FIT_RADIUS_PX: f64 = 4.0;
 
-/// Measure every plate's windows: `[star][plate]`.
+/// Each star's predicted place in its window in every plate, window px (`[star][plate]`): the reference
+/// catalogue's position through the design WCS ([`Observation::catalogue_px`]) moved by the plate's
+/// telemetered mean pointing (the stare's array is unrotated: a pointing offset of `(x, y)` mas moves the
+/// stars by `(x, y)` / plate scale px), less the window's corner.
+pub fn predicted_places(obs: &Observation) -> Vec<Vec<(f64, f64)>> {
+    let scale_mas = obs.cfg.instrument.plate_scale_mas();
+    obs.windows
+        .iter()
+        .zip(&obs.catalogue_px)
+        .map(|(w, (cx, cy))| {
+            obs.plates
+                .iter()
+                .map(|p| {
+                    (
+                        cx + p.telemetry_x_mas / scale_mas - w.x0 as f64,
+                        cy + p.telemetry_y_mas / scale_mas - w.y0 as f64,
+                    )
+                })
+                .collect()
+        })
+        .collect()
+}
+
+/// Measure every plate's windows, each from its predicted place recentred on the data: `[star][plate]`.
 pub fn measure(obs: &Observation) -> Vec<Vec<StarMeasure>> {
     let d = &obs.cfg.detector;
     let setup = Setup {
@@ -136,19 +166,22 @@ pub fn measure(obs: &Observation) -> Vec<Vec<StarMeasure>> {
         annulus_out_px: obs.spec.annulus_out_px,
         fit_radius_px: FIT_RADIUS_PX,
     };
+    let places = predicted_places(obs);
     (0..obs.windows.len())
         .into_par_iter()
         .map(|k| {
             let w = &obs.windows[k];
             obs.plates
                 .iter()
-                .map(|p| {
+                .zip(&places[k])
+                .map(|(p, &guess)| {
                     let mut m = phot::measure_window(
                         &p.windows_adu[k],
                         w.n,
                         &obs.calibration_flat[k],
                         &setup,
                         &obs.model_psf,
+                        guess,
                     );
                     m.x_px += w.x0 as f64;
                     m.y_px += w.y0 as f64;
@@ -264,41 +297,6 @@ pub fn light_curve(obs: &Observation, m: &[Vec<StarMeasure>]) -> LightCurve {
     }
 }
 
-/// The plates inside a box (its mid-time ± half its duration) widened by `margin` of its duration on each
-/// side.
-pub fn box_mask(t_days: &[f64], b: &BoxFit, margin: f64) -> Vec<bool> {
-    t_days
-        .iter()
-        .map(|t| (t - b.t0_days).abs() <= (0.5 + margin) * b.duration_days)
-        .collect()
-}
-
-/// How much of its duration the transit's mask adds on each side, for the decorrelation and the precision
-/// (a box is a little shorter than the transit it finds: its ingress and egress stay out of it).
-pub const MASK_MARGIN: f64 = 0.25;
-
-/// A single-transit box search: one trial period of twice the stare (no folding, no wrap-around), durations
-/// from 15 min to half the stare in 15-min steps, the points' σ their robust scatter.
-pub fn search(t_days: &[f64], flux: &[f64], stare_h: f64) -> Option<BoxFit> {
-    let good: Vec<f64> = flux.iter().cloned().filter(|v| v.is_finite()).collect();
-    let sigma = stats::mad_sigma(&good);
-    if !(sigma > 0.0) {
-        return None;
-    }
-    let durations: Vec<f64> = (1..)
-        .map(|k| 0.25 * k as f64)
-        .take_while(|h| *h <= 0.5 * stare_h)
-        .map(|h| h / 24.0)
-        .collect();
-    box_least_squares(
-        t_days,
-        flux,
-        &vec![sigma; flux.len()],
-        &[2.0 * stare_h / 24.0],
-        &durations,
-    )
-}
-
 /// The measured scatter of a light curve, leaving out the masked plates.
 pub fn precision(t_days: &[f64], flux: &[f64], mask: &[bool]) -> Precision {
     let f: Vec<f64> = flux
@@ -332,7 +330,8 @@ pub fn precision(t_days: &[f64], flux: &[f64], mask: &[bool]) -> Precision {
     }
 }
 
-/// The single-transit significance of each required depth at a 1-h precision, for the spec's transit shape.
+/// The predicted single-transit significance of each required depth at a 1-h precision, for the spec's
+/// transit shape: `depth / (σ_1h √(1 h / duration))`.
 pub fn detections(spec: &Spec, hour_ppm: f64) -> Vec<Detection> {
     REQUIRED_DEPTHS
         .iter()
@@ -365,9 +364,14 @@ pub fn analyse(obs: &Observation) -> StareResult {
         .then(|| search(&lc.t_days, &lc.flux, obs.spec.duration_h))
         .flatten()
         .map(|b| score(obs, &lc, &b));
+    // the injected transit, found, has its measured significance: no prediction of another for its depth
+    let detections = detections(&obs.spec, precision.hour_ppm)
+        .into_iter()
+        .filter(|d| recovery.is_none() || (d.depth - obs.spec.depth).abs() > 1e-9)
+        .collect();
     StareResult {
         readout: obs.readout,
-        detections: detections(&obs.spec, precision.hour_ppm),
+        detections,
         precision,
         precision_psf,
         budget: budget::predict(obs, lc.aperture_index, &lc.regressors, &lc.in_box),
