@@ -523,7 +523,8 @@ fn file_uses(rel: &Path, text: &str) -> FileUses {
 }
 
 /// The forbidden item a use names, if any: `truth` (the module or `TruthRow`), `simulate` (the module,
-/// `Simulator`, `FocalPlaneSimulator`) or `as_built` (a segment `as_built`, a type `AsBuilt…`). Names are
+/// `Simulator`, `FocalPlaneSimulator`) or `as_built` (the module `crate::instrument`, which draws the as-built
+/// instrument, a segment `as_built` or `as_built_oracle`, a type `AsBuilt…`). Names are
 /// matched in unresolved paths too, so a re-export elsewhere does not hide them.
 fn forbidden(u: &Use) -> Option<&'static str> {
     let first = u.path.first().filter(|_| u.resolved).map(String::as_str);
@@ -537,9 +538,10 @@ fn forbidden(u: &Use) -> Option<&'static str> {
     {
         return Some("simulate");
     }
-    if u.path
-        .iter()
-        .any(|s| s == "as_built" || s.starts_with("AsBuilt"))
+    if first == Some("instrument")
+        || u.path
+            .iter()
+            .any(|s| s == "as_built" || s.starts_with("AsBuilt") || s == "as_built_oracle")
     {
         return Some("as_built");
     }
@@ -871,6 +873,11 @@ fn the_checker_finds_the_truth_however_it_is_written() {
     );
     assert_eq!(items, BTreeSet::from(["as_built"]));
     let (_, items) = fixture("io/x.rs", "use crate::config::AsBuiltInstrument;");
+    assert_eq!(items, BTreeSet::from(["as_built"]));
+    let (_, items) = fixture(
+        "analysis/x.rs",
+        "fn f(c: &crate::config::Config) { let _ = crate::instrument::realise(c); }",
+    );
     assert_eq!(items, BTreeSet::from(["as_built"]));
     let (tops, _) = fixture(
         "scene/x.rs",

@@ -3,7 +3,7 @@
 //!
 //! The configuration's `instrument`, `optics`, `detector` and `focal_plane` sections are the **design**: what
 //! the documents say. The **as-built** instrument is drawn from it by the seeded deviations below
-//! (`crate::instrument::realise`); the images come from it, while every product an analysis reads (the model
+//! (the `instrument` module's `realise`); the images come from it, while every product an analysis reads (the model
 //! PSF, the header's WCS and gain, the reference catalogue's pixel columns, `design.toml`) comes from the
 //! design — unless `knowledge = "as-built"`, the `oracle` control that hands the analysis the as-built
 //! instrument so that a table can show what honest knowledge costs.
