@@ -601,7 +601,7 @@ fn catalogue_places(sim: &Simulator, stars: &[Star]) -> Vec<(f64, f64)> {
         .iter()
         .map(|s| match cat.iter().find(|c| c.id == s.id) {
             Some(c) => sim
-                .wcs()
+                .design_wcs()
                 .and_then(|w| w.sky_to_pixel(c.ra_deg, c.dec_deg))
                 .filter(|(x, y)| x.is_finite() && y.is_finite())
                 .unwrap_or((c.x_px, c.y_px)),
