@@ -118,6 +118,39 @@ impl AsBuilt {
         }
     }
 
+    /// One line for a run's output: the deviations switched on and what the products come from (`None` for
+    /// the design itself).
+    pub fn describe(&self) -> Option<String> {
+        if self.is_design() {
+            return None;
+        }
+        let parts: Vec<String> = [
+            (self.wavefront_rms_nm, "nm rms wavefront (Z4–Z11)"),
+            (self.wavefront_field_rms_nm, "nm rms across the array"),
+            (self.focus_breathing_nm, "nm focus breathing"),
+            (self.distortion_px, "px distortion beyond the design"),
+            (100.0 * self.gain_error, "% gain error"),
+            (100.0 * self.read_noise_error, "% read-noise error"),
+        ]
+        .iter()
+        .filter(|(v, _)| *v > 0.0)
+        .map(|(v, what)| format!("{v} {what}"))
+        .collect();
+        let products = match self.knowledge {
+            Knowledge::Design => "products from the design",
+            Knowledge::AsBuilt => "ORACLE: products from the as-built instrument",
+        };
+        Some(format!(
+            "the instrument as built (seed {}): {}; {products}",
+            self.seed,
+            if parts.is_empty() {
+                "the design".to_string()
+            } else {
+                parts.join(", ")
+            }
+        ))
+    }
+
     /// Check every field; the error names the field and the allowed range.
     pub fn validate(&self) -> Result<(), ConfigError> {
         let ranges: [(&str, f64, f64, f64); 7] = [
@@ -199,6 +232,27 @@ mod tests {
             let e = a.validate().expect_err(field).to_string();
             assert!(e.contains(field), "{e}");
         }
+    }
+
+    #[test]
+    fn a_run_names_the_deviations_and_the_oracle() {
+        assert_eq!(AsBuilt::default().describe(), None);
+        let a = AsBuilt {
+            wavefront_rms_nm: 30.0,
+            gain_error: 0.01,
+            ..AsBuilt::default()
+        };
+        let line = a.describe().expect("a line");
+        assert!(
+            line.contains("30 nm rms wavefront") && line.contains("1 % gain"),
+            "{line}"
+        );
+        assert!(line.contains("products from the design"), "{line}");
+        let oracle = AsBuilt {
+            knowledge: Knowledge::AsBuilt,
+            ..AsBuilt::default()
+        };
+        assert!(oracle.describe().expect("a line").contains("ORACLE"));
     }
 
     #[test]

@@ -168,6 +168,9 @@ pub fn simulate(
         t0.elapsed().as_secs_f64(),
         setup_s
     );
+    if let Some(line) = cfg.as_built.describe() {
+        println!("{line}");
+    }
     Ok(())
 }
 
@@ -268,6 +271,9 @@ fn simulate_focal_plane(
         t0.elapsed().as_secs_f64(),
         setup_s
     );
+    if let Some(line) = cfg.as_built.describe() {
+        println!("{line}");
+    }
     Ok(())
 }
 
