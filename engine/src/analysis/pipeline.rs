@@ -379,6 +379,9 @@ pub struct Supplied<'a> {
     /// (used where no product is given).
     pub reference_by_error: &'a [(f64, Vec<(f64, f64)>)],
     pub model_psf: Option<&'a Epsf>,
+    /// The design model PSF's change per nm rms of each low-order Fringe term (Z4 … Z11), on its grid: what
+    /// `analysis.telemetry_kernel = "design-fitted"` corrects the model PSF with.
+    pub model_psf_terms: Option<&'a [Epsf]>,
     /// The attitude telemetry product of the exposure: what every telemetry countermeasure of a plan
     /// corrects with (its recorded quality replaces the plan's).
     pub telemetry: Option<&'a TelemetryRecord>,
@@ -445,7 +448,7 @@ pub fn telemetry_for(
         return Err(AnalysisError::NoReadoutTiming);
     };
     let epsf = match (cfg.telemetry_kernel, supplied.model_psf) {
-        (TelemetryKernel::ModelPsf, Some(m)) => m,
+        (TelemetryKernel::ModelPsf | TelemetryKernel::DesignFitted, Some(m)) => m,
         _ => &plain.epsf,
     };
     let kernel_of = |e: &Epsf| {
@@ -467,6 +470,27 @@ pub fn telemetry_for(
     tel.model_track = rec
         .model_record(cfg.telemetry_filter)
         .map(|r| resample(&r, 0.0, &ro.timing, img.plate_scale_mas, ro.rotation_deg));
+    if let (TelemetryKernel::DesignFitted, Some(m), Some(terms)) = (
+        cfg.telemetry_kernel,
+        supplied.model_psf,
+        supplied.model_psf_terms,
+    ) && let Some(w) =
+        countermeasures::wavefront::fit(img, &plain.stars, m, terms, &tel, &build_options(cfg).fit)
+    {
+        // the design PSF corrected by the stars; the shift correction's response rebuilt from it
+        let nominal = tel.track.window(
+            ro.timing.t_overhead_s,
+            ro.timing.t_overhead_s + ro.timing.exposure_s,
+        );
+        tel.response = crate::analysis::response::FitResponse::build(
+            &kernel_of(&w.profile),
+            &tel.track,
+            &nominal,
+            &noise,
+        );
+        tel.profile = Some(w.profile.clone());
+        tel.wavefront = Some(w);
+    }
     if cfg.telemetry_kernel == TelemetryKernel::EpsfDeconvolved {
         // the image's own static profile, through the (filtered) telemetry; the shift correction's
         // response is rebuilt from it

@@ -709,6 +709,10 @@ pub enum TelemetryKernel {
     /// of its own pixels' windows (deconvolved; `analysis::countermeasures::forward_epsf`), started from the
     /// image's ePSF — no design model needed.
     EpsfDeconvolved,
+    /// The design model PSF corrected by the image's own stars: its low-order wavefront terms (Z4–Z11) fitted
+    /// through the design's derivative planes, each star seen through its own windows' jitter
+    /// (`analysis::countermeasures::wavefront`); the design model PSF alone where the planes are not supplied.
+    DesignFitted,
 }
 
 /// How the telemetry forward model (`telemetry-model`) filters the attitude telemetry before it sees each star

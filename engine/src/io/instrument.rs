@@ -443,6 +443,31 @@ pub fn model_psf(
     ))
 }
 
+/// The design model PSF's change per nm rms of each low-order term ([`crate::simulate::DESIGN_TERMS`]: Z4 …
+/// Z11), on its grid: `(ψ(+h) − ψ(−h)) / 2h` from the design kernels with the term moved by ∓ h =
+/// [`crate::simulate::TERM_STEP_NM`]; single precision, as the file holds them.
+pub fn model_psf_terms(
+    sim: &Simulator,
+) -> Result<Vec<crate::analysis::epsf::Epsf>, crate::simulate::SimError> {
+    let radius = sim.cfg.analysis.epsf_radius_px;
+    let h = crate::simulate::TERM_STEP_NM;
+    Ok(sim
+        .design_term_kernels()?
+        .iter()
+        .map(|(minus, plus)| {
+            let (m, p) = (
+                crate::analysis::pipeline::exact_epsf(minus, radius),
+                crate::analysis::pipeline::exact_epsf(plus, radius),
+            );
+            let mut d = p.clone();
+            for (v, (a, b)) in d.data.iter_mut().zip(p.data.iter().zip(&m.data)) {
+                *v = ((a - b) / (2.0 * h)) as f32 as f64;
+            }
+            d
+        })
+        .collect())
+}
+
 /// [`model_psf`] as `psf_model.fits` holds it (single precision): what an analysis in memory is handed, so
 /// that it equals the analysis of the written file.
 pub fn model_psf_product(

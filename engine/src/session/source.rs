@@ -114,6 +114,9 @@ impl<'a> Source<'a> {
 pub struct SourceProducts {
     /// The design model PSF (design wavefront, pixel-integrated, no jitter).
     pub model_psf: Epsf,
+    /// Its derivative planes per low-order term, when the analysis corrects it by the stars
+    /// (`analysis.telemetry_kernel = "design-fitted"`); else empty.
+    pub model_psf_terms: Vec<Epsf>,
     /// The reference catalogue a survey gives of the field ([`instrument::reference_catalogue`]: the source's
     /// survey with its floor at each catalogue error of the plan's `plate-*@catalogue`), in pixels.
     pub references: Vec<(f64, Vec<(f64, f64)>)>,
@@ -141,6 +144,8 @@ impl SourceProducts {
                 .or((!self.catalogue.is_empty()).then_some(self.catalogue.as_slice())),
             reference_by_error: &self.references,
             model_psf: Some(&self.model_psf),
+            model_psf_terms: (!self.model_psf_terms.is_empty())
+                .then_some(self.model_psf_terms.as_slice()),
             telemetry: None,
             telemetry_by_quality: &self.telemetry,
             readout: Some(self.readout),
@@ -237,8 +242,13 @@ impl Source<'_> {
         } else {
             Vec::new()
         };
+        let model_psf_terms = match cfg.telemetry_kernel {
+            crate::config::TelemetryKernel::DesignFitted => instrument::model_psf_terms(self.sim)?,
+            _ => Vec::new(),
+        };
         Ok(SourceProducts {
             model_psf: instrument::model_psf_product(self.sim)?,
+            model_psf_terms,
             references,
             catalogue,
             telemetry,
@@ -272,6 +282,7 @@ impl Source<'_> {
         let products = self.products(plan, cfg)?;
         let mut s = products.supplied(supplied.reference, supplied.catalogue);
         s.model_psf = supplied.model_psf.or(s.model_psf);
+        s.model_psf_terms = supplied.model_psf_terms.or(s.model_psf_terms);
         s.telemetry = supplied.telemetry;
         s.readout = supplied.readout.or(s.readout);
         let oracle = oracle_reference(plan, truth);

@@ -87,6 +87,14 @@ pub fn psf_colour(j_minus_h: f64, step_mag: f64) -> f64 {
     }
 }
 
+/// The low-order Fringe terms (1-based) whose derivative planes come with the design model PSF: Z4 … Z11,
+/// focus, astigmatism, coma, spherical, trefoil — the terms an as-built telescope departs by.
+pub const DESIGN_TERMS: [usize; 8] = [4, 5, 6, 7, 8, 9, 10, 11];
+
+/// The step of the derivative planes' central differences, nm rms of wavefront per term: small against the
+/// wavefront's own scale (a PSF's change is linear to ≲ 1 % over it), large against the tables' rounding.
+pub const TERM_STEP_NM: f64 = 10.0;
+
 /// Per-exposure ACE statistics over the nominal window (mas).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct AceStats {
@@ -190,6 +198,8 @@ pub struct Simulator {
     design_wcs: std::sync::OnceLock<Option<crate::sky::wcs::ArrayWcs>>,
     /// The PSF bank of the products' optics (the design), when it is not the images' bank.
     design_bank: std::sync::OnceLock<Arc<PsfBank>>,
+    /// The design kernels with each low-order term moved ± [`TERM_STEP_NM`] ([`Simulator::design_term_kernels`]).
+    term_kernels: std::sync::OnceLock<Vec<(Arc<PixelKernel>, Arc<PixelKernel>)>>,
     /// Where a sky scene's stars fell (the whole focal plane's account; `None` for pixel scenes).
     pub counts: Option<PlacementCounts>,
     pub timing: ReadoutTiming,
@@ -291,6 +301,7 @@ impl Simulator {
             wcs: std::sync::OnceLock::new(),
             design_wcs: std::sync::OnceLock::new(),
             design_bank: std::sync::OnceLock::new(),
+            term_kernels: std::sync::OnceLock::new(),
             counts,
             timing,
             bank,
@@ -452,6 +463,40 @@ impl Simulator {
         let bank = self.design_bank();
         let psf = self.in_array_axes(bank.get(self.cfg.scene.j_minus_h, &bank.centre_key()));
         self.kernel_with_blur(&psf, blur_px)
+    }
+
+    /// The design pixel kernels (as [`Simulator::design_kernel`]) with each of the Fringe terms
+    /// [`DESIGN_TERMS`] moved by −/+ [`TERM_STEP_NM`] nm rms of wavefront: what the design model PSF's derivative
+    /// planes are differenced from (`io::instrument::model_psf_terms`). Computed once (2 PSFs a term).
+    pub fn design_term_kernels(&self) -> Result<&[(Arc<PixelKernel>, Arc<PixelKernel>)], SimError> {
+        if let Some(k) = self.term_kernels.get() {
+            return Ok(k);
+        }
+        let um_per_unit = crate::optics::to_um(&self.cfg.optics, &[1.0])[0];
+        let mut out = Vec::with_capacity(DESIGN_TERMS.len());
+        for &j in DESIGN_TERMS.iter() {
+            let unit_rms = crate::optics::zernike::fringe_norm(j).sqrt();
+            let delta = TERM_STEP_NM * 1e-3 / um_per_unit / unit_rms;
+            let kernel = |sign: f64| -> Result<Arc<PixelKernel>, SimError> {
+                let mut c = self.cfg.clone();
+                let add = |f: &mut Vec<f64>| {
+                    if f.len() < j {
+                        f.resize(j, 0.0);
+                    }
+                    f[j - 1] += sign * delta;
+                };
+                add(&mut c.optics.fringe);
+                c.optics
+                    .field_table
+                    .iter_mut()
+                    .for_each(|r| add(&mut r.fringe));
+                let bank = PsfBank::new(&c);
+                let psf = self.in_array_axes(bank.get(c.scene.j_minus_h, &bank.centre_key()));
+                self.kernel_with_blur(&psf, 0.0)
+            };
+            out.push((kernel(-1.0)?, kernel(1.0)?));
+        }
+        Ok(self.term_kernels.get_or_init(|| out))
     }
 
     /// The PSF bank of the products' optics: the images' bank when the optics are the same.

@@ -33,6 +33,7 @@ pub mod forward_epsf;
 pub mod plate;
 pub mod stack;
 pub mod telemetry;
+pub mod wavefront;
 pub mod zones;
 
 pub use plate::PlateModel;

@@ -29,6 +29,8 @@ pub struct Telemetry {
     /// The track the forward model sees the profile through: the telemetry low-pass filtered
     /// ([`Smoothing::choose`]); `None`: [`Telemetry::track`] as recorded.
     pub model_track: Option<Track>,
+    /// The low-order wavefront the stars corrected the design model PSF by (`design-fitted`), if fitted.
+    pub wavefront: Option<super::wavefront::WavefrontFit>,
 }
 
 /// When each pixel of an exposure integrated (its readout timing) and how its array is turned on the sky:
@@ -299,6 +301,7 @@ impl Telemetry {
             profile: None,
             model_nodes_per_px: super::forward::DEFAULT_NODES_PER_PX,
             model_track: None,
+            wavefront: None,
         })
     }
 
