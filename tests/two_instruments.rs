@@ -250,3 +250,26 @@ fn the_stars_teach_the_design_psf_the_as_built_wavefront() {
     eprintln!("rms from the as-built PSF (of its peak): design {before:.4}, fitted {after:.4}");
     assert!(after < 0.5 * before, "{after} vs {before}");
 }
+
+/// The design model PSF's derivative planes are a file product an outside tool can read: written as `DZ4` …
+/// `DZ11` of `psf_model.fits` when the analysis corrects the design PSF by the stars, read back bit for bit;
+/// a file without them has none.
+#[test]
+fn the_derivative_planes_round_trip_through_the_model_psf_file() {
+    use engine::io::instrument::{model_psf_terms, read_model_psf_terms, write_model_psf};
+    let mut c = small_config();
+    c.analysis.telemetry_kernel = engine::config::TelemetryKernel::DesignFitted;
+    let sim = Simulator::new(&c).expect("sim");
+    let dir = engine::testkit::temp_dir("derivative-planes");
+    let path = write_model_psf(&dir, &sim).expect("write");
+    let read = read_model_psf_terms(&path).expect("read").expect("planes");
+    let made = model_psf_terms(&sim).expect("terms");
+    assert_eq!(read.len(), 8);
+    for (r, m) in read.iter().zip(&made) {
+        assert_eq!(r.data, m.data);
+    }
+    let plain = Simulator::new(&small_config()).expect("sim");
+    let other = engine::testkit::temp_dir("no-derivative-planes");
+    let path = write_model_psf(&other, &plain).expect("write");
+    assert!(read_model_psf_terms(&path).expect("read").is_none());
+}

@@ -134,6 +134,8 @@ pub struct AnalysisInput {
     pub reference: Option<Vec<CatalogueStar>>,
     /// The design model PSF product (`psf_model.fits`), when there is one.
     pub model_psf: Option<crate::analysis::epsf::Epsf>,
+    /// Its derivative planes per low-order term (`DZ4` … `DZ11` of `psf_model.fits`), when it holds them.
+    pub model_psf_terms: Option<Vec<crate::analysis::epsf::Epsf>>,
     /// The attitude telemetry product of this exposure (`telemetry_NNN.fits`), when there is one.
     pub telemetry: Option<crate::analysis::countermeasures::telemetry::TelemetryRecord>,
     /// The readout timing and array rotation the header states ([`super::readout_header`]): what the
@@ -200,6 +202,7 @@ impl AnalysisInput {
             input.assumptions.extend(products.assumed);
             input.reference = products.reference;
             input.model_psf = products.model_psf;
+            input.model_psf_terms = products.model_psf_terms;
             input.telemetry = read_telemetry_for(path, telemetry_path)?;
             input.with_readout(path, None, fallback)
         })
@@ -278,6 +281,7 @@ impl AnalysisInput {
             assumptions,
             reference: None,
             model_psf: None,
+            model_psf_terms: None,
             telemetry: None,
             readout: None,
         })
@@ -432,6 +436,7 @@ struct Products {
     flat: Option<CalibrationFlat>,
     reference: Option<Vec<CatalogueStar>>,
     model_psf: Option<crate::analysis::epsf::Epsf>,
+    model_psf_terms: Option<Vec<crate::analysis::epsf::Epsf>>,
     assumed: Vec<String>,
 }
 
@@ -455,17 +460,24 @@ impl Products {
         let mut assumed = Vec::new();
         let array = k.map_or(0, |k| k as u32 + 1);
         let reference = read_reference(image, refcat_path, array, &mut assumed)?;
-        let model_psf = match instrument::find_model_psf(image, None) {
+        let found = instrument::find_model_psf(image, None);
+        let model_psf = match &found {
             Some(p) => Some(instrument::read_model_psf(
-                &p,
+                p,
                 k.map(instrument::model_psf_extension).as_deref(),
             )?),
             None => None,
+        };
+        // the derivative planes: a single array's file (the focal plane's have none yet)
+        let model_psf_terms = match (&found, k) {
+            (Some(p), None) => instrument::read_model_psf_terms(p)?,
+            _ => None,
         };
         Ok(Self {
             flat,
             reference,
             model_psf,
+            model_psf_terms,
             assumed,
         })
     }

@@ -507,12 +507,79 @@ fn model_psf_error(e: crate::simulate::SimError, path: &Path) -> IoError {
     }
 }
 
-/// Write the design model PSF of a single-array simulation (`psf_model.fits`) into `dir`.
+/// The extension of the derivative plane of Fringe term `j` (1-based) in `psf_model.fits`.
+pub fn model_psf_term_extension(j: usize) -> String {
+    format!("DZ{j}")
+}
+
+/// Write the design model PSF of a single-array simulation (`psf_model.fits`) into `dir`; with its
+/// derivative planes per low-order term (`DZ4` … `DZ11`, [`model_psf_terms`]) when the configuration's analysis
+/// corrects it by the stars (`analysis.telemetry_kernel = "design-fitted"`: 16 more PSFs to compute).
 pub fn write_model_psf(dir: &Path, sim: &Simulator) -> Result<PathBuf, IoError> {
     let path = dir.join(MODEL_PSF_NAME);
     let e = model_psf(sim).map_err(|e| model_psf_error(e, &path))?;
-    fits::write(&path, &[model_psf_hdu("", &e, sim)])?;
+    let terms = match sim.cfg.analysis.telemetry_kernel {
+        crate::config::TelemetryKernel::DesignFitted => {
+            model_psf_terms(sim).map_err(|e| model_psf_error(e, &path))?
+        }
+        _ => Vec::new(),
+    };
+    let names: Vec<String> = crate::simulate::DESIGN_TERMS
+        .iter()
+        .map(|&j| model_psf_term_extension(j))
+        .collect();
+    let mut hdus = vec![model_psf_hdu("", &e, sim)];
+    for ((t, name), j) in terms.iter().zip(&names).zip(crate::simulate::DESIGN_TERMS) {
+        hdus.push(super::products::epsf_hdu(
+            name.as_str(),
+            t,
+            vec![
+                Card::s(
+                    "CONTENT",
+                    format!("d(design PSF)/d(Z{j}) per nm rms"),
+                    "the PSF's change per nm rms of wavefront",
+                ),
+                Card::f(
+                    "TERMSTEP",
+                    crate::simulate::TERM_STEP_NM,
+                    "[nm rms] central-difference step",
+                ),
+            ],
+        ));
+    }
+    fits::write(&path, &hdus)?;
     Ok(path)
+}
+
+/// The derivative planes of a model PSF file (`DZ4` … `DZ11`), `None` when it holds none; all of them or an
+/// error naming the one missing.
+pub fn read_model_psf_terms(
+    path: &Path,
+) -> Result<Option<Vec<crate::analysis::epsf::Epsf>>, IoError> {
+    let names = fits::extension_names(path)?;
+    let wanted: Vec<String> = crate::simulate::DESIGN_TERMS
+        .iter()
+        .map(|&j| model_psf_term_extension(j))
+        .collect();
+    if !wanted.iter().any(|w| names.contains(w)) {
+        return Ok(None);
+    }
+    let mut out = Vec::with_capacity(wanted.len());
+    for w in &wanted {
+        if !names.contains(w) {
+            return Err(IoError::Format {
+                path: path.to_path_buf(),
+                message: format!(
+                    "the model PSF's derivative planes lack {w} (expected {wanted:?})"
+                ),
+            });
+        }
+        let mut e = read_model_psf(path, Some(w))?;
+        // a derivative plane is signed: read_model_psf's checks hold, nothing is normalised
+        e.data.iter_mut().for_each(|v| *v = *v as f32 as f64);
+        out.push(e);
+    }
+    Ok(Some(out))
 }
 
 /// The extension of array `k` (0-based) in a focal-plane model PSF file.

@@ -201,6 +201,7 @@ impl Session {
             reference: reference_px.as_deref(),
             catalogue: input.reference.as_deref(),
             model_psf: input.model_psf.as_ref(),
+            model_psf_terms: input.model_psf_terms.as_deref(),
             telemetry: input.telemetry.as_ref(),
             readout: input.readout,
             exact_epsf: exact.as_ref(),
