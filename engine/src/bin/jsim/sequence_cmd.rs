@@ -62,6 +62,9 @@ pub struct SequenceArgs {
 }
 
 pub fn sequence(a: &SequenceArgs) -> Result<()> {
+    if !(a.cell_deg > 1e-4 && a.cell_deg <= 1.0) {
+        bail!("--cell-deg {}: allowed (1e-4, 1]", a.cell_deg);
+    }
     let cfg = a.cfg.load()?;
     let spec = match &a.spec {
         Some(p) => sequence::Spec::load(p).map_err(anyhow::Error::msg)?,
