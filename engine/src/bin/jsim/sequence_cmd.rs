@@ -106,7 +106,7 @@ pub fn sequence(a: &SequenceArgs) -> Result<()> {
             Cell::F(pa),
             Cell::S(e.start.utc_iso()),
             Cell::F(e.start.tdb_mjd()),
-            Cell::I(e.seed as i64),
+            Cell::S(e.seed.to_string()), // unsigned: a u64 seed ≥ 2⁶³ is no i64
         ]);
         flown_rows.push(vec![
             Cell::I(e.index as i64),
