@@ -644,3 +644,45 @@ fn each_command_offers_only_its_own_options() {
         "a refused command wrote something"
     );
 }
+
+/// A negative number is a value, not an unknown flag: the option's own range check answers, naming it and
+/// its range, and nothing is written.
+#[test]
+fn a_negative_number_gets_the_options_range_error() {
+    let dir = temp("negative");
+    let cases: [(&[&str], &str, &str); 5] = [
+        (
+            &["crowded", "--reference-error-mas", "-1"],
+            "--reference-error-mas",
+            "(0, ",
+        ),
+        (
+            &["crowded", "--telemetry-noise-mas", "-2"],
+            "--telemetry-noise-mas",
+            "[0, ",
+        ),
+        (&["crowded", "--bin-mag", "-0.5"], "--bin-mag", "0.1 … 2"),
+        (
+            &["crowded", "--telemetry-latency-s", "-61"],
+            "--telemetry-latency-s",
+            "[-60, 60]",
+        ),
+        (&["sequence", "--cell-deg", "-1"], "--cell-deg", "(1e-4, 1]"),
+    ];
+    for (k, (args, option, range)) in cases.iter().enumerate() {
+        let out_dir = dir.join(format!("out{k}"));
+        let out = jsim()
+            .args(*args)
+            .arg("--out")
+            .arg(&out_dir)
+            .output()
+            .expect("run");
+        let err = stderr_of(&out);
+        assert_eq!(out.status.code(), Some(1), "{args:?}: {err}");
+        assert!(
+            err.contains(option) && err.contains(range) && !err.contains("panicked"),
+            "{args:?}: {err}"
+        );
+        assert!(!out_dir.exists(), "{args:?} wrote {}", out_dir.display());
+    }
+}

@@ -470,3 +470,54 @@ fn a_sequence_is_solved_from_its_products_and_scored() {
     assert!(!dir.join("no2").exists());
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// plan.csv's seeds are the exposures' u64 seeds, unsigned (2⁶³ and above without a minus sign), so one
+/// copied back with `--set seed=…` is that exposure's; a master seed near 2⁶⁴ is accepted.
+#[test]
+fn plan_csv_seeds_parse_back_as_the_exposures_u64_seeds() {
+    let dir = temp("seeds");
+    let spec = spec(&dir);
+    let seq = engine::studies::sequence::Spec::load(&spec).expect("spec");
+    let mut base = engine::Config::default();
+    for s in SMALL {
+        let (k, v) = s.split_once('=').expect("k=v");
+        base = base.with_override(k, v).expect("override");
+    }
+    // the first master seed from 2⁶⁴ − 1 down whose plan has an exposure seed ≥ 2⁶³
+    let (master, expected) = (0..64)
+        .map(|k| {
+            let m = u64::MAX - k;
+            let cfg = base.with_override("seed", &m.to_string()).expect("seed");
+            assert_eq!(cfg.seed, m);
+            let plan = engine::studies::sequence::plan(&seq, &cfg).expect("plan");
+            (
+                m,
+                plan.exposures.iter().map(|e| e.seed).collect::<Vec<u64>>(),
+            )
+        })
+        .find(|(_, s)| s.iter().any(|s| *s >= 1 << 63))
+        .expect("a plan with a seed ≥ 2⁶³");
+    let out = dir.join("plan");
+    let o = run(
+        &out,
+        &spec,
+        &["--plan-only", "--set", &format!("seed={master}")],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = std::fs::read_to_string(out.join("plan.csv")).expect("plan");
+    let header: Vec<&str> = text.lines().next().expect("header").split(',').collect();
+    let col = header
+        .iter()
+        .position(|h| *h == "seed")
+        .expect("seed column");
+    let seeds: Vec<u64> = text
+        .lines()
+        .skip(1)
+        .map(|l| {
+            let cell = l.split(',').nth(col).expect("seed cell");
+            cell.parse::<u64>()
+                .unwrap_or_else(|e| panic!("seed {cell:?}: {e}"))
+        })
+        .collect();
+    assert_eq!(seeds, expected);
+}

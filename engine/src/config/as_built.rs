@@ -43,6 +43,7 @@ impl Knowledge {
 pub struct AsBuilt {
     /// The instrument's own seed: the deviations are drawn from it, not from the run's seed, so every
     /// exposure of a sequence (each with its own run seed) shares one instrument.
+    #[serde(with = "super::seed")]
     pub seed: u64,
     /// Static low-order wavefront deviation over Fringe Z4–Z11 at the field's centre, nm rms of the
     /// wavefront (the terms drawn N(0, 1) in rms-normalised units, then scaled to exactly this rms).

@@ -8,6 +8,7 @@
 
 mod as_built;
 mod detector;
+pub(crate) mod seed;
 mod sky;
 mod text;
 mod validate;
@@ -52,6 +53,7 @@ fn invalid(field: &str, value: impl std::fmt::Display, allowed: &str) -> ConfigE
 #[serde(deny_unknown_fields, default)]
 pub struct Config {
     /// Master seed: every random stream (ACE, scene offsets, flat, noise) derives from it.
+    #[serde(with = "seed")]
     pub seed: u64,
     pub instrument: Instrument,
     pub band: Band,

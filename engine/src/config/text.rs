@@ -126,6 +126,36 @@ mod tests {
         assert_eq!(back.hash_hex(), c.hash_hex());
     }
 
+    /// Every u64 seed, 2⁶³ and above included, is given by `--set`, survives further overrides and
+    /// round-trips through the TOML.
+    #[test]
+    fn a_seed_of_the_full_u64_range_round_trips() {
+        let c = Config::default();
+        for seed in [u64::MAX, 1 << 63, 7] {
+            let d = c
+                .with_override("seed", &seed.to_string())
+                .expect("seed override");
+            assert_eq!(d.seed, seed);
+            let e = d
+                .with_override("sky.ra_deg", "1.0")
+                .expect("a later override");
+            assert_eq!((e.seed, e.sky.ra_deg), (seed, 1.0));
+            let f = e
+                .with_override("as_built.seed", &seed.to_string())
+                .expect("as-built seed");
+            assert_eq!(f.as_built.seed, seed);
+            assert_eq!(Config::from_toml_str(&e.to_toml()).expect("round trip"), e);
+        }
+        // a plain integer in a file still reads, and a bad one names the field
+        let g = Config::from_toml_str("seed = 18446744073709551615\n").expect("u64 in a file");
+        assert_eq!(g.seed, u64::MAX);
+        let err = c
+            .with_override("seed", "-1")
+            .expect_err("negative")
+            .to_string();
+        assert!(err.contains("seed"), "{err}");
+    }
+
     #[test]
     fn overrides_by_dotted_path() {
         let c = Config::default();

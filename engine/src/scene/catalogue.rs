@@ -120,6 +120,28 @@ impl Layout {
                 ),
             });
         }
+        // half a pair would leave the other pair to place the stars, or fail later on a missing column
+        let col = |i: usize| names[i].trim().to_string();
+        for (pair, (a, b), (na, nb)) in [
+            ("ra, dec", sky_cols, ("ra", "dec")),
+            ("x, y", pixel_cols, ("x", "y")),
+        ] {
+            let lone = match (a, b) {
+                (Some(i), None) => Some((col(i), nb)),
+                (None, Some(i)) => Some((col(i), na)),
+                _ => None,
+            };
+            if let Some((found, missing)) = lone {
+                return Err(SceneError::Parse {
+                    path: path.into(),
+                    line: 1,
+                    message: format!(
+                        "columns {names:?}: `{found}` without `{missing}` — a position is a pair: give \
+                         both `ra, dec` (degrees) or both `x, y` (pixels), not half of `{pair}`"
+                    ),
+                });
+            }
+        }
         let (pos, sky) = match sky_cols {
             (Some(a), Some(d)) => ([a, d], true),
             _ => match (find(&["x", "x_px"]), find(&["y", "y_px"])) {
@@ -446,4 +468,36 @@ fn read_fits(path: &Path, lim: &Limits) -> Result<Catalogue, SceneError> {
         rows.push(star_of(&get, &lay, lim, &at)?);
     }
     collect(rows, lay.sky, &p)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// One column of a pair (an `x` beside `ra, dec`, a lone `ra`) is refused, naming the columns found
+    /// and the pairs expected, instead of placing the stars by the other pair.
+    #[test]
+    fn a_catalogue_with_half_a_position_pair_is_refused() {
+        let dir = std::env::temp_dir().join(format!("jsim-cat-half-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("tmp");
+        for (name, header, lone, missing) in [
+            ("ra_dec_x", "ra,dec,x,hw", "x", "y"),
+            ("ra_dec_y", "ra,dec,y_px,hw", "y_px", "x"),
+            ("x_y_ra", "x,y,ra,hw", "ra", "dec"),
+            ("ra_only", "ra,hw", "ra", "dec"),
+            ("y_only", "y,hw", "y", "x"),
+        ] {
+            let p = dir.join(format!("{name}.csv"));
+            std::fs::write(&p, format!("{header}\n266.4,-29.0,10,12.5\n")).expect("write");
+            let msg = read(&p, 12.5, 2.0, 1968.0).expect_err(name).to_string();
+            assert!(
+                msg.contains(&format!("`{lone}` without `{missing}`"))
+                    && msg.contains("ra, dec")
+                    && msg.contains("x, y")
+                    && msg.contains(header.split(',').next().expect("a column")),
+                "{name}: {msg}"
+            );
+        }
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 }

@@ -111,7 +111,15 @@ pub fn build(cfg: &Config) -> Result<Scene, SceneError> {
                      quad focal plane, or set focal_plane.layout = \"single\"",
                     path.display()
                 ))),
-                catalogue::Catalogue::Sky(stars) => placement::place(cfg, &stars),
+                catalogue::Catalogue::Sky(stars) => {
+                    let scene = placement::place(cfg, &stars)?;
+                    let none_on =
+                        |c: &placement::PlacementCounts| c.photosensitive + c.border + c.gap == 0;
+                    if scene.counts.as_ref().is_some_and(none_on) {
+                        return Err(placement::outside_field(cfg, path, &stars));
+                    }
+                    Ok(scene)
+                }
             }
         }
         SceneKind::Bulge => placement::place(cfg, &bulge::draw(cfg)?),
@@ -243,5 +251,35 @@ mod tests {
         std::fs::write(&f, "10,10,inf,2\n").expect("write");
         let s = read_catalogue(&f, 13.0, 2.0, 1968.0).expect("inf");
         assert_eq!(crate::photometry::electrons_per_s(s[0].mag_hw, 5800.0), 0.0);
+    }
+
+    /// A sky catalogue wholly outside the field is an error naming the field's bounds and the
+    /// catalogue's, not an image of no stars; one with some stars outside is placed as before.
+    #[test]
+    fn a_catalogue_wholly_outside_the_field_is_refused() {
+        let dir = std::env::temp_dir().join(format!("jsim-scene-off-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("tmp");
+        let mut cfg = Config::default();
+        cfg.scene.kind = SceneKind::Catalogue;
+        let off = dir.join("off.csv");
+        std::fs::write(&off, "ra,dec,hw\n10,10,12.5\n12,11,13\n").expect("write");
+        cfg.scene.catalogue = Some(off);
+        let msg = build(&cfg).expect_err("wholly outside").to_string();
+        for part in [
+            "outside the field",
+            "RA 10 … 12°",
+            "Dec 10 … 11°",
+            "266.4",
+            "-29.0",
+        ] {
+            assert!(msg.contains(part), "{part:?} not in: {msg}");
+        }
+        let some = dir.join("some.csv");
+        std::fs::write(&some, "ra,dec,hw\n10,10,12.5\n266.4168,-29.0078,13\n").expect("write");
+        cfg.scene.catalogue = Some(some);
+        let scene = build(&cfg).expect("some outside");
+        let counts = scene.counts.expect("counts");
+        assert_eq!((counts.off, counts.photosensitive), (1, 1));
+        let _ = std::fs::remove_dir_all(&dir);
     }
 }

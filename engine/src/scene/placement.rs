@@ -167,3 +167,63 @@ pub fn place(cfg: &Config, stars: &[SkyStar]) -> Result<Scene, SceneError> {
         counts: Some(counts),
     })
 }
+
+/// The error of a sky catalogue none of whose stars reaches the focal plane: the field's bounds (its
+/// pointing, the radius to its farthest corner, the arrays' corners' RA/Dec range) and the catalogue's.
+pub fn outside_field(cfg: &Config, path: &std::path::Path, stars: &[SkyStar]) -> SceneError {
+    let n = cfg.instrument.detector_px as f64;
+    let (ra0, dec0) = (cfg.sky.ra_deg, cfg.sky.dec_deg);
+    let edges = [
+        (-0.5, -0.5),
+        (n - 0.5, -0.5),
+        (-0.5, n - 0.5),
+        (n - 0.5, n - 0.5),
+    ];
+    let corners: Vec<(f64, f64)> = (0..crate::sky::array_count(cfg))
+        .filter_map(|k| crate::sky::array_wcs(cfg, k).ok())
+        .flat_map(|w| {
+            edges
+                .iter()
+                .filter_map(|&(x, y)| w.pixel_to_sky(x, y))
+                .collect::<Vec<_>>()
+        })
+        .collect();
+    let separation = |ra: f64, dec: f64| {
+        let (d1, d2, dra) = (dec0.to_radians(), dec.to_radians(), (ra - ra0).to_radians());
+        let c = d1.sin() * d2.sin() + d1.cos() * d2.cos() * dra.cos();
+        c.clamp(-1.0, 1.0).acos().to_degrees()
+    };
+    let radius = corners
+        .iter()
+        .map(|&(ra, dec)| separation(ra, dec))
+        .fold(0.0, f64::max);
+    let range = |v: Vec<f64>| {
+        v.into_iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), x| {
+                (a.min(x), b.max(x))
+            })
+    };
+    let (fra, fdec) = (
+        range(corners.iter().map(|c| c.0).collect()),
+        range(corners.iter().map(|c| c.1).collect()),
+    );
+    let (cra, cdec) = (
+        range(stars.iter().map(|s| s.ra_deg).collect()),
+        range(stars.iter().map(|s| s.dec_deg).collect()),
+    );
+    SceneError::Invalid(format!(
+        "{}: every one of its {} stars is outside the field — the catalogue spans RA {} … {}°, Dec {} … {}°; \
+         the field is pointed at RA {ra0:.4}°, Dec {dec0:.4}° (sky.ra_deg, sky.dec_deg) with a radius of \
+         {radius:.3}° to its farthest corner (RA {:.4} … {:.4}°, Dec {:.4} … {:.4}°)",
+        path.display(),
+        stars.len(),
+        cra.0,
+        cra.1,
+        cdec.0,
+        cdec.1,
+        fra.0,
+        fra.1,
+        fdec.0,
+        fdec.1,
+    ))
+}

@@ -3,7 +3,7 @@
 //! ([`options`]); `jsim config --print-default` writes the commented default configuration.
 
 use anyhow::{Result, bail};
-use clap::{Args, Parser, Subcommand};
+use clap::{Args, CommandFactory, FromArgMatches, Parser, Subcommand};
 use engine::analysis::countermeasures::{DEFAULT_CATALOGUE_ERROR_MAS, Plan, TelemetryQuality};
 use engine::config::{AceCase, Config, ReadoutOrder};
 use engine::session::Session;
@@ -207,9 +207,61 @@ pub struct TelemetryArgs {
 }
 
 impl TelemetryArgs {
+    /// Each value in its range, whether or not a countermeasure uses it (the error names the option).
+    pub fn validate(&self) -> Result<()> {
+        use engine::analysis::countermeasures::{
+            MAX_ERROR_MAS, MAX_TELEMETRY_LATENCY_S, MAX_TELEMETRY_RATE_HZ,
+        };
+        let checks = [
+            (
+                "--telemetry-noise-mas",
+                self.noise_mas,
+                (0.0..=MAX_ERROR_MAS).contains(&self.noise_mas),
+                format!("[0, {MAX_ERROR_MAS}]"),
+            ),
+            (
+                "--telemetry-rate-hz",
+                self.rate_hz,
+                self.rate_hz > 0.0 && self.rate_hz <= MAX_TELEMETRY_RATE_HZ,
+                format!("(0, {MAX_TELEMETRY_RATE_HZ}]"),
+            ),
+            (
+                "--telemetry-latency-s",
+                self.latency_s,
+                self.latency_s.abs() <= MAX_TELEMETRY_LATENCY_S,
+                format!("[-{MAX_TELEMETRY_LATENCY_S}, {MAX_TELEMETRY_LATENCY_S}]"),
+            ),
+            (
+                "--telemetry-correlated-mas",
+                self.correlated_mas,
+                (0.0..=MAX_ERROR_MAS).contains(&self.correlated_mas),
+                format!("[0, {MAX_ERROR_MAS}]"),
+            ),
+            (
+                "--telemetry-correlation-s",
+                self.correlation_time_s,
+                self.correlation_time_s > 0.0 && self.correlation_time_s <= 1e6,
+                "(0, 1e6]".to_string(),
+            ),
+            (
+                "--reference-error-mas",
+                self.reference_error_mas,
+                self.reference_error_mas > 0.0 && self.reference_error_mas <= MAX_ERROR_MAS,
+                format!("(0, {MAX_ERROR_MAS}]"),
+            ),
+        ];
+        for (option, value, ok, range) in checks {
+            if !ok {
+                bail!("{option} {value}: allowed {range}");
+            }
+        }
+        Ok(())
+    }
+
     /// The plan of these countermeasure names with this telemetry quality and reference error, validated
     /// by the engine (the one place a plan is checked).
     pub fn plan<S: AsRef<str>>(&self, names: &[S]) -> Result<Plan> {
+        self.validate()?;
         let q = TelemetryQuality {
             noise_mas: self.noise_mas,
             rate_hz: self.rate_hz,
@@ -271,11 +323,27 @@ pub struct CountermeasureArgs {
 fn main() {
     quiet_mesa();
     outputs::install_interrupt_handler();
-    let cli = Cli::parse();
+    let cli = Cli::from_arg_matches(&command().get_matches()).unwrap_or_else(|e| e.exit());
     if let Err(e) = run(cli) {
         eprintln!("jsim: error: {}", message_of(&e));
         std::process::exit(1);
     }
+}
+
+/// The command line, where every option that takes a value accepts a negative number (`--latency -1`) as its
+/// value, so that the option's own range check answers rather than clap's "unexpected argument".
+fn command() -> clap::Command {
+    fn allow_negative(c: clap::Command) -> clap::Command {
+        c.mut_args(|a| {
+            if a.get_action().takes_values() {
+                a.allow_negative_numbers(true)
+            } else {
+                a
+            }
+        })
+        .mut_subcommands(allow_negative)
+    }
+    allow_negative(Cli::command())
 }
 
 /// An error and its causes on one line, each cause said once: an engine error already quotes its source

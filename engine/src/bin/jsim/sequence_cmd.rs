@@ -62,6 +62,9 @@ pub struct SequenceArgs {
 }
 
 pub fn sequence(a: &SequenceArgs) -> Result<()> {
+    if !(a.cell_deg > 1e-4 && a.cell_deg <= 1.0) {
+        bail!("--cell-deg {}: allowed (1e-4, 1]", a.cell_deg);
+    }
     let cfg = a.cfg.load()?;
     let spec = match &a.spec {
         Some(p) => sequence::Spec::load(p).map_err(anyhow::Error::msg)?,
@@ -103,7 +106,7 @@ pub fn sequence(a: &SequenceArgs) -> Result<()> {
             Cell::F(pa),
             Cell::S(e.start.utc_iso()),
             Cell::F(e.start.tdb_mjd()),
-            Cell::I(e.seed as i64),
+            Cell::S(e.seed.to_string()), // unsigned: a u64 seed ≥ 2⁶³ is no i64
         ]);
         flown_rows.push(vec![
             Cell::I(e.index as i64),

@@ -109,7 +109,7 @@ fn write(dir: &Path, rows: &[MagRow]) -> Result<(), IoError> {
             let h = &r.budget.hour;
             vec![
                 Cell::F(r.hw),
-                Cell::I(r.seed as i64),
+                Cell::S(r.seed.to_string()), // unsigned: a u64 seed ≥ 2⁶³ is no i64
                 Cell::I(r.sub_exposures as i64),
                 Cell::F(r.exposure_s),
                 Cell::F(r.measured.plate_ppm),
