@@ -222,6 +222,11 @@ pub fn with_countermeasure(
         reference,
     };
     report.dof_absorbed = countermeasures::apply(cm, &ctx, &mut stars)?;
+    if let Some(w) = telemetry.and_then(|t| t.wavefront.as_ref())
+        && cm.telemetry_quality().is_some()
+    {
+        report.static_profile = w.describe();
+    }
     if cm.needs_stare() {
         // the image alone is its own stack: nothing corrected until the stare is finished
         report.stare_exposures = Some(1);

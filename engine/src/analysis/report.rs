@@ -65,6 +65,11 @@ pub struct Report {
     /// of one, its own stack: nothing corrected), K for a stare of K; absent (`null`) when no plate model
     /// referenced to the stack was asked for.
     pub stare_exposures: Option<usize>,
+    /// The static profile a telemetry countermeasure saw each star through, when it was not the design
+    /// model PSF or the image's ePSF as configured: the design PSF corrected by the stars (its fitted terms and
+    /// their errors, nm rms). Left out of the JSON when empty.
+    #[serde(skip_serializing_if = "String::is_empty")]
+    pub static_profile: String,
 }
 
 impl Report {

@@ -78,6 +78,10 @@ pub fn radial(n: u32, m: u32, rho: f64) -> f64 {
     sum
 }
 
+/// The low-order Fringe terms (1-based) an as-built telescope departs from its design by: Z4 … Z11 — focus,
+/// astigmatism, coma, spherical, trefoil (`instrument` draws them; the analysis' design PSF correction fits them).
+pub const LOW_ORDER_TERMS: [usize; 8] = [4, 5, 6, 7, 8, 9, 10, 11];
+
 /// Fringe term `j` (1-based) at polar coordinates on the unit disk.
 pub fn fringe(j: usize, rho: f64, theta: f64) -> f64 {
     let (n, m, trig) = fringe_nm(j);

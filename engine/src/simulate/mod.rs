@@ -87,12 +87,12 @@ pub fn psf_colour(j_minus_h: f64, step_mag: f64) -> f64 {
     }
 }
 
-/// The low-order Fringe terms (1-based) whose derivative planes come with the design model PSF: Z4 … Z11,
-/// focus, astigmatism, coma, spherical, trefoil — the terms an as-built telescope departs by.
-pub const DESIGN_TERMS: [usize; 8] = [4, 5, 6, 7, 8, 9, 10, 11];
+/// The low-order Fringe terms whose derivative planes come with the design model PSF
+/// ([`crate::optics::zernike::LOW_ORDER_TERMS`]).
+pub const DESIGN_TERMS: [usize; 8] = crate::optics::zernike::LOW_ORDER_TERMS;
 
 /// The step of the derivative planes' central differences, nm rms of wavefront per term: small against the
-/// wavefront's own scale (a PSF's change is linear to ≲ 1 % over it), large against the tables' rounding.
+/// wavefront's own scale, large against the tables' rounding.
 pub const TERM_STEP_NM: f64 = 10.0;
 
 /// Per-exposure ACE statistics over the nominal window (mas).

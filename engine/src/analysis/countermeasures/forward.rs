@@ -251,9 +251,19 @@ fn deposit(
     (nodes, total)
 }
 
-impl Profile for StarProfile<'_> {
-    fn eval_at(&self, i: usize, px: f64, py: f64, x: f64, y: f64) -> (f64, f64, f64) {
-        let f = self.forward;
+impl StarProfile<'_> {
+    /// This star's pixels seen through another static profile's forward model of the same exposure (the same
+    /// track and timing: its histograms are this star's, its core and profile `f`'s) — a linear map of
+    /// the profile, so a profile's derivative planes cost one star's histograms, not one each.
+    pub fn eval_through(
+        &self,
+        f: &Forward<'_>,
+        i: usize,
+        px: f64,
+        py: f64,
+        x: f64,
+        y: f64,
+    ) -> (f64, f64, f64) {
         let Some(&k) = self.group_of.get(&i) else {
             // a pixel beyond the reach the histograms were made for: the static profile
             return f.profile.eval(px - x, py - y);
@@ -274,6 +284,12 @@ impl Profile for StarProfile<'_> {
             gy += w * c;
         }
         (v * grp.norm, gx * grp.norm, gy * grp.norm)
+    }
+}
+
+impl Profile for StarProfile<'_> {
+    fn eval_at(&self, i: usize, px: f64, py: f64, x: f64, y: f64) -> (f64, f64, f64) {
+        self.eval_through(self.forward, i, px, py, x, y)
     }
 }
 

@@ -38,6 +38,23 @@ pub struct WavefrontFit {
     pub profile: Epsf,
 }
 
+impl WavefrontFit {
+    /// One line for a report: `design PSF + Z4…Z11 fitted from N stars: Z4 +3.1 ± 0.8, … nm rms`.
+    pub fn describe(&self) -> String {
+        let terms: Vec<String> = crate::optics::zernike::LOW_ORDER_TERMS
+            .iter()
+            .map(|j| format!("Z{j}"))
+            .zip(self.coefficients_nm.iter().zip(&self.sigma_nm))
+            .map(|(n, (a, s))| format!("{n} {a:+.1} ± {s:.1}"))
+            .collect();
+        format!(
+            "design PSF corrected by {} stars: {} nm rms",
+            self.stars,
+            terms.join(", ")
+        )
+    }
+}
+
 /// ψ₀ + Σ a_j D_j on ψ₀'s grid (the planes share it: they are products of one table).
 pub fn corrected(psi0: &Epsf, terms: &[Epsf], a: &[f64]) -> Epsf {
     let mut e = psi0.clone();
@@ -120,11 +137,7 @@ pub fn fit(
             .par_iter()
             .map(|st| {
                 let p = fwd.star(st.x, st.y, reach, img.nx, img.ny);
-                let pt: Vec<_> = term_forwards
-                    .iter()
-                    .map(|f| f.star(st.x, st.y, reach, img.nx, img.ny))
-                    .collect();
-                star_blocks(&pd, &p, &pt, st, opts.radius_px)
+                star_blocks(&pd, &p, &term_forwards, st, opts.radius_px)
             })
             .collect();
         // the terms' normal equations with every star's (x, y, f) eliminated
@@ -189,10 +202,10 @@ pub fn fit(
 
 /// A star's blocks over the pixels within `radius_px`: the Jacobian of (x, y, f) is `(−f ∂ψ/∂x, −f ∂ψ/∂y, ψ)` of
 /// its forward profile, of the terms `f · (F_s D_j)`; `None` without pixels.
-fn star_blocks<P: Profile>(
+fn star_blocks(
     pd: &crate::analysis::epsf::fit::PixelData<'_>,
-    p: &P,
-    terms: &[P],
+    p: &super::forward::StarProfile<'_>,
+    terms: &[super::forward::Forward<'_>],
     st: &StarState,
     radius_px: f64,
 ) -> Option<Blocks> {
@@ -224,7 +237,7 @@ fn star_blocks<P: Profile>(
             let res = pd.e[i] - mu;
             let jn = [-st.f * gx, -st.f * gy, v];
             for (j, t) in terms.iter().enumerate() {
-                ja[j] = st.f * t.eval_at(i, fx, fy, st.x, st.y).0;
+                ja[j] = st.f * p.eval_through(t, i, fx, fy, st.x, st.y).0;
             }
             for c in 0..3 {
                 for d in 0..3 {
