@@ -343,36 +343,11 @@ fn a_plate_model_after_the_forward_model_removes_a_telemetry_drift() {
 #[test]
 fn the_deconvolved_epsf_approaches_the_static_profile() {
     use engine::analysis::countermeasures::forward_epsf::build_deconvolved;
-    use engine::analysis::countermeasures::telemetry::ExposureReadout;
     use engine::analysis::epsf::Epsf;
-    use engine::analysis::pipeline::{Supplied, analyze_prepared, build_options, telemetry_for};
+    use engine::analysis::pipeline::build_options;
     let c = noise_free_rolling();
     let sim = Simulator::new(&c).expect("sim");
-    let e = sim.exposure(0).expect("exposure");
-    let img = engine::session::source::analysis_image(&sim, &e.image);
-    let (plain, _) = analyze_prepared(&img, &Options::new(&c.analysis)).expect("analysis");
-    let src = engine::session::source::Source::new(&sim, 0);
-    let rec = src
-        .telemetry_record(&TelemetryQuality::IDEAL)
-        .expect("record")
-        .expect("telemetry");
-    let supplied = Supplied {
-        telemetry: Some(&rec),
-        readout: Some(ExposureReadout {
-            timing: sim.timing,
-            rotation_deg: 0.0,
-        }),
-        ..Default::default()
-    };
-    let tel = telemetry_for(
-        &TelemetryQuality::IDEAL,
-        &supplied,
-        &img,
-        &plain,
-        &c.analysis,
-    )
-    .expect("telemetry")
-    .expect("a realistic ACE has telemetry");
+    let (img, plain, tel) = common::with_ideal_telemetry(&sim, &c);
     let deconvolved = build_deconvolved(
         &img,
         &plain.stars,

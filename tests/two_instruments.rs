@@ -144,40 +144,13 @@ fn without_deviations_the_products_are_the_instruments_own() {
 /// left is the PSF's second-order change over 50 nm (the planes are first derivatives at the design).
 #[test]
 fn the_stars_teach_the_design_psf_the_as_built_wavefront() {
-    use engine::analysis::countermeasures::TelemetryQuality;
-    use engine::analysis::countermeasures::telemetry::ExposureReadout;
     use engine::analysis::countermeasures::wavefront;
     use engine::analysis::epsf::Epsf;
-    use engine::analysis::pipeline::{
-        Options, Supplied, analyze_prepared, build_options, telemetry_for,
-    };
+    use engine::analysis::pipeline::build_options;
     let mut c = common::noise_free_rolling();
     c.as_built.wavefront_rms_nm = 50.0;
     let sim = Simulator::new(&c).expect("sim");
-    let e = sim.exposure(0).expect("exposure");
-    let img = engine::session::source::analysis_image(&sim, &e.image);
-    let (plain, _) = analyze_prepared(&img, &Options::new(&c.analysis)).expect("analysis");
-    let rec = engine::session::source::Source::new(&sim, 0)
-        .telemetry_record(&TelemetryQuality::IDEAL)
-        .expect("record")
-        .expect("telemetry");
-    let supplied = Supplied {
-        telemetry: Some(&rec),
-        readout: Some(ExposureReadout {
-            timing: sim.timing,
-            rotation_deg: 0.0,
-        }),
-        ..Default::default()
-    };
-    let tel = telemetry_for(
-        &TelemetryQuality::IDEAL,
-        &supplied,
-        &img,
-        &plain,
-        &c.analysis,
-    )
-    .expect("telemetry")
-    .expect("a realistic ACE has telemetry");
+    let (img, plain, tel) = common::with_ideal_telemetry(&sim, &c);
     let psi0 = engine::io::instrument::model_psf_product(&sim).expect("model PSF");
     let terms = engine::io::instrument::model_psf_terms(&sim).expect("terms");
     let w = wavefront::fit(

@@ -148,3 +148,43 @@ pub fn noise_free_rolling() -> engine::config::Config {
     c.analysis.crowding = engine::config::Crowding::Off;
     c
 }
+
+/// Exposure 0 of `sim` analysed plainly, and its telemetry with perfect (`IDEAL`) recording as the analysis
+/// applies it: the image, the plain analysis and the telemetry (a realistic ACE).
+pub fn with_ideal_telemetry(
+    sim: &engine::simulate::Simulator,
+    cfg: &engine::config::Config,
+) -> (
+    engine::analysis::AnalysisImage,
+    engine::analysis::pipeline::Analysis,
+    engine::analysis::countermeasures::Telemetry,
+) {
+    use engine::analysis::countermeasures::TelemetryQuality;
+    use engine::analysis::countermeasures::telemetry::ExposureReadout;
+    use engine::analysis::pipeline::{Options, Supplied, analyze_prepared, telemetry_for};
+    let e = sim.exposure(0).expect("exposure");
+    let img = engine::session::source::analysis_image(sim, &e.image);
+    let (plain, _) = analyze_prepared(&img, &Options::new(&cfg.analysis)).expect("analysis");
+    let rec = engine::session::source::Source::new(sim, 0)
+        .telemetry_record(&TelemetryQuality::IDEAL)
+        .expect("record")
+        .expect("telemetry");
+    let supplied = Supplied {
+        telemetry: Some(&rec),
+        readout: Some(ExposureReadout {
+            timing: sim.timing,
+            rotation_deg: 0.0,
+        }),
+        ..Default::default()
+    };
+    let tel = telemetry_for(
+        &TelemetryQuality::IDEAL,
+        &supplied,
+        &img,
+        &plain,
+        &cfg.analysis,
+    )
+    .expect("telemetry")
+    .expect("a realistic ACE has telemetry");
+    (img, plain, tel)
+}
