@@ -443,7 +443,7 @@ pub fn model_psf(
     ))
 }
 
-/// The design model PSF's change per nm rms of each low-order term ([`crate::simulate::DESIGN_TERMS`]: Z4 …
+/// The design model PSF's change per nm rms of each low-order term ([`crate::optics::zernike::LOW_ORDER_TERMS`]: Z4 …
 /// Z11), on its grid: `(ψ(+h) − ψ(−h)) / 2h` from the design kernels with the term moved by ∓ h =
 /// [`crate::simulate::TERM_STEP_NM`]; single precision, as the file holds them.
 pub fn model_psf_terms(
@@ -524,12 +524,16 @@ pub fn write_model_psf(dir: &Path, sim: &Simulator) -> Result<PathBuf, IoError> 
         }
         _ => Vec::new(),
     };
-    let names: Vec<String> = crate::simulate::DESIGN_TERMS
+    let names: Vec<String> = crate::optics::zernike::LOW_ORDER_TERMS
         .iter()
         .map(|&j| model_psf_term_extension(j))
         .collect();
     let mut hdus = vec![model_psf_hdu("", &e, sim)];
-    for ((t, name), j) in terms.iter().zip(&names).zip(crate::simulate::DESIGN_TERMS) {
+    for ((t, name), j) in terms
+        .iter()
+        .zip(&names)
+        .zip(crate::optics::zernike::LOW_ORDER_TERMS)
+    {
         hdus.push(super::products::epsf_hdu(
             name.as_str(),
             t,
@@ -557,7 +561,7 @@ pub fn read_model_psf_terms(
     path: &Path,
 ) -> Result<Option<Vec<crate::analysis::epsf::Epsf>>, IoError> {
     let names = fits::extension_names(path)?;
-    let wanted: Vec<String> = crate::simulate::DESIGN_TERMS
+    let wanted: Vec<String> = crate::optics::zernike::LOW_ORDER_TERMS
         .iter()
         .map(|&j| model_psf_term_extension(j))
         .collect();
