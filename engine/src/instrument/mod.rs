@@ -22,11 +22,10 @@
 //!   relative spread σ for small σ).
 
 use crate::config::{Config, FieldWfe, SipTerm};
+use crate::optics::zernike::LOW_ORDER_TERMS;
+use crate::optics::{add_term, coefficient_of_nm_rms};
 use crate::rng::{self, Stream};
 use rand_distr::{Distribution, StandardNormal};
-
-/// Index of the first deviated Fringe term (Z4) in a coefficient list (Z1 at 0).
-const FIRST_TERM: usize = 3;
 
 /// Why an as-built instrument could not be drawn.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -135,12 +134,11 @@ impl WavefrontDeviation {
         })
     }
 
-    /// The deviation's Fringe coefficients Z4 … Z11 (nm OPD) at (u, v) half-widths from the array's centre.
-    fn coefficients_nm(&self, u: f64, v: f64) -> [f64; 8] {
+    /// The deviation of each term Z4 … Z11 (nm rms of wavefront) at (u, v) half-widths from the array's centre.
+    fn rms_nm(&self, u: f64, v: f64) -> [f64; 8] {
         let mut c = [0.0; 8];
         for j in 0..8 {
-            let rms_of_unit = crate::optics::zernike::fringe_norm(FIRST_TERM + j + 1).sqrt();
-            c[j] = (self.centre[j] + u * self.per_x[j] + v * self.per_y[j]) / rms_of_unit;
+            c[j] = self.centre[j] + u * self.per_x[j] + v * self.per_y[j];
         }
         c
     }
@@ -154,17 +152,17 @@ fn add_wavefront(built: &mut Config, design: &Config) -> Result<(), InstrumentEr
         return Ok(());
     }
     let dev = WavefrontDeviation::draw(design)?;
-    // µm OPD per configured unit (its sign convention included): the deviation in the table's units
-    let um_per_unit = crate::optics::to_um(&design.optics, &[1.0])[0];
     let n = design.instrument.detector_px as f64;
     let half = ((n - 1.0) / 2.0).max(0.5);
+    // the deviation in the table's units and sign
     let add = |row: &mut FieldWfe| {
-        let c = dev.coefficients_nm((row.x_px - half) / half, (row.y_px - half) / half);
-        if row.fringe.len() < FIRST_TERM + 8 {
-            row.fringe.resize(FIRST_TERM + 8, 0.0);
-        }
-        for j in 0..8 {
-            row.fringe[FIRST_TERM + j] += c[j] * 1e-3 / um_per_unit;
+        let c = dev.rms_nm((row.x_px - half) / half, (row.y_px - half) / half);
+        for (&j, nm) in LOW_ORDER_TERMS.iter().zip(c) {
+            add_term(
+                &mut row.fringe,
+                j,
+                coefficient_of_nm_rms(&design.optics, j, nm),
+            );
         }
     };
     let o = &mut built.optics;

@@ -32,6 +32,20 @@ pub fn to_um(optics: &Optics, coeffs: &[f64]) -> Vec<f64> {
     v
 }
 
+/// A wavefront of `nm_rms` nanometres rms in Fringe term `j` (1-based) as a coefficient in the configuration's
+/// unit and sign ([`to_um`]'s inverse; the term's rms over the unit disk is `√zernike::fringe_norm(j)`).
+pub fn coefficient_of_nm_rms(optics: &Optics, j: usize, nm_rms: f64) -> f64 {
+    nm_rms / zernike::fringe_norm(j).sqrt() * 1e-3 / to_um(optics, &[1.0])[0]
+}
+
+/// Add `value` to Fringe term `j` (1-based) of a coefficient list, lengthening it with zeros as needed.
+pub fn add_term(fringe: &mut Vec<f64>, j: usize, value: f64) {
+    if fringe.len() < j {
+        fringe.resize(j, 0.0);
+    }
+    fringe[j - 1] += value;
+}
+
 /// A PSF's place in the field: its wavefront (Fringe coefficients, µm OPD), exactly (`Exact`, bit
 /// patterns) or rounded to the bank's tolerance (`Rounded`, multiples of `optics.field_wfe_step_nm`), so that
 /// stars whose interpolated wavefronts round alike share one PSF.

@@ -472,24 +472,15 @@ impl Simulator {
         if let Some(k) = self.term_kernels.get() {
             return Ok(k);
         }
-        let um_per_unit = crate::optics::to_um(&self.cfg.optics, &[1.0])[0];
         let mut out = Vec::with_capacity(DESIGN_TERMS.len());
         for &j in DESIGN_TERMS.iter() {
-            let unit_rms = crate::optics::zernike::fringe_norm(j).sqrt();
-            let delta = TERM_STEP_NM * 1e-3 / um_per_unit / unit_rms;
+            let delta = crate::optics::coefficient_of_nm_rms(&self.cfg.optics, j, TERM_STEP_NM);
             let kernel = |sign: f64| -> Result<Arc<PixelKernel>, SimError> {
                 let mut c = self.cfg.clone();
-                let add = |f: &mut Vec<f64>| {
-                    if f.len() < j {
-                        f.resize(j, 0.0);
-                    }
-                    f[j - 1] += sign * delta;
-                };
-                add(&mut c.optics.fringe);
-                c.optics
-                    .field_table
-                    .iter_mut()
-                    .for_each(|r| add(&mut r.fringe));
+                crate::optics::add_term(&mut c.optics.fringe, j, sign * delta);
+                for r in c.optics.field_table.iter_mut() {
+                    crate::optics::add_term(&mut r.fringe, j, sign * delta);
+                }
                 let bank = PsfBank::new(&c);
                 let psf = self.in_array_axes(bank.get(c.scene.j_minus_h, &bank.centre_key()));
                 self.kernel_with_blur(&psf, 0.0)
