@@ -360,17 +360,7 @@ fn the_deconvolved_epsf_approaches_the_static_profile() {
     let mut truth = Epsf::from_fn(4, c.analysis.epsf_radius_px, |x, y| kernel.eval(x, y));
     truth.normalise();
     let truth = truth.recentred();
-    let rms = |e: &Epsf| {
-        let (mut s, mut n) = (0.0, 0);
-        for k in 0..=16 {
-            for j in 0..=16 {
-                let (x, y) = (-2.0 + 0.25 * j as f64, -2.0 + 0.25 * k as f64);
-                s += (e.value(x, y) - truth.value(x, y)).powi(2);
-                n += 1;
-            }
-        }
-        (s / n as f64).sqrt() / truth.value(0.0, 0.0)
-    };
+    let rms = |e: &Epsf| common::profile_rms_of_peak(e, &truth);
     let (blurred, decon) = (rms(&plain.epsf), rms(&deconvolved));
     eprintln!(
         "rms from the static profile (of its peak): image ePSF {blurred:.4}, deconvolved {decon:.4}"

@@ -208,17 +208,7 @@ fn the_stars_teach_the_design_psf_the_as_built_wavefront() {
     let kernel = sim.optical_kernel().expect("as-built kernel");
     let mut truth_psf = Epsf::from_fn(8, c.analysis.epsf_radius_px, |x, y| kernel.eval(x, y));
     truth_psf.normalise();
-    let rms = |e: &Epsf| {
-        let (mut s, mut n) = (0.0, 0);
-        for k in 0..=16 {
-            for j in 0..=16 {
-                let (x, y) = (-2.0 + 0.25 * j as f64, -2.0 + 0.25 * k as f64);
-                s += (e.value(x, y) - truth_psf.value(x, y)).powi(2);
-                n += 1;
-            }
-        }
-        (s / n as f64).sqrt() / truth_psf.value(0.0, 0.0)
-    };
+    let rms = |e: &Epsf| common::profile_rms_of_peak(e, &truth_psf);
     let (before, after) = (rms(&psi0), rms(&w.profile));
     eprintln!("rms from the as-built PSF (of its peak): design {before:.4}, fitted {after:.4}");
     assert!(after < 0.5 * before, "{after} vs {before}");

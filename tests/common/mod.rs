@@ -188,3 +188,20 @@ pub fn with_ideal_telemetry(
     .expect("a realistic ACE has telemetry");
     (img, plain, tel)
 }
+
+/// RMS difference of profile `e` from `truth` over the inner 2 px (a 17 × 17 grid of ¼-px steps), as a fraction
+/// of `truth`'s central value: how far an ePSF lies from a reference profile.
+pub fn profile_rms_of_peak(
+    e: &engine::analysis::epsf::Epsf,
+    truth: &engine::analysis::epsf::Epsf,
+) -> f64 {
+    let (mut s, mut n) = (0.0, 0);
+    for k in 0..=16 {
+        for j in 0..=16 {
+            let (x, y) = (-2.0 + 0.25 * j as f64, -2.0 + 0.25 * k as f64);
+            s += (e.value(x, y) - truth.value(x, y)).powi(2);
+            n += 1;
+        }
+    }
+    (s / n as f64).sqrt() / truth.value(0.0, 0.0)
+}
