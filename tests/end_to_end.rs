@@ -504,3 +504,30 @@ fn a_reference_catalogue_of_another_pointing_is_refused() {
         let _ = std::fs::remove_dir_all(d);
     }
 }
+
+/// A seed of all 64 bits is written as itself: the header card as the FITS standard's text reads it (a
+/// signed card would have held −1), and the `CONFIG` extension's seed with it.
+#[test]
+fn a_seed_beyond_two_to_the_63_is_written_as_itself() {
+    let mut cfg = small_config();
+    cfg.seed = u64::MAX;
+    cfg.fidelity.images = 1;
+    cfg.ace.case = AceCase::None;
+    let sim = Simulator::new(&cfg).expect("simulator");
+    let exp = sim.exposure(0).expect("exposure");
+    let dir = temp_dir("e2e-big-seed");
+    let files = exposure::write_exposure(&dir, &sim, &exp).expect("write");
+    // the primary header: 80-character cards from the file's start, `KEY     = value / comment`
+    let bytes = std::fs::read(&files.image).expect("file");
+    let card = bytes
+        .chunks(80)
+        .take_while(|c| !c.starts_with(b"END "))
+        .map(|c| String::from_utf8_lossy(c).into_owned())
+        .find(|c| c.starts_with("SEED    ="))
+        .expect("a SEED card");
+    let value = card[10..].split('/').next().unwrap_or("").trim();
+    assert_eq!(value, u64::MAX.to_string(), "{card}");
+    let conf = fits::read_text(&files.image, "CONFIG").expect("CONFIG");
+    let back = engine::config::Config::from_toml_str(&conf).expect("parses");
+    assert_eq!(back.seed, u64::MAX);
+}

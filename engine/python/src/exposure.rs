@@ -56,6 +56,7 @@ impl PyExposure {
             match c.value {
                 Value::F(v) => header.set_item(c.key, engine::io::fits::as_header_f64(v))?,
                 Value::I(v) => header.set_item(c.key, v)?,
+                Value::U(v) => header.set_item(c.key, v)?,
                 Value::S(v) => header.set_item(c.key, v)?,
             }
         }
@@ -113,6 +114,7 @@ impl PyExposure {
             |k| match header.get(k) {
                 Some(Value::F(v)) => Some(engine::io::fits::as_header_f64(*v)),
                 Some(Value::I(v)) => Some(*v as f64),
+                Some(Value::U(v)) => Some(*v as f64),
                 _ => None,
             },
             |k| match header.get(k) {

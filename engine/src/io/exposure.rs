@@ -148,7 +148,7 @@ pub fn headers(sim: &Simulator, exp: &Exposure) -> Vec<Card> {
             c.instrument.plate_scale_mas(),
             "[mas/pix] plate scale",
         ),
-        Card::i("SEED", c.seed as i64, "master random seed"),
+        Card::u("SEED", c.seed, "master random seed"),
         Card::i(
             "IMAGEIDX",
             exp.index as i64,

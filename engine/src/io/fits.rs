@@ -22,6 +22,9 @@ use std::path::Path;
 pub enum Value {
     F(f64),
     I(i64),
+    /// An unsigned integer (a seed: all 64 bits, which a signed card would wrap); FITS integers have no
+    /// fixed width.
+    U(u64),
     S(String),
 }
 
@@ -45,6 +48,14 @@ impl Card {
         Self {
             key: key.into(),
             value: Value::I(v),
+            comment: comment.into(),
+        }
+    }
+    /// An unsigned card (a seed).
+    pub fn u(key: &str, v: u64, comment: &str) -> Self {
+        Self {
+            key: key.into(),
+            value: Value::U(v),
             comment: comment.into(),
         }
     }
@@ -127,6 +138,7 @@ fn write_cards(
         let r = match &c.value {
             Value::F(v) => hdu.write_key(f, &c.key, (*v, c.comment.as_str())),
             Value::I(v) => hdu.write_key(f, &c.key, (*v, c.comment.as_str())),
+            Value::U(v) => hdu.write_key(f, &c.key, (*v, c.comment.as_str())),
             Value::S(v) => hdu.write_key(f, &c.key, (v.clone(), c.comment.as_str())),
         };
         r.map_err(|e| IoError::fits(path, format!("header {}: {e}", c.key)))?;

@@ -27,7 +27,7 @@ fn primary_cards(fps: &FocalPlaneSimulator, exp: &FocalPlaneExposure) -> Vec<Car
     // the validated configuration always has a pointing; the configured one stands in otherwise
     let axis = crate::sky::pointing(c).unwrap_or_else(|_| crate::sky::Pointing::from(&c.sky));
     let mut cards = vec![
-        Card::i("SEED", c.seed as i64, "master random seed"),
+        Card::u("SEED", c.seed, "master random seed"),
         Card::i("IMAGEIDX", exp.index as i64, "image index in the dataset"),
         Card::i(
             "NARRAYS",
@@ -124,9 +124,9 @@ pub fn write_focal_plane_exposure(
             sim.array.index as i64 + 1,
             "array number (1-4)",
         ));
-        cards.push(Card::i(
+        cards.push(Card::u(
             "ARRSEED",
-            sim.array.seed as i64,
+            sim.array.seed,
             "seed of this array's flat/noise",
         ));
         let n = e.image.n;

@@ -50,7 +50,7 @@ pub struct CalibrationFlat {
 fn flat_cards(sim: &Simulator, error: f64) -> Vec<Card> {
     vec![
         Card::f("FLATERR", error, "relative 1-sigma error per pixel"),
-        Card::i("SEED", sim.cfg.seed as i64, "master random seed"),
+        Card::u("SEED", sim.cfg.seed, "master random seed"),
         Card::s("CONFHASH", sim.cfg.hash_hex(), "configuration hash"),
         Card::s("ORIGIN", "jsim", "JASMINE image simulator"),
         Card::s(
@@ -748,7 +748,7 @@ pub fn write_telemetry(
                         index as i64,
                         "the exposure this telemetry covers",
                     ),
-                    Card::i("SEED", sim.cfg.seed as i64, "master random seed"),
+                    Card::u("SEED", sim.cfg.seed, "master random seed"),
                     Card::s("CONFHASH", sim.cfg.hash_hex(), "configuration hash"),
                     Card::s("CONTENT", "attitude telemetry", "telescope frame, recorded"),
                 ],

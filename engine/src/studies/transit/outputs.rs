@@ -166,7 +166,7 @@ pub fn write_products(dir: &Path, obs: &Observation) -> Result<(), IoError> {
     crate::io::ensure_dir(dir)?;
     let d = &obs.cfg.detector;
     let primary = vec![
-        Card::i("SEED", obs.cfg.seed as i64, "master seed"),
+        Card::u("SEED", obs.cfg.seed, "master seed"),
         Card::f(
             "PLATE_S",
             obs.readout.plate_s,
