@@ -99,3 +99,38 @@ fn the_shape_term_predicts_what_the_shift_correction_leaves() {
         assert!(p_model < 0.05 && m_model < 0.3, "{p_model} {m_model}");
     }
 }
+
+/// The predictor is a planner's tool: it knows the design, not the instrument as built. With the as-built
+/// wavefront 40 nm rms off the design, its prediction is the design instrument's, to the last bit — and
+/// the as-built PSF would have predicted something else.
+#[test]
+fn the_predictor_knows_the_design_and_not_the_instrument_as_built() {
+    use engine::analysis::countermeasures::Countermeasure;
+    use engine::config::AsBuilt;
+    use engine::studies::predict::Predictor;
+    let mut design = small_config();
+    design.ace.case = AceCase::Gaussian;
+    design.fidelity.images = 1;
+    let mut built = design.clone();
+    built.as_built = AsBuilt {
+        seed: 2,
+        wavefront_rms_nm: 40.0,
+        ..AsBuilt::default()
+    };
+    let predict = |c: &engine::config::Config| {
+        let sim = engine::simulate::Simulator::new(c).expect("simulator");
+        Predictor::new(&sim, &c.analysis)
+            .expect("predictor")
+            .predict(&Countermeasure::None)
+            .expect("prediction")
+    };
+    let (d, b) = (predict(&design), predict(&built));
+    assert_eq!(d, b, "design {d} mas, with an as-built instrument {b} mas");
+    // the oracle control hands the predictor the as-built PSF: a different bound
+    built.as_built.knowledge = engine::config::Knowledge::AsBuilt;
+    let o = predict(&built);
+    assert!(
+        (o - d).abs() > 1e-6 * d,
+        "the as-built PSF predicts {o} like the design's {d}"
+    );
+}

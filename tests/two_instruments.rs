@@ -135,6 +135,30 @@ fn without_deviations_the_products_are_the_instruments_own() {
     assert_eq!(model.data, truth.data);
 }
 
+/// The design PSF corrected by exposure 0's stars (`design-fitted`: the Z4–Z11 terms fitted through the
+/// design's derivative planes, each star through its ideal telemetry), and the design PSF it started from.
+fn design_fitted(
+    sim: &Simulator,
+    cfg: &Config,
+) -> (
+    engine::analysis::countermeasures::wavefront::WavefrontFit,
+    engine::analysis::epsf::Epsf,
+) {
+    let (img, plain, tel) = common::with_ideal_telemetry(sim, cfg);
+    let psi0 = engine::io::instrument::model_psf_product(sim).expect("model PSF");
+    let terms = engine::io::instrument::model_psf_terms(sim).expect("terms");
+    let w = engine::analysis::countermeasures::wavefront::fit(
+        &img,
+        &plain.stars,
+        &psi0,
+        &terms,
+        &tel,
+        &engine::analysis::pipeline::build_options(&cfg.analysis).fit,
+    )
+    .expect("a fit");
+    (w, psi0)
+}
+
 /// The analysis learns the as-built wavefront from the stars: on a noise-free rolling image (450-mas realistic
 /// ACE, ideal telemetry) of an instrument 50 nm rms off its design, the Z4–Z11 coefficients fitted through the
 /// design's derivative planes, each star seen through its own windows' jitter
@@ -144,24 +168,11 @@ fn without_deviations_the_products_are_the_instruments_own() {
 /// left is the PSF's second-order change over 50 nm (the planes are first derivatives at the design).
 #[test]
 fn the_stars_teach_the_design_psf_the_as_built_wavefront() {
-    use engine::analysis::countermeasures::wavefront;
     use engine::analysis::epsf::Epsf;
-    use engine::analysis::pipeline::build_options;
     let mut c = common::noise_free_rolling();
     c.as_built.wavefront_rms_nm = 50.0;
     let sim = Simulator::new(&c).expect("sim");
-    let (img, plain, tel) = common::with_ideal_telemetry(&sim, &c);
-    let psi0 = engine::io::instrument::model_psf_product(&sim).expect("model PSF");
-    let terms = engine::io::instrument::model_psf_terms(&sim).expect("terms");
-    let w = wavefront::fit(
-        &img,
-        &plain.stars,
-        &psi0,
-        &terms,
-        &tel,
-        &build_options(&c.analysis).fit,
-    )
-    .expect("a fit");
+    let (w, psi0) = design_fitted(&sim, &c);
 
     // the drawn deviation, nm rms per term (the truth: read by this test alone)
     let built = engine::instrument::realise(&c).expect("as built");
@@ -235,4 +246,188 @@ fn the_derivative_planes_round_trip_through_the_model_psf_file() {
     let other = engine::testkit::temp_dir("no-derivative-planes");
     let path = write_model_psf(&other, &plain).expect("write");
     assert!(read_model_psf_terms(&path).expect("read").is_none());
+}
+
+/// The pointing and roll offsets and the quad's array placement: the header's WCS is the plan's (the
+/// planned axis, the arrays at their drawn places), the stars land through the as-built one, and the plate
+/// solution against the catalogue (`analysis::registration`) recovers the difference from the stars.
+#[test]
+fn the_header_points_where_planned_and_the_catalogue_registration_finds_where_the_stars_are() {
+    use engine::analysis::registration::register;
+    use engine::config::Layout;
+    let mut cfg = small_config();
+    cfg.fidelity.images = 1;
+    cfg.focal_plane.layout = Layout::Quad;
+    cfg.focal_plane.gap_px = 60.0;
+    cfg.as_built.pointing_offset_arcsec = [2.5, -1.75];
+    cfg.as_built.roll_offset_arcsec = 40.0;
+    cfg.validate().expect("valid");
+    let built = engine::instrument::realise(&cfg).expect("as built");
+    let design = engine::instrument::design_of(&cfg);
+    // the design: the planned axis and nominal arrays; the as-built: the sky moved by the offset
+    assert_eq!(design.sky, cfg.sky);
+    assert_eq!(design.focal_plane.array_offsets_px, [[0.0; 2]; 4]);
+    let moved = engine::sky::apparent::offset_mas(
+        (cfg.sky.ra_deg, cfg.sky.dec_deg),
+        (built.sky.ra_deg, built.sky.dec_deg),
+    );
+    assert!(
+        (moved.0 - 2500.0).abs() < 1e-6 && (moved.1 + 1750.0).abs() < 1e-6,
+        "{moved:?}"
+    );
+    assert!((built.sky.pa_deg - cfg.sky.pa_deg - 40.0 / 3600.0).abs() < 1e-12);
+
+    let n = cfg.instrument.detector_px as f64;
+    for k in 0..4 {
+        let truth = engine::sky::array_wcs(&built, k).expect("as-built WCS");
+        let header = engine::sky::array_wcs(&design, k).expect("design WCS");
+        // stars on a grid: where they land (truth) and where the header puts their sky places (catalogue)
+        let mut landed = Vec::new();
+        let mut catalogue = Vec::new();
+        for i in 0..30 {
+            for j in 0..30 {
+                let p = (
+                    10.0 + i as f64 * (n - 20.0) / 29.0,
+                    10.0 + j as f64 * (n - 20.0) / 29.0,
+                );
+                let (ra, dec) = truth.pixel_to_sky(p.0, p.1).expect("sky");
+                landed.push(p);
+                catalogue.push(header.sky_to_pixel(ra, dec).expect("pixel"));
+            }
+        }
+        // the header misses by the pointing offset (≈ 6.5 px) plus the array's assembly offset (≈ 10 px,
+        // in any direction: at least a pixel everywhere)
+        let miss = landed
+            .iter()
+            .zip(&catalogue)
+            .map(|(a, b)| (a.0 - b.0).hypot(a.1 - b.1))
+            .fold(f64::INFINITY, f64::min);
+        assert!(miss > 1.0, "array {k}: {miss} px");
+        // the registration from the stars alone puts every catalogue star where it landed, to 0.01 px
+        let flux: Vec<f64> = (0..landed.len()).map(|i| 1.0 + i as f64).collect();
+        let reg = register(&landed, &flux, &catalogue);
+        // the 500 brightest fits pair, less those the 3σ clip leaves out
+        assert!(reg.pairs >= 450, "array {k}: {reg:?}");
+        let worst = landed
+            .iter()
+            .zip(&catalogue)
+            .map(|(a, &c)| {
+                let r = reg.apply(c);
+                (a.0 - r.0).hypot(a.1 - r.1)
+            })
+            .fold(0.0, f64::max);
+        assert!(worst < 0.01, "array {k}: {worst} px after registration");
+    }
+}
+
+/// A simulated exposure with a pointing offset: the header's reference pixel points at the planned axis,
+/// the reference catalogue's pixel columns are the header's, and the stars are imaged elsewhere.
+#[test]
+fn a_pointing_offset_moves_the_stars_and_not_the_header() {
+    let mut cfg = small_config();
+    cfg.fidelity.images = 1;
+    cfg.scene.kind = engine::config::SceneKind::Bulge;
+    cfg.scene.bulge.density_per_arcmin2 = 20.0;
+    cfg.as_built.pointing_offset_arcsec = [3.0, 0.0];
+    cfg.validate().expect("valid");
+    let sim = Simulator::new(&cfg).expect("sim");
+    let mut plain = cfg.clone();
+    plain.as_built = AsBuilt::default();
+    let plan = Simulator::new(&plain).expect("sim");
+    // the header is the plan's, bit for bit
+    let (h, p) = (
+        sim.design_wcs().expect("header"),
+        plan.design_wcs().expect("plan"),
+    );
+    assert_eq!(h.keywords(), p.keywords());
+    // the same sky (the mock bulge is drawn where the telescope was meant to point) …
+    let ids = |s: &Simulator| s.stars.iter().map(|t| t.id).collect::<Vec<_>>();
+    let common: Vec<usize> = ids(&sim)
+        .into_iter()
+        .filter(|i| ids(&plan).contains(i))
+        .collect();
+    assert!(common.len() > 20, "{}", common.len());
+    // … seen from an axis 3″ further east: a star moves 3″/scale towards +x, west (east is −x at PA 0; the
+    // distortion, evaluated 6 px away, changes it by < 0.01 px)
+    let shift = 3000.0 / cfg.instrument.plate_scale_mas();
+    for id in common {
+        let a = sim.stars.iter().find(|s| s.id == id).expect("star");
+        let b = plan.stars.iter().find(|s| s.id == id).expect("star");
+        assert!(
+            (a.x_px - b.x_px - shift).abs() < 0.01 && (a.y_px - b.y_px).abs() < 0.01,
+            "star {id}: {:?} against {:?}",
+            (a.x_px, a.y_px),
+            (b.x_px, b.y_px)
+        );
+    }
+    // the catalogue's pixel columns are the header's: they miss the stars by the offset
+    let cat = reference_catalogue(&sim, &SurveyModel::default(), 0);
+    let planned = reference_catalogue(&plan, &SurveyModel::default(), 0);
+    assert!(!cat.is_empty());
+    for c in &cat {
+        if let Some(q) = planned.iter().find(|q| q.id == c.id) {
+            // the survey's errors are the same draws; the pixel columns are where the plan puts the star
+            assert!(
+                (c.x_px - q.x_px).abs() < 1e-3 && (c.y_px - q.y_px).abs() < 1e-3,
+                "{c:?} against {q:?}"
+            );
+        }
+    }
+}
+
+/// The orbit's focus breathing is tracked exposure by exposure: two exposures half an orbit apart see the
+/// as-built focus at +A and −A (60 nm of Z4 breathing about the design), and the design PSF corrected by each
+/// exposure's own stars (`design-fitted`) lies closer to that exposure's as-built PSF than to the other's
+/// (by at least half), and closer than the design PSF itself.
+#[test]
+fn the_design_fitted_psf_follows_the_focus_breathing() {
+    use engine::analysis::epsf::Epsf;
+    let mut c = common::noise_free_rolling();
+    c.as_built.focus_breathing_nm = 60.0;
+    // the drawn phase: of two starts a quarter orbit apart, the one where the focus is furthest off (≥ A/√2)
+    let focus_nm = |c: &Config| {
+        let built = engine::instrument::realise(c).expect("as built");
+        let um = |f: &[f64]| engine::optics::to_um(&c.optics, f)[3];
+        (um(&built.optics.field_table[0].fringe) - um(&c.optics.fringe))
+            * 1e3
+            * engine::optics::zernike::fringe_norm(4).sqrt()
+    };
+    let at = |start: &str| {
+        let mut d = c.clone();
+        d.observation.start_utc = start.into();
+        d
+    };
+    let [a, b] = [
+        ["2031-03-21T00:00:00", "2031-03-21T00:48:21"],
+        ["2031-03-21T00:24:10.5", "2031-03-21T01:12:31.5"],
+    ]
+    .into_iter()
+    .map(|[x, y]| [at(x), at(y)])
+    .max_by(|p, q| focus_nm(&p[0]).abs().total_cmp(&focus_nm(&q[0]).abs()))
+    .expect("a pair");
+    let (fa, fb) = (focus_nm(&a), focus_nm(&b));
+    eprintln!("as-built focus: {fa:.1} and {fb:.1} nm rms");
+    assert!(fa.abs() > 40.0 && (fa + fb).abs() < 1.0, "{fa} {fb}");
+    let fitted_and_truth = |cfg: &Config| {
+        let sim = Simulator::new(cfg).expect("sim");
+        let (w, psi0) = design_fitted(&sim, cfg);
+        let kernel = sim.optical_kernel().expect("as-built kernel");
+        let mut truth = Epsf::from_fn(8, cfg.analysis.epsf_radius_px, |x, y| kernel.eval(x, y));
+        truth.normalise();
+        (w.profile, truth, psi0)
+    };
+    let (pa, ta, design) = fitted_and_truth(&a);
+    let (pb, tb, _) = fitted_and_truth(&b);
+    let d = common::profile_rms_of_peak;
+    let (aa, ab, bb, ba) = (d(&pa, &ta), d(&pa, &tb), d(&pb, &tb), d(&pb, &ta));
+    let (design_a, design_b) = (d(&design, &ta), d(&design, &tb));
+    eprintln!(
+        "fitted at the first: {aa:.4} from its own, {ab:.4} from the other's; at the second: {bb:.4}, {ba:.4}; the design: \
+         {design_a:.4}, {design_b:.4}"
+    );
+    assert!(aa < 0.5 * ab && bb < 0.5 * ba, "{aa} {ab} {bb} {ba}");
+    assert!(
+        aa < design_a && bb < design_b,
+        "{aa} {design_a} {bb} {design_b}"
+    );
 }

@@ -2,7 +2,11 @@
 (RA---TAN-SIP, the example distortion) reads without warnings and round-trips pixel → sky → pixel, stars
 land where astropy's WCS puts their apparent place at the exposure's epoch (astropy's own: proper motion,
 parallax, deflection, aberration from the header's spacecraft state), the arrays sit in their places on the
-sky, and every star of the scene is accounted for in the primary header."""
+sky, and every star of the scene is accounted for in the primary header.
+
+The header's WCS is the design's (every array at its nominal place); these tests check where the simulation puts
+the stars, so they ask for the as-built instrument's WCS in the header by name (ORACLE, the control
+`as_built.knowledge = "as-built"`), and the last checks that without it the header is the design's."""
 
 import subprocess
 import warnings
@@ -18,6 +22,8 @@ ENGINE = Path(__file__).resolve().parents[2]
 SIP_EXAMPLE = ENGINE / "configs" / "focal_plane_sip.toml"
 N = SMALL["instrument.detector_px"]
 GAP = 60.0
+# the oracle control: the header's WCS is the as-built instrument's (the arrays as assembled)
+ORACLE = 'as_built.knowledge="as-built"'
 
 
 def simulate(jsim_bin, out, scene, *extra):
@@ -37,7 +43,7 @@ def array_wcs(hdul, k):
 
 
 def test_each_array_wcs_reads_without_warnings_and_round_trips(jsim_bin, tmp_path):
-    path = simulate(jsim_bin, tmp_path / "bulge", "bulge", "scene.bulge.density_per_arcmin2=20")
+    path = simulate(jsim_bin, tmp_path / "bulge", "bulge", "scene.bulge.density_per_arcmin2=20", ORACLE)
     rng = np.random.default_rng(3)
     with fits.open(path) as h:
         p = h[0].header
@@ -105,7 +111,7 @@ def test_stars_land_at_their_apparent_place_by_astropy(jsim_bin, tmp_path):
     cat.write_text("\n".join(rows) + "\n")
     path = simulate(
         jsim_bin, tmp_path / "cat", str(cat),
-        'observation.start_utc="2032-09-20T03:00:00"', "observation.catalogue_epoch_jyear=2016.0",
+        'observation.start_utc="2032-09-20T03:00:00"', "observation.catalogue_epoch_jyear=2016.0", ORACLE,
     )
     with fits.open(path) as h:
         p = h[0].header
@@ -142,7 +148,7 @@ def test_the_catalogue_place_is_kept_with_the_apparent_place_off(jsim_bin, tmp_p
     dec = dec0 + rng.uniform(-0.05, 0.05, 50)
     cat = tmp_path / "stars.csv"
     cat.write_text("ra,dec,pmra\n" + "".join(f"{a:.12f},{d:.12f},5.0\n" for a, d in zip(ra, dec)))
-    path = simulate(jsim_bin, tmp_path / "off", str(cat), "observation.apparent_place=false")
+    path = simulate(jsim_bin, tmp_path / "off", str(cat), "observation.apparent_place=false", ORACLE)
     with fits.open(path) as h:
         assert h[0].header["APPLACE"] == 0
         truth = h["TRUTH"].data
@@ -162,19 +168,20 @@ NOMINAL = ["focal_plane.array_offsets_px=[[0.0,0.0],[0.0,0.0],[0.0,0.0],[0.0,0.0
 
 def test_the_arrays_sit_in_their_places_on_the_sky(jsim_bin, tmp_path):
     # array 1 lower left, 2 lower right, 3 upper left, 4 upper right on a north-up, east-left sky (PA 0);
-    # as designed, then as assembled: each array displaced by its offset and turned by its small rotation
+    # as designed, then as assembled: each array displaced by its offset and turned by its small rotation (the
+    # header under the oracle control); without the control the header keeps the design's nominal places
     east = lambda a, b: (a[0] - b[0]) * np.cos(np.radians(b[1])) * 3.6e6 / 472.1  # noqa: E731
     north = lambda a, b: (a[1] - b[1]) * 3.6e6 / 472.1  # noqa: E731
     c = (N - 1) / 2
-    centres = {}
-    for name, extra in [("nominal", NOMINAL), ("assembled", [])]:
+    centres, pas = {}, {}
+    for name, extra in [("nominal", NOMINAL), ("assembled", [ORACLE]), ("design", [])]:
         path = simulate(jsim_bin, tmp_path / name, "bulge", "scene.bulge.density_per_arcmin2=0", *extra)
         with fits.open(path) as h:
             ws = {k: array_wcs(h, k) for k in range(1, 5)}
             centres[name] = {k: ws[k].all_pix2world([[c, c]], 0)[0] for k in range(1, 5)}
             rotation = {k: h[f"ARRAY{k}"].header["ROTATION"] for k in range(1, 5)}
             # each array's +y on the sky: the position angle of its CD matrix's second column
-            pa = {k: np.degrees(np.arctan2(ws[k].wcs.cd[0, 1], ws[k].wcs.cd[1, 1])) % 360 for k in ws}
+            pas[name] = {k: np.degrees(np.arctan2(ws[k].wcs.cd[0, 1], ws[k].wcs.cd[1, 1])) % 360 for k in ws}
         assert rotation == {1: 0.0, 2: 90.0, 3: 180.0, 4: 270.0}
         if name == "nominal":
             centre = centres[name]
@@ -182,7 +189,6 @@ def test_the_arrays_sit_in_their_places_on_the_sky(jsim_bin, tmp_path):
             assert abs(east(centre[2], centre[1]) + step) < 2.0 and abs(north(centre[2], centre[1])) < 2.0
             assert abs(north(centre[3], centre[1]) - step) < 2.0 and abs(east(centre[3], centre[1])) < 2.0
             assert abs(east(centre[4], centre[3]) + step) < 2.0
-            nominal_pa = pa
     # as assembled: array k's centre moved by its configured offset (focal-plane +x is west at PA 0, so east
     # is −x), its position angle by its rotation error (the distortion moves the centres < 0.1 px more)
     offsets = [[4.2, -7.9], [-6.3, 2.1], [9.4, 5.6], [-1.8, -10.7]]
@@ -190,5 +196,9 @@ def test_the_arrays_sit_in_their_places_on_the_sky(jsim_bin, tmp_path):
     for k in range(1, 5):
         a, b = centres["assembled"][k], centres["nominal"][k]
         assert abs(-east(a, b) - offsets[k - 1][0]) < 0.2 and abs(north(a, b) - offsets[k - 1][1]) < 0.2, k
-        turn = (pa[k] - nominal_pa[k] + 180) % 360 - 180
+        turn = (pas["assembled"][k] - pas["nominal"][k] + 180) % 360 - 180
         assert abs(turn - errors[k - 1]) < 1e-6, (k, turn)
+        # the design's header: the nominal place and turn, whatever the arrays as assembled
+        d = centres["design"][k]
+        assert abs(east(d, b)) < 1e-6 and abs(north(d, b)) < 1e-6, k
+        assert abs(pas["design"][k] - pas["nominal"][k]) < 1e-9, k

@@ -15,10 +15,10 @@
 //! in a noise-free image (a test's) every ripple of a star's wings stands above the threshold, so set the
 //! crowding explicitly there.
 
-use crate::analysis::crowded::neighbours::Neighbours;
 use crate::analysis::detection::{SAME_STAR_PX, drop_close, keep_first, sky_and_noise};
 use crate::analysis::image::AnalysisImage;
 use crate::config::Analysis as AnalysisCfg;
+use crate::numerics::neighbours::Neighbours;
 use rayon::prelude::*;
 
 /// Fraction of stars with a neighbour within the link radius above which `Auto` chooses the crowded

@@ -11,6 +11,7 @@ pub mod epsf;
 pub mod image;
 pub mod lightcurve;
 pub mod pipeline;
+pub mod registration;
 pub mod report;
 pub mod response;
 pub mod solution;

@@ -63,6 +63,12 @@ pub struct AsBuilt {
     pub gain_error: f64,
     /// Relative 1σ of the as-built read noise about the design's `detector.read_noise_per_read_e`.
     pub read_noise_error: f64,
+    /// Where the optical axis truly points, less where `[sky]` plans it: (east, north) on the tangent plane
+    /// at the planned axis, arcsec. One pointing per dataset (a stare holds it; a sequence draws one per
+    /// stare, `sequence.pointing_error_arcsec`). The header's WCS stays at the planned pointing.
+    pub pointing_offset_arcsec: [f64; 2],
+    /// The focal plane's true turn less the planned `sky.pa_deg`, arcsec (east of north).
+    pub roll_offset_arcsec: f64,
     /// What the products are made from: the design (default) or, as an `oracle` control, the as-built
     /// instrument.
     pub knowledge: Knowledge,
@@ -79,6 +85,8 @@ impl Default for AsBuilt {
             distortion_px: 0.0,
             gain_error: 0.0,
             read_noise_error: 0.0,
+            pointing_offset_arcsec: [0.0; 2],
+            roll_offset_arcsec: 0.0,
             knowledge: Knowledge::Design,
         }
     }
@@ -91,6 +99,9 @@ pub const MAX_WAVEFRONT_DEVIATION_NM: f64 = 500.0;
 pub const MAX_DISTORTION_DEVIATION_PX: f64 = 10.0;
 /// Largest relative gain or read-noise error accepted.
 pub const MAX_RELATIVE_ERROR: f64 = 0.5;
+/// Largest pointing or roll offset accepted, arcsec (1°: a pointing that missed its field; the analysis
+/// finds a catalogue's offset within `analysis::registration`'s search, ≈ 20 px ≈ 9″).
+pub const MAX_POINTING_OFFSET_ARCSEC: f64 = 3600.0;
 
 impl AsBuilt {
     /// Whether the as-built instrument is the design (every deviation 0) and the products are the design's.
@@ -106,6 +117,8 @@ impl AsBuilt {
             && self.distortion_px == 0.0
             && self.gain_error == 0.0
             && self.read_noise_error == 0.0
+            && self.pointing_offset_arcsec == [0.0; 2]
+            && self.roll_offset_arcsec == 0.0
     }
 
     /// The same knobs with every deviation off (what a realised, as-built configuration carries: its
@@ -132,10 +145,16 @@ impl AsBuilt {
             (self.distortion_px, "px distortion beyond the design"),
             (100.0 * self.gain_error, "% gain error"),
             (100.0 * self.read_noise_error, "% read-noise error"),
+            (
+                self.pointing_offset_arcsec[0].hypot(self.pointing_offset_arcsec[1]),
+                "arcsec pointing offset",
+            ),
+            (self.roll_offset_arcsec.abs(), "arcsec roll offset"),
         ]
         .iter()
         .filter(|(v, _)| *v > 0.0)
-        .map(|(v, what)| format!("{v} {what}"))
+        // four decimals: a pointing offset's length is a root
+        .map(|(v, what)| format!("{} {what}", (v * 1e4).round() / 1e4))
         .collect();
         let products = match self.knowledge {
             Knowledge::Design => "products from the design",
@@ -154,7 +173,8 @@ impl AsBuilt {
 
     /// Check every field; the error names the field and the allowed range.
     pub fn validate(&self) -> Result<(), ConfigError> {
-        let ranges: [(&str, f64, f64, f64); 7] = [
+        let p = MAX_POINTING_OFFSET_ARCSEC;
+        let ranges: [(&str, f64, f64, f64); 10] = [
             (
                 "as_built.wavefront_rms_nm",
                 self.wavefront_rms_nm,
@@ -197,6 +217,24 @@ impl AsBuilt {
                 0.0,
                 MAX_RELATIVE_ERROR,
             ),
+            (
+                "as_built.pointing_offset_arcsec[0]",
+                self.pointing_offset_arcsec[0],
+                -p,
+                p,
+            ),
+            (
+                "as_built.pointing_offset_arcsec[1]",
+                self.pointing_offset_arcsec[1],
+                -p,
+                p,
+            ),
+            (
+                "as_built.roll_offset_arcsec",
+                self.roll_offset_arcsec,
+                -p,
+                p,
+            ),
         ];
         for (field, v, lo, hi) in ranges {
             if !(v.is_finite() && (lo..=hi).contains(&v)) {
@@ -219,10 +257,13 @@ mod tests {
 
     #[test]
     fn out_of_range_deviations_name_their_field() {
-        let cases: [(&str, fn(&mut AsBuilt)); 4] = [
+        let cases: [(&str, fn(&mut AsBuilt)); 5] = [
             ("as_built.wavefront_rms_nm", |a| a.wavefront_rms_nm = -1.0),
             ("as_built.distortion_px", |a| a.distortion_px = f64::NAN),
             ("as_built.gain_error", |a| a.gain_error = 0.9),
+            ("as_built.pointing_offset_arcsec[1]", |a| {
+                a.pointing_offset_arcsec[1] = -4000.0
+            }),
             ("as_built.breathing_period_s", |a| {
                 a.breathing_period_s = 0.0
             }),

@@ -20,6 +20,11 @@
 //!   `distortion_px`).
 //! * **Gain and read noise**: the design's values × exp(σ z), z ~ N(0, 1) (log-normal: always positive, a
 //!   relative spread σ for small σ).
+//! * **Pointing and roll**: the axis where it truly points (`pointing_offset_arcsec`, `roll_offset_arcsec`:
+//!   values, not draws: a sequence draws one per stare from its own seed). The sky is drawn where the telescope
+//!   was planned to point; the stars land through the as-built pointing.
+//! * **Array placement**: `focal_plane.array_offsets_px` and `array_rotation_errors_deg` are the arrays as
+//!   assembled, the as-built instrument's; the design puts every array at its nominal place ([`design_of`]).
 
 use crate::config::{Config, FieldWfe, SipTerm};
 use crate::optics::zernike::LOW_ORDER_TERMS;
@@ -44,6 +49,7 @@ pub fn realise(design: &Config) -> Result<Config, InstrumentError> {
     }
     add_wavefront(&mut built, design)?;
     add_distortion(&mut built, design);
+    add_pointing(&mut built, design);
     let mut r = rng::stream(a.seed, Stream::AsBuilt, 4);
     let d = &mut built.detector;
     d.gain_e_per_adu *= log_normal(&mut r, a.gain_error);
@@ -55,6 +61,8 @@ pub fn realise(design: &Config) -> Result<Config, InstrumentError> {
 /// `design.toml` holds).
 pub fn design_of(cfg: &Config) -> Config {
     let mut d = cfg.clone();
+    d.focal_plane.array_offsets_px = [[0.0; 2]; 4];
+    d.focal_plane.array_rotation_errors_deg = [0.0; 4];
     d.as_built = crate::config::AsBuilt {
         seed: cfg.as_built.seed,
         ..Default::default()
@@ -62,11 +70,22 @@ pub fn design_of(cfg: &Config) -> Config {
     d
 }
 
+/// `cfg` with the quad's arrays where the design draws them (no assembly offsets or turns); a single array
+/// has none, and its configuration is left as it is (so that its products are those of before, bit for bit).
+fn nominal_arrays(cfg: &Config) -> Config {
+    let mut d = cfg.clone();
+    if d.focal_plane.layout == crate::config::Layout::Quad {
+        d.focal_plane.array_offsets_px = [[0.0; 2]; 4];
+        d.focal_plane.array_rotation_errors_deg = [0.0; 4];
+    }
+    d
+}
+
 /// The configuration the products beside the images are made from: the design, or the realised as-built
 /// instrument under the `oracle` control `as_built.knowledge = "as-built"`.
 pub fn products_config(design: &Config, built: &Config) -> Config {
     match design.as_built.knowledge {
-        crate::config::Knowledge::Design => design.clone(),
+        crate::config::Knowledge::Design => nominal_arrays(design),
         crate::config::Knowledge::AsBuilt => built.clone(),
     }
 }
@@ -183,6 +202,22 @@ fn add_wavefront(built: &mut Config, design: &Config) -> Result<(), InstrumentEr
     }
     o.field_table.iter_mut().for_each(add);
     Ok(())
+}
+
+/// Point the as-built telescope where it truly points: the planned axis moved by the pointing offset on the
+/// tangent plane there (gnomonic, `sky::apparent::plane_to_sky`), the focal plane turned by the roll offset.
+fn add_pointing(built: &mut Config, design: &Config) {
+    let a = &design.as_built;
+    let [east, north] = a.pointing_offset_arcsec;
+    if east != 0.0 || north != 0.0 {
+        let (ra, dec) = crate::sky::apparent::plane_to_sky(
+            (design.sky.ra_deg, design.sky.dec_deg),
+            east * 1000.0,
+            north * 1000.0,
+        );
+        (built.sky.ra_deg, built.sky.dec_deg) = (ra, dec);
+    }
+    built.sky.pa_deg += a.roll_offset_arcsec / 3600.0;
 }
 
 /// Add the drawn quadratic distortion to the SIP polynomials (terms of the same order summed).

@@ -5,7 +5,8 @@
 //!   number of stars, accuracy and median Cramér–Rao bound (mas);
 //! * `crowded_arrays.csv` — per case and array: detections (first pass, residual, matched to no truth
 //!   star), ePSF stars and
-//!   iterations, the fallback if any, groups and the largest, analysis time;
+//!   iterations, the fallback if any, groups and the largest, analysis time, and the reference catalogue's
+//!   registration when its stars were forced (pairs, residual rms, the map's predicted and true error, px);
 //! * `stars_<case>.csv` — every reported star of the case without countermeasure: array, position, flux,
 //!   bound, flags (bits of `analysis::epsf::fit::flags`), class, and where matched the truth's id, Hw and
 //!   fitted − true (mas);
@@ -89,7 +90,7 @@ pub fn bin_rows(case: &str, countermeasure: &str, bins: &[MagBin]) -> Vec<Vec<Ce
 }
 
 /// Columns of `crowded_arrays.csv`.
-pub const ARRAYS_HEADER: [&str; 11] = [
+pub const ARRAYS_HEADER: [&str; 15] = [
     "case",
     "array",
     "n_first",
@@ -101,6 +102,10 @@ pub const ARRAYS_HEADER: [&str; 11] = [
     "largest_group",
     "analyse_s",
     "fallback",
+    "registration_pairs",
+    "registration_rms_px",
+    "registration_predicted_px",
+    "registration_error_px",
 ];
 
 /// The rows of one case's arrays.
@@ -121,6 +126,10 @@ pub fn array_rows(case: &str, arrays: &[ArrayAnalysis]) -> Vec<Vec<Cell>> {
                 Cell::I(s.largest_group as i64),
                 Cell::F(s.analyse_s),
                 Cell::S(s.fallback.clone()),
+                Cell::I(s.registration.map_or(0, |r| r.pairs) as i64),
+                Cell::F(s.registration.map_or(f64::NAN, |r| r.rms_px)),
+                Cell::F(s.registration.map_or(f64::NAN, |r| r.predicted_error_px())),
+                Cell::F(a.registration_error_px),
             ]
         })
         .collect()

@@ -88,8 +88,10 @@ pub const HW_RANGE: (f64, f64) = (-5.0, 35.0);
 /// Allowed J − H colours.
 pub const JH_RANGE: (f64, f64) = (-1.0, 10.0);
 
-/// The stars of `cfg.scene` on the arrays of `cfg.focal_plane`.
-pub fn build(cfg: &Config) -> Result<Scene, SceneError> {
+/// The stars of `cfg.scene` on the arrays of `cfg.focal_plane` (`cfg`: the instrument as built, which puts
+/// them where they land). A mock bulge is drawn on the sky around `planned`, where the telescope was meant
+/// to point: a pointing error moves the arrays over the sky, not the sky.
+pub fn build(cfg: &Config, planned: &crate::config::Sky) -> Result<Scene, SceneError> {
     let arrays = crate::sky::array_count(cfg);
     let pixel_scene = |stars: Vec<Star>| Scene {
         arrays: vec![stars; arrays],
@@ -122,7 +124,11 @@ pub fn build(cfg: &Config) -> Result<Scene, SceneError> {
                 }
             }
         }
-        SceneKind::Bulge => placement::place(cfg, &bulge::draw(cfg)?),
+        SceneKind::Bulge => {
+            let mut at_plan = cfg.clone();
+            at_plan.sky = *planned;
+            placement::place(cfg, &bulge::draw(&at_plan)?)
+        }
     }
 }
 
@@ -264,7 +270,9 @@ mod tests {
         let off = dir.join("off.csv");
         std::fs::write(&off, "ra,dec,hw\n10,10,12.5\n12,11,13\n").expect("write");
         cfg.scene.catalogue = Some(off);
-        let msg = build(&cfg).expect_err("wholly outside").to_string();
+        let msg = build(&cfg, &cfg.sky)
+            .expect_err("wholly outside")
+            .to_string();
         for part in [
             "outside the field",
             "RA 10 … 12°",
@@ -277,7 +285,7 @@ mod tests {
         let some = dir.join("some.csv");
         std::fs::write(&some, "ra,dec,hw\n10,10,12.5\n266.4168,-29.0078,13\n").expect("write");
         cfg.scene.catalogue = Some(some);
-        let scene = build(&cfg).expect("some outside");
+        let scene = build(&cfg, &cfg.sky).expect("some outside");
         let counts = scene.counts.expect("counts");
         assert_eq!((counts.off, counts.photosensitive), (1, 1));
         let _ = std::fs::remove_dir_all(&dir);

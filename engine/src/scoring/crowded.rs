@@ -18,9 +18,9 @@
 
 use super::image::ScoredStar;
 use super::undetected::Undetected;
-use crate::analysis::crowded::neighbours::Neighbours;
 use crate::analysis::epsf::fit::flags;
 use crate::analysis::report::StarResult;
+use crate::numerics::neighbours::Neighbours;
 use crate::numerics::stats;
 use crate::truth::TruthRow;
 use serde::Serialize;

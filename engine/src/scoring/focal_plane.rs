@@ -8,6 +8,7 @@ use super::crowded::MagBin;
 use super::image::ScoredStar;
 use crate::analysis::countermeasures::Countermeasure;
 use crate::analysis::crowded::CrowdedSummary;
+use crate::analysis::registration::Registration;
 use crate::numerics::stats;
 use crate::sky::focal_plane::FocalPlane;
 use crate::truth::TruthRow;
@@ -27,6 +28,39 @@ pub struct ArrayAnalysis {
     pub n_unmatched: usize,
     /// The array's own ePSF.
     pub epsf: crate::analysis::epsf::Epsf,
+    /// The catalogue registration's true error (NaN without one): [`registration_error_px`].
+    pub registration_error_px: f64,
+}
+
+/// The true error of a catalogue's registration onto an array (`analysis::registration`), rms per axis over
+/// the truth stars on the array, px: where the map puts each star's catalogue place without the survey's
+/// error — its true sky place through the header's WCS, `to_header(x, y)` of its true pixel — against where
+/// it lies. NaN without a registration or a star.
+pub fn registration_error_px(
+    reg: Option<&Registration>,
+    truth: &[TruthRow],
+    n_px: usize,
+    to_header: impl Fn(f64, f64) -> Option<(f64, f64)>,
+) -> f64 {
+    let Some(reg) = reg.filter(|r| r.pairs > 0) else {
+        return f64::NAN;
+    };
+    let n = n_px as f64;
+    let (mut ss, mut count) = (0.0, 0usize);
+    for t in truth {
+        if !(t.x_px >= 0.0 && t.y_px >= 0.0 && t.x_px < n && t.y_px < n) {
+            continue;
+        }
+        if let Some(c) = to_header(t.x_px, t.y_px) {
+            let p = reg.apply(c);
+            ss += (p.0 - t.x_px).powi(2) + (p.1 - t.y_px).powi(2);
+            count += 1;
+        }
+    }
+    if count == 0 {
+        return f64::NAN;
+    }
+    (ss / (2.0 * count as f64)).sqrt()
 }
 
 /// Cells per array side of the binned vector maps.

@@ -10,10 +10,10 @@
 //! should be `√(σ² + ⟨δ²⟩)` if nothing else adds. The same with only the undetected stars fainter than
 //! the reference catalogue's limit: what would remain if the catalogue's stars were fitted too.
 
-use crate::analysis::crowded::neighbours::Neighbours;
 use crate::analysis::epsf::Epsf;
 use crate::analysis::epsf::fit::pixel_variance;
 use crate::numerics::linalg;
+use crate::numerics::neighbours::Neighbours;
 
 /// One array's undetected stars and the fit's noise model.
 pub struct Undetected {

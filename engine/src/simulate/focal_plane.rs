@@ -43,7 +43,7 @@ impl FocalPlaneSimulator {
         // the instrument as built images the stars (its optics, distortion): each array draws the same one
         let built = crate::instrument::realise(cfg)?;
         let bank = PsfBank::serving(bank, &built);
-        let scene = scene::build(&built)?;
+        let scene = scene::build(&built, &cfg.sky)?;
         check_memory(
             cfg,
             scene.arrays.iter().map(Vec::len).sum(),

@@ -242,7 +242,7 @@ impl Simulator {
             return Err(SimError::NotSingleArray("a single-array simulator"));
         }
         // the stars land where the instrument as built puts them
-        let scene = scene::build(&crate::instrument::realise(cfg)?)?;
+        let scene = scene::build(&crate::instrument::realise(cfg)?, &cfg.sky)?;
         check_memory(cfg, scene.arrays.iter().map(Vec::len).sum(), 1)?;
         let stars = scene.arrays.into_iter().next().unwrap_or_default();
         let spec = ArraySpec {
@@ -446,6 +446,29 @@ impl Simulator {
                 self.bank
                     .get(self.cfg.scene.j_minus_h, &self.bank.centre_key()),
             ),
+        };
+        self.kernel_with_blur(&psf, 0.0)
+    }
+
+    /// The design's PSF of a star (its colour and field position through the products' bank: the design's
+    /// optics, the as-built ones only under the oracle control); the star's own PSF without deviations.
+    pub fn design_psf_for(&self, star: &Star) -> Arc<PsfTable> {
+        let bank = self.design_bank();
+        self.in_array_axes(bank.get(self.psf_colour(star), &bank.field_key(star.x_px, star.y_px)))
+    }
+
+    /// The design's PSF of a colour at the field's centre.
+    pub fn design_psf_for_colour(&self, j_minus_h: f64) -> Arc<PsfTable> {
+        let bank = self.design_bank();
+        self.in_array_axes(bank.get(j_minus_h, &bank.centre_key()))
+    }
+
+    /// [`Simulator::optical_kernel`] of the design: the first star's [`Simulator::design_psf_for`] with
+    /// this simulation's pixel model — what a planner knows before the instrument is built.
+    pub fn design_optical_kernel(&self) -> Result<Arc<PixelKernel>, SimError> {
+        let psf = match self.stars.first() {
+            Some(s) => self.design_psf_for(s),
+            None => self.design_psf_for_colour(self.cfg.scene.j_minus_h),
         };
         self.kernel_with_blur(&psf, 0.0)
     }

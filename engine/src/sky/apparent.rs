@@ -93,6 +93,18 @@ pub fn offset_mas(a: (f64, f64), b: (f64, f64)) -> (f64, f64) {
     (xi * MAS_PER_RAD, eta * MAS_PER_RAD)
 }
 
+/// The inverse of [`offset_mas`] (the gnomonic projection at `tangent_deg`): the ICRS place (degrees) of plane point
+/// (ξ, η) mas.
+pub fn plane_to_sky(tangent_deg: (f64, f64), xi_mas: f64, eta_mas: f64) -> (f64, f64) {
+    let rad = std::f64::consts::PI / 180.0 / 3.6e6;
+    let (x, y) = (xi_mas * rad, eta_mas * rad);
+    let (ra0, de0) = (tangent_deg.0.to_radians(), tangent_deg.1.to_radians());
+    let den = de0.cos() - y * de0.sin();
+    let ra = ra0 + x.atan2(den);
+    let dec = ((de0.sin() + y * de0.cos()) * (ra - ra0).cos()).atan2(den);
+    (ra.to_degrees().rem_euclid(360.0), dec.to_degrees())
+}
+
 /// The parallax factors of a star at (α, δ) seen from `observer_au` (barycentric, ICRS axes, au): the
 /// displacement (Δα*, Δδ) on the tangent plane per mas of parallax, to first order —
 /// `Δα* = X sin α − Y cos α`, `Δδ = X cos α sin δ + Y sin α sin δ − Z cos δ` (the star is seen away from the

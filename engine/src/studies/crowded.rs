@@ -22,6 +22,7 @@ use crate::simulate::{FocalPlaneExposure, FocalPlaneSimulator};
 use std::time::Instant;
 
 pub use crate::analysis::crowded::CrowdedSummary;
+use crate::scoring::focal_plane::registration_error_px;
 pub use crate::scoring::focal_plane::{ArrayAnalysis, FocalPlaneAnalysis, VECTOR_CELLS};
 
 /// Refuse the countermeasures a crowded field does not offer, by name.
@@ -87,6 +88,15 @@ pub fn analyse_focal_plane(
                 summary: ia.crowded.clone().unwrap_or_default(),
                 n_unmatched: ia.n_unmatched.unwrap_or(0),
                 epsf: ia.global.epsf.clone(),
+                registration_error_px: registration_error_px(
+                    ia.crowded.as_ref().and_then(|c| c.registration.as_ref()),
+                    &e.truth,
+                    e.image.n,
+                    |x, y| {
+                        let (ra, dec) = sim.wcs()?.pixel_to_sky(x, y)?;
+                        sim.design_wcs()?.sky_to_pixel(ra, dec)
+                    },
+                ),
             })
             .collect();
         // each array's undetected truth stars, for the shifts their light gives the isolated stars' fits

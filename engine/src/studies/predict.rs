@@ -18,6 +18,9 @@
 //!   telemetry's errors move through the linear response (the forward model models the shape). The Y-zoned
 //!   ePSFs cannot remove a displacement, so they predict what `none` does.
 //!
+//! The PSF is the design's (`Simulator::design_optical_kernel`): the predictor is a planner's tool and knows
+//! what the products know; with an as-built instrument off its design it predicts what the design promises.
+//!
 //! Measured (paper grid, Hw 12.5, realistic ACE, rolling, ideal telemetry, 25 exposures): per-exposure
 //! predictions within 0.13–0.16 mas rms of the measured accuracy for `none`, `telemetry` and
 //! `telemetry-model` (the shift correction's 0.94-for-0.69 optimism came from the missing shape term).
@@ -138,14 +141,12 @@ impl Predictor {
     pub fn new(sim: &Simulator, analysis: &crate::config::Analysis) -> Result<Self, SimError> {
         let mut cfg = sim.cfg.clone();
         cfg.analysis = analysis.clone();
-        let psf = sim
-            .stars
-            .first()
-            .map(|s| sim.psf_for(s))
-            .unwrap_or_else(|| {
-                sim.bank()
-                    .get(cfg.scene.j_minus_h, &sim.bank().centre_key())
-            });
+        // the design's PSF: what a planner (and the analysis' products) know, not the instrument as built
+        let psf = match sim.stars.first() {
+            Some(s) => sim.design_psf_for(s),
+            None => sim.design_psf_for_colour(cfg.scene.j_minus_h),
+        };
+        let kernel = sim.design_optical_kernel()?;
         let images = (0..cfg.fidelity.images)
             .map(|i| {
                 let a = sim.ace_stats(i);
@@ -162,7 +163,6 @@ impl Predictor {
                 }
             })
             .collect();
-        let kernel = sim.optical_kernel()?;
         let psi = Epsf::from_fn(4, analysis.epsf_radius_px + 2, |x, y| kernel.eval(x, y));
         Ok(Self {
             map: IntraPixelMap::from_config(&cfg.detector, cfg.fidelity.subpixels)?,

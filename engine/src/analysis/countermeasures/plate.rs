@@ -134,9 +134,11 @@ pub fn fit_correction(
 }
 
 /// Fit the plate model onto a reference catalogue product (positions in the image's pixels): every usable
-/// fit (no rejection flag) is cross-matched to the catalogue by position — the common offset (median
-/// displacement to the nearest reference star within 20 px), then the nearest within 1 px — and the model is
-/// fitted over the matched pairs, subtracted from every star; returns the parameters absorbed. No truth.
+/// fit (no rejection flag) is cross-matched to the catalogue by position — the catalogue registered onto
+/// the fits (`analysis::registration`: an offset by votes, then an affine map), then the nearest within
+/// 1 px — and the model is fitted over the matched pairs (onto the catalogue's own positions: the plate
+/// model absorbs what the registration found), subtracted from every star; returns the parameters absorbed.
+/// No truth.
 pub fn plate_fit_to_catalogue(
     stars: &mut [StarResult],
     reference: &[(f64, f64)],
@@ -145,7 +147,10 @@ pub fn plate_fit_to_catalogue(
 ) -> Result<usize, CountermeasureError> {
     let usable: Vec<usize> = (0..stars.len()).filter(|&k| stars[k].is_usable()).collect();
     let pos: Vec<(f64, f64)> = usable.iter().map(|&k| (stars[k].x, stars[k].y)).collect();
-    let m = crate::analysis::detection::match_positions(&pos, reference, 20.0, 1.0);
+    let flux: Vec<f64> = usable.iter().map(|&k| stars[k].flux_e).collect();
+    let reg = crate::analysis::registration::register(&pos, &flux, reference);
+    let moved: Vec<(f64, f64)> = reference.iter().map(|&r| reg.apply(r)).collect();
+    let m = crate::analysis::detection::nearest_within(&pos, &moved, 1.0, (0.0, 0.0));
     let (p, target): (Vec<(f64, f64)>, Vec<(f64, f64)>) = pos
         .iter()
         .zip(&m)

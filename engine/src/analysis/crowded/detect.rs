@@ -188,7 +188,7 @@ pub fn detect_residual(
     sky: f64,
     noise: f64,
     nsigma: f64,
-    found: &super::neighbours::Neighbours,
+    found: &crate::numerics::neighbours::Neighbours,
     min_sep_px: f64,
 ) -> Vec<(f64, f64)> {
     let (nx, ny) = (img.nx, img.ny);

@@ -4,7 +4,6 @@
 
 use super::group_fit::Member;
 use super::link_radius_px;
-use super::neighbours::Neighbours;
 use super::pass::{fit_pass, members_of, model_image};
 use crate::analysis::epsf::Epsf;
 use crate::analysis::epsf::build::{BuildOptions, update};
@@ -12,6 +11,7 @@ use crate::analysis::epsf::fit::{StarFit, flags};
 use crate::analysis::image::AnalysisImage;
 use crate::analysis::pipeline::build_options;
 use crate::config::Analysis as AnalysisCfg;
+use crate::numerics::neighbours::Neighbours;
 use crate::numerics::stats;
 use rayon::prelude::*;
 

@@ -5,7 +5,8 @@
 //! its photon noise (`scoring::undetected` measures it star by star: on the mock bulge it explains the
 //! isolated stars' 1.17–1.21 × their bound). The reference catalogue (an instrument product, a survey's
 //! positions to Hw 16.5) knows many of them. Each star of the model claims its nearest catalogue star within
-//! [`FORCED_MATCH_PX`] (after the catalogue's common offset from the brightest fits); each unclaimed one
+//! [`FORCED_MATCH_PX`] (after the catalogue's registration onto the fits, `analysis::registration`: the
+//! header's design WCS misses the as-built pointing, array placement and distortion); each unclaimed one
 //! becomes a star of the model. It starts at its catalogue flux (below) or, without one, with the weighted
 //! least-squares amplitude of the ePSF at its position in the residual image (image − model of every star
 //! found, less the annulus sky), `f = Σ wᵢ ψᵢ rᵢ / Σ wᵢ ψᵢ²` over the fit radius (at least 1 e⁻: a
@@ -21,12 +22,13 @@
 //! (`--refcat-phot-sigma-mag`); the prior is twice as wide. A catalogue without Hw (NaN) leaves the flux free.
 
 use super::group_fit::{FluxPrior, Member};
-use super::neighbours::Neighbours;
 use super::pass::model_image;
 use crate::analysis::epsf::Epsf;
 use crate::analysis::epsf::fit::{PixelData, annulus_sky, pixel_variance, select_disc};
 use crate::analysis::image::AnalysisImage;
+use crate::analysis::registration::{Registration, register};
 use crate::config::Analysis as AnalysisCfg;
+use crate::numerics::neighbours::Neighbours;
 use rayon::prelude::*;
 
 /// The least start flux of a forced star, e⁻ (its group's fit sets the flux).
@@ -51,41 +53,34 @@ pub fn positions_px(stars: &[CatalogueStar]) -> Vec<(f64, f64)> {
     stars.iter().map(|c| (c.x_px, c.y_px)).collect()
 }
 
-/// A catalogue star this close to a star of the model (after the common offset) is that star (px).
+/// A catalogue star this close to a star of the model (after the registration) is that star (px).
 pub const FORCED_MATCH_PX: f64 = 1.0;
-/// The common offset of the catalogue from the fits is found with this many of the brightest fits …
-const OFFSET_STARS: usize = 500;
-/// … each matched to its nearest catalogue star within this distance (px: a pointing error of ≈ 10″).
-const OFFSET_SEARCH_PX: f64 = 20.0;
 
 /// The forced stars of `catalogue` (its positions in this image's pixels, as the design WCS puts them) for
-/// the model `stars` (see the module's documentation).
+/// the model `stars` (see the module's documentation), and the catalogue's registration onto them.
 pub fn forced_members(
     img: &AnalysisImage,
     epsf: &Epsf,
     stars: &[Member],
     catalogue: &[CatalogueStar],
     cfg: &AnalysisCfg,
-) -> Vec<Member> {
+) -> (Vec<Member>, Registration) {
     if catalogue.is_empty() || stars.is_empty() {
-        return Vec::new();
+        return (Vec::new(), Registration::NONE);
     }
     let pos: Vec<(f64, f64)> = stars.iter().map(|s| (s.x, s.y)).collect();
     let flux: Vec<f64> = stars.iter().map(|s| s.flux).collect();
-    let off = crate::analysis::detection::common_offset_of_brightest(
-        &pos,
-        &flux,
-        &positions_px(catalogue),
-        OFFSET_STARS,
-        OFFSET_SEARCH_PX,
-    );
+    let reg = register(&pos, &flux, &positions_px(catalogue));
     let (w, h) = (img.nx as f64, img.ny as f64);
     let cat: Vec<CatalogueStar> = catalogue
         .iter()
-        .map(|c| CatalogueStar {
-            x_px: c.x_px + off.0,
-            y_px: c.y_px + off.1,
-            hw: c.hw,
+        .map(|c| {
+            let (x_px, y_px) = reg.apply((c.x_px, c.y_px));
+            CatalogueStar {
+                x_px,
+                y_px,
+                hw: c.hw,
+            }
         })
         .filter(|c| c.x_px >= -0.5 && c.y_px >= -0.5 && c.x_px < w - 0.5 && c.y_px < h - 0.5)
         .collect();
@@ -113,7 +108,7 @@ pub fn forced_members(
         .map(|(p, _)| *p)
         .collect();
     if missed.is_empty() {
-        return Vec::new();
+        return (Vec::new(), reg);
     }
     let model = model_image(epsf, stars, img.nx, img.ny);
     let resid: Vec<f64> = img.e.iter().zip(&model).map(|(e, m)| e - m).collect();
@@ -122,7 +117,7 @@ pub fn forced_members(
         ..img.pixels()
     };
     let (r_in, r_out) = crate::analysis::detection::sky_annulus(cfg);
-    missed
+    let members = missed
         .par_iter()
         .filter_map(|c| {
             let (x, y) = (c.x_px, c.y_px);
@@ -144,7 +139,8 @@ pub fn forced_members(
                 ..Member::new(x, y, start.max(MIN_START_FLUX_E))
             })
         })
-        .collect()
+        .collect();
+    (members, reg)
 }
 
 /// The image's zero point `Z` (e⁻ of a Hw = 0 star): the median of `f · 10^(0.4 Hw)` over the

@@ -9,7 +9,7 @@
 //!    stars); rebuild, iterate.
 //! 3. **Grouped fits** ([`group_fit`]): stars closer than [`link_radius_px`] are fitted simultaneously
 //!    (x, y, flux each, one sky), the light of the stars outside the group subtracted; groups come from a
-//!    k-d tree ([`neighbours`]): O(N log N).
+//!    k-d tree ([`crate::numerics::neighbours`]): O(N log N).
 //! 4. **Residual detection**: peaks of image − model that no star accounts for (merged companions) are added
 //!    and everything is fitted again (twice, so each group sees its neighbours' final models).
 //! 5. **Forced catalogue stars** ([`forced`]): before the last pass, the reference catalogue's stars that no
@@ -24,7 +24,6 @@ pub mod detect;
 pub mod epsf;
 pub mod forced;
 pub mod group_fit;
-pub mod neighbours;
 pub mod pass;
 pub mod summary;
 
@@ -39,9 +38,9 @@ use crate::analysis::epsf::fit::{PixelData, StarFit, flags};
 use crate::analysis::image::AnalysisImage;
 use crate::analysis::pipeline::{MIN_EPSF_STARS, build_options};
 use crate::config::Analysis as AnalysisCfg;
+use crate::numerics::neighbours::Neighbours;
 use crate::numerics::stats;
 use group_fit::{Member, Outsiders, fit_group};
-use neighbours::Neighbours;
 use pass::members_of;
 use rayon::prelude::*;
 
@@ -93,6 +92,9 @@ pub struct Crowded {
     pub reported: Vec<usize>,
     /// The ePSF's node error the saturated stars' fits carry ([`group_fit::node_error`]).
     pub node_error: f64,
+    /// The reference catalogue's registration onto the fits, when its stars were forced
+    /// (`analysis::registration`).
+    pub registration: Option<crate::analysis::registration::Registration>,
 }
 
 /// Refit the stars of a crowded analysis `c` in their groups, each through its own profile from the telemetry
@@ -232,6 +234,7 @@ pub fn analyse(
             model: Vec::new(),
             reported: Vec::new(),
             node_error,
+            registration: None,
         };
     }
     // fit, look for what the model misses, fit again with the companions
@@ -301,8 +304,11 @@ pub fn analyse(
         .collect();
     // the reference catalogue's stars the detection missed, held at their catalogue positions: their light
     // is subtracted from their neighbours' fits (forced; never reported)
+    let mut registration = None;
     if let Some(cat) = catalogue.filter(|_| cfg.crowded_forced_catalogue) {
-        stars.extend(forced::forced_members(img, &epsf, &stars, cat, cfg));
+        let (forced, reg) = forced::forced_members(img, &epsf, &stars, cat, cfg);
+        stars.extend(forced);
+        registration = Some(reg);
     }
     let mut from_residual = from_residual;
     from_residual.resize(stars.len(), false);
@@ -364,6 +370,7 @@ pub fn analyse(
         model,
         reported,
         node_error,
+        registration,
     }
 }
 

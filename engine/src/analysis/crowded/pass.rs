@@ -3,13 +3,13 @@
 
 use super::group_fit::{MAX_GROUP_STARS, Member, Outsiders, fit_group, fit_group_with};
 use super::link_radius_px;
-use super::neighbours::{self, Neighbours};
 use crate::analysis::countermeasures::forward::{Forward, fit_reach_px};
 use crate::analysis::epsf::Epsf;
 use crate::analysis::epsf::fit::{PixelData, StarFit, annulus_sky, flags};
 use crate::analysis::image::AnalysisImage;
 use crate::analysis::pipeline::build_options;
 use crate::config::Analysis as AnalysisCfg;
+use crate::numerics::neighbours::{self, Neighbours};
 use crate::numerics::stats;
 use rayon::prelude::*;
 

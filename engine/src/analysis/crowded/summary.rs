@@ -15,6 +15,9 @@ pub struct CrowdedSummary {
     pub largest_group: usize,
     /// Wall-clock seconds of the array's crowded analysis (detection, ePSF, grouped fits).
     pub analyse_s: f64,
+    /// The reference catalogue's registration onto the fits (the plate solution against the catalogue),
+    /// when its stars were forced.
+    pub registration: Option<crate::analysis::registration::Registration>,
 }
 
 impl CrowdedSummary {
@@ -29,6 +32,7 @@ impl CrowdedSummary {
             n_groups: c.n_groups,
             largest_group: c.largest_group,
             analyse_s,
+            registration: c.registration,
         }
     }
 }

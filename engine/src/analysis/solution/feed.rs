@@ -523,13 +523,7 @@ pub fn focal_map(
     ))
 }
 
-/// `p ↦ (m₀ + m₁ p_x + m₂ p_y, m₃ + m₄ p_x + m₅ p_y)`.
-fn apply(m: &[f64; 6], p: [f64; 2]) -> [f64; 2] {
-    [
-        m[0] + m[1] * p[0] + m[2] * p[1],
-        m[3] + m[4] * p[0] + m[5] * p[1],
-    ]
-}
+use crate::numerics::affine::{apply, fit as fit_map};
 
 /// Reference stars an alignment needs: fewer leave the array out.
 const MIN_ALIGNMENT_STARS: usize = 3;
@@ -603,50 +597,7 @@ fn align(
     Ok(map)
 }
 
-/// The least-squares map from `pairs`' first to second points: affine with ≥ 6 pairs, else a shift.
-fn fit_map(pairs: &[([f64; 2], [f64; 2])]) -> [f64; 6] {
-    let n = pairs.len() as f64;
-    let mean = |f: &dyn Fn(&([f64; 2], [f64; 2])) -> f64| pairs.iter().map(f).sum::<f64>() / n;
-    let (ox, oy) = (mean(&|p| p.0[0]), mean(&|p| p.0[1]));
-    let (rx, ry) = (mean(&|p| p.1[0]), mean(&|p| p.1[1]));
-    if pairs.len() >= 6 {
-        let mut design = Vec::with_capacity(pairs.len() * 3);
-        let (mut yx, mut yy) = (Vec::new(), Vec::new());
-        for (o, r) in pairs {
-            design.extend_from_slice(&[1.0, (o[0] - ox) / 1e6, (o[1] - oy) / 1e6]);
-            yx.push(r[0] - rx);
-            yy.push(r[1] - ry);
-        }
-        let w = vec![1.0; pairs.len()];
-        let lstsq = crate::numerics::linalg::weighted_lstsq;
-        if let (Some((a, _)), Some((b, _))) =
-            (lstsq(&design, &yx, &w, 3), lstsq(&design, &yy, &w, 3))
-        {
-            let (a1, a2, b1, b2) = (a[1] / 1e6, a[2] / 1e6, b[1] / 1e6, b[2] / 1e6);
-            return [
-                rx + a[0] - a1 * ox - a2 * oy,
-                a1,
-                a2,
-                ry + b[0] - b1 * ox - b2 * oy,
-                b1,
-                b2,
-            ];
-        }
-    }
-    [rx - ox, 1.0, 0.0, ry - oy, 0.0, 1.0]
-}
-
-/// The inverse of the gnomonic projection at `tangent_deg`: the ICRS place (degrees) of plane point
-/// (ξ, η) mas.
-pub fn plane_to_sky(tangent_deg: (f64, f64), xi_mas: f64, eta_mas: f64) -> (f64, f64) {
-    let rad = std::f64::consts::PI / 180.0 / 3.6e6;
-    let (x, y) = (xi_mas * rad, eta_mas * rad);
-    let (ra0, de0) = (tangent_deg.0.to_radians(), tangent_deg.1.to_radians());
-    let den = de0.cos() - y * de0.sin();
-    let ra = ra0 + x.atan2(den);
-    let dec = ((de0.sin() + y * de0.cos()) * (ra - ra0).cos()).atan2(den);
-    (ra.to_degrees().rem_euclid(360.0), dec.to_degrees())
-}
+pub use crate::sky::apparent::plane_to_sky;
 
 #[cfg(test)]
 mod tests {

@@ -194,6 +194,17 @@ fn print_bins(case: &str, cm: &str, r: &FocalPlaneAnalysis) {
             s.largest_group,
             s.analyse_s
         );
+        if let Some(r) = s.registration.filter(|r| r.pairs > 0) {
+            println!(
+                "    catalogue registered onto the fits ({} parameters per axis, {} pairs): residual {:.4} px rms; \
+                 the map's error {:.4} px against the truth, {:.4} px predicted",
+                r.parameters,
+                r.pairs,
+                r.rms_px,
+                a.registration_error_px,
+                r.predicted_error_px()
+            );
+        }
     }
 }
 

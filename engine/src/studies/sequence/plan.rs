@@ -31,6 +31,10 @@ pub struct Stare {
     pub ra_deg: f64,
     pub dec_deg: f64,
     pub pa_deg: f64,
+    /// Its pointing error, (east, north) on the tangent plane at the planned axis, arcsec, and its roll
+    /// error, arcsec: the as-built instrument's offsets for its exposures (`as_built.pointing_offset_arcsec`).
+    pub pointing_offset_arcsec: [f64; 2],
+    pub roll_offset_arcsec: f64,
 }
 
 /// One exposure of the sequence.
@@ -131,10 +135,19 @@ pub fn plan(spec: &Spec, cfg: &Config) -> Result<Plan, String> {
                 let index = stares.len();
                 let mut r = rng::stream(cfg.seed, Stream::Sequence, index as u64);
                 let z: [f64; 3] = std::array::from_fn(|_| StandardNormal.sample(&mut r));
-                let e = spec.pointing_error_arcsec / 3600.0;
-                let dec = (dec0 + z[1] * e).clamp(-90.0, 90.0);
-                let ra = (ra0 + z[0] * e / dec0.to_radians().cos().max(1e-6)).rem_euclid(360.0);
-                let pa = galactic_north_pa_deg(ra0, dec0) + z[2] * spec.roll_error_arcsec / 3600.0;
+                let offset = [
+                    z[0] * spec.pointing_error_arcsec,
+                    z[1] * spec.pointing_error_arcsec,
+                ];
+                let roll = z[2] * spec.roll_error_arcsec;
+                // where it truly points: the planned axis moved on its tangent plane, as the instrument
+                // as built moves it (`instrument::realise`)
+                let (ra, dec) = crate::sky::apparent::plane_to_sky(
+                    (ra0, dec0),
+                    offset[0] * 1000.0,
+                    offset[1] * 1000.0,
+                );
+                let pa = galactic_north_pa_deg(ra0, dec0) + roll / 3600.0;
                 stares.push(Stare {
                     index,
                     visit: v,
@@ -145,6 +158,8 @@ pub fn plan(spec: &Spec, cfg: &Config) -> Result<Plan, String> {
                     ra_deg: ra,
                     dec_deg: dec,
                     pa_deg: pa,
+                    pointing_offset_arcsec: offset,
+                    roll_offset_arcsec: roll,
                 });
                 let stare_start = start.plus_s(s_in_visit as f64 * stare_span);
                 for m in 0..spec.exposures_per_stare {
@@ -172,16 +187,17 @@ pub fn plan(spec: &Spec, cfg: &Config) -> Result<Plan, String> {
     })
 }
 
-/// The configuration of exposure `e` of `plan`: `base` on the quad focal plane at its stare's pointing,
-/// its start (the ACE series' t = 0 set so that its image 0 starts at `e.start`), the orbit's phase then,
-/// one image, its own seed.
+/// The configuration of exposure `e` of `plan`: `base` on the quad focal plane at its stare's planned
+/// pointing, with the stare's pointing and roll errors as the as-built instrument's offsets (they replace
+/// any in `base`), its start (the ACE series' t = 0 set so that its image 0 starts at `e.start`), the
+/// orbit's phase then, one image, its own seed.
 pub fn exposure_config(base: &Config, plan: &Plan, e: &PlannedExposure) -> Config {
     let s = &plan.stares[e.stare];
     let mut c = base.clone();
     c.focal_plane.layout = Layout::Quad;
-    c.sky.ra_deg = s.ra_deg;
-    c.sky.dec_deg = s.dec_deg;
-    c.sky.pa_deg = s.pa_deg;
+    (c.sky.ra_deg, c.sky.dec_deg, c.sky.pa_deg) = s.planned();
+    c.as_built.pointing_offset_arcsec = s.pointing_offset_arcsec;
+    c.as_built.roll_offset_arcsec = s.roll_offset_arcsec;
     let t0 = e.start.plus_s(-base.ace.first_exposure_start_s);
     c.observation.start_utc = t0.utc_iso();
     c.observation.orbit_phase_deg = e.orbit_phase_deg;
@@ -194,12 +210,7 @@ pub fn exposure_config(base: &Config, plan: &Plan, e: &PlannedExposure) -> Confi
 /// pointing or roll error) on the focal plane **as designed** (no assembly offsets or turns) — the design
 /// WCS its catalogue's sky positions come through, and what the astrometric solution starts from.
 pub fn design_config(base: &Config, plan: &Plan, e: &PlannedExposure) -> Config {
-    let mut c = exposure_config(base, plan, e);
-    let (ra, dec, pa) = plan.stares[e.stare].planned();
-    (c.sky.ra_deg, c.sky.dec_deg, c.sky.pa_deg) = (ra, dec, pa);
-    c.focal_plane.array_offsets_px = [[0.0; 2]; 4];
-    c.focal_plane.array_rotation_errors_deg = [0.0; 4];
-    c
+    crate::instrument::design_of(&exposure_config(base, plan, e))
 }
 
 impl Stare {

@@ -59,10 +59,7 @@ pub const DESIGN_NAME: &str = "design.toml";
 /// the seed of every draw): the truth, read by the Slurm tasks that simulate and by the scoring only.
 pub fn design_of(cfg: &Config) -> Config {
     // no as-built deviation either: design.toml holds only design quantities
-    let mut c = crate::instrument::design_of(cfg);
-    c.focal_plane.array_offsets_px = [[0.0; 2]; 4];
-    c.focal_plane.array_rotation_errors_deg = [0.0; 4];
-    c
+    crate::instrument::design_of(cfg)
 }
 
 /// Write the configuration and the sequence file a sequence is planned with (`config.toml`,
