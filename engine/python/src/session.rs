@@ -306,6 +306,56 @@ impl PySession {
         PyAnalysis::new(py, analysis, &input, &cm)
     }
 
+    /// ePSF astrometry of an image file as `jsim analyze --image path` reads it: the same reader and the same
+    /// products — the calibration flat (`flat=`, else `flat_cal.fits` beside the image), the reference
+    /// catalogue (`refcat=`, else `refcat.csv`), the attitude telemetry (`telemetry=`, else
+    /// `telemetry_NNN.fits`, NNN the image's IMAGEIDX), the design model PSF (`psf_model.fits` beside the
+    /// image) and the truth (`truth=`, else the image's TRUTH extension) — so the result is the CLI's, bit
+    /// for bit. A focal-plane file (`fp_NNN.fits`) is analysed array by array by `jsim analyze`: here it is
+    /// refused by name.
+    #[pyo3(signature = (path, *, truth = None, flat = None, refcat = None, telemetry = None, countermeasure = "none", epsf_zones = None, crowding = None))]
+    #[allow(clippy::too_many_arguments)]
+    fn analyze_file(
+        &self,
+        py: Python<'_>,
+        path: std::path::PathBuf,
+        truth: Option<std::path::PathBuf>,
+        flat: Option<std::path::PathBuf>,
+        refcat: Option<std::path::PathBuf>,
+        telemetry: Option<std::path::PathBuf>,
+        countermeasure: &str,
+        epsf_zones: Option<usize>,
+        crowding: Option<&str>,
+    ) -> PyResult<PyAnalysis> {
+        let cm: Countermeasure = countermeasure.parse().or_py()?;
+        let mut cfg = self.cfg.clone();
+        if let Some(k) = crowding {
+            cfg.analysis.crowding = Crowding::parse(k).map_err(PyValueError::new_err)?;
+        }
+        if !engine::io::analysis_input::focal_plane_arrays(&path)
+            .or_py()?
+            .is_empty()
+        {
+            return Err(PyValueError::new_err(format!(
+                "{}: a focal-plane file (ARRAY1 …): analyse it with `jsim analyze`, array by array",
+                path.display()
+            )));
+        }
+        let input = AnalysisInput::read_products(
+            &path,
+            truth.as_deref(),
+            flat.as_deref(),
+            refcat.as_deref(),
+            telemetry.as_deref(),
+            &cfg,
+        )
+        .or_py()?;
+        let analysis = py
+            .detach(|| self.session.analyze_input(&cfg, &input, epsf_zones, cm))
+            .or_py()?;
+        PyAnalysis::new(py, analysis, &input, &cm)
+    }
+
     /// The instant predictor (no image simulated): the expected accuracy [mas] of the dataset per
     /// countermeasure, `{name: mas}`.
     #[pyo3(signature = (countermeasures = None))]

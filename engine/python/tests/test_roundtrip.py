@@ -5,6 +5,7 @@ import json
 import subprocess
 
 import numpy as np
+import pytest
 from astropy.io import fits
 
 import jsim
@@ -212,3 +213,50 @@ def test_experiment_rows_equal_the_cli(cfg, tmp_path, jsim_bin):
         for key in ["accuracy_mas", "sem_mas", "crlb_mas", "predicted_mas"]:
             assert rows[key][k] == cli[key][k], key
         assert rows["n_images"][k] == cli["n_images"][k] == 3
+
+
+def test_a_file_with_its_products_analyses_in_python_as_in_jsim_analyze(tmp_path, jsim_bin):
+    # a realistic-ACE image written by `jsim simulate` with every product beside it (the calibration flat, the
+    # reference catalogue, the telemetry, the design model PSF): `Session.analyze_file` reads them as
+    # `jsim analyze` does, and gives its catalogue bit for bit — with the telemetry forward model (telemetry
+    # and model PSF) and a catalogue-referenced plate model (refcat)
+    from conftest import SMALL, small_config
+
+    sets = [f"{k}={v}" if not isinstance(v, str) else f'{k}="{v}"' for k, v in SMALL.items()]
+    sets += ['ace.case="realistic"', "fidelity.images=1"]
+    cmd = [jsim_bin, "simulate", "--out", str(tmp_path / "sim")]
+    for s in sets:
+        cmd += ["--set", s]
+    subprocess.run(cmd, check=True, capture_output=True)
+    image = tmp_path / "sim" / "img_000.fits"
+    for name in ["flat_cal.fits", "refcat.csv", "telemetry_000.fits", "psf_model.fits"]:
+        assert (tmp_path / "sim" / name).exists(), name
+    session = jsim.Session(small_config(), backend="cpu")
+    for cm in ["telemetry-model", "plate-poly:3@catalogue"]:
+        out = tmp_path / f"an-{cm.replace(':', '_').replace('@', '_')}"
+        subprocess.run(
+            [jsim_bin, "analyze", "--image", str(image), "--countermeasure", cm, "--out", str(out)],
+            check=True,
+            capture_output=True,
+        )
+        cli = read_catalogue(out / "catalogue.csv")
+        summary = json.loads((out / "summary.json").read_text())
+        py = session.analyze_file(image, countermeasure=cm)
+        assert set(cli) == set(py.catalogue)
+        for name in cli:
+            np.testing.assert_array_equal(py.catalogue[name], cli[name], err_msg=f"{cm}: {name}")
+        for key in ["accuracy_mas", "accuracy_x_mas", "crlb_median_mas", "n_used", "n_detected"]:
+            assert py.summary[key] == summary["report"][key], (cm, key)
+        assert py.assumptions == summary["assumptions"], cm
+    # a focal-plane file is refused by name
+    fp = tmp_path / "fp"
+    quad = [s for s in sets if not s.startswith("ace.case")] + [
+        'focal_plane.layout="quad"', "scene.bulge.density_per_arcmin2=0", 'ace.case="gaussian"'
+    ]
+    subprocess.run(
+        [jsim_bin, "simulate", "--scene", "bulge", "--out", str(fp)] + [a for s in quad for a in ("--set", s)],
+        check=True,
+        capture_output=True,
+    )
+    with pytest.raises(ValueError, match="focal-plane"):
+        session.analyze_file(fp / "fp_000.fits")

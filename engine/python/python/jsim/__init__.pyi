@@ -118,6 +118,21 @@ class Session:
         the config it was simulated with and the calibration flat product (``flat``, ``flat_error``).
         ``crowding``: auto, on or off (default: the session configuration's ``analysis.crowding``).
         TypeError for a non-numeric dtype, ValueError for a shape that is not 2-D."""
+    def analyze_file(
+        self,
+        path: Union[str, PathLike[str]],
+        *,
+        truth: Union[str, PathLike[str], None] = None,
+        flat: Union[str, PathLike[str], None] = None,
+        refcat: Union[str, PathLike[str], None] = None,
+        telemetry: Union[str, PathLike[str], None] = None,
+        countermeasure: str = "none",
+        epsf_zones: Optional[int] = None,
+        crowding: Optional[str] = None,
+    ) -> Analysis:
+        """``jsim analyze --image path`` from Python: the same reader and products (flat_cal.fits,
+        refcat.csv, telemetry_NNN.fits, psf_model.fits beside the image, or the paths given), the CLI's
+        result bit for bit. A focal-plane file is refused (ValueError)."""
     def predict(self, countermeasures: Union[str, Sequence[str], None] = None) -> Dict[str, float]:
         """The instant predictor: expected accuracy [mas] per countermeasure."""
 
