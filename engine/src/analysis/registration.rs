@@ -81,6 +81,28 @@ impl Registration {
         (x + q(0), y + q(1))
     }
 
+    /// The catalogue position the map puts at image position `q`: the inverse, by fixed-point iteration from
+    /// the inverse of the affine part (the quadratic part is ≪ 1 px: four steps leave ≲ 1e-12 px).
+    pub fn invert(&self, q: (f64, f64)) -> (f64, f64) {
+        let m = &self.map;
+        let det = m[1] * m[5] - m[2] * m[4];
+        if self.pairs == 0 || det.abs() < 1e-12 {
+            return q;
+        }
+        let affine_inverse = |r: (f64, f64)| {
+            let (u, v) = (r.0 - m[0], r.1 - m[3]);
+            ((m[5] * u - m[2] * v) / det, (m[1] * v - m[4] * u) / det)
+        };
+        let mut p = affine_inverse(q);
+        for _ in 0..6 {
+            let b = quadratic_basis(p, self.centre_px);
+            let qx: f64 = (0..3).map(|j| self.quadratic[0][j] * b[j]).sum();
+            let qy: f64 = (0..3).map(|j| self.quadratic[1][j] * b[j]).sum();
+            p = affine_inverse((q.0 - qx, q.1 - qy));
+        }
+        p
+    }
+
     /// The map's own rms error per axis at the pairs it was fitted on, px: σ √(P/N) (see the module's
     /// documentation); NaN without a fit.
     pub fn predicted_error_px(&self) -> f64 {
@@ -126,7 +148,8 @@ pub fn register(fits: &[(f64, f64)], flux: &[f64], catalogue: &[(f64, f64)]) -> 
         // saturated core, a catalogue star that moved)
         for clip in [false, last] {
             if clip {
-                let limit = CLIP_SIGMA * reg.rms_px;
+                // (a floor: a map that fits exactly keeps its pairs)
+                let limit = (CLIP_SIGMA * reg.rms_px).max(1e-6);
                 pairs.retain(|(c, f)| {
                     let p = reg.apply((c[0], c[1]));
                     (p.0 - f[0]).abs() <= limit && (p.1 - f[1]).abs() <= limit

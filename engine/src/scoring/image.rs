@@ -15,7 +15,7 @@
 //!   excursion is the signature of a bad ePSF.
 //! * Fewer than [`MIN_SCORED_STARS`] used stars, or no truth: every statistic is absent (NaN), never 0.
 
-use crate::analysis::countermeasures::Countermeasure;
+use crate::analysis::countermeasures::{Countermeasure, Reference};
 use crate::analysis::crowded::CrowdedSummary;
 use crate::analysis::detection::match_positions;
 use crate::analysis::epsf::Epsf;
@@ -224,12 +224,34 @@ pub fn score(analysis: &Analysis, truth: Option<&[TruthRow]>, scale_mas: f64) ->
 
 /// Score every analysis of an image against `truth` on the plain analysis' match.
 pub fn score_image(ia: &ImageAnalysis, truth: Option<&[TruthRow]>, scale_mas: f64) -> ScoredImage {
+    score_image_in_frames(ia, truth, None, scale_mas)
+}
+
+/// [`score_image`], the countermeasures referenced to the reference catalogue (`plate-*@catalogue`, alone or
+/// after the forward model) scored in the catalogue's frame: against `catalogue_truth`, the truth's stars
+/// in the same order at their true sky places through the header's design WCS ([`in_header_frame`]). Their
+/// positions are the catalogue's by construction (the plate model maps the fits onto it); where the header
+/// misses the instrument as built (its pointing, roll, array placement, distortion) the catalogue's frame is
+/// not the image's. `None`: the frames agree.
+pub fn score_image_in_frames(
+    ia: &ImageAnalysis,
+    truth: Option<&[TruthRow]>,
+    catalogue_truth: Option<&[TruthRow]>,
+    scale_mas: f64,
+) -> ScoredImage {
     let global = score(&ia.global, truth, scale_mas);
     let matches: Vec<Option<usize>> = global.stars.iter().map(|s| s.truth).collect();
     let measured = ia
         .measured
         .iter()
         .map(|(cm, a)| {
+            let truth = match cm {
+                Countermeasure::Plate {
+                    reference: Reference::Catalogue { .. },
+                    ..
+                } => catalogue_truth.or(truth),
+                _ => truth,
+            };
             // the same stars in the same order (see the module's documentation); else matched on their own
             let s = if a.stars.len() == matches.len() {
                 score_matched(a, truth, &matches, scale_mas)
@@ -245,6 +267,39 @@ pub fn score_image(ia: &ImageAnalysis, truth: Option<&[TruthRow]>, scale_mas: f6
         measured,
         crowded: ia.crowded.clone(),
     }
+}
+
+/// The truth of a simulated array in its header's frame ([`in_header_frame`] through the simulator's WCS as
+/// built and its design WCS), or `None` when the two agree (no pointing, roll, placement or distortion beyond
+/// the design, or the oracle control): what [`score_image_in_frames`] scores the catalogue-referenced
+/// countermeasures against.
+pub fn catalogue_truth(
+    sim: &crate::simulate::Simulator,
+    truth: &[TruthRow],
+) -> Option<Vec<TruthRow>> {
+    if !sim.wcs_deviates() {
+        return None;
+    }
+    let (built, header) = (sim.wcs()?, sim.design_wcs()?);
+    Some(in_header_frame(truth, |x, y| {
+        let (ra, dec) = built.pixel_to_sky(x, y)?;
+        header.sky_to_pixel(ra, dec)
+    }))
+}
+
+/// `truth` with every star's position moved into the header's frame by `to_header(x, y)` (its true pixel →
+/// its sky place through the WCS as built → the design WCS's pixel); NaN where it has none.
+pub fn in_header_frame(
+    truth: &[TruthRow],
+    to_header: impl Fn(f64, f64) -> Option<(f64, f64)>,
+) -> Vec<TruthRow> {
+    truth
+        .iter()
+        .map(|t| {
+            let (x_px, y_px) = to_header(t.x_px, t.y_px).unwrap_or((f64::NAN, f64::NAN));
+            TruthRow { x_px, y_px, ..*t }
+        })
+        .collect()
 }
 
 /// Attach per-truth-star fit-response predictions (px) to a scored analysis and refresh its report.

@@ -305,7 +305,13 @@ impl Source<'_> {
         cfg: &AnalysisCfg,
         plate_scale_mas: f64,
     ) -> Result<ScoredImage, SourceError> {
-        let mut res = score_image(analysis, Some(truth), plate_scale_mas);
+        let in_header = crate::scoring::image::catalogue_truth(self.sim, truth);
+        let mut res = crate::scoring::image::score_image_in_frames(
+            analysis,
+            Some(truth),
+            in_header.as_deref(),
+            plate_scale_mas,
+        );
         self.attach_ace_prediction(truth, &mut res.global, cfg, plate_scale_mas)?;
         for (cm, a) in &mut res.measured {
             if *cm == Countermeasure::None {

@@ -15,7 +15,7 @@ use crate::analysis::pipeline::offered_in_crowded_field;
 use crate::config::Crowding;
 use crate::io::instrument::SurveyModel;
 use crate::scoring::crowded as report;
-use crate::scoring::image::{ScoredImage, score_image};
+use crate::scoring::image::{ScoredImage, score_image_in_frames};
 use crate::scoring::undetected::Undetected;
 use crate::session::{Source, SourceError, analysis_image};
 use crate::simulate::{FocalPlaneExposure, FocalPlaneSimulator};
@@ -70,7 +70,13 @@ pub fn analyse_focal_plane(
             survey: *survey,
         }
         .analyse(&img, Some(&e.truth), &c, plan, &Default::default())?;
-        per_array.push(score_image(&analysis, Some(&e.truth), scale));
+        let in_header = crate::scoring::image::catalogue_truth(sim, &e.truth);
+        per_array.push(score_image_in_frames(
+            &analysis,
+            Some(&e.truth),
+            in_header.as_deref(),
+            scale,
+        ));
     }
     let analyse_s = t0.elapsed().as_secs_f64();
     let mut out = Vec::with_capacity(plan.countermeasures.len());
