@@ -121,6 +121,9 @@ pub struct AnalysisInput {
     pub img: AnalysisImage,
     /// The truth catalogue: the given file, else the image's TRUTH extension (if any).
     pub truth: Option<Vec<TruthRow>>,
+    /// The same truth in the header's frame (the TRUTH table's `x_header`, `y_header`, written when the
+    /// header is not the instrument as built): what a catalogue-referenced countermeasure is scored against.
+    pub truth_in_header: Option<Vec<TruthRow>>,
     /// The configuration and exposure index the image was simulated with (its CONFIG extension and
     /// IMAGEIDX), when it is a jsim image.
     pub provenance: Option<(Config, usize)>,
@@ -204,6 +207,7 @@ impl AnalysisInput {
             input.model_psf = products.model_psf;
             input.model_psf_terms = products.model_psf_terms;
             input.telemetry = read_telemetry_for(path, telemetry_path)?;
+            input.truth_in_header = truth_in_header(truth_path.unwrap_or(path), None);
             input.with_readout(path, None, fallback)
         })
     }
@@ -284,6 +288,7 @@ impl AnalysisInput {
             model_psf_terms: None,
             telemetry: None,
             readout: None,
+            truth_in_header: None,
         })
     }
 }
@@ -372,6 +377,7 @@ impl AnalysisInput {
                         .to_string();
                 }
             }
+            input.truth_in_header = truth_in_header(truth_path.unwrap_or(path), Some(k + 1));
             input
         })
         .map_err(|message| IoError::Format {
@@ -415,6 +421,30 @@ impl AnalysisInput {
 }
 
 /// The truth rows of one array (1-based `array` column) of a focal-plane TRUTH table.
+/// The TRUTH table's stars (of array `array`, 1-based, of a focal-plane file) in the header's frame: its
+/// rows with `x_header`, `y_header` for x, y; `None` when it has no such columns (the header is the
+/// instrument as built) or is not a FITS table.
+fn truth_in_header(path: &Path, array: Option<usize>) -> Option<Vec<TruthRow>> {
+    let mut names: Vec<&str> = crate::io::exposure::TRUTH_HEADER.to_vec();
+    names.extend(crate::io::exposure::TRUTH_IN_HEADER);
+    if array.is_some() {
+        names.push("array");
+    }
+    let cols = fits::read_table(path, "TRUTH", &names).ok()?;
+    let n = crate::io::exposure::TRUTH_HEADER.len();
+    let keep: Vec<usize> = (0..cols.first()?.len())
+        .filter(|&i| array.is_none_or(|a| cols[names.len() - 1][i] as usize == a))
+        .collect();
+    let mut sel: Vec<Vec<f64>> = cols[..n]
+        .iter()
+        .map(|c| keep.iter().map(|&i| c[i]).collect())
+        .collect();
+    // x and y are the table's first two columns after the id
+    sel[1] = keep.iter().map(|&i| cols[n][i]).collect();
+    sel[2] = keep.iter().map(|&i| cols[n + 1][i]).collect();
+    Some(crate::io::exposure::truth_from_columns(&sel))
+}
+
 fn array_truth(path: &Path, array: usize) -> Result<Vec<TruthRow>, IoError> {
     let mut names: Vec<&str> = crate::io::exposure::TRUTH_HEADER.to_vec();
     names.push("array");

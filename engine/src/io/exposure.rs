@@ -353,6 +353,26 @@ pub fn truth_columns(t: &[TruthRow], wcs: Option<&ArrayWcs>) -> Vec<Column> {
         .collect()
 }
 
+/// The truth's positions in the header's frame (`x_header`, `y_header`: each star's true sky place through the
+/// header's design WCS, `Simulator::in_header_frame_px`), written beside the TRUTH table's own columns when the
+/// header is not the instrument as built — what a catalogue-referenced countermeasure is scored against.
+pub fn header_frame_columns(sim: &Simulator, t: &[TruthRow]) -> [Column; 2] {
+    let (x, y): (Vec<f64>, Vec<f64>) = t
+        .iter()
+        .map(|r| {
+            sim.in_header_frame_px(r.x_px, r.y_px)
+                .unwrap_or((f64::NAN, f64::NAN))
+        })
+        .unzip();
+    [
+        Column::F64(TRUTH_IN_HEADER[0].into(), x),
+        Column::F64(TRUTH_IN_HEADER[1].into(), y),
+    ]
+}
+
+/// The TRUTH table's header-frame columns ([`header_frame_columns`]).
+pub const TRUTH_IN_HEADER: [&str; 2] = ["x_header", "y_header"];
+
 /// Columns of the truth CSV.
 pub const TRUTH_HEADER: [&str; 11] = [
     "id",
@@ -485,7 +505,13 @@ pub fn write_image_file(
             },
             Hdu::Table {
                 name: "TRUTH",
-                columns: truth_columns(&exp.truth, sim.wcs()),
+                columns: {
+                    let mut c = truth_columns(&exp.truth, sim.wcs());
+                    if sim.wcs_deviates() {
+                        c.extend(header_frame_columns(sim, &exp.truth));
+                    }
+                    c
+                },
                 cards: vec![],
             },
             Hdu::Text {

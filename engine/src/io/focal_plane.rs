@@ -74,8 +74,14 @@ fn primary_cards(fps: &FocalPlaneSimulator, exp: &FocalPlaneExposure) -> Vec<Car
 pub fn focal_plane_truth(fps: &FocalPlaneSimulator, exp: &FocalPlaneExposure) -> Vec<Column> {
     let mut merged: Vec<Column> = Vec::new();
     let mut arrays: Vec<i64> = Vec::new();
+    // the header-frame columns when any array's header is not the instrument as built (the same as x, y on
+    // an array whose header is)
+    let in_header = fps.arrays.iter().any(|s| s.wcs_deviates());
     for (sim, e) in fps.arrays.iter().zip(&exp.arrays) {
-        let cols = truth_columns(&e.truth, sim.wcs());
+        let mut cols = truth_columns(&e.truth, sim.wcs());
+        if in_header {
+            cols.extend(crate::io::exposure::header_frame_columns(sim, &e.truth));
+        }
         arrays.extend(std::iter::repeat_n(
             sim.array.index as i64 + 1,
             e.truth.len(),

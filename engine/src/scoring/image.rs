@@ -280,11 +280,7 @@ pub fn catalogue_truth(
     if !sim.wcs_deviates() {
         return None;
     }
-    let (built, header) = (sim.wcs()?, sim.design_wcs()?);
-    Some(in_header_frame(truth, |x, y| {
-        let (ra, dec) = built.pixel_to_sky(x, y)?;
-        header.sky_to_pixel(ra, dec)
-    }))
+    Some(in_header_frame(truth, |x, y| sim.in_header_frame_px(x, y)))
 }
 
 /// `truth` with every star's position moved into the header's frame by `to_header(x, y)` (its true pixel →

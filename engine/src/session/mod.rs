@@ -222,7 +222,16 @@ impl Session {
                 countermeasure: countermeasure.to_string(),
             })
         })?;
-        Ok(score(&analysis, truth, input.img.plate_scale_mas))
+        // a countermeasure referenced to the catalogue gives positions in the catalogue's (the header's) frame:
+        // scored against the truth in that frame when the file carries it
+        let scored_truth = match countermeasure {
+            Countermeasure::Plate {
+                reference: crate::analysis::countermeasures::Reference::Catalogue { .. },
+                ..
+            } => input.truth_in_header.as_deref().or(truth),
+            _ => truth,
+        };
+        Ok(score(&analysis, scored_truth, input.img.plate_scale_mas))
     }
 }
 

@@ -355,6 +355,16 @@ impl Simulator {
             .as_ref()
     }
 
+    /// Where the header's WCS puts the sky place of true pixel (x, y): its true sky place through the WCS as
+    /// built, then the header's (design) WCS; (x, y) itself when the two agree. The catalogue's frame.
+    pub fn in_header_frame_px(&self, x: f64, y: f64) -> Option<(f64, f64)> {
+        if !self.wcs_deviates() {
+            return Some((x, y));
+        }
+        let (ra, dec) = self.wcs()?.pixel_to_sky(x, y)?;
+        self.design_wcs()?.sky_to_pixel(ra, dec)
+    }
+
     /// Whether the header's WCS differs from where the stars truly land (a distortion beyond the design).
     pub fn wcs_deviates(&self) -> bool {
         self.cfg.focal_plane != self.built.focal_plane || self.cfg.sky != self.built.sky
