@@ -61,8 +61,7 @@ pub fn realise(design: &Config) -> Result<Config, InstrumentError> {
 /// `design.toml` holds).
 pub fn design_of(cfg: &Config) -> Config {
     let mut d = cfg.clone();
-    d.focal_plane.array_offsets_px = [[0.0; 2]; 4];
-    d.focal_plane.array_rotation_errors_deg = [0.0; 4];
+    place_arrays_nominally(&mut d);
     d.as_built = crate::config::AsBuilt {
         seed: cfg.as_built.seed,
         ..Default::default()
@@ -75,10 +74,15 @@ pub fn design_of(cfg: &Config) -> Config {
 fn nominal_arrays(cfg: &Config) -> Config {
     let mut d = cfg.clone();
     if d.focal_plane.layout == crate::config::Layout::Quad {
-        d.focal_plane.array_offsets_px = [[0.0; 2]; 4];
-        d.focal_plane.array_rotation_errors_deg = [0.0; 4];
+        place_arrays_nominally(&mut d);
     }
     d
+}
+
+/// Every array at its design place: no assembly offset or turn.
+fn place_arrays_nominally(c: &mut Config) {
+    c.focal_plane.array_offsets_px = [[0.0; 2]; 4];
+    c.focal_plane.array_rotation_errors_deg = [0.0; 4];
 }
 
 /// The configuration the products beside the images are made from: the design, or the realised as-built

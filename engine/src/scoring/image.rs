@@ -15,7 +15,7 @@
 //!   excursion is the signature of a bad ePSF.
 //! * Fewer than [`MIN_SCORED_STARS`] used stars, or no truth: every statistic is absent (NaN), never 0.
 
-use crate::analysis::countermeasures::{Countermeasure, Reference};
+use crate::analysis::countermeasures::Countermeasure;
 use crate::analysis::crowded::CrowdedSummary;
 use crate::analysis::detection::match_positions;
 use crate::analysis::epsf::Epsf;
@@ -245,12 +245,10 @@ pub fn score_image_in_frames(
         .measured
         .iter()
         .map(|(cm, a)| {
-            let truth = match cm {
-                Countermeasure::Plate {
-                    reference: Reference::Catalogue { .. },
-                    ..
-                } => catalogue_truth.or(truth),
-                _ => truth,
+            let truth = if cm.is_catalogue_plate() {
+                catalogue_truth.or(truth)
+            } else {
+                truth
             };
             // the same stars in the same order (see the module's documentation); else matched on their own
             let s = if a.stars.len() == matches.len() {

@@ -224,12 +224,10 @@ impl Session {
         })?;
         // a countermeasure referenced to the catalogue gives positions in the catalogue's (the header's) frame:
         // scored against the truth in that frame when the file carries it
-        let scored_truth = match countermeasure {
-            Countermeasure::Plate {
-                reference: crate::analysis::countermeasures::Reference::Catalogue { .. },
-                ..
-            } => input.truth_in_header.as_deref().or(truth),
-            _ => truth,
+        let scored_truth = if countermeasure.is_catalogue_plate() {
+            input.truth_in_header.as_deref().or(truth)
+        } else {
+            truth
         };
         Ok(score(&analysis, scored_truth, input.img.plate_scale_mas))
     }

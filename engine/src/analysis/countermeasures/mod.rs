@@ -328,6 +328,18 @@ impl Countermeasure {
         )
     }
 
+    /// Whether this countermeasure is a plate model referenced to the reference catalogue (`@catalogue`,
+    /// alone or after the forward model): its positions are in the catalogue's frame.
+    pub fn is_catalogue_plate(&self) -> bool {
+        matches!(
+            self,
+            Countermeasure::Plate {
+                reference: Reference::Catalogue { .. },
+                ..
+            }
+        )
+    }
+
     /// Check the parameters.
     pub fn validate(&self) -> Result<(), CountermeasureError> {
         let bad = |why: String| {
