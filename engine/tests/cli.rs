@@ -686,3 +686,56 @@ fn a_negative_number_gets_the_options_range_error() {
         assert!(!out_dir.exists(), "{args:?} wrote {}", out_dir.display());
     }
 }
+
+/// A real Hubble exposure (a cutout of ACS/HRC j8bt06nyq_flt, tests/data/hst_acs_hrc_47tuc): `jsim analyze`
+/// reads its SCI chip in electrons, says where each value came from, masks its flagged pixels and writes
+/// the chip's catalogue with RA/Dec; a negative --read-noise-e is a named error that writes nothing.
+#[test]
+fn a_real_hst_exposure_is_analysed_chip_by_chip_with_its_choices_stated() {
+    let image = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../tests/data/hst_acs_hrc_47tuc/j8bt06nyq_cutout_flt.fits");
+    let dir = temp("hst");
+    let out = jsim()
+        .args(["analyze", "--image"])
+        .arg(&image)
+        .arg("--out")
+        .arg(dir.join("an"))
+        .output()
+        .expect("run");
+    let err = stderr_of(&out);
+    assert!(out.status.success(), "{err}");
+    for said in [
+        "[SCI,1]: BUNIT ELECTRONS: 1 e⁻ per data unit",
+        "READNSEC = 4.71 (amplifiers C of CCDAMP)",
+        "DQ: 117 flagged pixel(s) masked (44 saturated)",
+        "TAN with SIP distortion",
+    ] {
+        assert!(err.contains(said), "{said} not in {err}");
+    }
+    let header =
+        std::fs::read_to_string(dir.join("an/SCI1/catalogue.csv")).expect("chip catalogue");
+    assert!(
+        header
+            .lines()
+            .next()
+            .unwrap_or("")
+            .ends_with(",ra_deg,dec_deg")
+    );
+    let combined = std::fs::read_to_string(dir.join("an/catalogue.csv")).expect("catalogue");
+    assert!(
+        combined.lines().count() > 200,
+        "{} stars",
+        combined.lines().count()
+    );
+    let bad = jsim()
+        .args(["analyze", "--read-noise-e", "-1", "--image"])
+        .arg(&image)
+        .arg("--out")
+        .arg(dir.join("bad"))
+        .output()
+        .expect("run");
+    assert!(!bad.status.success());
+    assert!(stderr_of(&bad).contains("--read-noise-e -1: must be a finite number ≥ 0"));
+    assert!(!dir.join("bad").exists());
+    let _ = std::fs::remove_dir_all(&dir);
+}

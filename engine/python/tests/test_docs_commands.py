@@ -63,7 +63,7 @@ PLACEHOLDER = re.compile(r"(…|<|\$|^[A-Z]{1,4}(\.[a-z]+)?$|=[A-Z]{1,4}$|^(DIR|
 # producers before consumers; within a rank, the pages' order
 RANK = {"config": 0, "psf": 1, "ace": 1, "predict": 1, "simulate": 2, "crowded_image.py": 3, "crowded": 3,
         "experiment": 4, "bench": 4, "sequence": 4, "transit": 4, "analyze": 5, "solve": 5, "photutils_catalogue.py": 6, "focal_plane_image.py": 6,
-        "crowded_photutils.py": 6, "simulate_reference.py": 6, "persistence_cost.py": 6, "score": 7, "sweep": 8, "merge": 9, "report": 10}
+        "crowded_photutils.py": 6, "check_real_image.py": 6, "simulate_reference.py": 6, "persistence_cost.py": 6, "score": 7, "sweep": 8, "merge": 9, "report": 10}
 
 
 def pages():
@@ -213,7 +213,7 @@ def reduced_sweep(src, dst):
 @pytest.fixture(scope="module")
 def scratch(tmp_path_factory):
     """A directory laid out like the repository: catalogues and configs as they are, the sweep files reduced,
-    the Python scripts linked."""
+    the Python scripts and the test data (real telescope files) linked."""
     d = tmp_path_factory.mktemp("docs")
     for sub in ["catalogues", "configs", "sequences"]:
         shutil.copytree(os.path.join(REPO, "engine", sub), d / "engine" / sub)
@@ -221,6 +221,8 @@ def scratch(tmp_path_factory):
     for f in glob.glob(os.path.join(REPO, "engine", "sweeps", "*.toml")):
         reduced_sweep(f, d / "engine" / "sweeps" / os.path.basename(f))
     os.symlink(os.path.join(REPO, "engine", "python"), d / "engine" / "python")
+    os.makedirs(d / "tests")
+    os.symlink(os.path.join(REPO, "tests", "data"), d / "tests" / "data")
     small = {}
     for key, value in REDUCED.items():
         table, field = key.split(".")

@@ -144,6 +144,8 @@ pub struct AnalysisInput {
     /// The readout timing and array rotation the header states ([`super::readout_header`]): what the
     /// telemetry is applied with.
     pub readout: Option<ExposureReadout>,
+    /// What was read of a calibrated chip of another observatory ([`super::calibrated`]), when it is one.
+    pub chip: Option<super::calibrated::ChipFacts>,
 }
 
 impl AnalysisInput {
@@ -278,9 +280,19 @@ impl AnalysisInput {
             )),
         }
         Ok(Self {
-            img,
             truth,
             provenance,
+            ..Self::bare(img, plate_scale_mas, assumptions)
+        })
+    }
+
+    /// An image with nothing beside it: no truth, provenance or product yet.
+    fn bare(img: AnalysisImage, plate_scale_mas: f64, assumptions: Vec<String>) -> Self {
+        Self {
+            img,
+            truth: None,
+            truth_in_header: None,
+            provenance: None,
             plate_scale_mas,
             assumptions,
             reference: None,
@@ -288,8 +300,8 @@ impl AnalysisInput {
             model_psf_terms: None,
             telemetry: None,
             readout: None,
-            truth_in_header: None,
-        })
+            chip: None,
+        }
     }
 }
 
@@ -336,6 +348,46 @@ pub fn focal_plane_arrays(path: &Path) -> Result<Vec<String>, IoError> {
 }
 
 impl AnalysisInput {
+    /// Read chip `set` of a calibrated multi-extension file (HST, JWST: [`super::calibrated`]) for
+    /// analysis. The image is already flat-fielded by its pipeline and is in electrons once read; the plate
+    /// scale is the header's (its WCS), else `fallback`'s.
+    pub fn read_chip(
+        path: &Path,
+        set: &super::calibrated::Imset,
+        opts: &super::calibrated::ReadOptions,
+        fallback: &Config,
+    ) -> Result<Self, IoError> {
+        let chip = super::calibrated::read_chip(path, set, opts)?;
+        let facts = chip.facts();
+        let mut assumptions = chip.notes;
+        let plate_scale_mas = chip.plate_scale_mas.unwrap_or_else(|| {
+            let s = fallback.instrument.plate_scale_mas();
+            assumptions.push(format!(
+                "no PLTSCALE header nor WCS matrix: {s:.3} mas/px from the configuration assumed"
+            ));
+            s
+        });
+        assumptions.push(
+            "a calibrated image: flat-fielded by its own pipeline, not again here; no model PSF, so the \
+             ePSF is built from the stars alone"
+                .to_string(),
+        );
+        let img = AnalysisImage {
+            nx: chip.nx,
+            ny: chip.ny,
+            e: chip.electrons,
+            bad: chip.bad,
+            // the data are electrons: no ADC quantisation to add
+            var_floor_e2: chip.read_noise_e.powi(2),
+            flat_sigma: 0.0,
+            plate_scale_mas,
+        };
+        Ok(Self {
+            chip: Some(facts),
+            ..Self::bare(img, plate_scale_mas, assumptions)
+        })
+    }
+
     /// Read array `k` (0-based: extension `ARRAY{k+1}`, its `DQ{k+1}`) of a focal-plane file for analysis,
     /// with the calibration flat's extension `FLAT{k+1}` (from `flat_path`, else `flat_cal.fits` beside
     /// the file) and, when a truth is wanted for the report, the rows of array k+1 of the file's TRUTH

@@ -512,7 +512,7 @@ pub fn read_image(path: &Path) -> Result<ImageRead, IoError> {
 }
 
 /// Open a file for reading, a missing one an error that says so once.
-fn open(path: &Path) -> Result<FitsFile, IoError> {
+pub(crate) fn open(path: &Path) -> Result<FitsFile, IoError> {
     if !path.exists() {
         return Err(IoError::io(
             path,

@@ -3,6 +3,7 @@
 //! a path as one shell word for the scripts and command lines we write or show.
 
 pub mod analysis_input;
+pub mod calibrated;
 pub mod crowded;
 pub mod csv;
 pub mod ecsv;

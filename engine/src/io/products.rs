@@ -50,17 +50,40 @@ pub fn catalogue_rows(stars: &[ScoredStar], plate_scale_mas: f64) -> Vec<Vec<Cel
         .collect()
 }
 
-/// Write `catalogue.csv`.
+/// The columns `catalogue.csv` gains when the image's header has a celestial WCS that the analysis reads
+/// (a calibrated chip of another observatory): each star's RA and Dec, degrees (ICRS, as the header's).
+pub const SKY_HEADER: [&str; 2] = ["ra_deg", "dec_deg"];
+
+/// `rows` (of [`catalogue_rows`]) with each star's RA, Dec through `wcs` appended (NaN where the
+/// projection has none).
+pub fn with_sky(
+    mut rows: Vec<Vec<Cell>>,
+    stars: &[ScoredStar],
+    wcs: &crate::sky::wcs::ArrayWcs,
+) -> Vec<Vec<Cell>> {
+    for (r, s) in rows.iter_mut().zip(stars) {
+        let (ra, dec) = wcs.pixel_to_sky(s.x, s.y).unwrap_or((f64::NAN, f64::NAN));
+        r.extend([Cell::F(ra), Cell::F(dec)]);
+    }
+    rows
+}
+
+/// Write `catalogue.csv` (with RA/Dec through `sky`, when given).
 pub fn write_catalogue(
     path: &Path,
     stars: &[ScoredStar],
     plate_scale_mas: f64,
+    sky: Option<&crate::sky::wcs::ArrayWcs>,
 ) -> Result<(), IoError> {
-    csv::write(
-        path,
-        &CATALOGUE_HEADER,
-        &catalogue_rows(stars, plate_scale_mas),
-    )
+    let rows = catalogue_rows(stars, plate_scale_mas);
+    match sky {
+        Some(w) => {
+            let mut header = CATALOGUE_HEADER.to_vec();
+            header.extend(SKY_HEADER);
+            csv::write(path, &header, &with_sky(rows, stars, w))
+        }
+        None => csv::write(path, &CATALOGUE_HEADER, &rows),
+    }
 }
 
 /// An ePSF table as an image HDU (`epsf.fits`, the model PSF product): its nodes, nodes per pixel, origin
@@ -104,6 +127,9 @@ pub struct Summary<'a> {
     pub report: &'a Report,
     /// What the analysis assumed where the image did not say (empty when it said everything).
     pub assumptions: Vec<String>,
+    /// What was read of a calibrated chip of another observatory (its unit, read noise, masked pixels).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub calibration: Option<&'a super::calibrated::ChipFacts>,
     pub seconds: f64,
 }
 
@@ -123,11 +149,13 @@ pub fn write_analysis(
     analysis: &Scored,
     summary: &Summary<'_>,
     vectors: Option<(&VectorMap, f64, &str)>,
+    sky: Option<&crate::sky::wcs::ArrayWcs>,
 ) -> Result<(), IoError> {
     write_catalogue(
         &dir.join("catalogue.csv"),
         &analysis.stars,
         summary.plate_scale_mas,
+        sky,
     )?;
     write_epsf(
         &dir.join("epsf.fits"),

@@ -201,6 +201,18 @@ impl ArrayWcs {
         ];
         let crpix = [axis_px[0] + 1.0, axis_px[1] + 1.0];
         let crval_deg = [pointing.ra_deg, pointing.dec_deg];
+        Self::from_header_with_sip(crpix, crval_deg, cd_deg, naxis, sip)
+    }
+
+    /// The TAN projection a FITS header states with its forward SIP distortion (`A_p_q`, `B_p_q`), the
+    /// inverse fitted over the array as for a WCS this module writes.
+    pub fn from_header_with_sip(
+        crpix: [f64; 2],
+        crval_deg: [f64; 2],
+        cd_deg: [[f64; 2]; 2],
+        naxis: [usize; 2],
+        sip: Option<Sip>,
+    ) -> Result<Self, String> {
         let mut w = Self::from_header(crpix, crval_deg, cd_deg, naxis)?;
         if let Some(forward) = sip {
             forward.validate()?;

@@ -2,10 +2,10 @@
 //! files; here we print, write and show progress).
 
 use crate::outputs::{Outputs, interrupted};
-use anyhow::{Context, Result};
+use anyhow::{Context, Result, bail};
 use engine::analysis::countermeasures::{Countermeasure, Plan};
 use engine::config::{AceCase, Config, ReadoutOrder};
-use engine::io::{analysis_input, csv, exposure, products};
+use engine::io::{analysis_input, calibrated, csv, exposure, products};
 use engine::jitter::AceSeries;
 use engine::scoring::vectors::VectorMap;
 use engine::session::Session;
@@ -286,6 +286,8 @@ pub struct AnalyzeArgs {
     pub telemetry: Option<PathBuf>,
     pub zones: Option<usize>,
     pub countermeasure: Countermeasure,
+    /// How a calibrated (HST, JWST) file's data are read, where its header is silent or wrong.
+    pub calibrated: engine::io::calibrated::ReadOptions,
     pub out: PathBuf,
 }
 
@@ -295,7 +297,30 @@ pub struct AnalyzeArgs {
 pub fn analyze(session: &Session, cfg: &Config, a: &AnalyzeArgs) -> Result<()> {
     let arrays = analysis_input::focal_plane_arrays(&a.image)?;
     if !arrays.is_empty() {
-        return analyze_focal_plane(session, cfg, a, &arrays);
+        let parts: Vec<Part> = arrays
+            .iter()
+            .enumerate()
+            .map(|(k, n)| Part {
+                label: n.clone(),
+                dir: n.clone(),
+                number: k as i64 + 1,
+            })
+            .collect();
+        let read = |k: usize| {
+            analysis_input::AnalysisInput::read_array(
+                &a.image,
+                k,
+                a.truth.as_deref(),
+                a.flat.as_deref(),
+                a.refcat.as_deref(),
+                a.telemetry.as_deref(),
+                cfg,
+            )
+        };
+        return analyze_parts(session, cfg, a, &parts, "arrays", &read);
+    }
+    if !calibrated::primary_is_image(&a.image)? {
+        return analyze_calibrated(session, cfg, a);
     }
     let t0 = Instant::now();
     let input = analysis_input::AnalysisInput::read_products(
@@ -340,6 +365,7 @@ pub fn analyze(session: &Session, cfg: &Config, a: &AnalyzeArgs) -> Result<()> {
         countermeasure: &an.report.countermeasure,
         report: &an.report,
         assumptions,
+        calibration: None,
         seconds: t0.elapsed().as_secs_f64(),
     };
     products::write_analysis(
@@ -349,6 +375,7 @@ pub fn analyze(session: &Session, cfg: &Config, a: &AnalyzeArgs) -> Result<()> {
         truth
             .is_some()
             .then_some((&map, img.nx as f64, title.as_str())),
+        None,
     )?;
     outputs.keep();
     let r = &an.report;
@@ -603,15 +630,63 @@ pub fn score(a: &ScoreArgs) -> Result<()> {
     Ok(())
 }
 
-/// `jsim analyze` on a focal-plane file: each array (`ARRAY1` …) analysed alone with its own flat
-/// (`FLAT1` … of the flat product), written to `OUT/ARRAYk/`, and the arrays together: `OUT/catalogue.csv`
-/// (every array's stars with an `array` column) and `OUT/summary.json` (each array's report and the
-/// combined one).
-fn analyze_focal_plane(
+/// One image of a multi-image file: an array of a focal plane (`ARRAY2`) or a chip of a calibrated file
+/// (`SCI,2`, written to `SCI2/`).
+struct Part {
+    label: String,
+    dir: String,
+    /// The `array` column of the combined catalogue: the array's number, the chip's EXTVER.
+    number: i64,
+}
+
+/// `jsim analyze` on a calibrated multi-extension file of another observatory (HST, JWST: its `SCI`
+/// chips, [`calibrated`]): each chip analysed alone, and the chips together, as a focal plane's arrays.
+fn analyze_calibrated(session: &Session, cfg: &Config, a: &AnalyzeArgs) -> Result<()> {
+    let sets = calibrated::imsets(&a.image)?;
+    if sets.is_empty() {
+        bail!(
+            "{}: the primary HDU is not a 2-D image, and the file has neither SCI extensions (a calibrated \
+             HST or JWST file) nor ARRAYn ones (a jsim focal plane)",
+            a.image.display()
+        );
+    }
+    for (given, what) in [
+        (a.flat.is_some(), "--flat"),
+        (a.refcat.is_some(), "--refcat"),
+        (a.telemetry.is_some(), "--telemetry"),
+        (a.truth.is_some(), "--truth"),
+    ] {
+        if given {
+            bail!(
+                "{what}: not read with a calibrated file of another observatory (its SCI chips are \
+                 flat-fielded by their pipeline; score its catalogue with `jsim score`)"
+            );
+        }
+    }
+    let parts: Vec<Part> = sets
+        .iter()
+        .map(|s| Part {
+            label: s.name(),
+            dir: s.dir_name(),
+            number: s.extver,
+        })
+        .collect();
+    let read =
+        |k: usize| analysis_input::AnalysisInput::read_chip(&a.image, &sets[k], &a.calibrated, cfg);
+    analyze_parts(session, cfg, a, &parts, "chips", &read)
+}
+
+/// `jsim analyze` on a file of several images: each part (a focal plane's `ARRAY1` … with its own flat
+/// `FLAT1` …, or a calibrated file's chips) analysed alone and written to `OUT/<part>/`, and the parts
+/// together: `OUT/catalogue.csv` (every part's stars with an `array` column) and `OUT/summary.json` (each
+/// part's report and the combined one).
+fn analyze_parts(
     session: &Session,
     cfg: &Config,
     a: &AnalyzeArgs,
-    arrays: &[String],
+    parts: &[Part],
+    noun: &str,
+    read: &dyn Fn(usize) -> std::result::Result<analysis_input::AnalysisInput, engine::io::IoError>,
 ) -> Result<()> {
     let t0 = Instant::now();
     let mut outputs = Outputs::in_dir(&a.out)?;
@@ -621,6 +696,7 @@ fn analyze_focal_plane(
     let mut rows = Vec::new();
     let mut all_stars = Vec::new();
     let mut all_crowded = true;
+    let mut with_sky_columns = false;
     let mut scale = f64::NAN;
     // each array's stars, truth and size, for the accuracy against magnitude when every array has a truth
     let mut scored: Vec<
@@ -630,17 +706,10 @@ fn analyze_focal_plane(
             usize,
         )>,
     > = Vec::new();
-    for (k, name) in arrays.iter().enumerate() {
+    for (k, part) in parts.iter().enumerate() {
+        let name = &part.label;
         let t = Instant::now();
-        let input = analysis_input::AnalysisInput::read_array(
-            &a.image,
-            k,
-            a.truth.as_deref(),
-            a.flat.as_deref(),
-            a.refcat.as_deref(),
-            a.telemetry.as_deref(),
-            cfg,
-        )?;
+        let input = read(k)?;
         let assumptions = input.assumptions_for(&a.countermeasure);
         for s in &assumptions {
             eprintln!("jsim: {}[{name}]: {s}", a.image.display());
@@ -649,7 +718,7 @@ fn analyze_focal_plane(
             .analyze_input(cfg, &input, a.zones, a.countermeasure)
             .with_context(|| format!("{}[{name}]", a.image.display()))?;
         scale = input.plate_scale_mas;
-        let dir = a.out.join(name);
+        let dir = a.out.join(&part.dir);
         for f in ["catalogue.csv", "epsf.fits", "summary.json"] {
             outputs.add(&dir.join(f));
         }
@@ -660,11 +729,27 @@ fn analyze_focal_plane(
             countermeasure: &an.report.countermeasure,
             report: &an.report,
             assumptions: assumptions.clone(),
+            calibration: input.chip.as_ref(),
             seconds: t.elapsed().as_secs_f64(),
         };
-        products::write_analysis(&dir, &an, &summary, None)?;
-        for mut r in products::catalogue_rows(&an.stars, scale) {
-            r.insert(0, csv::Cell::I(k as i64 + 1));
+        // a calibrated chip's stars on the sky through its header's WCS
+        let sky = match input.chip.as_ref().and_then(|c| c.wcs.as_ref()) {
+            Some(w) => Some(w.projection().map_err(|e| {
+                anyhow::anyhow!("{}[{name}]: the header's WCS: {e}", a.image.display())
+            })?),
+            None => None,
+        };
+        products::write_analysis(&dir, &an, &summary, None, sky.as_ref())?;
+        let part_rows = products::catalogue_rows(&an.stars, scale);
+        let part_rows = match &sky {
+            Some(w) => {
+                with_sky_columns = true;
+                products::with_sky(part_rows, &an.stars, w)
+            }
+            None => part_rows,
+        };
+        for mut r in part_rows {
+            r.insert(0, csv::Cell::I(part.number));
             rows.push(r);
         }
         print_report(
@@ -691,6 +776,7 @@ fn analyze_focal_plane(
             "array": name,
             "report": an.report,
             "assumptions": assumptions,
+            "calibration": input.chip,
         }));
     }
     let combined = engine::scoring::image::summarise(
@@ -706,6 +792,13 @@ fn analyze_focal_plane(
     );
     let mut header = vec!["array"];
     header.extend(products::CATALOGUE_HEADER);
+    if with_sky_columns {
+        header.extend(products::SKY_HEADER);
+        // a part without a WCS has no sky position
+        for r in rows.iter_mut() {
+            r.resize(header.len(), csv::Cell::F(f64::NAN));
+        }
+    }
     csv::write(&a.out.join("catalogue.csv"), &header, &rows)?;
     // with every array's truth: accuracy against magnitude as `jsim crowded` reports it (its bins, its
     // classes, the same file)
@@ -754,7 +847,7 @@ fn analyze_focal_plane(
     )?;
     outputs.keep();
     print_report(
-        &format!("{} (all {} arrays)", a.image.display(), arrays.len()),
+        &format!("{} (all {} {noun})", a.image.display(), parts.len()),
         &combined,
         combined.n_matched > 0,
         t0.elapsed().as_secs_f64(),

@@ -111,6 +111,8 @@ enum Command {
         /// default: the configuration's `analysis.crowding` (auto).
         #[arg(long, value_parser = parse_crowding)]
         crowding: Option<engine::analysis::crowding::Crowding>,
+        #[command(flatten)]
+        calibrated: options::CalibratedArgs,
         /// Output directory (catalogue.csv, epsf.fits, summary.json, vectors.csv, vectors.png).
         #[arg(long, default_value = "out/analyze")]
         out: PathBuf,
@@ -397,8 +399,10 @@ fn run(cli: Cli) -> Result<()> {
             epsf_zones,
             cm,
             crowding,
+            calibrated,
             out,
         } => {
+            let calibrated = calibrated.options()?;
             let mut c = cfg.load()?;
             if let Some(k) = crowding {
                 c.analysis.crowding = k;
@@ -424,6 +428,7 @@ fn run(cli: Cli) -> Result<()> {
                     telemetry,
                     zones: epsf_zones,
                     countermeasure: plan.countermeasures[0],
+                    calibrated,
                     out,
                 },
             )

@@ -334,3 +334,47 @@ impl PredictConfigArgs {
         .load()
     }
 }
+
+/// How a calibrated file of another observatory (HST, JWST) is read where its header is silent or wrong
+/// (`engine::io::calibrated`).
+#[derive(Args, Clone, Debug, Default)]
+pub struct CalibratedArgs {
+    /// Electrons per data unit of a calibrated file's SCI chips (default: from BUNIT, the gain and the
+    /// exposure, or the VAR_POISSON plane).
+    #[arg(long, value_name = "E_PER_UNIT")]
+    electrons_per_unit: Option<f64>,
+    /// Read noise of a calibrated file's pixels, e⁻ (default: RDNOISE, READNSE[A-D] of CCDAMP's amplifiers,
+    /// VAR_RNOISE or the ERR plane).
+    #[arg(long, value_name = "E")]
+    read_noise_e: Option<f64>,
+    /// DQ bits that do not mask a pixel of a calibrated file: bit values or sums, separated by commas or
+    /// `+`; `~N` for all bits but N's (default: HST masks every flagged pixel, JWST only DO_NOT_USE and
+    /// NON_SCIENCE).
+    #[arg(long, value_name = "BITS")]
+    dq_ignore: Option<String>,
+}
+
+impl CalibratedArgs {
+    /// The options, checked: an impossible value is an error naming the option and its range.
+    pub fn options(&self) -> Result<engine::io::calibrated::ReadOptions> {
+        if let Some(k) = self.electrons_per_unit
+            && !(k > 0.0 && k.is_finite())
+        {
+            bail!("--electrons-per-unit {k}: must be a finite number > 0");
+        }
+        if let Some(r) = self.read_noise_e
+            && !(r >= 0.0 && r.is_finite())
+        {
+            bail!("--read-noise-e {r}: must be a finite number ≥ 0 [e-]");
+        }
+        let dq_ignore = match &self.dq_ignore {
+            Some(s) => Some(engine::io::calibrated::parse_dq_bits(s).map_err(anyhow::Error::msg)?),
+            None => None,
+        };
+        Ok(engine::io::calibrated::ReadOptions {
+            electrons_per_unit: self.electrons_per_unit,
+            read_noise_e: self.read_noise_e,
+            dq_ignore,
+        })
+    }
+}

@@ -1,0 +1,192 @@
+"""Calibrated files of other observatories, read by `jsim analyze` (engine/src/io/calibrated.rs) and checked
+against astropy and photutils, which read the same files on their own:
+
+- a real Hubble exposure: a 200 x 200 cutout of ACS/HRC j8bt06nyq_flt (47 Tuc, F606W; tests/data/
+  hst_acs_hrc_47tuc, from the drizzle 1.12 source distribution, BSD-3): its DQ counts, plate scale, read
+  noise, RA/Dec through its SIP WCS, and the fitted positions against photutils' 2-D Gaussian centroids;
+- a JWST-style file that astropy writes here: two chips in MJy/sr with VAR_POISSON, VAR_RNOISE and a 32-bit
+  DQ, its stars known, so the accuracy against the Cramér–Rao bound tests the units end to end;
+- bad input: a unit jsim cannot read, a file with no image, a bad --dq-ignore, each a named error.
+"""
+
+import csv
+import importlib.util
+import json
+import os
+import subprocess
+
+import numpy as np
+import pytest
+from astropy.io import fits
+from astropy.wcs import WCS
+from astropy.wcs.utils import proj_plane_pixel_area
+
+ROOT = os.path.join(os.path.dirname(__file__), "..", "..", "..")
+HST = os.path.join(ROOT, "tests", "data", "hst_acs_hrc_47tuc", "j8bt06nyq_cutout_flt.fits")
+_spec = importlib.util.spec_from_file_location(
+    "check_real_image", os.path.join(os.path.dirname(__file__), "..", "examples", "check_real_image.py")
+)
+CHECK = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(CHECK)
+
+
+def read_catalogue(path):
+    with open(path) as f:
+        rows = list(csv.DictReader(f))
+    return {k: np.array([float(r[k]) for r in rows]) for k in rows[0]}
+
+
+@pytest.fixture(scope="module")
+def hst(jsim_bin, tmp_path_factory):
+    out = tmp_path_factory.mktemp("hst")
+    run = subprocess.run(
+        [jsim_bin, "analyze", "--image", HST, "--out", str(out)], check=True, capture_output=True, text=True
+    )
+    return out, run
+
+
+def test_the_hst_file_is_read_as_its_header_and_planes_say(hst):
+    out, run = hst
+    summary = json.loads((out / "summary.json").read_text())
+    (chip,) = summary["arrays"]
+    assert chip["array"] == "SCI,1"
+    cal = chip["calibration"]
+    with fits.open(HST) as h:
+        dq = h["DQ"].data.astype(np.int64)
+        assert cal["electrons_per_unit"] == 1.0  # BUNIT = ELECTRONS
+        assert cal["read_noise_e"] == h[0].header["READNSEC"]  # CCDAMP = C
+        assert cal["n_flagged"] == int((dq != 0).sum())
+        assert cal["n_saturated"] == int(((dq & (256 | 2048)) != 0).sum())
+        w = WCS(h["SCI"].header, h)
+    scale_mas = np.sqrt(proj_plane_pixel_area(w)) * 3.6e6
+    assert abs(summary["plate_scale_mas"] - scale_mas) < 1e-9 * scale_mas
+    assert "SIP" in run.stderr and "READNSEC" in run.stderr
+
+
+def test_ra_dec_agree_with_astropy_through_the_sip_wcs(hst):
+    out, _ = hst
+    with fits.open(HST) as h:
+        assert WCS(h["SCI"].header, h).sip is not None
+    assert len(read_catalogue(out / "catalogue.csv")["x"]) > 200
+    assert CHECK.radec_difference_arcsec(HST, out / "SCI1" / "catalogue.csv") < 1e-6
+
+
+def test_positions_agree_with_photutils_centroids_within_their_bounds(hst):
+    """Bright, isolated, unflagged stars: jsim's ePSF fit against photutils' 2-D Gaussian centroid of a 7 x 7
+    box (engine/python/examples/check_real_image.py). The differences' scatter holds both methods' noise
+    (the centroid's ≥ the bound), so it is compared with 3 x the bound; a pixel-phase error of a few
+    hundredths of a pixel would fail it."""
+    out, _ = hst
+    scale = json.loads((out / "summary.json").read_text())["plate_scale_mas"]
+    n, median, scatter, crlb_px = CHECK.centroid_comparison(HST, out / "SCI1" / "catalogue.csv", scale)
+    assert n >= 20, n
+    assert np.all(np.abs(median) < 0.02), median
+    assert np.all(scatter < 3 * crlb_px), (scatter, crlb_px)
+
+
+def gaussian_star(n, x0, y0, sigma):
+    yy, xx = np.mgrid[0:n, 0:n]
+    return np.exp(-((xx - x0) ** 2 + (yy - y0) ** 2) / (2 * sigma**2)) / (2 * np.pi * sigma**2)
+
+
+def write_jwst_like(path, rng, k_e_per_unit, rn_e, n=128, stars=40, bunit="MJy/sr"):
+    """Two chips of Gaussian stars (σ 1.0 px, fluxes 2e4–2e5 e⁻) on 200 e⁻ of sky, Poisson and read noise in
+    electrons, then divided by k into MJy/sr with the variance planes the JWST pipeline writes."""
+    primary = fits.PrimaryHDU()
+    primary.header["TELESCOP"] = "JWST"
+    hdus = [primary]
+    truth = {}
+    for chip in (1, 2):
+        xs = rng.uniform(8, n - 9, stars)
+        ys = rng.uniform(8, n - 9, stars)
+        fl = 10 ** rng.uniform(np.log10(2e4), np.log10(2e5), stars)
+        model = np.full((n, n), 200.0)
+        for xi, yi, fi in zip(xs, ys, fl):
+            model += fi * gaussian_star(n, xi, yi, 1.0)
+        e = rng.poisson(model) + rng.normal(0, rn_e, (n, n))
+        dq = np.zeros((n, n), np.uint32)
+        dq[5, 5:20] = 1  # DO_NOT_USE
+        dq[60:62, 60:62] |= 4  # JUMP_DET: kept
+        hdr = fits.Header()
+        hdr["BUNIT"] = bunit
+        for kw, v in [("CTYPE1", "RA---TAN"), ("CTYPE2", "DEC--TAN"), ("CRPIX1", 64.5), ("CRPIX2", 64.5),
+                      ("CRVAL1", 266.4 + 0.01 * chip), ("CRVAL2", -29.0), ("CD1_1", -8.7e-6), ("CD1_2", 0.0),
+                      ("CD2_1", 0.0), ("CD2_2", 8.7e-6)]:
+            hdr[kw] = v
+        sci = (e / k_e_per_unit).astype(np.float32)
+        hdus.append(fits.ImageHDU(sci, hdr, name="SCI", ver=chip))
+        hdus.append(fits.ImageHDU((np.sqrt(np.maximum(e, 0) + rn_e**2) / k_e_per_unit).astype(np.float32),
+                                  name="ERR", ver=chip))
+        hdus.append(fits.ImageHDU(dq, name="DQ", ver=chip))
+        hdus.append(fits.ImageHDU((np.maximum(e, 0) / k_e_per_unit**2).astype(np.float32), name="VAR_POISSON",
+                                  ver=chip))
+        hdus.append(fits.ImageHDU(np.full((n, n), rn_e**2 / k_e_per_unit**2, np.float32), name="VAR_RNOISE",
+                                  ver=chip))
+        truth[chip] = (xs, ys, fl)
+    fits.HDUList(hdus).writeto(path)
+    return truth
+
+
+def test_a_jwst_style_file_reaches_its_bound_in_electrons_chip_by_chip(jsim_bin, tmp_path):
+    rng = np.random.default_rng(11)
+    k, rn = 731.0, 9.0
+    truth = write_jwst_like(tmp_path / "cal.fits", rng, k, rn)
+    out = tmp_path / "an"
+    subprocess.run([jsim_bin, "analyze", "--image", str(tmp_path / "cal.fits"), "--out", str(out)],
+                   check=True, capture_output=True, text=True)
+    summary = json.loads((out / "summary.json").read_text())
+    assert [a["array"] for a in summary["arrays"]] == ["SCI,1", "SCI,2"]
+    ratios = []
+    for a in summary["arrays"]:
+        cal = a["calibration"]
+        assert abs(cal["electrons_per_unit"] / k - 1) < 1e-4
+        assert abs(cal["read_noise_e"] / rn - 1) < 1e-4
+        assert cal["n_flagged"] == 15  # DO_NOT_USE only; JUMP_DET is not masked by default
+    combined = read_catalogue(out / "catalogue.csv")
+    assert set(combined["array"]) == {1.0, 2.0}
+    for chip in (1, 2):
+        cat = read_catalogue(out / f"SCI{chip}" / "catalogue.csv")
+        xs, ys, fl = truth[chip]
+        d = np.hypot(cat["x"][:, None] - xs[None], cat["y"][:, None] - ys[None])
+        j = d.argmin(1)
+        near = d.min(1) < 0.5
+        # isolated stars only: a blend's error is not the single-star bound's
+        dt = np.hypot(xs[:, None] - xs[None], ys[:, None] - ys[None])
+        np.fill_diagonal(dt, np.inf)
+        ok = near & (dt.min(1)[j] > 6) & (cat["flags"] == 0)
+        # the flux in electrons: the sum of the star's electrons, to a few per cent
+        assert abs(np.median(cat["flux_e"][ok] / fl[j[ok]]) - 1) < 0.03
+        scale = summary["plate_scale_mas"]
+        err = np.r_[cat["x"][ok] - xs[j[ok]], cat["y"][ok] - ys[j[ok]]] * scale
+        crlb = np.r_[cat["crlb_x_mas"][ok], cat["crlb_y_mas"][ok]]
+        ratios.extend(err / crlb)
+    ratios = np.array(ratios)
+    # ≥ 100 normalised errors: their rms is 1 within ≈ 3 × 1/√(2N) if the electrons (and so the bound) are right
+    assert len(ratios) >= 100, len(ratios)
+    rms = np.sqrt(np.mean(ratios**2))
+    assert abs(rms - 1) < 3 / np.sqrt(2 * len(ratios)) + 0.1, rms
+
+
+def test_bad_calibrated_input_is_a_named_error(jsim_bin, tmp_path):
+    rng = np.random.default_rng(1)
+    write_jwst_like(tmp_path / "jy.fits", rng, 10.0, 5.0, n=64, stars=3, bunit="Jy")
+    with fits.open(tmp_path / "jy.fits", mode="update") as h:
+        for i in range(len(h) - 1, 0, -1):
+            if h[i].name == "VAR_POISSON":
+                del h[i]
+    r = subprocess.run([jsim_bin, "analyze", "--image", str(tmp_path / "jy.fits"), "--out", str(tmp_path / "a")],
+                       capture_output=True, text=True)
+    assert r.returncode != 0 and "BUNIT" in r.stderr and "--electrons-per-unit" in r.stderr, r.stderr
+    assert not (tmp_path / "a").exists()
+    # the override makes the same file readable
+    r = subprocess.run([jsim_bin, "analyze", "--image", str(tmp_path / "jy.fits"), "--electrons-per-unit", "10",
+                        "--out", str(tmp_path / "b")], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    fits.HDUList([fits.PrimaryHDU(), fits.ImageHDU(np.zeros((8, 8)), name="OTHER")]).writeto(tmp_path / "none.fits")
+    r = subprocess.run([jsim_bin, "analyze", "--image", str(tmp_path / "none.fits"), "--out", str(tmp_path / "c")],
+                       capture_output=True, text=True)
+    assert r.returncode != 0 and "SCI" in r.stderr and "ARRAYn" in r.stderr, r.stderr
+    r = subprocess.run([jsim_bin, "analyze", "--image", HST, "--dq-ignore", "cosmic", "--out", str(tmp_path / "d")],
+                       capture_output=True, text=True)
+    assert r.returncode != 0 and "--dq-ignore" in r.stderr, r.stderr
+    assert not (tmp_path / "c").exists() and not (tmp_path / "d").exists()

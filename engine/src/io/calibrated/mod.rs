@@ -1,0 +1,299 @@
+//! Calibrated images of other observatories: the multi-extension files of HST and JWST (and any file laid out
+//! the same way), read into electrons with a mask, a read noise and a plate scale, each choice written down.
+//!
+//! The layout (the "imset" convention of HST's `_flt` / `_flc` and JWST's `_cal` / `_rate` products): an
+//! empty primary header, then per detector chip a `SCI` image with its `ERR` and `DQ` planes (JWST also
+//! `VAR_POISSON`, `VAR_RNOISE`), the chips told apart by `EXTVER`. Keywords are looked up in the `SCI`
+//! header first, then the primary's (the `INHERIT = T` convention).
+//!
+//! What is read, in order of precedence (each used value is stated in the report):
+//! - **Electrons per data unit** `k`: `--electrons-per-unit`; else the `VAR_POISSON` plane, whose ratio to the
+//!   data is `1/k` for every pixel with signal (variance of a Poisson count in data units = data/k); else from
+//!   `BUNIT`: ELECTRONS → 1; COUNTS / DN → the gain; a rate (…/S) → times the exposure; MJy/sr → gain ×
+//!   exposure / `PHOTMJSR`. The gain is `GAIN`, `ATODGAIN`, the mean of `ATODGN{A–D}` over the amplifiers in
+//!   `CCDAMP`, or the nominal `CCDGAIN`, in that order.
+//! - **Read noise** (e⁻): `--read-noise-e`; else `RDNOISE`; else the rms of `READNSE{A–D}` over the
+//!   amplifiers in `CCDAMP`; else √median(`VAR_RNOISE`)·k; else from the `ERR` plane of the sky pixels:
+//!   σ_RN² = median((k·ERR)² − k·data).
+//! - **Data quality**: a pixel is masked when its DQ value has a bit outside the ignored ones. The default
+//!   follows each pipeline: HST masks every flagged pixel (AstroDrizzle's `final_bits = 0`); JWST only
+//!   `DO_NOT_USE` (1) and `NON_SCIENCE` (512), as the JWST pipeline's resampling does
+//!   (`good_bits = "~DO_NOT_USE+NON_SCIENCE"`). `--dq-ignore` replaces the default. Non-finite values are
+//!   masked too. Saturated pixels (HST bits 256 and 2048, JWST bit 2) are counted apart.
+//! - **Plate scale**: `PLTSCALE`; else √|det CD| (or of `CDELT`·`PC`) of the chip's WCS.
+
+mod header_wcs;
+mod units;
+
+use header_wcs::MAX_SIP_ORDER;
+pub use header_wcs::{ChipWcs, chip_wcs, plate_scale_mas};
+pub use units::{DataUnit, Observatory, calibrate, parse_dq_bits, read_noise_from_err};
+
+use super::IoError;
+use fitsio::hdu::HduInfo;
+use std::path::Path;
+
+/// One chip of a calibrated file: the HDU indices (0 = primary) of its planes.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Imset {
+    /// The chips' `EXTVER` (1 when absent).
+    pub extver: i64,
+    pub sci: usize,
+    pub err: Option<usize>,
+    pub dq: Option<usize>,
+    pub var_poisson: Option<usize>,
+    pub var_rnoise: Option<usize>,
+}
+
+impl Imset {
+    /// `SCI,1`: how astronomers name the chip (FITS `EXTNAME,EXTVER`).
+    pub fn name(&self) -> String {
+        format!("SCI,{}", self.extver)
+    }
+    /// `SCI1`: the chip's name as a directory name.
+    pub fn dir_name(&self) -> String {
+        format!("SCI{}", self.extver)
+    }
+}
+
+/// What the command line may say in place of, or beyond, the header.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct ReadOptions {
+    /// Electrons per data unit (overrides BUNIT, the gain and VAR_POISSON).
+    pub electrons_per_unit: Option<f64>,
+    /// Read noise of a pixel, e⁻ (overrides the header and the noise planes).
+    pub read_noise_e: Option<f64>,
+    /// DQ bits that do not mask a pixel (replaces the pipeline's default).
+    pub dq_ignore: Option<u64>,
+}
+
+/// A header's values as the reader looks them up (the chip's header, then the primary).
+pub trait Keys {
+    fn number(&self, key: &str) -> Option<f64>;
+    fn text(&self, key: &str) -> Option<String>;
+}
+
+/// What was read of a chip, for the report (`summary.json`).
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct ChipFacts {
+    pub electrons_per_unit: f64,
+    pub read_noise_e: f64,
+    pub n_flagged: usize,
+    pub n_saturated: usize,
+    pub n_non_finite: usize,
+    /// The header's WCS (TAN, SIP): the catalogue's RA/Dec come through it.
+    #[serde(skip)]
+    pub wcs: Option<ChipWcs>,
+}
+
+/// A chip read into electrons, with what was used and how.
+#[derive(Debug, Clone)]
+pub struct CalibratedChip {
+    pub nx: usize,
+    pub ny: usize,
+    pub electrons: Vec<f64>,
+    pub bad: Vec<bool>,
+    pub read_noise_e: f64,
+    /// From `PLTSCALE` or the WCS; `None` when the header has neither.
+    pub plate_scale_mas: Option<f64>,
+    pub electrons_per_unit: f64,
+    /// Pixels masked by their DQ value, of which saturated, and non-finite values.
+    pub n_flagged: usize,
+    pub n_saturated: usize,
+    pub n_non_finite: usize,
+    pub wcs: Option<ChipWcs>,
+    /// Each value used and where it came from, one sentence each.
+    pub notes: Vec<String>,
+}
+
+impl CalibratedChip {
+    /// What was read, without the pixels.
+    pub fn facts(&self) -> ChipFacts {
+        ChipFacts {
+            electrons_per_unit: self.electrons_per_unit,
+            read_noise_e: self.read_noise_e,
+            n_flagged: self.n_flagged,
+            n_saturated: self.n_saturated,
+            n_non_finite: self.n_non_finite,
+            wcs: self.wcs.clone(),
+        }
+    }
+}
+
+/// The planes of one chip as read, before the header's facts are applied.
+#[derive(Debug, Clone, Default)]
+pub struct ChipPlanes {
+    pub nx: usize,
+    pub ny: usize,
+    pub sci: Vec<f32>,
+    pub err: Option<Vec<f32>>,
+    pub dq: Option<Vec<u64>>,
+    pub var_poisson: Option<Vec<f32>>,
+    pub var_rnoise: Option<Vec<f32>>,
+}
+
+/// The HDU's header values: its own cards, then the primary's.
+struct HduKeys {
+    numbers: std::collections::HashMap<String, f64>,
+    texts: std::collections::HashMap<String, String>,
+}
+
+impl Keys for HduKeys {
+    fn number(&self, key: &str) -> Option<f64> {
+        self.numbers.get(key).copied()
+    }
+    fn text(&self, key: &str) -> Option<String> {
+        self.texts.get(key).cloned()
+    }
+}
+
+/// The keys the reader looks up.
+fn wanted_keys() -> Vec<String> {
+    let mut k: Vec<String> = [
+        "BUNIT", "TELESCOP", "GAIN", "ATODGAIN", "CCDGAIN", "CCDAMP", "RDNOISE", "EXPTIME",
+        "XPOSURE", "EFFEXPTM", "PHOTMJSR", "PLTSCALE", "CD1_1", "CD1_2", "CD2_1", "CD2_2",
+        "CDELT1", "CDELT2", "PC1_1", "PC1_2", "PC2_1", "PC2_2", "CTYPE1", "CTYPE2", "CRPIX1",
+        "CRPIX2", "CRVAL1", "CRVAL2", "A_ORDER", "B_ORDER", "CPDIS1", "D2IMDIS1",
+    ]
+    .iter()
+    .map(|s| s.to_string())
+    .collect();
+    for name in ["A", "B"] {
+        for p in 0..=MAX_SIP_ORDER {
+            for q in 0..=MAX_SIP_ORDER - p {
+                if p + q >= 2 {
+                    k.push(format!("{name}_{p}_{q}"));
+                }
+            }
+        }
+    }
+    for a in ['A', 'B', 'C', 'D'] {
+        k.push(format!("ATODGN{a}"));
+        k.push(format!("READNSE{a}"));
+    }
+    k
+}
+
+/// The shape of HDU `i` when it is a 2-D image.
+fn image_shape(info: &HduInfo) -> Option<(usize, usize)> {
+    match info {
+        HduInfo::ImageInfo { shape, .. } if shape.len() == 2 => Some((shape[1], shape[0])),
+        _ => None,
+    }
+}
+
+/// The chips of a calibrated file: its `SCI` extensions grouped with their planes by `EXTVER`, in order.
+/// Empty when the file has no `SCI` extension.
+pub fn imsets(path: &Path) -> Result<Vec<Imset>, IoError> {
+    let mut f = super::fits::open(path)?;
+    let mut found: Vec<(String, i64, usize)> = Vec::new();
+    for i in 1.. {
+        let Ok(h) = f.hdu(i) else { break };
+        let name = h
+            .read_key::<String>(&mut f, "EXTNAME")
+            .unwrap_or_default()
+            .trim()
+            .to_ascii_uppercase();
+        let ver = h.read_key::<i64>(&mut f, "EXTVER").unwrap_or(1);
+        if image_shape(&h.info).is_some() {
+            found.push((name, ver, i));
+        }
+    }
+    let at = |n: &str, v: i64| {
+        found
+            .iter()
+            .find(|(m, w, _)| m == n && *w == v)
+            .map(|x| x.2)
+    };
+    Ok(found
+        .iter()
+        .filter(|(n, _, _)| n == "SCI")
+        .map(|(_, v, i)| Imset {
+            extver: *v,
+            sci: *i,
+            err: at("ERR", *v),
+            dq: at("DQ", *v),
+            var_poisson: at("VAR_POISSON", *v),
+            var_rnoise: at("VAR_RNOISE", *v),
+        })
+        .collect())
+}
+
+/// Whether the primary HDU holds a 2-D image (jsim's single-array files and any plain image).
+pub fn primary_is_image(path: &Path) -> Result<bool, IoError> {
+    let mut f = super::fits::open(path)?;
+    let h = f.primary_hdu().map_err(|e| IoError::fits(path, e))?;
+    Ok(image_shape(&h.info).is_some())
+}
+
+/// Read chip `set` of `path` into electrons ([`calibrate`]).
+pub fn read_chip(path: &Path, set: &Imset, opts: &ReadOptions) -> Result<CalibratedChip, IoError> {
+    let mut f = super::fits::open(path)?;
+    let fe = |e: fitsio::errors::Error| IoError::fits(path, e);
+    let wanted = wanted_keys();
+    let mut numbers = std::collections::HashMap::new();
+    let mut texts = std::collections::HashMap::new();
+    // the primary first, so that the chip's own cards replace its
+    for i in [0, set.sci] {
+        let h = f.hdu(i).map_err(fe)?;
+        for k in &wanted {
+            if let Ok(v) = h.read_key::<f64>(&mut f, k) {
+                numbers.insert(k.clone(), v);
+            }
+            if let Ok(v) = h.read_key::<String>(&mut f, k) {
+                texts.insert(k.clone(), v);
+            }
+        }
+    }
+    let keys = HduKeys { numbers, texts };
+    let sci_hdu = f.hdu(set.sci).map_err(fe)?;
+    let (nx, ny) = image_shape(&sci_hdu.info)
+        .ok_or_else(|| IoError::fits(path, format!("{} is not a 2-D image", set.name())))?;
+    let sci: Vec<f32> = sci_hdu.read_image(&mut f).map_err(fe)?;
+    let mut plane_f32 = |i: Option<usize>, what: &str| -> Result<Option<Vec<f32>>, IoError> {
+        let Some(i) = i else { return Ok(None) };
+        let h = f.hdu(i).map_err(fe)?;
+        if image_shape(&h.info) != Some((nx, ny)) {
+            return Err(IoError::fits(
+                path,
+                format!("{what},{} is not {nx}×{ny} like SCI", set.extver),
+            ));
+        }
+        Ok(Some(h.read_image(&mut f).map_err(fe)?))
+    };
+    let err = plane_f32(set.err, "ERR")?;
+    let var_poisson = plane_f32(set.var_poisson, "VAR_POISSON")?;
+    let var_rnoise = plane_f32(set.var_rnoise, "VAR_RNOISE")?;
+    let dq = match set.dq {
+        Some(i) => {
+            let h = f.hdu(i).map_err(fe)?;
+            if image_shape(&h.info) != Some((nx, ny)) {
+                return Err(IoError::fits(
+                    path,
+                    format!("DQ,{} is not {nx}×{ny} like SCI", set.extver),
+                ));
+            }
+            let v: Vec<i64> = h.read_image(&mut f).map_err(fe)?;
+            // a 16-bit DQ read as a signed integer keeps its bits in the low 16
+            Some(v.into_iter().map(|q| (q as u64) & 0xffff_ffff).collect())
+        }
+        None => None,
+    };
+    calibrate(
+        &keys,
+        ChipPlanes {
+            nx,
+            ny,
+            sci,
+            err,
+            dq,
+            var_poisson,
+            var_rnoise,
+        },
+        opts,
+    )
+    .map_err(|message| IoError::Format {
+        path: path.to_path_buf(),
+        message: format!("{}: {message}", set.name()),
+    })
+}
