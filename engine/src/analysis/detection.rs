@@ -157,6 +157,39 @@ pub fn clear_box(img: &AnalysisImage, x: f64, y: f64, r_px: f64) -> bool {
         })
 }
 
+/// The relaxed test of an ePSF star's pixels, for an image whose flagged pixels are everywhere (a real
+/// detector's hot pixels, cosmic rays flagged by its pipeline): the box of half-width `r_px` inside the
+/// image, no masked pixel within [`CLEAR_CORE_PX`] of (x, y) — where a saturated or hit core would be —, and
+/// at most a quarter of the box masked. The ePSF builder leaves the masked pixels out of its samples.
+pub fn clear_core(img: &AnalysisImage, x: f64, y: f64, r_px: f64) -> bool {
+    let inside =
+        x - r_px >= 0.0 && y - r_px >= 0.0 && x + r_px < img.nx as f64 && y + r_px < img.ny as f64;
+    if !inside {
+        return false;
+    }
+    let (mut masked, mut total) = (0usize, 0usize);
+    for py in (y - r_px).floor() as usize..=((y + r_px).ceil() as usize).min(img.ny - 1) {
+        for px in (x - r_px).floor() as usize..=((x + r_px).ceil() as usize).min(img.nx - 1) {
+            total += 1;
+            if img.bad[py * img.nx + px] {
+                if (px as f64 - x).hypot(py as f64 - y) <= CLEAR_CORE_PX {
+                    return false;
+                }
+                masked += 1;
+            }
+        }
+    }
+    4 * masked <= total
+}
+
+/// Fewest isolated, unsaturated stars an ePSF is built from. Each star samples one sub-pixel phase per
+/// pixel of the 4× oversampled table; the builder's smoothing (zeros at whole cycles per pixel) fills the
+/// rest well from 9 stars (`engine/tests/cli.rs` analyses a 3 × 3 grid to a few mas), not from 4.
+pub const MIN_EPSF_STARS: usize = 5;
+
+/// The core of a star that [`clear_core`] keeps free of masked pixels, px.
+pub const CLEAR_CORE_PX: f64 = 1.5;
+
 /// Sky annulus used for every star (just outside the ePSF table).
 pub fn sky_annulus(cfg: &AnalysisCfg) -> (f64, f64) {
     let r = cfg.epsf_radius_px as f64;
@@ -260,17 +293,24 @@ pub fn starts(
         .map(|&(x, y)| build::initial_start(&pd, x, y, ann))
         .collect();
     let r = cfg.epsf_radius_px as f64 + 1.0;
-    let usable: Vec<bool> = s
-        .iter()
-        .enumerate()
-        .map(|(k, st)| {
-            let clean = clear_box(img, st.x, st.y, r);
-            let isolated = s
-                .iter()
-                .enumerate()
-                .all(|(j, o)| j == k || (o.x - st.x).hypot(o.y - st.y) > 2.0 * r);
-            clean && isolated && st.flux > 0.0
-        })
-        .collect();
+    let usable_with = |clean: &dyn Fn(f64, f64) -> bool| -> Vec<bool> {
+        s.iter()
+            .enumerate()
+            .map(|(k, st)| {
+                let isolated = s
+                    .iter()
+                    .enumerate()
+                    .all(|(j, o)| j == k || (o.x - st.x).hypot(o.y - st.y) > 2.0 * r);
+                clean(st.x, st.y) && isolated && st.flux > 0.0
+            })
+            .collect()
+    };
+    let usable = usable_with(&|x, y| clear_box(img, x, y, r));
+    // too few stars with a clean box (flagged pixels everywhere): those with a clean core
+    let usable = if usable.iter().filter(|u| **u).count() < MIN_EPSF_STARS {
+        usable_with(&|x, y| clear_core(img, x, y, r))
+    } else {
+        usable
+    };
     (s, usable)
 }

@@ -12,6 +12,7 @@ pub mod image;
 pub mod lightcurve;
 pub mod pipeline;
 pub mod registration;
+pub mod repeat;
 pub mod report;
 pub mod response;
 pub mod solution;

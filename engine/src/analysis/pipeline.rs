@@ -47,10 +47,8 @@ pub struct Options {
     pub model_epsf: Option<Epsf>,
 }
 
-/// Fewest isolated, unsaturated stars an ePSF is built from. Each star samples one sub-pixel phase per
-/// pixel of the 4× oversampled table; the builder's smoothing (zeros at whole cycles per pixel) fills the
-/// rest well from 9 stars (`engine/tests/cli.rs` analyses a 3 × 3 grid to a few mas), not from 4.
-pub const MIN_EPSF_STARS: usize = 5;
+/// Fewest stars an ePSF is built from (defined beside the choice of ePSF stars).
+pub use super::detection::MIN_EPSF_STARS;
 
 impl Options {
     pub fn new(cfg: &AnalysisCfg) -> Self {

@@ -50,6 +50,55 @@ pub fn catalogue_rows(stars: &[ScoredStar], plate_scale_mas: f64) -> Vec<Vec<Cel
         .collect()
 }
 
+/// Columns of `repeatability.csv` (`jsim analyze` on exposures of one pointing): per pair of exposures and
+/// flux bin, the repeatability of the fitted positions against their bounds (`analysis::repeat`).
+pub const REPEAT_HEADER: [&str; 14] = [
+    "exposure_a",
+    "exposure_b",
+    "flux_min_e",
+    "flux_max_e",
+    "n",
+    "repeat_x_mas",
+    "repeat_y_mas",
+    "crlb_x_mas",
+    "crlb_y_mas",
+    "ratio_x",
+    "ratio_y",
+    "ratio_error",
+    "offset_x_px",
+    "offset_y_px",
+];
+
+/// The rows of `repeatability.csv` for the pair (`a`, `b`) (their labels), its bins and common offset.
+pub fn repeat_rows(
+    a: &str,
+    b: &str,
+    bins: &[crate::analysis::repeat::RepeatBin],
+    offset_px: (f64, f64),
+    plate_scale_mas: f64,
+) -> Vec<Vec<Cell>> {
+    bins.iter()
+        .map(|r| {
+            vec![
+                Cell::S(a.to_string()),
+                Cell::S(b.to_string()),
+                Cell::F(r.flux_min_e),
+                Cell::F(r.flux_max_e),
+                Cell::I(r.n as i64),
+                Cell::F(r.repeat_x_px * plate_scale_mas),
+                Cell::F(r.repeat_y_px * plate_scale_mas),
+                Cell::F(r.crlb_x_px * plate_scale_mas),
+                Cell::F(r.crlb_y_px * plate_scale_mas),
+                Cell::F(r.ratio_x),
+                Cell::F(r.ratio_y),
+                Cell::F(r.ratio_error),
+                Cell::F(offset_px.0),
+                Cell::F(offset_px.1),
+            ]
+        })
+        .collect()
+}
+
 /// The columns `catalogue.csv` gains when the image's header has a celestial WCS that the analysis reads
 /// (a calibrated chip of another observatory): each star's RA and Dec, degrees (ICRS, as the header's).
 pub const SKY_HEADER: [&str; 2] = ["ra_deg", "dec_deg"];

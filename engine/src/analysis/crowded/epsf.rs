@@ -23,11 +23,20 @@ pub const MAX_CROWDED_ITERATIONS: usize = 10;
 /// Least S/N of an ePSF star's flux, `f/√(f + π r_fit² σ²)` (σ the image's pixel noise): the builder
 /// wants stars whose every pixel sample is well measured (A&K 2000 use the brightest unsaturated stars).
 pub const MIN_EPSF_SNR: f64 = 100.0;
+/// How many candidates a loosened choice aims for (see [`epsf_candidates`]): a 4×-oversampled table of a 13-px box has ≈ 2700 nodes, and 50 stars give it ≈ 3
+/// samples each.
+pub const PREFERRED_EPSF_STARS: usize = 50;
+/// The least S/N of an ePSF star when the choice loosens.
+pub const RELAXED_EPSF_SNR: f64 = 30.0;
 
 /// Which stars may build the ePSF: inside the image by the table's half-width plus one pixel, no masked
 /// pixel there, positive flux, not outshone (no other star within the table's half-width with more flux)
 /// and not closer than the link radius's half to another star (a pair too close to separate reliably).
-/// Its flux S/N at least [`MIN_EPSF_SNR`]. The brightest [`MAX_EPSF_STARS`] of them.
+/// Its flux S/N at least [`MIN_EPSF_SNR`]. When fewer than `MIN_EPSF_STARS` pass (no ePSF could be built),
+/// the choice loosens until [`PREFERRED_EPSF_STARS`] stars pass or nothing is left to loosen: a star needs
+/// only a clean core (no masked pixel within 1.5 px, at most a quarter of the box: `detection::clear_core`;
+/// the builder leaves masked pixels out), then only S/N ≥ [`RELAXED_EPSF_SNR`]. The brightest
+/// [`MAX_EPSF_STARS`] of them.
 pub fn epsf_candidates(
     img: &AnalysisImage,
     stars: &[Member],
@@ -39,23 +48,42 @@ pub fn epsf_candidates(
     let pos: Vec<(f64, f64)> = stars.iter().map(|s| (s.x, s.y)).collect();
     let nb = Neighbours::new(&pos);
     let close = 0.5 * link_radius_px(cfg);
-    let ok: Vec<bool> = stars
-        .par_iter()
-        .enumerate()
-        .map(|(k, s)| {
-            let snr = s.flux / (s.flux.max(0.0) + area * noise * noise).sqrt();
-            if !(s.flux > 0.0) || snr < MIN_EPSF_SNR {
-                return false;
+    let ok_with = |strict: bool, min_snr: f64| -> Vec<bool> {
+        stars
+            .par_iter()
+            .enumerate()
+            .map(|(k, s)| {
+                let snr = s.flux / (s.flux.max(0.0) + area * noise * noise).sqrt();
+                if !(s.flux > 0.0) || snr < min_snr {
+                    return false;
+                }
+                let clean = if strict {
+                    crate::analysis::detection::clear_box(img, s.x, s.y, r)
+                } else {
+                    crate::analysis::detection::clear_core(img, s.x, s.y, r)
+                };
+                clean
+                    && nb.within(s.x, s.y, r - 1.0).into_iter().all(|j| {
+                        j == k
+                            || (stars[j].flux < s.flux
+                                && (stars[j].x - s.x).hypot(stars[j].y - s.y) >= close)
+                    })
+            })
+            .collect()
+    };
+    // a clean box and S/N ≥ MIN_EPSF_SNR; when that cannot build an ePSF, the first looser choice that gives
+    // PREFERRED_EPSF_STARS, else the loosest (each holds the one before): a clean core (flagged pixels
+    // everywhere, as on a real detector), then a clean core and S/N ≥ RELAXED_EPSF_SNR (few bright stars)
+    let count = |ok: &[bool]| ok.iter().filter(|o| **o).count();
+    let mut ok = ok_with(true, MIN_EPSF_SNR);
+    if count(&ok) < crate::analysis::pipeline::MIN_EPSF_STARS {
+        for (strict, min_snr) in [(false, MIN_EPSF_SNR), (false, RELAXED_EPSF_SNR)] {
+            ok = ok_with(strict, min_snr);
+            if count(&ok) >= PREFERRED_EPSF_STARS {
+                break;
             }
-            let clean = crate::analysis::detection::clear_box(img, s.x, s.y, r);
-            clean
-                && nb.within(s.x, s.y, r - 1.0).into_iter().all(|j| {
-                    j == k
-                        || (stars[j].flux < s.flux
-                            && (stars[j].x - s.x).hypot(stars[j].y - s.y) >= close)
-                })
-        })
-        .collect();
+        }
+    }
     let mut order: Vec<usize> = (0..stars.len()).filter(|&k| ok[k]).collect();
     order.sort_by(|&a, &b| stars[b].flux.total_cmp(&stars[a].flux));
     let mut chosen = vec![false; stars.len()];

@@ -2,8 +2,9 @@
 //! files; here we print, write and show progress).
 
 use crate::outputs::{Outputs, interrupted};
-use anyhow::{Context, Result, bail};
+use anyhow::{Context, Result};
 use engine::analysis::countermeasures::{Countermeasure, Plan};
+use engine::analysis::report::StarResult;
 use engine::config::{AceCase, Config, ReadoutOrder};
 use engine::io::{analysis_input, calibrated, csv, exposure, products};
 use engine::jitter::AceSeries;
@@ -288,6 +289,8 @@ pub struct AnalyzeArgs {
     pub countermeasure: Countermeasure,
     /// How a calibrated (HST, JWST) file's data are read, where its header is silent or wrong.
     pub calibrated: engine::io::calibrated::ReadOptions,
+    /// The cosmic-ray rejection by comparison of a calibrated file's exposures of one pointing (`None`: off).
+    pub cr_rejection: Option<engine::analysis::repeat::Rejection>,
     pub out: PathBuf,
 }
 
@@ -317,10 +320,10 @@ pub fn analyze(session: &Session, cfg: &Config, a: &AnalyzeArgs) -> Result<()> {
                 cfg,
             )
         };
-        return analyze_parts(session, cfg, a, &parts, "arrays", &read);
+        return analyze_parts(session, cfg, a, &parts, "arrays", &read, None);
     }
     if !calibrated::primary_is_image(&a.image)? {
-        return analyze_calibrated(session, cfg, a);
+        return crate::calibrated_cmd::analyze_calibrated(session, cfg, a);
     }
     let t0 = Instant::now();
     let input = analysis_input::AnalysisInput::read_products(
@@ -632,61 +635,29 @@ pub fn score(a: &ScoreArgs) -> Result<()> {
 
 /// One image of a multi-image file: an array of a focal plane (`ARRAY2`) or a chip of a calibrated file
 /// (`SCI,2`, written to `SCI2/`).
-struct Part {
-    label: String,
-    dir: String,
+pub struct Part {
+    pub label: String,
+    pub dir: String,
     /// The `array` column of the combined catalogue: the array's number, the chip's EXTVER.
-    number: i64,
+    pub number: i64,
 }
 
-/// `jsim analyze` on a calibrated multi-extension file of another observatory (HST, JWST: its `SCI`
-/// chips, [`calibrated`]): each chip analysed alone, and the chips together, as a focal plane's arrays.
-fn analyze_calibrated(session: &Session, cfg: &Config, a: &AnalyzeArgs) -> Result<()> {
-    let sets = calibrated::imsets(&a.image)?;
-    if sets.is_empty() {
-        bail!(
-            "{}: the primary HDU is not a 2-D image, and the file has neither SCI extensions (a calibrated \
-             HST or JWST file) nor ARRAYn ones (a jsim focal plane)",
-            a.image.display()
-        );
-    }
-    for (given, what) in [
-        (a.flat.is_some(), "--flat"),
-        (a.refcat.is_some(), "--refcat"),
-        (a.telemetry.is_some(), "--telemetry"),
-        (a.truth.is_some(), "--truth"),
-    ] {
-        if given {
-            bail!(
-                "{what}: not read with a calibrated file of another observatory (its SCI chips are \
-                 flat-fielded by their pipeline; score its catalogue with `jsim score`)"
-            );
-        }
-    }
-    let parts: Vec<Part> = sets
-        .iter()
-        .map(|s| Part {
-            label: s.name(),
-            dir: s.dir_name(),
-            number: s.extver,
-        })
-        .collect();
-    let read =
-        |k: usize| analysis_input::AnalysisInput::read_chip(&a.image, &sets[k], &a.calibrated, cfg);
-    analyze_parts(session, cfg, a, &parts, "chips", &read)
-}
+/// What a caller of [`analyze_parts`] adds to its outputs once every part is analysed: it gets each part's
+/// fits and the outputs' guard (to declare the files it writes).
+pub type Finish<'a> = &'a dyn Fn(&[Vec<StarResult>], &mut Outputs) -> Result<()>;
 
 /// `jsim analyze` on a file of several images: each part (a focal plane's `ARRAY1` … with its own flat
 /// `FLAT1` …, or a calibrated file's chips) analysed alone and written to `OUT/<part>/`, and the parts
 /// together: `OUT/catalogue.csv` (every part's stars with an `array` column) and `OUT/summary.json` (each
-/// part's report and the combined one).
-fn analyze_parts(
+/// part's report and the combined one); then `finish`, if any.
+pub fn analyze_parts(
     session: &Session,
     cfg: &Config,
     a: &AnalyzeArgs,
     parts: &[Part],
     noun: &str,
     read: &dyn Fn(usize) -> std::result::Result<analysis_input::AnalysisInput, engine::io::IoError>,
+    finish: Option<Finish<'_>>,
 ) -> Result<()> {
     let t0 = Instant::now();
     let mut outputs = Outputs::in_dir(&a.out)?;
@@ -694,6 +665,7 @@ fn analyze_parts(
     outputs.path("summary.json");
     let mut per_array = Vec::new();
     let mut rows = Vec::new();
+    let mut fits: Vec<Vec<StarResult>> = Vec::new();
     let mut all_stars = Vec::new();
     let mut all_crowded = true;
     let mut with_sky_columns = false;
@@ -766,6 +738,7 @@ fn analyze_parts(
             ..*s
         }));
         all_crowded &= an.report.crowded;
+        fits.push(an.stars.iter().map(|s| s.fit).collect());
         scored.push(
             input
                 .truth
@@ -845,6 +818,9 @@ fn analyze_parts(
         &a.out.join("summary.json"),
         serde_json::to_string_pretty(&json)?.as_bytes(),
     )?;
+    if let Some(f) = finish {
+        f(&fits, &mut outputs)?;
+    }
     outputs.keep();
     print_report(
         &format!("{} (all {} {noun})", a.image.display(), parts.len()),

@@ -11,6 +11,7 @@ use std::path::PathBuf;
 
 mod bench_cmd;
 mod budget_out;
+mod calibrated_cmd;
 mod cmd;
 mod crowded_cmd;
 mod options;
@@ -402,6 +403,7 @@ fn run(cli: Cli) -> Result<()> {
             calibrated,
             out,
         } => {
+            let cr_rejection = calibrated_cmd::rejection(calibrated.cr_reject_sigma)?;
             let calibrated = calibrated.options()?;
             let mut c = cfg.load()?;
             if let Some(k) = crowding {
@@ -429,6 +431,7 @@ fn run(cli: Cli) -> Result<()> {
                     zones: epsf_zones,
                     countermeasure: plan.countermeasures[0],
                     calibrated,
+                    cr_rejection,
                     out,
                 },
             )

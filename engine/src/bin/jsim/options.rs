@@ -352,6 +352,10 @@ pub struct CalibratedArgs {
     /// NON_SCIENCE).
     #[arg(long, value_name = "BITS")]
     dq_ignore: Option<String>,
+    /// Exposures of one pointing in a calibrated file (a CR-split pair): a pixel more than this many σ above
+    /// the others' is a cosmic ray, masked with its neighbours (0: off).
+    #[arg(long, value_name = "SIGMA", default_value_t = 5.0)]
+    pub cr_reject_sigma: f64,
 }
 
 impl CalibratedArgs {

@@ -117,3 +117,29 @@ pub fn plate_scale_mas(keys: &dyn Keys) -> Option<(f64, &'static str)> {
     det.map(|(d, from)| (d.abs().sqrt() * 3.6e6, from))
         .filter(|(s, _)| *s > 0.0 && s.is_finite())
 }
+
+/// Whether two chips are exposures of one pointing on one pixel grid: the same size, and each of the first's
+/// corners and centre lands within `tolerance_px` of itself through the second's WCS. Chips without a WCS
+/// are not.
+pub fn same_pointing(a: &ChipWcs, b: &ChipWcs, tolerance_px: f64) -> bool {
+    if a.naxis != b.naxis {
+        return false;
+    }
+    let (Ok(wa), Ok(wb)) = (a.projection(), b.projection()) else {
+        return false;
+    };
+    let (nx, ny) = ((a.naxis[0] - 1) as f64, (a.naxis[1] - 1) as f64);
+    [
+        (0.0, 0.0),
+        (nx, 0.0),
+        (0.0, ny),
+        (nx, ny),
+        (nx / 2.0, ny / 2.0),
+    ]
+    .iter()
+    .all(|&(x, y)| {
+        wa.pixel_to_sky(x, y)
+            .and_then(|(ra, dec)| wb.sky_to_pixel(ra, dec))
+            .is_some_and(|(u, v)| (u - x).hypot(v - y) <= tolerance_px)
+    })
+}

@@ -12,7 +12,7 @@
 //!   `BUNIT`: ELECTRONS → 1; COUNTS / DN → the gain; a rate (…/S) → times the exposure; MJy/sr → gain ×
 //!   exposure / `PHOTMJSR`. The gain is `GAIN`, `ATODGAIN`, the mean of `ATODGN{A–D}` over the amplifiers in
 //!   `CCDAMP`, or the nominal `CCDGAIN`, in that order.
-//! - **Read noise** (e⁻): `--read-noise-e`; else `RDNOISE`; else the rms of `READNSE{A–D}` over the
+//! - **Read noise** (e⁻): `--read-noise-e`; else `RDNOISE` or `READNSE` (STIS); else the rms of `READNSE{A–D}` over the
 //!   amplifiers in `CCDAMP`; else √median(`VAR_RNOISE`)·k; else from the `ERR` plane of the sky pixels:
 //!   σ_RN² = median((k·ERR)² − k·data).
 //! - **Data quality**: a pixel is masked when its DQ value has a bit outside the ignored ones. The default
@@ -26,7 +26,7 @@ mod header_wcs;
 mod units;
 
 use header_wcs::MAX_SIP_ORDER;
-pub use header_wcs::{ChipWcs, chip_wcs, plate_scale_mas};
+pub use header_wcs::{ChipWcs, chip_wcs, plate_scale_mas, same_pointing};
 pub use units::{DataUnit, Observatory, calibrate, parse_dq_bits, read_noise_from_err};
 
 use super::IoError;
@@ -150,10 +150,10 @@ impl Keys for HduKeys {
 /// The keys the reader looks up.
 fn wanted_keys() -> Vec<String> {
     let mut k: Vec<String> = [
-        "BUNIT", "TELESCOP", "GAIN", "ATODGAIN", "CCDGAIN", "CCDAMP", "RDNOISE", "EXPTIME",
-        "XPOSURE", "EFFEXPTM", "PHOTMJSR", "PLTSCALE", "CD1_1", "CD1_2", "CD2_1", "CD2_2",
-        "CDELT1", "CDELT2", "PC1_1", "PC1_2", "PC2_1", "PC2_2", "CTYPE1", "CTYPE2", "CRPIX1",
-        "CRPIX2", "CRVAL1", "CRVAL2", "A_ORDER", "B_ORDER", "CPDIS1", "D2IMDIS1",
+        "BUNIT", "TELESCOP", "GAIN", "ATODGAIN", "CCDGAIN", "CCDAMP", "RDNOISE", "READNSE",
+        "EXPTIME", "XPOSURE", "EFFEXPTM", "PHOTMJSR", "PLTSCALE", "CD1_1", "CD1_2", "CD2_1",
+        "CD2_2", "CDELT1", "CDELT2", "PC1_1", "PC1_2", "PC2_1", "PC2_2", "CTYPE1", "CTYPE2",
+        "CRPIX1", "CRPIX2", "CRVAL1", "CRVAL2", "A_ORDER", "B_ORDER", "CPDIS1", "D2IMDIS1",
     ]
     .iter()
     .map(|s| s.to_string())

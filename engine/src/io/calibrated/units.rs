@@ -251,11 +251,10 @@ fn read_noise_e(
     if let Some(r) = opts.read_noise_e {
         return Ok((r, format!("read noise {r} e⁻ (--read-noise-e)")));
     }
-    if let Some(r) = keys
-        .number("RDNOISE")
-        .filter(|v| *v >= 0.0 && v.is_finite())
-    {
-        return Ok((r, format!("read noise {r} e⁻ from RDNOISE")));
+    for key in ["RDNOISE", "READNSE"] {
+        if let Some(r) = keys.number(key).filter(|v| *v >= 0.0 && v.is_finite()) {
+            return Ok((r, format!("read noise {r} e⁻ from {key}")));
+        }
     }
     let amps = amplifiers(keys);
     let per_amp: Vec<(char, f64)> = amps
@@ -307,7 +306,7 @@ fn read_noise_e(
             ),
         ));
     }
-    Err("no read noise: no RDNOISE, READNSE[A-D] (with CCDAMP), VAR_RNOISE or ERR plane; give --read-noise-e"
+    Err("no read noise: no RDNOISE, READNSE, READNSE[A-D] (with CCDAMP), VAR_RNOISE or ERR plane; give --read-noise-e"
         .to_string())
 }
 
@@ -362,6 +361,26 @@ pub fn calibrate(
         }
     }
     let good: Vec<bool> = bad.iter().map(|b| !b).collect();
+    if n > 0 && good.iter().all(|g| !g) {
+        return Err(format!(
+            "every pixel is masked ({n_flagged} by DQ, {n_non_finite} not finite; DQ bits not masking a pixel: {}): \
+             nothing to analyse (--dq-ignore BITS keeps pixels whose flags are harmless)",
+            describe_bits(ignore, opts.dq_ignore.is_some())
+        ));
+    }
+    if let Some(e) = &planes.err
+        && let Some(i) = (0..n).find(|&i| good[i] && !(e[i].is_finite() && e[i] > 0.0))
+    {
+        let count = (0..n)
+            .filter(|&i| good[i] && !(e[i].is_finite() && e[i] > 0.0))
+            .count();
+        return Err(format!(
+            "ERR: {count} unmasked pixel(s) with an error that is zero, negative or not a number (the first at x {}, \
+             y {}): a calibrated ERR plane is > 0 wherever the DQ plane lets a pixel through",
+            i % planes.nx,
+            i / planes.nx
+        ));
+    }
     let (k, k_note) = electrons_per_unit(keys, &planes, &good, opts)?;
     if !(k > 0.0 && k.is_finite()) {
         return Err(format!("{k} e⁻ per data unit: must be a finite number > 0"));
