@@ -15,8 +15,9 @@ use std::process::Command;
 /// Python packages the suite needs (the build backend and the `test` extra).
 /// What the suite needs: the build tool, the test runner, numpy and astropy for the module's tests, batman
 /// (the transit model's outside reference, GPL-3: used by the tests only, never linked), and matplotlib and
-/// photutils for the docs' example and benchmark scripts (`test_docs_commands.py` runs them).
-const PACKAGES: [&str; 7] = [
+/// photutils for the docs' example and benchmark scripts (`test_docs_commands.py` runs them), and
+/// astroscrappy (L.A.Cosmic: the outside reference of the single-exposure cosmic-ray detection).
+const PACKAGES: [&str; 8] = [
     "maturin>=1.9,<2",
     "numpy>=1.21",
     "pytest>=7",
@@ -24,6 +25,7 @@ const PACKAGES: [&str; 7] = [
     "matplotlib>=3.5",
     "photutils>=1.9",
     "batman-package>=2.4",
+    "astroscrappy>=1.1",
 ];
 
 fn run(cmd: &mut Command, what: &str) {
@@ -76,7 +78,7 @@ fn the_python_module_passes_its_pytest_suite() {
     let have_all = Command::new(&vpython)
         .args([
             "-c",
-            "import maturin, numpy, pytest, astropy, matplotlib, photutils, batman",
+            "import maturin, numpy, pytest, astropy, matplotlib, photutils, batman, astroscrappy",
         ])
         .output()
         .is_ok_and(|o| o.status.success());

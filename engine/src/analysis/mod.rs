@@ -9,6 +9,7 @@ pub mod crowding;
 pub mod detection;
 pub mod epsf;
 pub mod image;
+pub mod lacosmic;
 pub mod lightcurve;
 pub mod pipeline;
 pub mod registration;

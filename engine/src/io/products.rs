@@ -50,6 +50,28 @@ pub fn catalogue_rows(stars: &[ScoredStar], plate_scale_mas: f64) -> Vec<Vec<Cel
         .collect()
 }
 
+/// The cosmic-ray mask `jsim analyze` writes per chip of a calibrated file (`SCIk/cosmic_rays.fits`).
+pub const COSMIC_RAYS_NAME: &str = "cosmic_rays.fits";
+
+/// Write a chip's cosmic-ray mask: a 16-bit image, 1 where the analysis masked a cosmic ray (by comparison
+/// with another exposure of the pointing, or by L.A.Cosmic), else 0.
+pub fn write_cosmic_rays(path: &Path, nx: usize, ny: usize, mask: &[u16]) -> Result<(), IoError> {
+    fits::write(
+        path,
+        &[Hdu::Image {
+            name: "",
+            nx,
+            ny,
+            pixels: Pixels::U16(mask),
+            cards: vec![Card::s(
+                "CONTENT",
+                "cosmic rays masked by jsim",
+                "1: a cosmic ray (comparison or L.A.Cosmic)",
+            )],
+        }],
+    )
+}
+
 /// Columns of `repeatability.csv` (`jsim analyze` on exposures of one pointing): per pair of exposures and
 /// flux bin, the repeatability of the fitted positions against their bounds (`analysis::repeat`).
 pub const REPEAT_HEADER: [&str; 14] = [

@@ -7,6 +7,7 @@ use crate::cmd::{AnalyzeArgs, Part, analyze_parts};
 use crate::outputs::Outputs;
 use anyhow::{Result, bail};
 use engine::analysis::crowding;
+use engine::analysis::lacosmic;
 use engine::analysis::repeat::{self, Rejection};
 use engine::analysis::report::StarResult;
 use engine::config::{Config, Crowding};
@@ -56,6 +57,8 @@ pub fn analyze_calibrated(session: &Session, cfg: &Config, a: &AnalyzeArgs) -> R
         .map(|s| AnalysisInput::read_chip(&a.image, s, &a.calibrated, cfg))
         .collect::<Result<Vec<_>, _>>()?;
     let exposures = one_pointing(&inputs);
+    // each chip's cosmic-ray mask: by comparison for exposures of one pointing, else L.A.Cosmic
+    let before: Vec<Vec<bool>> = inputs.iter().map(|i| i.img.bad.clone()).collect();
     if exposures && let Some(r) = &a.cr_rejection {
         let mut images: Vec<_> = inputs.iter().map(|i| i.img.clone()).collect();
         let counts = repeat::reject_by_comparison(&mut images, r);
@@ -69,7 +72,31 @@ pub fn analyze_calibrated(session: &Session, cfg: &Config, a: &AnalyzeArgs) -> R
                 r.grow_sigma
             ));
         }
+    } else if !exposures && let Some(l) = &a.lacosmic {
+        for input in inputs.iter_mut() {
+            let hits = lacosmic::detect(&input.img, l);
+            let n = hits.iter().filter(|h| **h).count();
+            for (b, h) in input.img.bad.iter_mut().zip(&hits) {
+                *b |= *h;
+            }
+            input.assumptions.push(format!(
+                "{n} pixel(s) masked as cosmic rays by L.A.Cosmic (σ_lim {}, f_lim {}, {} iterations)",
+                l.sigma_clip, l.objlim, l.iterations
+            ));
+        }
     }
+    let cr_masks: Vec<Vec<u16>> = inputs
+        .iter()
+        .zip(&before)
+        .map(|(i, b)| {
+            i.img
+                .bad
+                .iter()
+                .zip(b)
+                .map(|(now, was)| u16::from(*now && !*was))
+                .collect()
+        })
+        .collect();
     // exposures of one pointing are analysed alike: crowded when any of them is
     let mut cfg = cfg.clone();
     if exposures && cfg.analysis.crowding == Crowding::Auto {
@@ -88,6 +115,11 @@ pub fn analyze_calibrated(session: &Session, cfg: &Config, a: &AnalyzeArgs) -> R
     let read = |k: usize| Ok(inputs[k].clone());
     let scale = inputs[0].plate_scale_mas;
     let finish = |fits: &[Vec<StarResult>], outputs: &mut Outputs| -> Result<()> {
+        for ((part, mask), input) in parts.iter().zip(&cr_masks).zip(&inputs) {
+            let path = a.out.join(&part.dir).join(products::COSMIC_RAYS_NAME);
+            outputs.add(&path);
+            products::write_cosmic_rays(&path, input.img.nx, input.img.ny, mask)?;
+        }
         if !exposures {
             return Ok(());
         }
@@ -142,6 +174,17 @@ fn one_pointing(inputs: &[AnalysisInput]) -> bool {
         && wcs.iter().all(|w| {
             matches!((w, wcs[0]), (Some(w), Some(first)) if calibrated::same_pointing(first, w, SAME_POINTING_PX))
         })
+}
+
+/// The single-exposure knob: `--lacosmic-sigma S` (0: off), L.A.Cosmic's σ_lim.
+pub fn lacosmic_knob(sigma: f64) -> Result<Option<lacosmic::LaCosmic>> {
+    if !(sigma == 0.0 || (sigma >= 2.0 && sigma.is_finite())) {
+        bail!("--lacosmic-sigma {sigma}: 0 (off) or a finite number ≥ 2");
+    }
+    Ok((sigma > 0.0).then(|| lacosmic::LaCosmic {
+        sigma_clip: sigma,
+        ..lacosmic::LaCosmic::default()
+    }))
 }
 
 /// The rejection knob: `--cr-reject-sigma T` (0: off).

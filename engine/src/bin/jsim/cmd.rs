@@ -291,6 +291,8 @@ pub struct AnalyzeArgs {
     pub calibrated: engine::io::calibrated::ReadOptions,
     /// The cosmic-ray rejection by comparison of a calibrated file's exposures of one pointing (`None`: off).
     pub cr_rejection: Option<engine::analysis::repeat::Rejection>,
+    /// L.A.Cosmic on a calibrated file's single exposures (`None`: off).
+    pub lacosmic: Option<engine::analysis::lacosmic::LaCosmic>,
     pub out: PathBuf,
 }
 

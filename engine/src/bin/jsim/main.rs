@@ -404,6 +404,7 @@ fn run(cli: Cli) -> Result<()> {
             out,
         } => {
             let cr_rejection = calibrated_cmd::rejection(calibrated.cr_reject_sigma)?;
+            let lacosmic = calibrated_cmd::lacosmic_knob(calibrated.lacosmic_sigma)?;
             let calibrated = calibrated.options()?;
             let mut c = cfg.load()?;
             if let Some(k) = crowding {
@@ -432,6 +433,7 @@ fn run(cli: Cli) -> Result<()> {
                     countermeasure: plan.countermeasures[0],
                     calibrated,
                     cr_rejection,
+                    lacosmic,
                     out,
                 },
             )

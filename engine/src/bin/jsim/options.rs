@@ -356,6 +356,11 @@ pub struct CalibratedArgs {
     /// the others' is a cosmic ray, masked with its neighbours (0: off).
     #[arg(long, value_name = "SIGMA", default_value_t = 5.0)]
     pub cr_reject_sigma: f64,
+    /// A calibrated file's single exposures: L.A.Cosmic's significance of a cosmic ray's Laplacian (van
+    /// Dokkum 2001; 4.5 its usual value). Off (0) by default: on an undersampled, crowded field it also takes
+    /// pixels of star cores, and the pipeline's DQ flags its cosmic rays.
+    #[arg(long, value_name = "SIGMA", default_value_t = 0.0)]
+    pub lacosmic_sigma: f64,
 }
 
 impl CalibratedArgs {
