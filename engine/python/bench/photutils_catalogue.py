@@ -42,18 +42,33 @@ from photutils.psf import EPSFBuilder, IterativePSFPhotometry, SourceGrouper, ex
 photutils.future_column_names = True  # x_centroid, not the deprecated xcentroid
 
 
+def gain_of(h, hdr):
+    """e- per data unit: GAIN (jsim), else 1 for a calibrated chip in ELECTRONS, else ATODGAIN for COUNTS."""
+    if "GAIN" in hdr:
+        return hdr["GAIN"]
+    unit = hdr.get("BUNIT", "").strip().upper()
+    if unit.startswith("ELECTRON"):
+        return 1.0
+    if unit.startswith("COUNT") and "ATODGAIN" in h[0].header:
+        return h[0].header["ATODGAIN"]
+    sys.exit(f"no GAIN, and BUNIT {unit!r} is not ELECTRONS or COUNTS with ATODGAIN")
+
+
 def load(path, ext, flat, flat_ext):
     with fits.open(path) as h:
         hdu = h[ext] if ext else h[0]
         hdr = hdu.header
-        e = (hdu.data.astype(float) - hdr.get("BIASADU", 0.0)) * hdr["GAIN"]
+        e = (hdu.data.astype(float) - hdr.get("BIASADU", 0.0)) * gain_of(h, hdr)
         bad = ~np.isfinite(e)
-        dq_name = "DQ" + ext[len("ARRAY"):] if ext else "DQ"
+        # a focal plane's ARRAYk has DQk; a calibrated file's SCI chip (HST, JWST) its DQ
+        dq_name = "DQ" + ext[len("ARRAY"):] if ext and ext.startswith("ARRAY") else "DQ"
         if dq_name in h:
             bad |= h[dq_name].data != 0
         elif "SATURATE" in hdr:
             bad |= hdu.data >= hdr["SATURATE"]
         scale = hdr.get("PLTSCALE", np.nan)
+        if not np.isfinite(scale) and "CD1_1" in hdr:
+            scale = float(np.sqrt(abs(hdr["CD1_1"] * hdr["CD2_2"] - hdr.get("CD1_2", 0.0) * hdr.get("CD2_1", 0.0))) * 3.6e6)
     if flat:
         with fits.open(flat) as f:
             e = e / f[flat_ext or 0].data
@@ -76,7 +91,8 @@ def cut_csv(src, dst, lo, hi, extra=None):
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--image", required=True)
-    ap.add_argument("--ext", default=None, help="ARRAYk of a focal-plane file (default: the primary HDU)")
+    ap.add_argument("--ext", default=None,
+                    help="ARRAYk of a focal-plane file, or SCI of a calibrated HST/JWST file (default: the primary HDU)")
     ap.add_argument("--flat", default=None, help="the calibration flat product (flat_cal.fits)")
     ap.add_argument("--size", type=int, default=512, help="centred cut, px (0: the whole image)")
     ap.add_argument("--nsigma", type=float, default=5.0)
@@ -86,7 +102,7 @@ def main(argv=None):
     ap.add_argument("--out", required=True)
     a = ap.parse_args(argv)
 
-    flat_ext = "FLAT" + a.ext[len("ARRAY"):] if a.ext else None
+    flat_ext = "FLAT" + a.ext[len("ARRAY"):] if a.ext and a.ext.startswith("ARRAY") else None
     e, bad, scale = load(a.image, a.ext, a.flat, flat_ext)
     n = e.shape[0]
     size = n if a.size <= 0 else min(a.size, n)

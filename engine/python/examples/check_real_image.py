@@ -1,6 +1,6 @@
 """Check `jsim analyze` on a calibrated file of another observatory with tools that read it on their own.
 
-    python engine/python/examples/check_real_image.py IMAGE OUT [--chip 1]
+    python engine/python/examples/check_real_image.py IMAGE OUT [--chip 1] [--photutils PHOTUTILS_CSV]
 
 IMAGE is the calibrated file (HST `_flt`, JWST `_cal`), OUT the output directory `jsim analyze` wrote for
 it. Printed, for the chip:
@@ -8,7 +8,9 @@ it. Printed, for the chip:
   included), arcsec;
 - jsim's positions of bright (2e4–3e5 e⁻), isolated (no other detection within 8 px), unflagged stars
   against photutils' 2-D Gaussian centroid of a 7 x 7 box (sky = the median of unflagged pixels): the
-  median difference and the scatter per axis, px, beside jsim's median Cramér–Rao bound.
+  median difference and the scatter per axis, px, beside jsim's median Cramér–Rao bound;
+- with --photutils, the same stars in photutils' PSF photometry of the chip
+  (engine/python/bench/photutils_catalogue.py --ext SCI), matched star by star.
 """
 
 import argparse
@@ -65,11 +67,34 @@ def centroid_comparison(image, catalogue, plate_scale_mas, chip=1):
     return len(diffs), np.median(diffs, axis=0), diffs.std(axis=0), crlb_px
 
 
+def photutils_comparison(catalogue, photutils_csv, plate_scale_mas):
+    """(n, median (x, y), scatter (x, y), median bound) of photutils' PSF fit less jsim's, px, over the bright
+    (2e4–3e5 e⁻), isolated (8 px), unflagged stars of both, each matched to the other's nearest within 0.5 px."""
+    from scipy.spatial import cKDTree
+
+    cat = read_catalogue(catalogue)
+    pu = read_catalogue(photutils_csv)
+    x, y, f = cat["x"], cat["y"], cat["flux_e"]
+    d = np.hypot(x[:, None] - x[None], y[:, None] - y[None])
+    np.fill_diagonal(d, np.inf)
+    pick = (d.min(1) > 8) & (f > 2e4) & (f < 3e5) & (cat["flags"] == 0)
+    good = pu["flags"] == 0
+    tp = cKDTree(np.column_stack([pu["x"][good], pu["y"][good]]))
+    dist, j = tp.query(np.column_stack([x[pick], y[pick]]))
+    ok = dist < 0.5
+    px, py = pu["x"][good][j[ok]], pu["y"][good][j[ok]]
+    diffs = np.column_stack([px - x[pick][ok], py - y[pick][ok]])
+    crlb_px = float(np.median(cat["crlb_x_mas"][pick][ok])) / plate_scale_mas
+    return len(diffs), np.median(diffs, axis=0), diffs.std(axis=0), crlb_px
+
+
 def main():
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("image")
     p.add_argument("out")
     p.add_argument("--chip", type=int, default=1)
+    p.add_argument("--photutils", default=None,
+                   help="photutils.csv of engine/python/bench/photutils_catalogue.py on the same chip")
     a = p.parse_args()
     catalogue = os.path.join(a.out, f"SCI{a.chip}", "catalogue.csv")
     with open(os.path.join(a.out, "summary.json")) as f:
@@ -80,6 +105,12 @@ def main():
         f"{n} bright isolated stars, photutils centroid_2dg less jsim: median ({med[0]:+.4f}, {med[1]:+.4f}) px, "
         f"scatter ({std[0]:.4f}, {std[1]:.4f}) px; jsim's median bound {crlb:.4f} px"
     )
+    if a.photutils:
+        n, med, std, crlb = photutils_comparison(catalogue, a.photutils, scale)
+        print(
+            f"{n} of them in photutils' PSF photometry, photutils less jsim: median ({med[0]:+.4f}, {med[1]:+.4f}) px, "
+            f"scatter ({std[0]:.4f}, {std[1]:.4f}) px; jsim's median bound {crlb:.4f} px"
+        )
 
 
 if __name__ == "__main__":
