@@ -312,8 +312,11 @@ impl PySession {
     /// `telemetry_NNN.fits`, NNN the image's IMAGEIDX), the design model PSF (`psf_model.fits` beside the
     /// image) and the truth (`truth=`, else the image's TRUTH extension) — so the result is the CLI's, bit
     /// for bit. A focal-plane file (`fp_NNN.fits`) is analysed array by array by `jsim analyze`: here it is
-    /// refused by name.
-    #[pyo3(signature = (path, *, truth = None, flat = None, refcat = None, telemetry = None, countermeasure = "none", epsf_zones = None, crowding = None))]
+    /// refused by name. A calibrated file of another observatory (HST, JWST: docs/real-images.md) is read
+    /// chip by chip: `chip=` its SCI EXTVER (needed when it has several), with `electrons_per_unit=`,
+    /// `read_noise_e=` and `dq_ignore=` (bits, as `--dq-ignore`) where its header is silent or wrong — the
+    /// CLI's result for that chip when the chips are not exposures of one pointing compared with each other.
+    #[pyo3(signature = (path, *, truth = None, flat = None, refcat = None, telemetry = None, countermeasure = "none", epsf_zones = None, crowding = None, chip = None, electrons_per_unit = None, read_noise_e = None, dq_ignore = None))]
     #[allow(clippy::too_many_arguments)]
     fn analyze_file(
         &self,
@@ -326,6 +329,10 @@ impl PySession {
         countermeasure: &str,
         epsf_zones: Option<usize>,
         crowding: Option<&str>,
+        chip: Option<i64>,
+        electrons_per_unit: Option<f64>,
+        read_noise_e: Option<f64>,
+        dq_ignore: Option<&str>,
     ) -> PyResult<PyAnalysis> {
         let cm: Countermeasure = countermeasure.parse().or_py()?;
         let mut cfg = self.cfg.clone();
@@ -340,6 +347,35 @@ impl PySession {
                 "{}: a focal-plane file (ARRAY1 …): analyse it with `jsim analyze`, array by array",
                 path.display()
             )));
+        }
+        if !engine::io::calibrated::primary_is_image(&path).or_py()? {
+            let sets = engine::io::calibrated::imsets(&path).or_py()?;
+            let set = match chip {
+                Some(v) => sets.iter().find(|s| s.extver == v),
+                None if sets.len() == 1 => sets.first(),
+                None => None,
+            }
+            .ok_or_else(|| {
+                let names: Vec<String> = sets.iter().map(|s| s.name()).collect();
+                PyValueError::new_err(format!(
+                    "{}: chip={chip:?}: the file's SCI chips are [{}] (give chip= one's EXTVER)",
+                    path.display(),
+                    names.join("; ")
+                ))
+            })?;
+            let opts = engine::io::calibrated::ReadOptions {
+                electrons_per_unit: positive("electrons_per_unit", electrons_per_unit)?,
+                read_noise_e: non_negative("read_noise_e", read_noise_e)?,
+                dq_ignore: dq_ignore
+                    .map(engine::io::calibrated::parse_dq_bits)
+                    .transpose()
+                    .map_err(PyValueError::new_err)?,
+            };
+            let input = AnalysisInput::read_chip(&path, set, &opts, &cfg).or_py()?;
+            let analysis = py
+                .detach(|| self.session.analyze_input(&cfg, &input, epsf_zones, cm))
+                .or_py()?;
+            return PyAnalysis::new(py, analysis, &input, &cm);
         }
         let input = AnalysisInput::read_products(
             &path,
@@ -535,5 +571,25 @@ impl PyAnalysis {
             "jsim.Analysis({}, accuracy {acc:.2} mas)",
             self.countermeasure
         )
+    }
+}
+
+/// `value`, when given, a finite number > 0 (else an error naming `what`).
+fn positive(what: &str, value: Option<f64>) -> PyResult<Option<f64>> {
+    match value {
+        Some(v) if !(v > 0.0 && v.is_finite()) => Err(PyValueError::new_err(format!(
+            "{what}={v}: must be a finite number > 0"
+        ))),
+        v => Ok(v),
+    }
+}
+
+/// `value`, when given, a finite number ≥ 0 (else an error naming `what`).
+fn non_negative(what: &str, value: Option<f64>) -> PyResult<Option<f64>> {
+    match value {
+        Some(v) if !(v >= 0.0 && v.is_finite()) => Err(PyValueError::new_err(format!(
+            "{what}={v}: must be a finite number ≥ 0"
+        ))),
+        v => Ok(v),
     }
 }

@@ -316,3 +316,25 @@ def test_lacosmic_finds_hits_injected_into_a_real_exposure_as_astroscrappy_does(
     found_theirs = np.mean([theirs[y, x] for y, x in strong])
     assert len(strong) >= 50
     assert found_mine >= 0.9 and found_mine >= found_theirs - 0.05, (found_mine, found_theirs)
+
+
+def test_python_reads_a_calibrated_chip_as_the_cli_does(jsim_bin, tmp_path):
+    """`Session.analyze_file` on the real HST file: the CLI's chip catalogue bit for bit (its columns but RA/Dec)
+    and the same assumptions; a file of several chips needs `chip=`, and a bad option is a named error."""
+    import jsim
+
+    session = jsim.Session(jsim.Config.default(), backend="cpu")
+    py = session.analyze_file(HST)
+    out = tmp_path / "cli"
+    subprocess.run([jsim_bin, "analyze", "--image", HST, "--out", str(out)], check=True, capture_output=True)
+    cli = read_catalogue(out / "SCI1" / "catalogue.csv")
+    summary = json.loads((out / "SCI1" / "summary.json").read_text())
+    assert set(py.catalogue) | {"ra_deg", "dec_deg"} == set(cli)
+    for name in py.catalogue:
+        np.testing.assert_array_equal(py.catalogue[name], cli[name], err_msg=name)
+    assert py.assumptions == summary["assumptions"]
+    with pytest.raises(ValueError, match=r"chip=None: the file's SCI chips are \[SCI,1; SCI,2\]"):
+        session.analyze_file(STIS)
+    assert session.analyze_file(STIS, chip=2).summary["n_detected"] > 100
+    with pytest.raises(ValueError, match="read_noise_e=-1: must be a finite number ≥ 0"):
+        session.analyze_file(HST, read_noise_e=-1.0)
