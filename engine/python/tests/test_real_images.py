@@ -338,3 +338,42 @@ def test_python_reads_a_calibrated_chip_as_the_cli_does(jsim_bin, tmp_path):
     assert session.analyze_file(STIS, chip=2).summary["n_detected"] > 100
     with pytest.raises(ValueError, match="read_noise_e=-1: must be a finite number ≥ 0"):
         session.analyze_file(HST, read_noise_e=-1.0)
+
+
+WFPC2 = os.path.join(ROOT, "tests", "data", "hst_wfpc2_omegacen", "u40x010hm_cutout_c0f.fits")
+
+
+def test_a_real_four_chip_wfpc2_file_in_the_waivered_layout(jsim_bin, tmp_path):
+    """A cutout of a real WFPC2 exposure of omega Cen: four chips as planes of one cube, each chip's WCS a row of
+    the group table, the DQ cube in the companion _c1f file. Without a read noise in its header it is a named
+    error that writes nothing; with `--read-noise-e`, each chip is analysed with its own WCS, DQ and gain, and
+    the RA/Dec agree with astropy's reading of the same row to 1e-6 arcsec."""
+    r = subprocess.run([jsim_bin, "analyze", "--image", WFPC2, "--out", str(tmp_path / "none")],
+                       capture_output=True, text=True)
+    assert r.returncode == 1 and "GROUP1: no read noise" in r.stderr and "--read-noise-e" in r.stderr, r.stderr
+    assert not (tmp_path / "none").exists()
+    out = tmp_path / "wf"
+    r = subprocess.run([jsim_bin, "analyze", "--image", WFPC2, "--read-noise-e", "5.3", "--out", str(out)],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    summary = json.loads((out / "summary.json").read_text())
+    assert [a["array"] for a in summary["arrays"]] == ["GROUP1", "GROUP2", "GROUP3", "GROUP4"]
+    with fits.open(WFPC2) as h, fits.open(WFPC2.replace("_c0f", "_c1f")) as d:
+        rows = h[1].data
+        for k, a in enumerate(summary["arrays"]):
+            cal = a["calibration"]
+            assert cal["electrons_per_unit"] == h[0].header["ATODGAIN"]
+            assert cal["n_flagged"] == int((d[0].data[k] != 0).sum())
+            assert cal["n_saturated"] == int(((d[0].data[k] & 8) != 0).sum())
+            assert a["report"]["n_detected"] > 100
+            w = WCS(naxis=2)
+            w.wcs.ctype = [rows["CTYPE1"][k], rows["CTYPE2"][k]]
+            w.wcs.crval = [rows["CRVAL1"][k], rows["CRVAL2"][k]]
+            w.wcs.crpix = [rows["CRPIX1"][k], rows["CRPIX2"][k]]
+            w.wcs.cd = [[rows["CD1_1"][k], rows["CD1_2"][k]], [rows["CD2_1"][k], rows["CD2_2"][k]]]
+            cat = read_catalogue(out / f"GROUP{k + 1}" / "catalogue.csv")
+            ra, dec = w.all_pix2world(cat["x"], cat["y"], 0)
+            d_arcsec = np.hypot((cat["ra_deg"] - ra) * np.cos(np.radians(dec)), cat["dec_deg"] - dec) * 3600
+            assert d_arcsec.max() < 1e-6, (k, d_arcsec.max())
+    combined = read_catalogue(out / "catalogue.csv")
+    assert set(combined["array"]) == {1.0, 2.0, 3.0, 4.0}

@@ -21,9 +21,12 @@
 //!   (`good_bits = "~DO_NOT_USE+NON_SCIENCE"`). `--dq-ignore` replaces the default. Non-finite values are
 //!   masked too. Saturated pixels (HST bits 256 and 2048, JWST bit 2) are counted apart.
 //! - **Plate scale**: `PLTSCALE`; else √|det CD| (or of `CDELT`·`PC`) of the chip's WCS.
+//!
+//! HST's older waivered layout (WFPC2's `_c0f.fits`: the chips as planes of one cube) is read by [`waivered`].
 
 mod header_wcs;
 mod units;
+pub mod waivered;
 
 use header_wcs::MAX_SIP_ORDER;
 pub use header_wcs::{ChipWcs, chip_wcs, plate_scale_mas, same_pointing};
@@ -43,16 +46,24 @@ pub struct Imset {
     pub dq: Option<usize>,
     pub var_poisson: Option<usize>,
     pub var_rnoise: Option<usize>,
+    /// The plane of the primary cube, for a waivered file ([`waivered`]); `None` for an imset.
+    pub group: Option<usize>,
 }
 
 impl Imset {
-    /// `SCI,1`: how astronomers name the chip (FITS `EXTNAME,EXTVER`).
+    /// `SCI,1`: how astronomers name the chip (FITS `EXTNAME,EXTVER`); `GROUP1` for a waivered file's.
     pub fn name(&self) -> String {
-        format!("SCI,{}", self.extver)
+        match self.group {
+            Some(_) => self.dir_name(),
+            None => format!("SCI,{}", self.extver),
+        }
     }
-    /// `SCI1`: the chip's name as a directory name.
+    /// `SCI1` (`GROUP1`): the chip's name as a directory name.
     pub fn dir_name(&self) -> String {
-        format!("SCI{}", self.extver)
+        match self.group {
+            Some(_) => format!("GROUP{}", self.extver),
+            None => format!("SCI{}", self.extver),
+        }
     }
 }
 
@@ -133,7 +144,7 @@ pub struct ChipPlanes {
 }
 
 /// The HDU's header values: its own cards, then the primary's.
-struct HduKeys {
+pub(super) struct HduKeys {
     numbers: std::collections::HashMap<String, f64>,
     texts: std::collections::HashMap<String, String>,
 }
@@ -148,12 +159,13 @@ impl Keys for HduKeys {
 }
 
 /// The keys the reader looks up.
-fn wanted_keys() -> Vec<String> {
+pub(super) fn wanted_keys() -> Vec<String> {
     let mut k: Vec<String> = [
-        "BUNIT", "TELESCOP", "GAIN", "ATODGAIN", "CCDGAIN", "CCDAMP", "RDNOISE", "READNSE",
-        "EXPTIME", "XPOSURE", "EFFEXPTM", "PHOTMJSR", "PLTSCALE", "CD1_1", "CD1_2", "CD2_1",
-        "CD2_2", "CDELT1", "CDELT2", "PC1_1", "PC1_2", "PC2_1", "PC2_2", "CTYPE1", "CTYPE2",
-        "CRPIX1", "CRPIX2", "CRVAL1", "CRVAL2", "A_ORDER", "B_ORDER", "CPDIS1", "D2IMDIS1",
+        "BUNIT", "TELESCOP", "INSTRUME", "GAIN", "ATODGAIN", "CCDGAIN", "CCDAMP", "RDNOISE",
+        "READNSE", "EXPTIME", "XPOSURE", "EFFEXPTM", "PHOTMJSR", "PLTSCALE", "CD1_1", "CD1_2",
+        "CD2_1", "CD2_2", "CDELT1", "CDELT2", "PC1_1", "PC1_2", "PC2_1", "PC2_2", "CTYPE1",
+        "CTYPE2", "CRPIX1", "CRPIX2", "CRVAL1", "CRVAL2", "A_ORDER", "B_ORDER", "CPDIS1",
+        "D2IMDIS1",
     ]
     .iter()
     .map(|s| s.to_string())
@@ -182,9 +194,18 @@ fn image_shape(info: &HduInfo) -> Option<(usize, usize)> {
     }
 }
 
-/// The chips of a calibrated file: its `SCI` extensions grouped with their planes by `EXTVER`, in order.
-/// Empty when the file has no `SCI` extension.
+/// The chips of a calibrated file: its `SCI` extensions grouped with their planes by `EXTVER`, in order, or a
+/// waivered file's cube planes ([`waivered::groups`]). Empty when the file has neither.
 pub fn imsets(path: &Path) -> Result<Vec<Imset>, IoError> {
+    let sets = sci_imsets(path)?;
+    if sets.is_empty() {
+        return waivered::groups(path);
+    }
+    Ok(sets)
+}
+
+/// The `SCI` extensions of a file with their planes.
+fn sci_imsets(path: &Path) -> Result<Vec<Imset>, IoError> {
     let mut f = super::fits::open(path)?;
     let mut found: Vec<(String, i64, usize)> = Vec::new();
     for i in 1.. {
@@ -215,6 +236,7 @@ pub fn imsets(path: &Path) -> Result<Vec<Imset>, IoError> {
             dq: at("DQ", *v),
             var_poisson: at("VAR_POISSON", *v),
             var_rnoise: at("VAR_RNOISE", *v),
+            group: None,
         })
         .collect())
 }
@@ -228,6 +250,9 @@ pub fn primary_is_image(path: &Path) -> Result<bool, IoError> {
 
 /// Read chip `set` of `path` into electrons ([`calibrate`]).
 pub fn read_chip(path: &Path, set: &Imset, opts: &ReadOptions) -> Result<CalibratedChip, IoError> {
+    if set.group.is_some() {
+        return waivered::read_group(path, set, opts);
+    }
     let mut f = super::fits::open(path)?;
     let fe = |e: fitsio::errors::Error| IoError::fits(path, e);
     let wanted = wanted_keys();

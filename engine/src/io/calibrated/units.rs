@@ -341,6 +341,11 @@ pub fn calibrate(
 ) -> Result<CalibratedChip, String> {
     let n = planes.nx * planes.ny;
     let obs = Observatory::from_telescop(keys.text("TELESCOP").as_deref());
+    // WFPC2 flags its A-to-D saturation with bit 8 (ACS and WFC3 with 256 and 2048)
+    let saturated_bits = match keys.text("INSTRUME").map(|t| t.trim().to_ascii_uppercase()) {
+        Some(i) if i == "WFPC2" => 8,
+        _ => obs.saturated_bits(),
+    };
     let ignore = opts.dq_ignore.unwrap_or(obs.default_dq_ignore());
     let mut notes = Vec::new();
     let (mut n_flagged, mut n_saturated, mut n_non_finite) = (0, 0, 0);
@@ -355,7 +360,7 @@ pub fn calibrate(
         {
             *b = true;
             n_flagged += 1;
-            if dq[i] & obs.saturated_bits() != 0 {
+            if dq[i] & saturated_bits != 0 {
                 n_saturated += 1;
             }
         }
