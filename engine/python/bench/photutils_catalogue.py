@@ -92,7 +92,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--image", required=True)
     ap.add_argument("--ext", default=None,
-                    help="ARRAYk of a focal-plane file, or SCI of a calibrated HST/JWST file (default: the primary HDU)")
+                    help="ARRAYk of a focal-plane file, or sci (SCI) of a calibrated HST/JWST file (default: the primary HDU)")
     ap.add_argument("--flat", default=None, help="the calibration flat product (flat_cal.fits)")
     ap.add_argument("--size", type=int, default=512, help="centred cut, px (0: the whole image)")
     ap.add_argument("--nsigma", type=float, default=5.0)
@@ -101,6 +101,7 @@ def main(argv=None):
     ap.add_argument("--jsim", default=None, help="jsim's catalogue.csv to cut to the region")
     ap.add_argument("--out", required=True)
     a = ap.parse_args(argv)
+    a.ext = a.ext.upper() if a.ext else None  # extension names are read without regard to case
 
     flat_ext = "FLAT" + a.ext[len("ARRAY"):] if a.ext and a.ext.startswith("ARRAY") else None
     e, bad, scale = load(a.image, a.ext, a.flat, flat_ext)
