@@ -164,15 +164,12 @@ pub fn repeatability(
         median(pairs.iter().map(|(p, q)| p.y - q.y).collect()),
     );
     let mut bins = Vec::new();
-    let mut lo = 10f64.powf(
-        pairs
-            .iter()
-            .map(|(p, q)| (p.flux_e * q.flux_e).sqrt().log10())
-            .fold(f64::INFINITY, f64::min)
-            .mul_add(2.0, 0.0)
-            .floor()
-            / 2.0,
-    );
+    // the first half-decade edge at or below the faintest pair's flux
+    let faintest = pairs
+        .iter()
+        .map(|(p, q)| (p.flux_e * q.flux_e).sqrt().log10())
+        .fold(f64::INFINITY, f64::min);
+    let mut lo = 10f64.powf((2.0 * faintest).floor() / 2.0);
     while pairs
         .iter()
         .any(|(p, q)| (p.flux_e * q.flux_e).sqrt() >= lo)

@@ -127,7 +127,7 @@ pub const SKY_HEADER: [&str; 2] = ["ra_deg", "dec_deg"];
 
 /// `rows` (of [`catalogue_rows`]) with each star's RA, Dec through `wcs` appended (NaN where the
 /// projection has none).
-pub fn with_sky(
+fn with_sky(
     mut rows: Vec<Vec<Cell>>,
     stars: &[ScoredStar],
     wcs: &crate::sky::wcs::ArrayWcs,
@@ -139,6 +139,24 @@ pub fn with_sky(
     rows
 }
 
+/// The columns and rows of `catalogue.csv`: [`CATALOGUE_HEADER`], and [`SKY_HEADER`] with each star's RA/Dec
+/// when `sky` is given.
+pub fn catalogue_table(
+    stars: &[ScoredStar],
+    plate_scale_mas: f64,
+    sky: Option<&crate::sky::wcs::ArrayWcs>,
+) -> (Vec<&'static str>, Vec<Vec<Cell>>) {
+    let rows = catalogue_rows(stars, plate_scale_mas);
+    let mut header = CATALOGUE_HEADER.to_vec();
+    match sky {
+        Some(w) => {
+            header.extend(SKY_HEADER);
+            (header, with_sky(rows, stars, w))
+        }
+        None => (header, rows),
+    }
+}
+
 /// Write `catalogue.csv` (with RA/Dec through `sky`, when given).
 pub fn write_catalogue(
     path: &Path,
@@ -146,15 +164,8 @@ pub fn write_catalogue(
     plate_scale_mas: f64,
     sky: Option<&crate::sky::wcs::ArrayWcs>,
 ) -> Result<(), IoError> {
-    let rows = catalogue_rows(stars, plate_scale_mas);
-    match sky {
-        Some(w) => {
-            let mut header = CATALOGUE_HEADER.to_vec();
-            header.extend(SKY_HEADER);
-            csv::write(path, &header, &with_sky(rows, stars, w))
-        }
-        None => csv::write(path, &CATALOGUE_HEADER, &rows),
-    }
+    let (header, rows) = catalogue_table(stars, plate_scale_mas, sky);
+    csv::write(path, &header, &rows)
 }
 
 /// An ePSF table as an image HDU (`epsf.fits`, the model PSF product): its nodes, nodes per pixel, origin

@@ -176,25 +176,29 @@ fn one_pointing(inputs: &[AnalysisInput]) -> bool {
         })
 }
 
+/// A cosmic-ray significance option, `--OPTION SIGMA`: 0 (off, `None`) or a finite number ≥ 2.
+fn sigma_option(option: &str, sigma: f64) -> Result<Option<f64>> {
+    if !(sigma == 0.0 || (sigma >= 2.0 && sigma.is_finite())) {
+        bail!("--{option} {sigma}: 0 (off) or a finite number ≥ 2");
+    }
+    Ok((sigma > 0.0).then_some(sigma))
+}
+
 /// The single-exposure knob: `--lacosmic-sigma S` (0: off), L.A.Cosmic's σ_lim.
 pub fn lacosmic_knob(sigma: f64) -> Result<Option<lacosmic::LaCosmic>> {
-    if !(sigma == 0.0 || (sigma >= 2.0 && sigma.is_finite())) {
-        bail!("--lacosmic-sigma {sigma}: 0 (off) or a finite number ≥ 2");
-    }
-    Ok((sigma > 0.0).then(|| lacosmic::LaCosmic {
-        sigma_clip: sigma,
-        ..lacosmic::LaCosmic::default()
-    }))
+    Ok(
+        sigma_option("lacosmic-sigma", sigma)?.map(|sigma_clip| lacosmic::LaCosmic {
+            sigma_clip,
+            ..lacosmic::LaCosmic::default()
+        }),
+    )
 }
 
 /// The rejection knob: `--cr-reject-sigma T` (0: off).
 pub fn rejection(sigma: f64) -> Result<Option<Rejection>> {
-    if !(sigma == 0.0 || (sigma >= 2.0 && sigma.is_finite())) {
-        bail!("--cr-reject-sigma {sigma}: 0 (off) or a finite number ≥ 2");
-    }
-    Ok((sigma > 0.0).then(|| Rejection {
-        threshold_sigma: sigma,
-        grow_sigma: Rejection::default().grow_sigma.min(sigma),
+    Ok(sigma_option("cr-reject-sigma", sigma)?.map(|t| Rejection {
+        threshold_sigma: t,
+        grow_sigma: Rejection::default().grow_sigma.min(t),
         ..Rejection::default()
     }))
 }

@@ -714,14 +714,8 @@ pub fn analyze_parts(
             None => None,
         };
         products::write_analysis(&dir, &an, &summary, None, sky.as_ref())?;
-        let part_rows = products::catalogue_rows(&an.stars, scale);
-        let part_rows = match &sky {
-            Some(w) => {
-                with_sky_columns = true;
-                products::with_sky(part_rows, &an.stars, w)
-            }
-            None => part_rows,
-        };
+        let (part_header, part_rows) = products::catalogue_table(&an.stars, scale, sky.as_ref());
+        with_sky_columns |= part_header.len() > products::CATALOGUE_HEADER.len();
         for mut r in part_rows {
             r.insert(0, csv::Cell::I(part.number));
             rows.push(r);

@@ -4,19 +4,24 @@
 use super::header_wcs::{chip_wcs, plate_scale_mas};
 use super::{CalibratedChip, ChipPlanes, Keys, ReadOptions};
 
-/// The observatory whose conventions a file follows (`TELESCOP`), for its DQ bits.
+/// The observatory (and, where its DQ bits differ, the instrument) whose conventions a file follows
+/// (`TELESCOP`, `INSTRUME`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Observatory {
     Hst,
+    /// HST's WFPC2, whose DQ flags A-to-D saturation with bit 8.
+    HstWfpc2,
     Jwst,
     Other,
 }
 
 impl Observatory {
-    pub fn from_telescop(t: Option<&str>) -> Self {
-        match t.map(|s| s.trim().to_ascii_uppercase()) {
-            Some(s) if s == "HST" => Self::Hst,
-            Some(s) if s == "JWST" => Self::Jwst,
+    pub fn from_header(telescop: Option<&str>, instrume: Option<&str>) -> Self {
+        let up = |t: Option<&str>| t.map(|s| s.trim().to_ascii_uppercase());
+        match (up(telescop).as_deref(), up(instrume).as_deref()) {
+            (_, Some("WFPC2")) => Self::HstWfpc2,
+            (Some("HST"), _) => Self::Hst,
+            (Some("JWST"), _) => Self::Jwst,
             _ => Self::Other,
         }
     }
@@ -25,7 +30,7 @@ impl Observatory {
         match self {
             // everything but DO_NOT_USE (bit 0) and NON_SCIENCE (bit 9)
             Self::Jwst => !(1 | 512),
-            Self::Hst | Self::Other => 0,
+            Self::Hst | Self::HstWfpc2 | Self::Other => 0,
         }
     }
     /// The DQ bits that flag a saturated pixel.
@@ -33,6 +38,7 @@ impl Observatory {
         match self {
             // full-well (256) and A-to-D (2048) saturation of ACS and WFC3
             Self::Hst => 256 | 2048,
+            Self::HstWfpc2 => 8,
             Self::Jwst => 2,
             Self::Other => 0,
         }
@@ -88,6 +94,21 @@ fn amplifiers(keys: &dyn Keys) -> Vec<char> {
         .unwrap_or_default()
 }
 
+/// The amplifiers of `CCDAMP` and the finite, positive values of `{prefix}{A–D}` for those that have one
+/// (`ATODGN`, `READNSE`).
+fn per_amplifier(keys: &dyn Keys, prefix: &str) -> (Vec<char>, Vec<(char, f64)>) {
+    let amps = amplifiers(keys);
+    let values = amps
+        .iter()
+        .filter_map(|a| {
+            keys.number(&format!("{prefix}{a}"))
+                .filter(|v| *v > 0.0 && v.is_finite())
+                .map(|v| (*a, v))
+        })
+        .collect();
+    (amps, values)
+}
+
 /// The gain (e⁻ per count) and the key it came from.
 fn gain(keys: &dyn Keys) -> Option<(f64, String)> {
     let positive = |v: f64| v > 0.0 && v.is_finite();
@@ -96,15 +117,7 @@ fn gain(keys: &dyn Keys) -> Option<(f64, String)> {
             return Some((v, k.to_string()));
         }
     }
-    let amps = amplifiers(keys);
-    let per_amp: Vec<(char, f64)> = amps
-        .iter()
-        .filter_map(|a| {
-            keys.number(&format!("ATODGN{a}"))
-                .filter(|v| positive(*v))
-                .map(|v| (*a, v))
-        })
-        .collect();
+    let (amps, per_amp) = per_amplifier(keys, "ATODGN");
     if !per_amp.is_empty() {
         let mean = per_amp.iter().map(|p| p.1).sum::<f64>() / per_amp.len() as f64;
         let names: Vec<String> = per_amp.iter().map(|p| format!("ATODGN{}", p.0)).collect();
@@ -256,15 +269,7 @@ fn read_noise_e(
             return Ok((r, format!("read noise {r} e⁻ from {key}")));
         }
     }
-    let amps = amplifiers(keys);
-    let per_amp: Vec<(char, f64)> = amps
-        .iter()
-        .filter_map(|a| {
-            keys.number(&format!("READNSE{a}"))
-                .filter(|v| *v > 0.0 && v.is_finite())
-                .map(|v| (*a, v))
-        })
-        .collect();
+    let (amps, per_amp) = per_amplifier(keys, "READNSE");
     if !per_amp.is_empty() {
         let rms = (per_amp.iter().map(|p| p.1 * p.1).sum::<f64>() / per_amp.len() as f64).sqrt();
         let names: Vec<String> = per_amp
@@ -340,12 +345,11 @@ pub fn calibrate(
     opts: &ReadOptions,
 ) -> Result<CalibratedChip, String> {
     let n = planes.nx * planes.ny;
-    let obs = Observatory::from_telescop(keys.text("TELESCOP").as_deref());
-    // WFPC2 flags its A-to-D saturation with bit 8 (ACS and WFC3 with 256 and 2048)
-    let saturated_bits = match keys.text("INSTRUME").map(|t| t.trim().to_ascii_uppercase()) {
-        Some(i) if i == "WFPC2" => 8,
-        _ => obs.saturated_bits(),
-    };
+    let obs = Observatory::from_header(
+        keys.text("TELESCOP").as_deref(),
+        keys.text("INSTRUME").as_deref(),
+    );
+    let saturated_bits = obs.saturated_bits();
     let ignore = opts.dq_ignore.unwrap_or(obs.default_dq_ignore());
     let mut notes = Vec::new();
     let (mut n_flagged, mut n_saturated, mut n_non_finite) = (0, 0, 0);

@@ -83,7 +83,11 @@ pub fn read_group(path: &Path, set: &Imset, opts: &ReadOptions) -> Result<Calibr
     let Some((n, ny, nx)) = cube_shape(&primary.info) else {
         return Err(IoError::fits(path, "the primary HDU is not a data cube"));
     };
-    let cube: Vec<f32> = primary.read_image(&mut f).map_err(fe)?;
+    let plane = nx * ny;
+    // this chip's plane of the cube alone
+    let sci: Vec<f32> = primary
+        .read_section(&mut f, k * plane, (k + 1) * plane)
+        .map_err(fe)?;
     let table = f.hdu(1).map_err(fe)?;
     for c in NUMBER_COLUMNS {
         if let Some(v) = table
@@ -112,8 +116,6 @@ pub fn read_group(path: &Path, set: &Imset, opts: &ReadOptions) -> Result<Calibr
         texts.insert("BUNIT".to_string(), "COUNTS".to_string());
         notes.push("no BUNIT: counts (DN), as a waivered HST file holds".to_string());
     }
-    let plane = nx * ny;
-    let sci = cube[k * plane..(k + 1) * plane].to_vec();
     let dq = match companion_dq(path) {
         Some(p) => {
             let mut g = crate::io::fits::open(&p)?;
@@ -124,14 +126,11 @@ pub fn read_group(path: &Path, set: &Imset, opts: &ReadOptions) -> Result<Calibr
                     format!("not a {n} × {ny} × {nx} cube like {}", path.display()),
                 ));
             }
-            let v: Vec<i64> = h.read_image(&mut g).map_err(|e| IoError::fits(&p, e))?;
+            let v: Vec<i64> = h
+                .read_section(&mut g, k * plane, (k + 1) * plane)
+                .map_err(|e| IoError::fits(&p, e))?;
             notes.push(format!("DQ from {}", p.display()));
-            Some(
-                v[k * plane..(k + 1) * plane]
-                    .iter()
-                    .map(|q| (*q as u64) & 0xffff)
-                    .collect(),
-            )
+            Some(v.into_iter().map(|q| (q as u64) & 0xffff).collect())
         }
         None => {
             notes.push("no companion _c1f.fits: no DQ plane".to_string());
