@@ -6,8 +6,8 @@
 //! at 4σ of their sampling error); outliers are rejected; bad input is named.
 
 use engine::analysis::solution::{
-    CalibrationModel, ExposureGeometry, Observation, Options, Params, Reference, SolutionError,
-    SourceModel, solve,
+    CalibrationModel, ExposureGeometry, Method, Observation, Options, Params, Reference, Solution,
+    SolutionError, SourceModel, solve,
 };
 use engine::studies::bench_solution::CALIBRATED;
 use engine::studies::bench_solution::{Synthetic, SyntheticSpec, synthetic};
@@ -27,20 +27,25 @@ fn sequence(n: usize, obs_sigma_mas: f64, ref_sigma: Params, seed: u64) -> Synth
     })
 }
 
-#[test]
-fn noise_free_it_recovers_sources_attitudes_and_motions() {
-    let t = sequence(400, 0.0, [0.0; 5], 1);
-    let sol = solve(&t.obs, &t.exposures, &t.refs, 400, &Options::default()).expect("solved");
-    for (s, truth) in sol.sources.iter().zip(&t.params) {
+/// Every solved parameter within `tol` (mas, mas/yr) of the truth.
+fn assert_sources_within(sol: &Solution, truth: &[Params], tol: f64) {
+    for (s, truth) in sol.sources.iter().zip(truth) {
         for k in 0..5 {
             assert!(
-                (s.params[k] - truth[k]).abs() < 1e-5,
+                (s.params[k] - truth[k]).abs() < tol,
                 "parameter {k}: {} vs {}",
                 s.params[k],
                 truth[k]
             );
         }
     }
+}
+
+#[test]
+fn noise_free_it_recovers_sources_attitudes_and_motions() {
+    let t = sequence(400, 0.0, [0.0; 5], 1);
+    let sol = solve(&t.obs, &t.exposures, &t.refs, 400, &Options::default()).expect("solved");
+    assert_sources_within(&sol, &t.params, 1e-5);
     for (a, truth) in sol.attitudes.iter().zip(&t.attitudes) {
         assert!((a.offset_mas[0] - truth.offset_mas[0]).abs() < 1e-5);
         assert!((a.offset_mas[1] - truth.offset_mas[1]).abs() < 1e-5);
@@ -197,6 +202,28 @@ fn bad_input_is_named() {
         run(&t.obs, &t.exposures, &no_motion, &opt),
         Some(SolutionError::FrameUnanchored(_))
     ));
+    // the criterion is a fraction of the formal error
+    for tol in [0.0, 1.0, f64::NAN] {
+        let e = run(
+            &t.obs,
+            &t.exposures,
+            &t.refs,
+            &Options {
+                tolerance_sigma: tol,
+                ..opt
+            },
+        );
+        assert!(
+            matches!(
+                e,
+                Some(SolutionError::Knob {
+                    field: "tolerance_sigma",
+                    ..
+                })
+            ),
+            "{e:?}"
+        );
+    }
 }
 
 /// Four arrays with offsets of 10 px and turns of 0.1° (the plate model's priors) and a third-order
@@ -212,14 +239,16 @@ fn noise_free_it_recovers_the_arrays_offsets_and_the_distortion() {
         calibration: CALIBRATED,
         seed: 4,
     });
+    // noise-free: the criterion far below the errors a noisy set would have
     let opt = Options {
         calibration: CALIBRATED,
         max_iterations: 5000,
+        tolerance_sigma: 1e-7,
         ..Options::default()
     };
     // without the calibration unknowns the sources are wrong by the arrays' offsets (mas …)
     let plain = solve(&t.obs, &t.exposures, &t.refs, 600, &Options::default()).expect("plain");
-    let worst = |sol: &engine::analysis::solution::Solution| {
+    let worst = |sol: &Solution| {
         sol.sources
             .iter()
             .zip(&t.params)
@@ -230,16 +259,7 @@ fn noise_free_it_recovers_the_arrays_offsets_and_the_distortion() {
     // … with them, right to the solver's tolerance
     let sol = solve(&t.obs, &t.exposures, &t.refs, 600, &opt).expect("solved");
     assert!(sol.converged, "{} iterations", sol.iterations);
-    for (s, truth) in sol.sources.iter().zip(&t.params) {
-        for k in 0..5 {
-            assert!(
-                (s.params[k] - truth[k]).abs() < 1e-4,
-                "parameter {k}: {} vs {}",
-                s.params[k],
-                truth[k]
-            );
-        }
-    }
+    assert_sources_within(&sol, &t.params, 1e-4);
     // the calibration against the drawn one, both in the gauge the attitudes leave (px)
     let mut truth = t.calibration.clone();
     truth.remove_gauge();
@@ -313,4 +333,85 @@ fn a_distortion_a_single_pointing_cannot_see_is_named() {
         ),
         "{e:?}"
     );
+}
+
+/// The conjugate gradients (the default) and the block iteration solve one least-squares problem: on a noisy
+/// sequence with the instrument's calibration, their solutions agree to a small fraction of the formal
+/// errors — the gradients in fewer than half the passes over the observations.
+#[test]
+fn conjugate_gradients_and_the_block_iteration_reach_one_solution() {
+    let t = synthetic(&SyntheticSpec {
+        sources: 1000,
+        pointings_per_side: 5,
+        epochs: 4,
+        obs_sigma_mas: 1.0,
+        ref_sigma: [0.3, 0.3, 0.1, 0.1, 0.05],
+        calibration: CALIBRATED,
+        seed: 11,
+    });
+    let run = |method: Method| {
+        let opt = Options {
+            calibration: CALIBRATED,
+            method,
+            max_iterations: 5000,
+            ..Options::default()
+        };
+        solve(&t.obs, &t.exposures, &t.refs, 1000, &opt).expect("solved")
+    };
+    let (cg, block) = (run(Method::ConjugateGradient), run(Method::Block));
+    assert!(cg.converged && block.converged);
+    assert_eq!(cg.rejected, block.rejected);
+    let mut worst = 0.0f64;
+    for (a, b) in cg.sources.iter().zip(&block.sources) {
+        for k in 0..5 {
+            if a.sigma[k].is_finite() {
+                worst = worst.max((a.params[k] - b.params[k]).abs() / a.sigma[k]);
+            }
+        }
+    }
+    // the criterion stops each step at 10⁻³ σ; what remains after it is of that order
+    assert!(worst < 0.01, "largest difference {worst} σ");
+    assert!(
+        2 * cg.iterations < block.iterations,
+        "{} against {}",
+        cg.iterations,
+        block.iterations
+    );
+    assert!((cg.chi2_per_dof - block.chi2_per_dof).abs() < 1e-6);
+}
+
+/// The gauge is the reference catalogue's: the same observations seen in a frame turned by 20″ and spinning
+/// at 2 mas/yr over the field (every exposure's attitude takes it up) give the same sources, in the
+/// catalogue's frame.
+#[test]
+fn a_turned_and_spinning_input_frame_comes_back_in_the_catalogues() {
+    let mut t = sequence(400, 0.0, [0.0; 5], 5);
+    let turn_rad = 20.0 / 206_264.8;
+    // 2 mas/yr at the pattern's corner (≈ 3 × 10⁵ mas from the origin)
+    let spin_rad_per_yr = 2.0 / 3.0e5;
+    for o in &mut t.obs {
+        let phi = turn_rad + spin_rad_per_yr * t.exposures[o.exposure].t_yr;
+        let (s, c) = phi.sin_cos();
+        (o.xi_mas, o.eta_mas) = (c * o.xi_mas - s * o.eta_mas, s * o.xi_mas + c * o.eta_mas);
+    }
+    let opt = Options {
+        tolerance_sigma: 1e-7,
+        ..Options::default()
+    };
+    let sol = solve(&t.obs, &t.exposures, &t.refs, 400, &opt).expect("solved");
+    assert!(sol.converged);
+    assert_sources_within(&sol, &t.params, 1e-5);
+    // the frame the observations carried is in the attitudes: each one's roll is the truth's plus the turn
+    for (a, (truth, g)) in sol
+        .attitudes
+        .iter()
+        .zip(t.attitudes.iter().zip(&t.exposures))
+    {
+        let want = truth.roll_rad() + turn_rad + spin_rad_per_yr * g.t_yr;
+        assert!(
+            (a.roll_rad() - want).abs() < 1e-11,
+            "{} vs {want}",
+            a.roll_rad()
+        );
+    }
 }

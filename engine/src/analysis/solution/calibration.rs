@@ -81,8 +81,38 @@ impl CalibrationModel {
         monomials_between(lo, self.distortion_order)
     }
 
+    /// The terms φ_j (f/L) of a detection at design focal-plane position `f_px` on `array`, as (index
+    /// within an axis's coefficients, value) pairs in rising index: its array's own, then the distortion's.
+    pub fn terms_at(
+        &self,
+        array: usize,
+        f_px: [f64; 2],
+        norm_px: f64,
+        out: &mut Vec<(usize, f64)>,
+    ) {
+        out.clear();
+        let (u, v) = (f_px[0] / norm_px, f_px[1] / norm_px);
+        let terms = self.array_terms();
+        if array < self.arrays {
+            let k = terms.len() * array;
+            out.extend(
+                terms
+                    .iter()
+                    .enumerate()
+                    .map(|(j, (p, q))| (k + j, u.powi(*p) * v.powi(*q))),
+            );
+        }
+        let base = terms.len() * self.arrays;
+        out.extend(
+            self.monomials()
+                .iter()
+                .enumerate()
+                .map(|(j, (p, q))| (base + j, u.powi(*p) * v.powi(*q))),
+        );
+    }
+
     /// Unknowns per axis.
-    fn per_axis(&self) -> usize {
+    pub fn per_axis(&self) -> usize {
         self.arrays * self.array_terms().len() + self.monomials().len()
     }
 
@@ -210,7 +240,7 @@ impl Calibration {
 /// The gauge the attitudes hold, as four linear constraints on the calibration's coefficients (indexed x
 /// terms first, then y, each array's terms in turn): the arrays' mean offset in x and in y, and the
 /// similarity part of their mean B — scale `x_u + y_v`, turn `y_u − x_v`. None without arrays.
-fn gauge_rows(model: CalibrationModel) -> Vec<Vec<(usize, f64)>> {
+pub(super) fn gauge_rows(model: CalibrationModel) -> Vec<Vec<(usize, f64)>> {
     if model.arrays == 0 {
         return Vec::new();
     }

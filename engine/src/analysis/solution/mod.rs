@@ -17,10 +17,13 @@
 //! differently — each array's affine offsets and a global distortion polynomial ([`calibration`]) — as a
 //! third block.
 //!
-//! **The solution** is block-iterative, like Gaia's AGIS: with the attitudes fixed every source is a small
-//! weighted least-squares fit of its own observations (plus its reference-catalogue entry as a prior, which
-//! anchors the frame); with the sources fixed every exposure's (p, q, a) is one too; the two alternate until
-//! nothing moves by more than the tolerance (with a calibration, the third block follows the attitudes). Then observations beyond `clip_sigma` are rejected and it runs
+//! **The solution** is Gaia's AGIS in miniature (Lindegren et al. 2012; [`Method`]): with the attitudes
+//! fixed every source is a small weighted least-squares fit of its own observations (plus its
+//! reference-catalogue entry as a prior, which anchors the frame); with the sources fixed every exposure's
+//! (p, q, a) is one too (with a calibration, the third block follows the attitudes). The block iteration
+//! alternates them until nothing moves by more than `tolerance_mas`; the default, conjugate gradients
+//! preconditioned by the same blocks ([`cg`]), solves all of them at once until no update exceeds
+//! `tolerance_sigma` of its formal error. Then observations beyond `clip_sigma` are rejected and it runs
 //! again. A source's covariance is its block's, the attitudes held fixed (with hundreds of sources per
 //! exposure the attitude's share is small; the χ² test in `tests` checks the pulls).
 //!
@@ -30,6 +33,7 @@
 //! does), and at least two sources must be anchored.
 
 pub mod calibration;
+mod cg;
 pub mod feed;
 mod solve;
 
@@ -111,14 +115,32 @@ impl SourceModel {
     }
 }
 
+/// How the joint least-squares problem is iterated to its solution.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Method {
+    /// The block iteration (Gauss–Seidel over the blocks, AGIS's "simple iteration", Lindegren et al. 2012
+    /// §5.2): sources with the instrument held, then the instrument with the sources held. Its iterations
+    /// grow with the exposures; kept as the reference the accelerated one is checked against.
+    Block,
+    /// Conjugate gradients on the normal equations of all unknowns at once, preconditioned by the same
+    /// blocks (source, exposure, calibration: Bombrun et al. 2012, A&A 538, A77), inside a Gauss–Newton
+    /// loop for the attitude's bilinear term. The default.
+    ConjugateGradient,
+}
+
 /// The solution's knobs.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Options {
     pub model: SourceModel,
-    /// Alternations of the two blocks at most (per rejection round).
+    pub method: Method,
+    /// Iterations at most per rejection round: the block iteration's alternations, or the conjugate
+    /// gradients' steps (each one pass over the observations).
     pub max_iterations: usize,
-    /// Stop when no source and no exposure's offset moves by more than this, mas.
+    /// The block iteration stops when no source and no exposure's offset moves by more than this, mas.
     pub tolerance_mas: f64,
+    /// The conjugate gradients stop when the largest update of any unknown is below this fraction of its
+    /// formal error (its preconditioner block's σ).
+    pub tolerance_sigma: f64,
     /// Reject an observation whose normalised residual exceeds this (per axis, in its σ); 0 keeps all.
     pub clip_sigma: f64,
     /// Rounds of rejection at most.
@@ -134,8 +156,10 @@ impl Default for Options {
     fn default() -> Self {
         Self {
             model: SourceModel::Full,
+            method: Method::ConjugateGradient,
             max_iterations: 500,
             tolerance_mas: 1e-7,
+            tolerance_sigma: 1e-3,
             clip_sigma: 5.0,
             max_rejection_rounds: 5,
             calibration: CalibrationModel::NONE,
@@ -264,6 +288,12 @@ pub enum SolutionError {
          it"
     )]
     CalibrationUnconstrained(usize),
+    #[error("solution option {field} = {value}: allowed {allowed}")]
+    Knob {
+        field: &'static str,
+        value: f64,
+        allowed: &'static str,
+    },
     #[error("calibration: {field} = {value}: allowed {allowed}")]
     CalibrationModel {
         field: &'static str,

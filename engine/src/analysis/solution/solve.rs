@@ -2,8 +2,8 @@
 
 use super::calibration::{self, Calibration};
 use super::{
-    Attitude, ExposureGeometry, Observation, Options, Params, Reference, Solution, SolutionError,
-    SolvedSource, SourceModel,
+    Attitude, ExposureGeometry, Method, Observation, Options, Params, Reference, Solution,
+    SolutionError, SolvedSource, SourceModel,
 };
 use crate::numerics::linalg::weighted_lstsq;
 use rayon::prelude::*;
@@ -84,100 +84,29 @@ pub fn solve(
             .abs()
             .sqrt()
     });
-    let mut sources: Vec<SolvedSource> = vec![unsolved(); n_sources];
+    let problem = Problem {
+        obs,
+        exposures,
+        by_source: &by_source,
+        by_exposure: &by_exposure,
+        prior: &prior,
+        opt,
+        mas_per_px,
+    };
+    let mut state = State {
+        sources: vec![unsolved(); n_sources],
+        attitudes,
+        cal,
+        pos,
+    };
     let (mut iterations, mut rejected) = (0, 0);
     let mut converged = true;
     for _round in 0..opt.max_rejection_rounds.max(1) {
-        let mut this_round = false;
-        for _ in 0..opt.max_iterations.max(1) {
-            iterations += 1;
-            let new_sources: Vec<SolvedSource> = (0..n_sources)
-                .into_par_iter()
-                .map(|s| {
-                    source_block(
-                        &pos,
-                        obs,
-                        &by_source[s],
-                        exposures,
-                        &attitudes,
-                        prior[s],
-                        &active,
-                        opt.model,
-                    )
-                })
-                .collect();
-            let params: Vec<Option<Params>> = new_sources
-                .iter()
-                .map(|s| s.params[0].is_finite().then_some(s.params))
-                .collect();
-            // the instrument: the attitudes alone, or with the calibration in one block
-            let mut new_cal = None;
-            let new_attitudes: Vec<Attitude> = if opt.calibration.solves() {
-                let places = places_of(obs, exposures, &params);
-                let (c, att) = calibration::fit_with_attitudes(
-                    opt.calibration,
-                    opt.focal_norm_px,
-                    obs,
-                    exposures,
-                    &places,
-                    &active,
-                )
-                .ok_or_else(|| unconstrained(obs, &active, opt.calibration.arrays))?;
-                new_cal = Some(c);
-                att.into_iter()
-                    .zip(&attitudes)
-                    .map(|(n, old)| n.unwrap_or(*old))
-                    .collect()
-            } else {
-                (0..exposures.len())
-                    .into_par_iter()
-                    .map(|e| {
-                        attitude_block(&pos, obs, &by_exposure[e], &exposures[e], &params, &active)
-                            .unwrap_or(attitudes[e])
-                    })
-                    .collect()
-            };
-            let moved_sources = sources
-                .iter()
-                .zip(&new_sources)
-                .map(|(a, b)| {
-                    (a.params[0] - b.params[0])
-                        .abs()
-                        .max((a.params[1] - b.params[1]).abs())
-                })
-                .fold(
-                    0.0f64,
-                    |m, v| if v.is_nan() { f64::INFINITY } else { m.max(v) },
-                );
-            let moved_attitudes = attitudes
-                .iter()
-                .zip(&new_attitudes)
-                .map(|(a, b)| {
-                    // how far the change moves the exposure's farthest-reaching point: its offset, and the
-                    // turn and scale over 10⁶ mas (a focal plane's reach)
-                    let dpq = (a.p - b.p).abs() + (a.q - b.q).abs();
-                    (a.offset_mas[0] - b.offset_mas[0]).abs()
-                        + (a.offset_mas[1] - b.offset_mas[1]).abs()
-                        + dpq * 1e6
-                })
-                .fold(0.0f64, f64::max);
-            sources = new_sources;
-            attitudes = new_attitudes;
-            let mut moved_calibration = 0.0;
-            if let Some(c) = new_cal {
-                moved_calibration = c.moved_px(&cal) * mas_per_px;
-                cal = c;
-                pos = corrected(obs, exposures, &cal);
-            }
-            // the calibration's terms settle to their rounding (≈ 10⁻¹⁰ of their size: 10⁻⁵ mas), which
-            // can lie above the tolerance
-            if moved_sources.max(moved_attitudes) <= opt.tolerance_mas
-                && moved_calibration <= opt.tolerance_mas.max(CALIBRATION_ROUNDING_MAS)
-            {
-                this_round = true;
-                break;
-            }
-        }
+        let (its, this_round) = match opt.method {
+            Method::Block => block_iterate(&problem, &mut state, &active)?,
+            Method::ConjugateGradient => super::cg::iterate(&problem, &mut state, &active)?,
+        };
+        iterations += its;
         converged = this_round;
         if opt.clip_sigma <= 0.0 {
             break;
@@ -188,10 +117,10 @@ pub fn solve(
         let mut changed = 0;
         for (i, o) in obs.iter().enumerate() {
             let Some((rx, ry)) = residual(
-                pos[i],
+                state.pos[i],
                 &exposures[o.exposure],
-                &attitudes[o.exposure],
-                &sources[o.source],
+                &state.attitudes[o.exposure],
+                &state.sources[o.source],
             ) else {
                 continue;
             };
@@ -223,13 +152,13 @@ pub fn solve(
             continue;
         }
         if let Some((rx, ry)) = residual(
-            pos[i],
+            state.pos[i],
             &exposures[o.exposure],
-            &attitudes[o.exposure],
-            &sources[o.source],
+            &state.attitudes[o.exposure],
+            &state.sources[o.source],
         ) {
             let c = (rx * rx + ry * ry) / (o.sigma_mas * o.sigma_mas);
-            sources[o.source].chi2 += c;
+            state.sources[o.source].chi2 += c;
             chi2_total += c;
             n_terms += 2;
         }
@@ -242,9 +171,9 @@ pub fn solve(
     // no degree of freedom left: no χ² to report
     let dof = (n_terms + priors).saturating_sub(unknowns);
     Ok(Solution {
-        sources,
-        attitudes,
-        calibration: cal,
+        sources: state.sources,
+        attitudes: state.attitudes,
+        calibration: state.cal,
         iterations,
         converged,
         rejected,
@@ -256,8 +185,142 @@ pub fn solve(
     })
 }
 
+/// What every iteration reads: the observations, their exposures, who sees what, the priors, the knobs.
+pub(super) struct Problem<'a> {
+    pub obs: &'a [Observation],
+    pub exposures: &'a [ExposureGeometry],
+    pub by_source: &'a [Vec<usize>],
+    pub by_exposure: &'a [Vec<usize>],
+    pub prior: &'a [Option<&'a Reference>],
+    pub opt: &'a Options,
+    /// mas per focal-plane px (for the calibration's share of the block iteration's convergence test).
+    pub mas_per_px: f64,
+}
+
+/// What the iterations move: the sources, the attitudes, the calibration, and every observation's place
+/// with the calibration's correction removed (`pos`, mas).
+pub(super) struct State {
+    pub sources: Vec<SolvedSource>,
+    pub attitudes: Vec<Attitude>,
+    pub cal: Calibration,
+    pub pos: Vec<[f64; 2]>,
+}
+
+/// Every source's block with the attitudes and the calibration held (`state.pos` already corrected).
+pub(super) fn source_pass(p: &Problem, state: &State, active: &[bool]) -> Vec<SolvedSource> {
+    (0..p.by_source.len())
+        .into_par_iter()
+        .map(|s| {
+            source_block(
+                &state.pos,
+                p.obs,
+                &p.by_source[s],
+                p.exposures,
+                &state.attitudes,
+                p.prior[s],
+                active,
+                p.opt.model,
+            )
+        })
+        .collect()
+}
+
+/// The block iteration (Gauss–Seidel over the blocks): sources with the instrument held, then the instrument
+/// with the sources held, until no source and no exposure moves by more than `tolerance_mas`. Returns the
+/// alternations and whether it reached the tolerance.
+fn block_iterate(
+    p: &Problem,
+    state: &mut State,
+    active: &[bool],
+) -> Result<(usize, bool), SolutionError> {
+    let (obs, exposures, opt) = (p.obs, p.exposures, p.opt);
+    for iteration in 1..=opt.max_iterations.max(1) {
+        let new_sources = source_pass(p, state, active);
+        let params: Vec<Option<Params>> = new_sources
+            .iter()
+            .map(|s| s.params[0].is_finite().then_some(s.params))
+            .collect();
+        // the instrument: the attitudes alone, or with the calibration in one block
+        let mut new_cal = None;
+        let new_attitudes: Vec<Attitude> = if opt.calibration.solves() {
+            let places = places_of(obs, exposures, &params);
+            let (c, att) = calibration::fit_with_attitudes(
+                opt.calibration,
+                opt.focal_norm_px,
+                obs,
+                exposures,
+                &places,
+                active,
+            )
+            .ok_or_else(|| unconstrained(obs, active, opt.calibration.arrays))?;
+            new_cal = Some(c);
+            att.into_iter()
+                .zip(&state.attitudes)
+                .map(|(n, old)| n.unwrap_or(*old))
+                .collect()
+        } else {
+            (0..exposures.len())
+                .into_par_iter()
+                .map(|e| {
+                    attitude_block(
+                        &state.pos,
+                        obs,
+                        &p.by_exposure[e],
+                        &exposures[e],
+                        &params,
+                        active,
+                    )
+                    .unwrap_or(state.attitudes[e])
+                })
+                .collect()
+        };
+        let moved_sources = state
+            .sources
+            .iter()
+            .zip(&new_sources)
+            .map(|(a, b)| {
+                (a.params[0] - b.params[0])
+                    .abs()
+                    .max((a.params[1] - b.params[1]).abs())
+            })
+            .fold(
+                0.0f64,
+                |m, v| if v.is_nan() { f64::INFINITY } else { m.max(v) },
+            );
+        let moved_attitudes = state
+            .attitudes
+            .iter()
+            .zip(&new_attitudes)
+            .map(|(a, b)| {
+                // how far the change moves the exposure's farthest-reaching point: its offset, and the
+                // turn and scale over 10⁶ mas (a focal plane's reach)
+                let dpq = (a.p - b.p).abs() + (a.q - b.q).abs();
+                (a.offset_mas[0] - b.offset_mas[0]).abs()
+                    + (a.offset_mas[1] - b.offset_mas[1]).abs()
+                    + dpq * 1e6
+            })
+            .fold(0.0f64, f64::max);
+        state.sources = new_sources;
+        state.attitudes = new_attitudes;
+        let mut moved_calibration = 0.0;
+        if let Some(c) = new_cal {
+            moved_calibration = c.moved_px(&state.cal) * p.mas_per_px;
+            state.cal = c;
+            state.pos = corrected(obs, exposures, &state.cal);
+        }
+        // the calibration's terms settle to their rounding (≈ 10⁻¹⁰ of their size: 10⁻⁵ mas), which
+        // can lie above the tolerance
+        if moved_sources.max(moved_attitudes) <= opt.tolerance_mas
+            && moved_calibration <= opt.tolerance_mas.max(CALIBRATION_ROUNDING_MAS)
+        {
+            return Ok((iteration, true));
+        }
+    }
+    Ok((opt.max_iterations.max(1), false))
+}
+
 /// Does a reference error `sigma` constrain its parameter?
-fn anchors(sigma: f64) -> bool {
+pub(super) fn anchors(sigma: f64) -> bool {
     sigma > 0.0 && sigma.is_finite()
 }
 
@@ -285,7 +348,7 @@ fn residual(
 }
 
 /// Every observation's place with the calibration's correction removed, mas.
-fn corrected(
+pub(super) fn corrected(
     obs: &[Observation],
     exposures: &[ExposureGeometry],
     cal: &Calibration,
@@ -315,7 +378,7 @@ fn places_of(
 
 /// The error of a calibration that cannot be fitted: the first array with fewer than 3 kept observations,
 /// else `arrays` (a distortion term).
-fn unconstrained(obs: &[Observation], active: &[bool], arrays: usize) -> SolutionError {
+pub(super) fn unconstrained(obs: &[Observation], active: &[bool], arrays: usize) -> SolutionError {
     let mut n = vec![0usize; arrays];
     for (o, on) in obs.iter().zip(active) {
         if *on && o.array < arrays {
@@ -506,6 +569,20 @@ fn validate(
     opt: &Options,
 ) -> Result<(), SolutionError> {
     let cm = opt.calibration;
+    if !(opt.tolerance_sigma > 0.0 && opt.tolerance_sigma < 1.0) {
+        return Err(SolutionError::Knob {
+            field: "tolerance_sigma",
+            value: opt.tolerance_sigma,
+            allowed: "0 < tolerance_sigma < 1 (a fraction of each unknown's formal error)",
+        });
+    }
+    if !(opt.tolerance_mas > 0.0 && opt.tolerance_mas.is_finite()) {
+        return Err(SolutionError::Knob {
+            field: "tolerance_mas",
+            value: opt.tolerance_mas,
+            allowed: "a finite step > 0 mas",
+        });
+    }
     if !(opt.focal_norm_px.is_finite() && opt.focal_norm_px > 0.0) {
         return Err(SolutionError::CalibrationModel {
             field: "focal_norm_px",

@@ -46,6 +46,10 @@ pub struct BenchArgs {
     /// cubic distortion, drawn and solved) or none.
     #[arg(long, value_enum, default_value_t = SolutionCalibration::Full)]
     pub solution_calibration: SolutionCalibration,
+    /// How the astrometric-solution rows are solved: cg (conjugate gradients, the default) and/or block (the
+    /// block iteration), each row once per method.
+    #[arg(long, value_enum, default_value = "cg", value_delimiter = ',')]
+    pub solution_methods: Vec<SolutionMethod>,
     /// Detection thresholds of the crowded-analysis rows (part crowded), on the largest field.
     #[arg(long, default_value = "3,5,10", value_delimiter = ',')]
     pub crowded_sigmas: Vec<f64>,
@@ -62,6 +66,13 @@ pub struct BenchArgs {
 pub enum SolutionCalibration {
     Full,
     None,
+}
+
+/// How the solution's benchmark solves.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum SolutionMethod {
+    Cg,
+    Block,
 }
 
 /// The parts `--parts` may name.
@@ -173,6 +184,13 @@ pub fn bench(a: &BenchArgs) -> Result<()> {
                 SolutionCalibration::Full => engine::studies::bench_solution::CALIBRATED,
                 SolutionCalibration::None => engine::analysis::solution::CalibrationModel::NONE,
             },
+            &a.solution_methods
+                .iter()
+                .map(|m| match m {
+                    SolutionMethod::Cg => engine::analysis::solution::Method::ConjugateGradient,
+                    SolutionMethod::Block => engine::analysis::solution::Method::Block,
+                })
+                .collect::<Vec<_>>(),
             cfg.seed,
         )?);
         save(&rows)?;

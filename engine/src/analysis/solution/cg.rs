@@ -1,0 +1,682 @@
+//! The accelerated solution: conjugate gradients on the normal equations of every unknown at once,
+//! preconditioned by the blocks the block iteration solves one at a time (AGIS's scheme: Bombrun, Lindegren,
+//! Hobbs et al. 2012, A&A 538, A77, §4).
+//!
+//! **The linear problem.** About the current sources s, attitudes (p, q, a) and calibration c, an
+//! observation's residual `r = o − M Δf(c) − [c_e + A (x(s) − c_e) + a]` changes to first order by `J δ`, with
+//! the columns
+//!
+//! ```text
+//! ∂/∂(ξ₀, η₀, μ_ξ, μ_η, ϖ) = A b_k,  b = (1,0), (0,1), (t,0), (0,t), (P_ξ, P_η)
+//! ∂/∂(p S, q S) = (d_x, d_y)/S, (−d_y, d_x)/S,  d = x(s) − c_e;   ∂/∂a = (1,0), (0,1)
+//! ∂/∂c_x,j = M (φ_j, 0),  ∂/∂c_y,j = M (0, φ_j)
+//! ```
+//!
+//! (S the exposure's lever arm, so that its four unknowns share a scale). The normal equations
+//! `(Jᵀ W J + P) δ = Jᵀ W r + P (x_ref − x)` — P the reference catalogue's priors, and on the calibration the
+//! four gauge rows the attitudes hold (see [`super::calibration`]) as a penalty — are solved by
+//! preconditioned conjugate gradients. `N v` is never formed: one pass over the observations gives `J v`,
+//! a pass over each source's and each exposure's observations gives `Jᵀ W (J v)`. The preconditioner is
+//! block-diagonal: each source's n × n block (its own fit with everything else held), each exposure's 4 × 4,
+//! the calibration's dense block.
+//!
+//! **Convergence is a criterion**: a step stops the gradients when no unknown moves by more than
+//! `tolerance_sigma` of its formal error (its block's σ); the Gauss–Newton loop about them (the attitude's
+//! A x(s) is bilinear) stops when a whole linear solution moves nothing by more than that. The sources are
+//! then fitted once more with the instrument held, which gives their reported covariance (as the block
+//! iteration's).
+
+use super::calibration::{Calibration, gauge_rows};
+use super::solve::{Problem, State, anchors, corrected, source_pass, unconstrained};
+use super::{Attitude, Params};
+use crate::analysis::solution::SolutionError;
+use rayon::prelude::*;
+
+/// Relinearisations at most (the attitudes' bilinear term is of order 10⁻⁵: two or three suffice).
+const MAX_OUTER: usize = 20;
+
+/// Run the accelerated solution from `state` (its attitudes and calibration; the sources are fitted first).
+/// Returns the iterations (passes over the observations) and whether the criterion was met.
+pub(super) fn iterate(
+    p: &Problem,
+    state: &mut State,
+    active: &[bool],
+) -> Result<(usize, bool), SolutionError> {
+    let opt = p.opt;
+    let lever: Vec<f64> = p
+        .by_exposure
+        .par_iter()
+        .zip(p.exposures)
+        .map(|(mine, g)| {
+            mine.iter()
+                .map(|&i| {
+                    let o = &p.obs[i];
+                    (o.xi_mas - g.centre_mas[0])
+                        .abs()
+                        .max((o.eta_mas - g.centre_mas[1]).abs())
+                })
+                .fold(1.0f64, f64::max)
+        })
+        .collect();
+    state.sources = source_pass(p, state, active);
+    let budget = opt.max_iterations.max(1);
+    let mut iterations = 1usize;
+    for _ in 0..MAX_OUTER {
+        let mut lin = Linear::new(p, state, active, &lever);
+        let pre = lin.preconditioner()?;
+        let b = lin.rhs(state);
+        let (x, steps, inner_converged) = pcg(&lin, &pre, &b, opt.tolerance_sigma, budget);
+        iterations += steps;
+        let moved = x
+            .iter()
+            .zip(&pre.sigma)
+            .map(|(v, s)| if *s > 0.0 { v.abs() / s } else { 0.0 })
+            .fold(0.0f64, f64::max);
+        lin.update(state, &x);
+        if inner_converged && moved <= opt.tolerance_sigma {
+            state.sources = source_pass(p, state, active);
+            return Ok((iterations, true));
+        }
+        if iterations >= budget {
+            break;
+        }
+    }
+    state.sources = source_pass(p, state, active);
+    Ok((iterations, false))
+}
+
+/// Preconditioned conjugate gradients for `N x = b` from x = 0: the solution, the steps taken, and whether
+/// the last step moved every unknown by less than `tol` of its σ (or the residual vanished).
+fn pcg(
+    lin: &Linear,
+    pre: &Preconditioner,
+    b: &[f64],
+    tol: f64,
+    budget: usize,
+) -> (Vec<f64>, usize, bool) {
+    let mut x = vec![0.0; b.len()];
+    let mut r = b.to_vec();
+    let mut z = pre.apply(&r);
+    let mut d = z.clone();
+    let mut rz = dot(&r, &z);
+    let mut steps = 0;
+    while steps < budget {
+        if !(rz > 0.0) {
+            return (x, steps, true);
+        }
+        steps += 1;
+        let q = lin.apply(&d);
+        let dq = dot(&d, &q);
+        if !(dq > 0.0) {
+            return (x, steps, true);
+        }
+        let alpha = rz / dq;
+        let mut step = 0.0f64;
+        for k in 0..x.len() {
+            let dx = alpha * d[k];
+            x[k] += dx;
+            r[k] -= alpha * q[k];
+            if pre.sigma[k] > 0.0 {
+                step = step.max(dx.abs() / pre.sigma[k]);
+            }
+        }
+        if step <= tol {
+            return (x, steps, true);
+        }
+        z = pre.apply(&r);
+        let rz_new = dot(&r, &z);
+        let beta = rz_new / rz;
+        rz = rz_new;
+        for (dk, zk) in d.iter_mut().zip(&z) {
+            *dk = zk + beta * *dk;
+        }
+    }
+    (x, steps, false)
+}
+
+fn dot(a: &[f64], b: &[f64]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| x * y).sum()
+}
+
+/// The problem linearised about one state: which unknown sits where, and the Jacobian's columns.
+struct Linear<'a> {
+    p: &'a Problem<'a>,
+    active: &'a [bool],
+    lever: &'a [f64],
+    params: Vec<Params>,
+    attitudes: Vec<Attitude>,
+    /// Unknowns per source (0: not solved) and where its first one sits.
+    dims: Vec<usize>,
+    src_off: Vec<usize>,
+    att_off: usize,
+    cal_off: usize,
+    /// The calibration's unknowns per axis (0 when none is solved).
+    cal_axis: usize,
+    len: usize,
+    /// The gauge rows' penalty weight (the heaviest diagonal term of the calibration's block).
+    heavy: f64,
+    cal_now: Vec<f64>,
+}
+
+/// A source's five columns and an exposure's four (each a 2-vector: the ξ and η rows).
+type Columns = ([[f64; 2]; 5], [[f64; 2]; 4]);
+
+impl<'a> Linear<'a> {
+    fn new(p: &'a Problem<'a>, state: &State, active: &'a [bool], lever: &'a [f64]) -> Self {
+        let dims: Vec<usize> = state
+            .sources
+            .iter()
+            .map(|s| s.sigma.iter().take_while(|v| v.is_finite()).count())
+            .collect();
+        let mut src_off = Vec::with_capacity(dims.len());
+        let mut n = 0;
+        for d in &dims {
+            src_off.push(n);
+            n += d;
+        }
+        let cal_axis = if p.opt.calibration.solves() {
+            p.opt.calibration.per_axis()
+        } else {
+            0
+        };
+        let att_off = n;
+        let cal_off = att_off + 4 * p.exposures.len();
+        Self {
+            p,
+            active,
+            lever,
+            params: state.sources.iter().map(|s| s.params).collect(),
+            attitudes: state.attitudes.clone(),
+            dims,
+            src_off,
+            att_off,
+            cal_off,
+            cal_axis,
+            len: cal_off + 2 * cal_axis,
+            heavy: 0.0,
+            cal_now: flatten(&state.cal),
+        }
+    }
+
+    /// Does observation `i` enter (kept, its source solved)?
+    fn used(&self, i: usize) -> bool {
+        self.active[i] && self.dims[self.p.obs[i].source] > 0
+    }
+
+    /// Observation `i`'s source and attitude columns, and its source's place less the exposure's centre.
+    fn columns(&self, i: usize) -> Columns {
+        let o = &self.p.obs[i];
+        let g = &self.p.exposures[o.exposure];
+        let a = &self.attitudes[o.exposure];
+        let place = g.place(&self.params[o.source]);
+        let (dx, dy) = (place[0] - g.centre_mas[0], place[1] - g.centre_mas[1]);
+        let b = [
+            [1.0, 0.0],
+            [0.0, 1.0],
+            [g.t_yr, 0.0],
+            [0.0, g.t_yr],
+            g.parallax_factor,
+        ];
+        let src = b.map(|v| [a.p * v[0] - a.q * v[1], a.q * v[0] + a.p * v[1]]);
+        let s = self.lever[o.exposure];
+        let att = [[dx / s, dy / s], [-dy / s, dx / s], [1.0, 0.0], [0.0, 1.0]];
+        (src, att)
+    }
+
+    fn weight(&self, i: usize) -> f64 {
+        let s = self.p.obs[i].sigma_mas;
+        1.0 / (s * s)
+    }
+
+    /// φ of observation `i` (empty without a calibration).
+    fn phi(&self, i: usize, out: &mut Vec<(usize, f64)>) {
+        out.clear();
+        if self.cal_axis > 0 {
+            let o = &self.p.obs[i];
+            self.p
+                .opt
+                .calibration
+                .terms_at(o.array, o.focal_px, self.p.opt.focal_norm_px, out);
+        }
+    }
+
+    /// `W J v` per observation (zero where it does not enter).
+    fn weighted_jv(&self, v: &[f64]) -> Vec<[f64; 2]> {
+        (0..self.p.obs.len())
+            .into_par_iter()
+            .map_init(Vec::new, |phi, i| {
+                if !self.used(i) {
+                    return [0.0; 2];
+                }
+                let o = &self.p.obs[i];
+                let (src, att) = self.columns(i);
+                let (so, n) = (self.src_off[o.source], self.dims[o.source]);
+                let ao = self.att_off + 4 * o.exposure;
+                let mut jv = [0.0; 2];
+                for k in 0..n {
+                    jv[0] += src[k][0] * v[so + k];
+                    jv[1] += src[k][1] * v[so + k];
+                }
+                for k in 0..4 {
+                    jv[0] += att[k][0] * v[ao + k];
+                    jv[1] += att[k][1] * v[ao + k];
+                }
+                self.phi(i, phi);
+                if !phi.is_empty() {
+                    let m = &self.p.exposures[o.exposure].to_plane;
+                    let (cx, cy) = (self.cal_off, self.cal_off + self.cal_axis);
+                    let (mut fx, mut fy) = (0.0, 0.0);
+                    for &(j, f) in phi.iter() {
+                        fx += f * v[cx + j];
+                        fy += f * v[cy + j];
+                    }
+                    jv[0] += m[0] * fx + m[1] * fy;
+                    jv[1] += m[2] * fx + m[3] * fy;
+                }
+                let w = self.weight(i);
+                [w * jv[0], w * jv[1]]
+            })
+            .collect()
+    }
+
+    /// `Σᵢ Jᵢᵀ uᵢ`: by source, then by exposure (each exposure's calibration share summed after).
+    fn transpose(&self, u: &[[f64; 2]]) -> Vec<f64> {
+        let mut out = vec![0.0; self.len];
+        let per_source: Vec<[f64; 5]> = self
+            .p
+            .by_source
+            .par_iter()
+            .enumerate()
+            .map(|(s, mine)| {
+                let mut acc = [0.0; 5];
+                let n = self.dims[s];
+                if n == 0 {
+                    return acc;
+                }
+                for &i in mine.iter().filter(|i| self.active[**i]) {
+                    let (src, _) = self.columns(i);
+                    for k in 0..n {
+                        acc[k] += src[k][0] * u[i][0] + src[k][1] * u[i][1];
+                    }
+                }
+                acc
+            })
+            .collect();
+        for (s, acc) in per_source.iter().enumerate() {
+            let o = self.src_off[s];
+            out[o..o + self.dims[s]].copy_from_slice(&acc[..self.dims[s]]);
+        }
+        let per_exposure: Vec<([f64; 4], Vec<f64>)> = self
+            .p
+            .by_exposure
+            .par_iter()
+            .enumerate()
+            .map(|(e, mine)| {
+                let mut att_acc = [0.0; 4];
+                let mut cal = vec![0.0; 2 * self.cal_axis];
+                let m = &self.p.exposures[e].to_plane;
+                let mut phi = Vec::new();
+                for &i in mine.iter().filter(|i| self.used(**i)) {
+                    let (_, att) = self.columns(i);
+                    for k in 0..4 {
+                        att_acc[k] += att[k][0] * u[i][0] + att[k][1] * u[i][1];
+                    }
+                    self.phi(i, &mut phi);
+                    let (gx, gy) = (
+                        m[0] * u[i][0] + m[2] * u[i][1],
+                        m[1] * u[i][0] + m[3] * u[i][1],
+                    );
+                    for &(j, f) in &phi {
+                        cal[j] += f * gx;
+                        cal[self.cal_axis + j] += f * gy;
+                    }
+                }
+                (att_acc, cal)
+            })
+            .collect();
+        for (e, (att, cal)) in per_exposure.iter().enumerate() {
+            let o = self.att_off + 4 * e;
+            out[o..o + 4].copy_from_slice(att);
+            for (x, c) in out[self.cal_off..].iter_mut().zip(cal) {
+                *x += c;
+            }
+        }
+        out
+    }
+
+    /// The priors' weights and the gauge penalty applied to `v`, added to `out`.
+    fn add_priors(&self, v: &[f64], out: &mut [f64]) {
+        for (s, r) in self.p.prior.iter().enumerate() {
+            let Some(r) = r else { continue };
+            for k in 0..self.dims[s] {
+                if anchors(r.sigma[k]) {
+                    out[self.src_off[s] + k] += v[self.src_off[s] + k] / (r.sigma[k] * r.sigma[k]);
+                }
+            }
+        }
+        if self.cal_axis > 0 {
+            for row in gauge_rows(self.p.opt.calibration) {
+                let g: f64 = row.iter().map(|&(j, w)| w * v[self.cal_off + j]).sum();
+                for &(j, w) in &row {
+                    out[self.cal_off + j] += self.heavy * w * g;
+                }
+            }
+        }
+    }
+
+    /// `N v = Jᵀ W J v + P v`.
+    fn apply(&self, v: &[f64]) -> Vec<f64> {
+        let mut out = self.transpose(&self.weighted_jv(v));
+        self.add_priors(v, &mut out);
+        out
+    }
+
+    /// `Jᵀ W r + P (x_ref − x)`, the gauge rows pulling the calibration's gauge to zero.
+    fn rhs(&self, state: &State) -> Vec<f64> {
+        let u: Vec<[f64; 2]> = (0..self.p.obs.len())
+            .into_par_iter()
+            .map(|i| {
+                if !self.used(i) {
+                    return [0.0; 2];
+                }
+                let o = &self.p.obs[i];
+                let g = &self.p.exposures[o.exposure];
+                let m =
+                    self.attitudes[o.exposure].apply(g.centre_mas, g.place(&self.params[o.source]));
+                let w = self.weight(i);
+                [w * (state.pos[i][0] - m[0]), w * (state.pos[i][1] - m[1])]
+            })
+            .collect();
+        let mut b = self.transpose(&u);
+        // P (x_ref − x): the negated prior term of the current values, plus the references' own
+        let mut minus_x = vec![0.0; self.len];
+        for (s, n) in self.dims.iter().enumerate() {
+            for k in 0..*n {
+                minus_x[self.src_off[s] + k] = -self.params[s][k];
+            }
+        }
+        for (j, c) in self.cal_now.iter().enumerate() {
+            minus_x[self.cal_off + j] = -c;
+        }
+        self.add_priors(&minus_x, &mut b);
+        for (s, r) in self.p.prior.iter().enumerate() {
+            let Some(r) = r else { continue };
+            for k in 0..self.dims[s] {
+                if anchors(r.sigma[k]) {
+                    b[self.src_off[s] + k] += r.params[k] / (r.sigma[k] * r.sigma[k]);
+                }
+            }
+        }
+        b
+    }
+
+    /// The block-diagonal preconditioner (each block's inverse) and every unknown's formal error from it.
+    /// Sets the gauge penalty's weight.
+    fn preconditioner(&mut self) -> Result<Preconditioner, SolutionError> {
+        let sources: Vec<Vec<f64>> = (0..self.dims.len())
+            .into_par_iter()
+            .map(|s| {
+                let n = self.dims[s];
+                let mut blk = vec![0.0; n * n];
+                if n == 0 {
+                    return blk;
+                }
+                for &i in self.p.by_source[s].iter().filter(|i| self.active[**i]) {
+                    let (src, _) = self.columns(i);
+                    let w = self.weight(i);
+                    for a in 0..n {
+                        for b in 0..n {
+                            blk[a * n + b] += w * (src[a][0] * src[b][0] + src[a][1] * src[b][1]);
+                        }
+                    }
+                }
+                if let Some(r) = self.p.prior[s] {
+                    for k in 0..n {
+                        if anchors(r.sigma[k]) {
+                            blk[k * n + k] += 1.0 / (r.sigma[k] * r.sigma[k]);
+                        }
+                    }
+                }
+                inverse_scaled(&blk, n).unwrap_or_else(|| vec![0.0; n * n])
+            })
+            .collect();
+        let ca = self.cal_axis;
+        let per_exposure: Vec<(Vec<f64>, Vec<f64>)> = self
+            .p
+            .by_exposure
+            .par_iter()
+            .map(|mine| {
+                let mut att = [0.0; 16];
+                let mut s = vec![0.0; ca * ca];
+                let mut phi = Vec::new();
+                let mut count = 0;
+                for &i in mine.iter().filter(|i| self.used(**i)) {
+                    count += 1;
+                    let (_, cols) = self.columns(i);
+                    let w = self.weight(i);
+                    for a in 0..4 {
+                        for b in 0..4 {
+                            att[a * 4 + b] +=
+                                w * (cols[a][0] * cols[b][0] + cols[a][1] * cols[b][1]);
+                        }
+                    }
+                    self.phi(i, &mut phi);
+                    for &(j1, f1) in &phi {
+                        for &(j2, f2) in &phi {
+                            s[j1 * ca + j2] += w * f1 * f2;
+                        }
+                    }
+                }
+                let inv = if count >= 2 {
+                    inverse_scaled(&att, 4).unwrap_or_else(|| vec![0.0; 16])
+                } else {
+                    vec![0.0; 16]
+                };
+                (inv, s)
+            })
+            .collect();
+        // the calibration's block: Σₑ (Mₑᵀ Mₑ) ⊗ Sₑ, then the gauge penalty
+        let n2 = 2 * ca;
+        let mut cal = vec![0.0; n2 * n2];
+        if ca > 0 {
+            for (e, (_, s)) in per_exposure.iter().enumerate() {
+                let m = &self.p.exposures[e].to_plane;
+                let mtm = [
+                    m[0] * m[0] + m[2] * m[2],
+                    m[0] * m[1] + m[2] * m[3],
+                    m[1] * m[0] + m[3] * m[2],
+                    m[1] * m[1] + m[3] * m[3],
+                ];
+                for ax in 0..2 {
+                    for ay in 0..2 {
+                        let f = mtm[ax * 2 + ay];
+                        for j1 in 0..ca {
+                            for j2 in 0..ca {
+                                cal[(ax * ca + j1) * n2 + ay * ca + j2] += f * s[j1 * ca + j2];
+                            }
+                        }
+                    }
+                }
+            }
+            self.heavy = (0..n2)
+                .map(|i| cal[i * n2 + i])
+                .fold(0.0f64, f64::max)
+                .max(1e-300);
+            for row in gauge_rows(self.p.opt.calibration) {
+                for &(i, a) in &row {
+                    for &(j, b) in &row {
+                        cal[i * n2 + j] += self.heavy * a * b;
+                    }
+                }
+            }
+        }
+        let cal_inv = if ca > 0 {
+            inverse_scaled(&cal, n2).ok_or_else(|| {
+                unconstrained(self.p.obs, self.active, self.p.opt.calibration.arrays)
+            })?
+        } else {
+            Vec::new()
+        };
+        let mut sigma = vec![0.0; self.len];
+        for (s, inv) in sources.iter().enumerate() {
+            let n = self.dims[s];
+            for k in 0..n {
+                sigma[self.src_off[s] + k] = inv[k * n + k].max(0.0).sqrt();
+            }
+        }
+        for (e, (inv, _)) in per_exposure.iter().enumerate() {
+            for k in 0..4 {
+                sigma[self.att_off + 4 * e + k] = inv[k * 4 + k].max(0.0).sqrt();
+            }
+        }
+        for k in 0..n2 {
+            sigma[self.cal_off + k] = cal_inv[k * n2 + k].max(0.0).sqrt();
+        }
+        Ok(Preconditioner {
+            sources,
+            dims: self.dims.clone(),
+            src_off: self.src_off.clone(),
+            exposures: per_exposure.into_iter().map(|(inv, _)| inv).collect(),
+            att_off: self.att_off,
+            cal: cal_inv,
+            cal_off: self.cal_off,
+            sigma,
+        })
+    }
+
+    /// Move the state by the linear solution `x`.
+    fn update(&self, state: &mut State, x: &[f64]) {
+        for (s, src) in state.sources.iter_mut().enumerate() {
+            let o = self.src_off[s];
+            for k in 0..self.dims[s] {
+                src.params[k] += x[o + k];
+            }
+        }
+        for (e, a) in state.attitudes.iter_mut().enumerate() {
+            let o = self.att_off + 4 * e;
+            a.p += x[o] / self.lever[e];
+            a.q += x[o + 1] / self.lever[e];
+            a.offset_mas[0] += x[o + 2];
+            a.offset_mas[1] += x[o + 3];
+        }
+        if self.cal_axis > 0 {
+            add_flat(&mut state.cal, &x[self.cal_off..]);
+            state.pos = corrected(self.p.obs, self.p.exposures, &state.cal);
+        }
+    }
+}
+
+/// The preconditioner's blocks (inverted) and the formal error of every unknown.
+struct Preconditioner {
+    sources: Vec<Vec<f64>>,
+    dims: Vec<usize>,
+    src_off: Vec<usize>,
+    exposures: Vec<Vec<f64>>,
+    att_off: usize,
+    cal: Vec<f64>,
+    cal_off: usize,
+    sigma: Vec<f64>,
+}
+
+impl Preconditioner {
+    /// `M⁻¹ r`, block by block.
+    fn apply(&self, r: &[f64]) -> Vec<f64> {
+        let mut z = vec![0.0; r.len()];
+        let mul = |inv: &[f64], n: usize, o: usize, z: &mut [f64]| {
+            for a in 0..n {
+                z[o + a] = (0..n).map(|b| inv[a * n + b] * r[o + b]).sum();
+            }
+        };
+        for (s, inv) in self.sources.iter().enumerate() {
+            mul(inv, self.dims[s], self.src_off[s], &mut z);
+        }
+        for (e, inv) in self.exposures.iter().enumerate() {
+            mul(inv, 4, self.att_off + 4 * e, &mut z);
+        }
+        let n2 = r.len() - self.cal_off;
+        if n2 > 0 {
+            mul(&self.cal, n2, self.cal_off, &mut z);
+        }
+        z
+    }
+}
+
+/// The inverse of a symmetric positive-definite block scaled by its diagonal first (so that the pivot test
+/// sees correlations, not units); None when singular.
+fn inverse_scaled(m: &[f64], n: usize) -> Option<Vec<f64>> {
+    let d: Vec<f64> = (0..n).map(|i| m[i * n + i].sqrt()).collect();
+    if d.iter().any(|v| !(*v > 0.0) || !v.is_finite()) {
+        return None;
+    }
+    let scaled: Vec<f64> = (0..n * n).map(|k| m[k] / (d[k / n] * d[k % n])).collect();
+    let inv = crate::numerics::linalg::inverse(&scaled, n)?;
+    Some((0..n * n).map(|k| inv[k] / (d[k / n] * d[k % n])).collect())
+}
+
+/// A calibration's coefficients as one vector: x's per-axis terms (each array's, then the distortion's),
+/// then y's.
+fn flatten(c: &Calibration) -> Vec<f64> {
+    if !c.model.solves() {
+        return Vec::new();
+    }
+    let mut v = Vec::with_capacity(2 * c.model.per_axis());
+    for axis in 0..2 {
+        for a in &c.arrays {
+            v.extend_from_slice(&a[axis]);
+        }
+        v.extend_from_slice(&c.distortion[axis]);
+    }
+    v
+}
+
+/// Add `dx` (in [`flatten`]'s order) to a calibration's coefficients.
+fn add_flat(c: &mut Calibration, dx: &[f64]) {
+    let mut k = 0;
+    for axis in 0..2 {
+        for a in c.arrays.iter_mut() {
+            for v in a[axis].iter_mut() {
+                *v += dx[k];
+                k += 1;
+            }
+        }
+        for v in c.distortion[axis].iter_mut() {
+            *v += dx[k];
+            k += 1;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::analysis::solution::calibration::CalibrationModel;
+
+    #[test]
+    fn flatten_and_add_flat_keep_one_order() {
+        let model = CalibrationModel {
+            arrays: 2,
+            array_order: 1,
+            distortion_order: 2,
+        };
+        let mut c = Calibration::zero(model, 3000.0);
+        let n = 2 * model.per_axis();
+        let dx: Vec<f64> = (0..n).map(|k| k as f64).collect();
+        add_flat(&mut c, &dx);
+        assert_eq!(flatten(&c), dx);
+        // x: array 0's three terms, array 1's three, the distortion's three; then y
+        assert_eq!(c.arrays[1][0], vec![3.0, 4.0, 5.0]);
+        assert_eq!(c.distortion[1], vec![15.0, 16.0, 17.0]);
+    }
+
+    #[test]
+    fn the_scaled_inverse_inverts_across_units() {
+        // a 2 × 2 with diagonal terms 10¹² apart
+        let m = [1e12, 3e5, 3e5, 1.0];
+        let inv = inverse_scaled(&m, 2).expect("invertible");
+        let det = 1e12 - 9e10;
+        let want = [1.0 / det, -3e5 / det, -3e5 / det, 1e12 / det];
+        for (a, b) in inv.iter().zip(want) {
+            assert!((a - b).abs() <= 1e-12 * b.abs(), "{a} {b}");
+        }
+    }
+}
