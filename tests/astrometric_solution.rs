@@ -335,20 +335,26 @@ fn a_distortion_a_single_pointing_cannot_see_is_named() {
     );
 }
 
+/// `n` sources on a `side` × `side` pattern over four epochs, 1-mas measurements, the survey's reference
+/// errors, the instrument's calibration drawn.
+fn noisy_calibrated(n: usize, side: usize, seed: u64) -> Synthetic {
+    synthetic(&SyntheticSpec {
+        sources: n,
+        pointings_per_side: side,
+        epochs: 4,
+        obs_sigma_mas: 1.0,
+        ref_sigma: [0.3, 0.3, 0.1, 0.1, 0.05],
+        calibration: CALIBRATED,
+        seed,
+    })
+}
+
 /// The conjugate gradients (the default) and the block iteration solve one least-squares problem: on a noisy
 /// sequence with the instrument's calibration, their solutions agree to a small fraction of the formal
 /// errors — the gradients in fewer than half the passes over the observations.
 #[test]
 fn conjugate_gradients_and_the_block_iteration_reach_one_solution() {
-    let t = synthetic(&SyntheticSpec {
-        sources: 1000,
-        pointings_per_side: 5,
-        epochs: 4,
-        obs_sigma_mas: 1.0,
-        ref_sigma: [0.3, 0.3, 0.1, 0.1, 0.05],
-        calibration: CALIBRATED,
-        seed: 11,
-    });
+    let t = noisy_calibrated(1000, 5, 11);
     let run = |method: Method| {
         let opt = Options {
             calibration: CALIBRATED,
@@ -414,4 +420,25 @@ fn a_turned_and_spinning_input_frame_comes_back_in_the_catalogues() {
             a.roll_rad()
         );
     }
+}
+
+/// The solution does not depend on the machine: its sums run over chunks fixed by the problem, added in
+/// their order, so one thread and two give the same solution bit for bit.
+#[test]
+fn one_thread_and_two_give_the_same_solution_bit_for_bit() {
+    let t = noisy_calibrated(600, 3, 12);
+    let opt = Options {
+        calibration: CALIBRATED,
+        ..Options::default()
+    };
+    let with = |threads: usize| {
+        rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .expect("a pool")
+            .install(|| solve(&t.obs, &t.exposures, &t.refs, 600, &opt).expect("solved"))
+    };
+    let (one, two) = (with(1), with(2));
+    assert_eq!(one, two);
+    assert!(one.converged);
 }

@@ -82,7 +82,8 @@ impl CalibrationModel {
     }
 
     /// The terms φ_j (f/L) of a detection at design focal-plane position `f_px` on `array`, as (index
-    /// within an axis's coefficients, value) pairs in rising index: its array's own, then the distortion's.
+    /// within an axis's coefficients, value) pairs in rising index: its array's own, then the distortion's
+    /// (no allocation beyond `out`'s: this runs for every observation in every pass).
     pub fn terms_at(
         &self,
         array: usize,
@@ -91,24 +92,61 @@ impl CalibrationModel {
         out: &mut Vec<(usize, f64)>,
     ) {
         out.clear();
+        self.for_each_term(array, f_px, norm_px, |j, t| out.push((j, t)));
+    }
+
+    /// [`CalibrationModel::terms_at`]'s pairs handed to `f` one by one.
+    pub fn for_each_term(
+        &self,
+        array: usize,
+        f_px: [f64; 2],
+        norm_px: f64,
+        mut f: impl FnMut(usize, f64),
+    ) {
         let (u, v) = (f_px[0] / norm_px, f_px[1] / norm_px);
-        let terms = self.array_terms();
-        if array < self.arrays {
-            let k = terms.len() * array;
-            out.extend(
-                terms
-                    .iter()
-                    .enumerate()
-                    .map(|(j, (p, q))| (k + j, u.powi(*p) * v.powi(*q))),
-            );
-        }
-        let base = terms.len() * self.arrays;
-        out.extend(
-            self.monomials()
-                .iter()
-                .enumerate()
-                .map(|(j, (p, q))| (base + j, u.powi(*p) * v.powi(*q))),
+        let top = self
+            .distortion_order
+            .max(self.array_order)
+            .min(MAX_DISTORTION_ORDER);
+        let (mut up, mut vp) = (
+            [1.0; MAX_DISTORTION_ORDER + 1],
+            [1.0; MAX_DISTORTION_ORDER + 1],
         );
+        for k in 1..=top {
+            up[k] = up[k - 1] * u;
+            vp[k] = vp[k - 1] * v;
+        }
+        // monomials_between's order: by order, then by falling power of u
+        let mut between = |lo: usize, hi: usize, first: usize| {
+            let mut j = first;
+            for n in lo..=hi {
+                for q in 0..=n {
+                    f(j, up[n - q] * vp[q]);
+                    j += 1;
+                }
+            }
+        };
+        let per_array = self.per_array();
+        if array < self.arrays {
+            between(0, self.array_order, per_array * array);
+        }
+        let lo = if self.arrays > 0 {
+            self.array_order + 1
+        } else {
+            2
+        };
+        if self.distortion_order >= lo {
+            between(lo, self.distortion_order, per_array * self.arrays);
+        }
+    }
+
+    /// Each array's own terms per axis (0 without arrays).
+    pub fn per_array(&self) -> usize {
+        if self.arrays == 0 {
+            0
+        } else {
+            (self.array_order + 1) * (self.array_order + 2) / 2
+        }
     }
 
     /// Unknowns per axis.
@@ -150,20 +188,21 @@ impl Calibration {
 
     /// Δf at design focal-plane position `f_px` on array `array`, px.
     pub fn correction_px(&self, array: usize, f_px: [f64; 2]) -> [f64; 2] {
-        let (u, v) = (f_px[0] / self.norm_px, f_px[1] / self.norm_px);
+        let per = self.model.per_array();
+        let n = self.model.arrays * per;
         let mut d = [0.0; 2];
-        if let Some(a) = self.arrays.get(array) {
-            for (m, (p, q)) in self.model.array_terms().into_iter().enumerate() {
-                let t = u.powi(p) * v.powi(q);
-                d[0] += a[0][m] * t;
-                d[1] += a[1][m] * t;
-            }
-        }
-        for (m, (p, q)) in self.model.monomials().into_iter().enumerate() {
-            let t = u.powi(p) * v.powi(q);
-            d[0] += self.distortion[0][m] * t;
-            d[1] += self.distortion[1][m] * t;
-        }
+        self.model.for_each_term(array, f_px, self.norm_px, |j, t| {
+            let (x, y) = if j < n {
+                (
+                    self.arrays[j / per][0][j % per],
+                    self.arrays[j / per][1][j % per],
+                )
+            } else {
+                (self.distortion[0][j - n], self.distortion[1][j - n])
+            };
+            d[0] += x * t;
+            d[1] += y * t;
+        });
         d
     }
 
@@ -305,12 +344,13 @@ pub fn inverse2(m: &[f64; 4]) -> Option<[f64; 4]> {
 ///
 /// Returns the calibration and each exposure's attitude (None where it sees fewer than two placed sources),
 /// or None when the calibration is unconstrained.
-pub fn fit_with_attitudes(
+pub(super) fn fit_with_attitudes(
     model: CalibrationModel,
     norm_px: f64,
     obs: &[Observation],
     exposures: &[ExposureGeometry],
-    places: &[Option<[f64; 2]>],
+    by_exposure: &super::groups::Groups,
+    place: impl Fn(usize) -> Option<[f64; 2]> + Sync,
     active: &[bool],
 ) -> Option<(Calibration, Vec<Option<super::Attitude>>)> {
     use rayon::prelude::*;
@@ -329,16 +369,10 @@ pub fn fit_with_attitudes(
         rc: Vec<f64>,
         count: usize,
     }
-    let mut by_exposure: Vec<Vec<usize>> = vec![Vec::new(); exposures.len()];
-    for (i, o) in obs.iter().enumerate() {
-        if active[i] && places[i].is_some() {
-            by_exposure[o.exposure].push(i);
-        }
-    }
-    let blocks: Vec<Option<Block>> = by_exposure
-        .par_iter()
-        .enumerate()
-        .map(|(e, mine)| {
+    let blocks: Vec<Option<Block>> = (0..exposures.len())
+        .into_par_iter()
+        .map(|e| {
+            let mine = by_exposure.get(e);
             let g = &exposures[e];
             let m = inv[e]?;
             let det = (g.to_plane[0] * g.to_plane[3] - g.to_plane[1] * g.to_plane[2]).abs();
@@ -348,7 +382,7 @@ pub fn fit_with_attitudes(
                 ra: [0.0; 4],
                 c: vec![0.0; n2 * n2],
                 rc: vec![0.0; n2],
-                count: mine.len(),
+                count: 0,
             };
             let to_focal = |p: [f64; 2]| {
                 let d = [p[0] - g.centre_mas[0], p[1] - g.centre_mas[1]];
@@ -359,9 +393,10 @@ pub fn fit_with_attitudes(
             let (mut upow, mut vpow) = (vec![1.0; max_order + 1], vec![1.0; max_order + 1]);
             // C's x block (the y block is the same: one φ, one weight per observation), upper triangle
             let mut cx = vec![0.0; n * n];
-            for &i in mine {
+            for i in mine.iter().map(|i| *i as usize).filter(|i| active[*i]) {
                 let o = &obs[i];
-                let Some(place) = places[i] else { continue };
+                let Some(place) = place(i) else { continue };
+                blk.count += 1;
                 // σ in px: the plane's mas per px is √|det M|
                 let w = det / (o.sigma_mas * o.sigma_mas);
                 let (y, sp) = (to_focal([o.xi_mas, o.eta_mas]), to_focal(place));
@@ -558,6 +593,37 @@ mod tests {
         };
         assert_eq!(q.array_terms().len(), 6);
         assert_eq!(q.monomials(), vec![(3, 0), (2, 1), (1, 2), (0, 3)]);
+    }
+
+    #[test]
+    fn the_terms_at_a_place_are_the_listed_monomials() {
+        let m = CalibrationModel {
+            arrays: 4,
+            array_order: 2,
+            distortion_order: 5,
+        };
+        let (f, norm) = ([1234.0, -987.0], 3000.0);
+        let (u, v) = (f[0] / norm, f[1] / norm);
+        let mut got = Vec::new();
+        m.terms_at(2, f, norm, &mut got);
+        let per = m.array_terms().len();
+        let mut want: Vec<(usize, f64)> = m
+            .array_terms()
+            .iter()
+            .enumerate()
+            .map(|(j, (p, q))| (2 * per + j, u.powi(*p) * v.powi(*q)))
+            .collect();
+        want.extend(
+            m.monomials()
+                .iter()
+                .enumerate()
+                .map(|(j, (p, q))| (4 * per + j, u.powi(*p) * v.powi(*q))),
+        );
+        assert_eq!(got.len(), want.len());
+        for ((j, a), (k, b)) in got.iter().zip(&want) {
+            assert_eq!(j, k);
+            assert!((a - b).abs() <= 1e-15 * b.abs().max(1e-3), "{a} {b}");
+        }
     }
 
     #[test]

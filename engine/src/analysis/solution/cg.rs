@@ -26,8 +26,8 @@
 //! then fitted once more with the instrument held, which gives their reported covariance (as the block
 //! iteration's).
 
+use super::blocks::{Problem, State, anchors, source_pass, unconstrained};
 use super::calibration::{Calibration, gauge_rows};
-use super::solve::{Problem, State, anchors, corrected, source_pass, unconstrained};
 use super::{Attitude, Params};
 use crate::analysis::solution::SolutionError;
 use rayon::prelude::*;
@@ -43,14 +43,15 @@ pub(super) fn iterate(
     active: &[bool],
 ) -> Result<(usize, bool), SolutionError> {
     let opt = p.opt;
-    let lever: Vec<f64> = p
-        .by_exposure
-        .par_iter()
-        .zip(p.exposures)
-        .map(|(mine, g)| {
-            mine.iter()
+    let lever: Vec<f64> = (0..p.exposures.len())
+        .into_par_iter()
+        .map(|e| {
+            let g = &p.exposures[e];
+            p.by_exposure
+                .get(e)
+                .iter()
                 .map(|&i| {
-                    let o = &p.obs[i];
+                    let o = &p.obs[i as usize];
                     (o.xi_mas - g.centre_mas[0])
                         .abs()
                         .max((o.eta_mas - g.centre_mas[1]).abs())
@@ -240,108 +241,98 @@ impl<'a> Linear<'a> {
         }
     }
 
-    /// `W J v` per observation (zero where it does not enter).
-    fn weighted_jv(&self, v: &[f64]) -> Vec<[f64; 2]> {
-        (0..self.p.obs.len())
-            .into_par_iter()
-            .map_init(Vec::new, |phi, i| {
-                if !self.used(i) {
-                    return [0.0; 2];
-                }
-                let o = &self.p.obs[i];
-                let (src, att) = self.columns(i);
-                let (so, n) = (self.src_off[o.source], self.dims[o.source]);
-                let ao = self.att_off + 4 * o.exposure;
-                let mut jv = [0.0; 2];
-                for k in 0..n {
-                    jv[0] += src[k][0] * v[so + k];
-                    jv[1] += src[k][1] * v[so + k];
-                }
-                for k in 0..4 {
-                    jv[0] += att[k][0] * v[ao + k];
-                    jv[1] += att[k][1] * v[ao + k];
-                }
-                self.phi(i, phi);
-                if !phi.is_empty() {
-                    let m = &self.p.exposures[o.exposure].to_plane;
-                    let (cx, cy) = (self.cal_off, self.cal_off + self.cal_axis);
-                    let (mut fx, mut fy) = (0.0, 0.0);
-                    for &(j, f) in phi.iter() {
-                        fx += f * v[cx + j];
-                        fy += f * v[cy + j];
-                    }
-                    jv[0] += m[0] * fx + m[1] * fy;
-                    jv[1] += m[2] * fx + m[3] * fy;
-                }
-                let w = self.weight(i);
-                [w * jv[0], w * jv[1]]
-            })
-            .collect()
-    }
-
-    /// `Σᵢ Jᵢᵀ uᵢ`: by source, then by exposure (each exposure's calibration share summed after).
-    fn transpose(&self, u: &[[f64; 2]]) -> Vec<f64> {
+    /// `Σᵢ Jᵢᵀ uᵢ` with `uᵢ = f(i, Jᵢ's columns, φᵢ)`, in one pass over the observations by source: each
+    /// source's share written in place, the exposures' and the calibration's summed over chunks of sources
+    /// (no per-observation buffer).
+    fn accumulate(
+        &self,
+        f: impl Fn(usize, &Columns, &[(usize, f64)]) -> [f64; 2] + Sync,
+    ) -> Vec<f64> {
         let mut out = vec![0.0; self.len];
-        let per_source: Vec<[f64; 5]> = self
-            .p
-            .by_source
-            .par_iter()
+        let (src_part, rest) = out.split_at_mut(self.att_off);
+        let mut slices: Vec<&mut [f64]> = Vec::with_capacity(self.dims.len());
+        let mut tail = src_part;
+        for d in &self.dims {
+            let (head, t) = tail.split_at_mut(*d);
+            slices.push(head);
+            tail = t;
+        }
+        let ca = self.cal_axis;
+        let shared = rest.len();
+        let chunk = chunk_len(self.dims.len(), shared);
+        let acc = slices
+            .par_chunks_mut(chunk)
             .enumerate()
-            .map(|(s, mine)| {
-                let mut acc = [0.0; 5];
-                let n = self.dims[s];
-                if n == 0 {
-                    return acc;
-                }
-                for &i in mine.iter().filter(|i| self.active[**i]) {
-                    let (src, _) = self.columns(i);
-                    for k in 0..n {
-                        acc[k] += src[k][0] * u[i][0] + src[k][1] * u[i][1];
+            .map(|(c, chunk_slices)| {
+                let mut acc = vec![0.0; shared];
+                let mut phi = Vec::new();
+                for (k, slice) in chunk_slices.iter_mut().enumerate() {
+                    let s = c * chunk + k;
+                    if self.dims[s] == 0 {
+                        continue;
+                    }
+                    for i in self.p.by_source.get(s).iter().map(|i| *i as usize) {
+                        if !self.active[i] {
+                            continue;
+                        }
+                        let cols = self.columns(i);
+                        self.phi(i, &mut phi);
+                        let u = f(i, &cols, &phi);
+                        let (src, att) = &cols;
+                        for (k, x) in slice.iter_mut().enumerate() {
+                            *x += src[k][0] * u[0] + src[k][1] * u[1];
+                        }
+                        let e = self.p.obs[i].exposure;
+                        for k in 0..4 {
+                            acc[4 * e + k] += att[k][0] * u[0] + att[k][1] * u[1];
+                        }
+                        if !phi.is_empty() {
+                            let m = &self.p.exposures[e].to_plane;
+                            let (gx, gy) = (m[0] * u[0] + m[2] * u[1], m[1] * u[0] + m[3] * u[1]);
+                            let base = 4 * self.p.exposures.len();
+                            for &(j, t) in &phi {
+                                acc[base + j] += t * gx;
+                                acc[base + ca + j] += t * gy;
+                            }
+                        }
                     }
                 }
                 acc
             })
-            .collect();
-        for (s, acc) in per_source.iter().enumerate() {
-            let o = self.src_off[s];
-            out[o..o + self.dims[s]].copy_from_slice(&acc[..self.dims[s]]);
-        }
-        let per_exposure: Vec<([f64; 4], Vec<f64>)> = self
-            .p
-            .by_exposure
-            .par_iter()
-            .enumerate()
-            .map(|(e, mine)| {
-                let mut att_acc = [0.0; 4];
-                let mut cal = vec![0.0; 2 * self.cal_axis];
-                let m = &self.p.exposures[e].to_plane;
-                let mut phi = Vec::new();
-                for &i in mine.iter().filter(|i| self.used(**i)) {
-                    let (_, att) = self.columns(i);
-                    for k in 0..4 {
-                        att_acc[k] += att[k][0] * u[i][0] + att[k][1] * u[i][1];
-                    }
-                    self.phi(i, &mut phi);
-                    let (gx, gy) = (
-                        m[0] * u[i][0] + m[2] * u[i][1],
-                        m[1] * u[i][0] + m[3] * u[i][1],
-                    );
-                    for &(j, f) in &phi {
-                        cal[j] += f * gx;
-                        cal[self.cal_axis + j] += f * gy;
-                    }
-                }
-                (att_acc, cal)
-            })
-            .collect();
-        for (e, (att, cal)) in per_exposure.iter().enumerate() {
-            let o = self.att_off + 4 * e;
-            out[o..o + 4].copy_from_slice(att);
-            for (x, c) in out[self.cal_off..].iter_mut().zip(cal) {
-                *x += c;
-            }
-        }
+            .collect::<Vec<_>>()
+            .into_iter()
+            .fold(vec![0.0; shared], add_into);
+        rest.copy_from_slice(&acc);
         out
+    }
+
+    /// `J v` of observation `i` from its columns.
+    fn jv(&self, i: usize, cols: &Columns, phi: &[(usize, f64)], v: &[f64]) -> [f64; 2] {
+        let o = &self.p.obs[i];
+        let (src, att) = cols;
+        let (so, n) = (self.src_off[o.source], self.dims[o.source]);
+        let ao = self.att_off + 4 * o.exposure;
+        let mut jv = [0.0; 2];
+        for k in 0..n {
+            jv[0] += src[k][0] * v[so + k];
+            jv[1] += src[k][1] * v[so + k];
+        }
+        for k in 0..4 {
+            jv[0] += att[k][0] * v[ao + k];
+            jv[1] += att[k][1] * v[ao + k];
+        }
+        if !phi.is_empty() {
+            let m = &self.p.exposures[o.exposure].to_plane;
+            let (cx, cy) = (self.cal_off, self.cal_off + self.cal_axis);
+            let (mut fx, mut fy) = (0.0, 0.0);
+            for &(j, f) in phi {
+                fx += f * v[cx + j];
+                fy += f * v[cy + j];
+            }
+            jv[0] += m[0] * fx + m[1] * fy;
+            jv[1] += m[2] * fx + m[3] * fy;
+        }
+        jv
     }
 
     /// The priors' weights and the gauge penalty applied to `v`, added to `out`.
@@ -366,28 +357,25 @@ impl<'a> Linear<'a> {
 
     /// `N v = Jᵀ W J v + P v`.
     fn apply(&self, v: &[f64]) -> Vec<f64> {
-        let mut out = self.transpose(&self.weighted_jv(v));
+        let mut out = self.accumulate(|i, cols, phi| {
+            let jv = self.jv(i, cols, phi, v);
+            let w = self.weight(i);
+            [w * jv[0], w * jv[1]]
+        });
         self.add_priors(v, &mut out);
         out
     }
 
     /// `Jᵀ W r + P (x_ref − x)`, the gauge rows pulling the calibration's gauge to zero.
     fn rhs(&self, state: &State) -> Vec<f64> {
-        let u: Vec<[f64; 2]> = (0..self.p.obs.len())
-            .into_par_iter()
-            .map(|i| {
-                if !self.used(i) {
-                    return [0.0; 2];
-                }
-                let o = &self.p.obs[i];
-                let g = &self.p.exposures[o.exposure];
-                let m =
-                    self.attitudes[o.exposure].apply(g.centre_mas, g.place(&self.params[o.source]));
-                let w = self.weight(i);
-                [w * (state.pos[i][0] - m[0]), w * (state.pos[i][1] - m[1])]
-            })
-            .collect();
-        let mut b = self.transpose(&u);
+        let mut b = self.accumulate(|i, _, _| {
+            let o = &self.p.obs[i];
+            let g = &self.p.exposures[o.exposure];
+            let m = self.attitudes[o.exposure].apply(g.centre_mas, g.place(&self.params[o.source]));
+            let at = self.p.place_at(&state.cal, i);
+            let w = self.weight(i);
+            [w * (at[0] - m[0]), w * (at[1] - m[1])]
+        });
         // P (x_ref − x): the negated prior term of the current values, plus the references' own
         let mut minus_x = vec![0.0; self.len];
         for (s, n) in self.dims.iter().enumerate() {
@@ -421,7 +409,10 @@ impl<'a> Linear<'a> {
                 if n == 0 {
                     return blk;
                 }
-                for &i in self.p.by_source[s].iter().filter(|i| self.active[**i]) {
+                for i in self.p.by_source.get(s).iter().map(|i| *i as usize) {
+                    if !self.active[i] {
+                        continue;
+                    }
                     let (src, _) = self.columns(i);
                     let w = self.weight(i);
                     for a in 0..n {
@@ -441,63 +432,71 @@ impl<'a> Linear<'a> {
             })
             .collect();
         let ca = self.cal_axis;
-        let per_exposure: Vec<(Vec<f64>, Vec<f64>)> = self
-            .p
-            .by_exposure
-            .par_iter()
-            .map(|mine| {
-                let mut att = [0.0; 16];
-                let mut s = vec![0.0; ca * ca];
-                let mut phi = Vec::new();
-                let mut count = 0;
-                for &i in mine.iter().filter(|i| self.used(**i)) {
-                    count += 1;
-                    let (_, cols) = self.columns(i);
-                    let w = self.weight(i);
-                    for a in 0..4 {
-                        for b in 0..4 {
-                            att[a * 4 + b] +=
-                                w * (cols[a][0] * cols[b][0] + cols[a][1] * cols[b][1]);
-                        }
-                    }
-                    self.phi(i, &mut phi);
-                    for &(j1, f1) in &phi {
-                        for &(j2, f2) in &phi {
-                            s[j1 * ca + j2] += w * f1 * f2;
-                        }
-                    }
-                }
-                let inv = if count >= 2 {
-                    inverse_scaled(&att, 4).unwrap_or_else(|| vec![0.0; 16])
-                } else {
-                    vec![0.0; 16]
-                };
-                (inv, s)
-            })
-            .collect();
-        // the calibration's block: Σₑ (Mₑᵀ Mₑ) ⊗ Sₑ, then the gauge penalty
         let n2 = 2 * ca;
-        let mut cal = vec![0.0; n2 * n2];
-        if ca > 0 {
-            for (e, (_, s)) in per_exposure.iter().enumerate() {
-                let m = &self.p.exposures[e].to_plane;
-                let mtm = [
-                    m[0] * m[0] + m[2] * m[2],
-                    m[0] * m[1] + m[2] * m[3],
-                    m[1] * m[0] + m[3] * m[2],
-                    m[1] * m[1] + m[3] * m[3],
-                ];
-                for ax in 0..2 {
-                    for ay in 0..2 {
-                        let f = mtm[ax * 2 + ay];
-                        for j1 in 0..ca {
-                            for j2 in 0..ca {
-                                cal[(ax * ca + j1) * n2 + ay * ca + j2] += f * s[j1 * ca + j2];
+        let n_exposures = self.p.exposures.len();
+        // each exposure's 4 × 4 inverted; the calibration's block Σ w (M φ)ᵀ (M φ) summed over chunks of
+        // exposures
+        let chunk = chunk_len(n_exposures, n2 * n2);
+        let blocks: Vec<(Vec<[f64; 16]>, Vec<f64>)> = (0..n_exposures.div_ceil(chunk))
+            .into_par_iter()
+            .map(|c| {
+                let mut cal = vec![0.0; n2 * n2];
+                let mut phi = Vec::new();
+                let invs = (c * chunk..((c + 1) * chunk).min(n_exposures))
+                    .map(|e| {
+                        let m = &self.p.exposures[e].to_plane;
+                        let mtm = [
+                            m[0] * m[0] + m[2] * m[2],
+                            m[0] * m[1] + m[2] * m[3],
+                            m[1] * m[0] + m[3] * m[2],
+                            m[1] * m[1] + m[3] * m[3],
+                        ];
+                        let mut att = [0.0; 16];
+                        let mut count = 0;
+                        for i in self.p.by_exposure.get(e).iter().map(|i| *i as usize) {
+                            if !self.used(i) {
+                                continue;
+                            }
+                            count += 1;
+                            let (_, cols) = self.columns(i);
+                            let w = self.weight(i);
+                            for a in 0..4 {
+                                for b in 0..4 {
+                                    att[a * 4 + b] +=
+                                        w * (cols[a][0] * cols[b][0] + cols[a][1] * cols[b][1]);
+                                }
+                            }
+                            self.phi(i, &mut phi);
+                            for &(j1, f1) in &phi {
+                                for &(j2, f2) in &phi {
+                                    let t = w * f1 * f2;
+                                    for ax in 0..2 {
+                                        for ay in 0..2 {
+                                            cal[(ax * ca + j1) * n2 + ay * ca + j2] +=
+                                                mtm[ax * 2 + ay] * t;
+                                        }
+                                    }
+                                }
                             }
                         }
-                    }
-                }
-            }
+                        let inv = (count >= 2).then(|| inverse_scaled(&att, 4)).flatten();
+                        inv.map_or([0.0; 16], |v| {
+                            let mut a = [0.0; 16];
+                            a.copy_from_slice(&v);
+                            a
+                        })
+                    })
+                    .collect();
+                (invs, cal)
+            })
+            .collect();
+        let mut cal = vec![0.0; n2 * n2];
+        let mut exposures = Vec::with_capacity(n_exposures);
+        for (invs, c) in blocks {
+            exposures.extend(invs);
+            add_into_slice(&mut cal, &c);
+        }
+        if ca > 0 {
             self.heavy = (0..n2)
                 .map(|i| cal[i * n2 + i])
                 .fold(0.0f64, f64::max)
@@ -524,7 +523,7 @@ impl<'a> Linear<'a> {
                 sigma[self.src_off[s] + k] = inv[k * n + k].max(0.0).sqrt();
             }
         }
-        for (e, (inv, _)) in per_exposure.iter().enumerate() {
+        for (e, inv) in exposures.iter().enumerate() {
             for k in 0..4 {
                 sigma[self.att_off + 4 * e + k] = inv[k * 4 + k].max(0.0).sqrt();
             }
@@ -536,7 +535,7 @@ impl<'a> Linear<'a> {
             sources,
             dims: self.dims.clone(),
             src_off: self.src_off.clone(),
-            exposures: per_exposure.into_iter().map(|(inv, _)| inv).collect(),
+            exposures,
             att_off: self.att_off,
             cal: cal_inv,
             cal_off: self.cal_off,
@@ -561,8 +560,29 @@ impl<'a> Linear<'a> {
         }
         if self.cal_axis > 0 {
             add_flat(&mut state.cal, &x[self.cal_off..]);
-            state.pos = corrected(self.p.obs, self.p.exposures, &state.cal);
         }
+    }
+}
+
+/// Items per parallel chunk. The chunks' partial sums are added in their order, and their number depends on
+/// the problem alone — never on the threads — so that a solution is the same bit for bit on any machine:
+/// [`CHUNKS`], fewer where their accumulators (`accumulator` numbers each) would pass 256 MiB together.
+fn chunk_len(items: usize, accumulator: usize) -> usize {
+    let affordable = (256 << 20) / (8 * accumulator.max(1));
+    items.div_ceil(CHUNKS.min(affordable).max(1)).max(1)
+}
+
+/// Parallel chunks of sources (or exposures) per pass: work for 16 threads, four chunks each.
+const CHUNKS: usize = 64;
+
+fn add_into(mut a: Vec<f64>, b: Vec<f64>) -> Vec<f64> {
+    add_into_slice(&mut a, &b);
+    a
+}
+
+fn add_into_slice(a: &mut [f64], b: &[f64]) {
+    for (x, y) in a.iter_mut().zip(b) {
+        *x += y;
     }
 }
 
@@ -571,7 +591,7 @@ struct Preconditioner {
     sources: Vec<Vec<f64>>,
     dims: Vec<usize>,
     src_off: Vec<usize>,
-    exposures: Vec<Vec<f64>>,
+    exposures: Vec<[f64; 16]>,
     att_off: usize,
     cal: Vec<f64>,
     cal_off: usize,

@@ -32,9 +32,11 @@
 //! them, so with several epochs its entries must carry proper motions and parallaxes (a survey such as Gaia's
 //! does), and at least two sources must be anchored.
 
+mod blocks;
 pub mod calibration;
 mod cg;
 pub mod feed;
+mod groups;
 mod solve;
 
 pub use calibration::{Calibration, CalibrationModel};
@@ -116,7 +118,7 @@ impl SourceModel {
 }
 
 /// How the joint least-squares problem is iterated to its solution.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub enum Method {
     /// The block iteration (Gauss–Seidel over the blocks, AGIS's "simple iteration", Lindegren et al. 2012
     /// §5.2): sources with the instrument held, then the instrument with the sources held. Its iterations
@@ -125,6 +127,7 @@ pub enum Method {
     /// Conjugate gradients on the normal equations of all unknowns at once, preconditioned by the same
     /// blocks (source, exposure, calibration: Bombrun et al. 2012, A&A 538, A77), inside a Gauss–Newton
     /// loop for the attitude's bilinear term. The default.
+    #[default]
     ConjugateGradient,
 }
 

@@ -1,11 +1,16 @@
-//! The block-iterative solution: validation, the two blocks, rejection (see the module's documentation).
+//! The solution: validation, the start, the iteration (the block iteration here, the conjugate gradients in
+//! [`super::cg`]), rejection and χ² (see the module's documentation).
 
+use super::blocks::{
+    Problem, State, anchors, attitude_block, places_of, residual, source_pass, unconstrained,
+    unsolved,
+};
 use super::calibration::{self, Calibration};
+use super::groups::Groups;
 use super::{
     Attitude, ExposureGeometry, Method, Observation, Options, Params, Reference, Solution,
-    SolutionError, SolvedSource, SourceModel,
+    SolutionError, SourceModel,
 };
-use crate::numerics::linalg::weighted_lstsq;
 use rayon::prelude::*;
 
 /// How far a converged calibration's correction still moves from step to step: its rounding, mas.
@@ -20,12 +25,9 @@ pub fn solve(
     opt: &Options,
 ) -> Result<Solution, SolutionError> {
     validate(obs, exposures, refs, n_sources, opt)?;
-    let mut by_source = vec![Vec::new(); n_sources];
-    let mut by_exposure = vec![Vec::new(); exposures.len()];
-    for (i, o) in obs.iter().enumerate() {
-        by_source[o.source].push(i);
-        by_exposure[o.exposure].push(i);
-    }
+    let by_source = Groups::new(n_sources, obs.len(), |i| obs[i].source);
+    let by_exposure = Groups::new(exposures.len(), obs.len(), |i| obs[i].exposure);
+    no_duplicates(obs, &by_source)?;
     let mut prior: Vec<Option<&Reference>> = vec![None; n_sources];
     for r in refs {
         prior[r.source] = Some(r);
@@ -35,24 +37,19 @@ pub fn solve(
     // then, with a calibration, the instrument's from them too, and the attitudes again
     let ref_params: Vec<Option<Params>> = prior.iter().map(|r| r.map(|r| r.params)).collect();
     let mut cal = Calibration::zero(opt.calibration, opt.focal_norm_px);
-    let mut pos: Vec<[f64; 2]> = obs.iter().map(|o| [o.xi_mas, o.eta_mas]).collect();
-    let start_attitudes = |pos: &[[f64; 2]], previous: Option<&[Attitude]>| -> Vec<Attitude> {
-        (0..exposures.len())
-            .map(|e| {
-                attitude_block(
-                    pos,
-                    obs,
-                    &by_exposure[e],
-                    &exposures[e],
-                    &ref_params,
-                    &active,
-                )
-                .or(previous.map(|p| p[e]))
-                .unwrap_or(Attitude::IDENTITY)
-            })
-            .collect()
-    };
-    let mut attitudes = start_attitudes(&pos, None);
+    let mut attitudes: Vec<Attitude> = (0..exposures.len())
+        .map(|e| {
+            attitude_block(
+                &cal,
+                obs,
+                by_exposure.get(e),
+                &exposures[e],
+                &ref_params,
+                &active,
+            )
+            .unwrap_or(Attitude::IDENTITY)
+        })
+        .collect();
     if opt.calibration.solves() {
         // the arrays' affine terms alone from the references: a start the full model refines
         let start = calibration::CalibrationModel {
@@ -60,17 +57,16 @@ pub fn solve(
             distortion_order: 0,
             ..opt.calibration
         };
-        let places = places_of(obs, exposures, &ref_params);
         if let Some((c, att)) = calibration::fit_with_attitudes(
             start,
             opt.focal_norm_px,
             obs,
             exposures,
-            &places,
+            &by_exposure,
+            |i| places_of(obs, exposures, &ref_params, i),
             &active,
         ) {
             cal = c.extended_to(opt.calibration);
-            pos = corrected(obs, exposures, &cal);
             for (a, n) in attitudes.iter_mut().zip(att) {
                 if let Some(n) = n {
                     *a = n;
@@ -97,7 +93,6 @@ pub fn solve(
         sources: vec![unsolved(); n_sources],
         attitudes,
         cal,
-        pos,
     };
     let (mut iterations, mut rejected) = (0, 0);
     let mut converged = true;
@@ -111,35 +106,8 @@ pub fn solve(
         if opt.clip_sigma <= 0.0 {
             break;
         }
-        // each source's worst observation beyond the clip goes (one per round: an outlier drags its source,
-        // and with it the residuals of the source's good observations); a rejected one that now fits returns
-        let mut worst: Vec<Option<(usize, f64)>> = vec![None; n_sources];
-        let mut changed = 0;
-        for (i, o) in obs.iter().enumerate() {
-            let Some((rx, ry)) = residual(
-                state.pos[i],
-                &exposures[o.exposure],
-                &state.attitudes[o.exposure],
-                &state.sources[o.source],
-            ) else {
-                continue;
-            };
-            let z = rx.abs().max(ry.abs()) / o.sigma_mas;
-            if !active[i] {
-                if z <= opt.clip_sigma {
-                    active[i] = true;
-                    rejected -= 1;
-                    changed += 1;
-                }
-            } else if z > opt.clip_sigma && worst[o.source].is_none_or(|(_, w)| z > w) {
-                worst[o.source] = Some((i, z));
-            }
-        }
-        for (i, _) in worst.into_iter().flatten() {
-            active[i] = false;
-            rejected += 1;
-            changed += 1;
-        }
+        let (changed, now_rejected) = reject(&problem, &state, &mut active, opt.clip_sigma);
+        rejected = now_rejected;
         if changed == 0 {
             break;
         }
@@ -152,7 +120,7 @@ pub fn solve(
             continue;
         }
         if let Some((rx, ry)) = residual(
-            state.pos[i],
+            problem.place_at(&state.cal, i),
             &exposures[o.exposure],
             &state.attitudes[o.exposure],
             &state.sources[o.source],
@@ -185,44 +153,57 @@ pub fn solve(
     })
 }
 
-/// What every iteration reads: the observations, their exposures, who sees what, the priors, the knobs.
-pub(super) struct Problem<'a> {
-    pub obs: &'a [Observation],
-    pub exposures: &'a [ExposureGeometry],
-    pub by_source: &'a [Vec<usize>],
-    pub by_exposure: &'a [Vec<usize>],
-    pub prior: &'a [Option<&'a Reference>],
-    pub opt: &'a Options,
-    /// mas per focal-plane px (for the calibration's share of the block iteration's convergence test).
-    pub mas_per_px: f64,
+/// One round of rejection: each source's worst kept observation beyond `clip` σ goes (one per round: an
+/// outlier drags its source, and with it the residuals of the source's good observations), and a rejected
+/// one that now fits returns. Returns the observations that changed and those now rejected.
+fn reject(p: &Problem, state: &State, active: &mut [bool], clip: f64) -> (usize, usize) {
+    let mut worst: Vec<Option<(usize, f64)>> = vec![None; p.by_source.len()];
+    let mut changed = 0;
+    for (i, o) in p.obs.iter().enumerate() {
+        let Some((rx, ry)) = residual(
+            p.place_at(&state.cal, i),
+            &p.exposures[o.exposure],
+            &state.attitudes[o.exposure],
+            &state.sources[o.source],
+        ) else {
+            continue;
+        };
+        let z = rx.abs().max(ry.abs()) / o.sigma_mas;
+        if !active[i] {
+            if z <= clip {
+                active[i] = true;
+                changed += 1;
+            }
+        } else if z > clip && worst[o.source].is_none_or(|(_, w)| z > w) {
+            worst[o.source] = Some((i, z));
+        }
+    }
+    for (i, _) in worst.into_iter().flatten() {
+        active[i] = false;
+        changed += 1;
+    }
+    (changed, active.iter().filter(|a| !**a).count())
 }
 
-/// What the iterations move: the sources, the attitudes, the calibration, and every observation's place
-/// with the calibration's correction removed (`pos`, mas).
-pub(super) struct State {
-    pub sources: Vec<SolvedSource>,
-    pub attitudes: Vec<Attitude>,
-    pub cal: Calibration,
-    pub pos: Vec<[f64; 2]>,
-}
-
-/// Every source's block with the attitudes and the calibration held (`state.pos` already corrected).
-pub(super) fn source_pass(p: &Problem, state: &State, active: &[bool]) -> Vec<SolvedSource> {
-    (0..p.by_source.len())
-        .into_par_iter()
-        .map(|s| {
-            source_block(
-                &state.pos,
-                p.obs,
-                &p.by_source[s],
-                p.exposures,
-                &state.attitudes,
-                p.prior[s],
-                active,
-                p.opt.model,
-            )
-        })
-        .collect()
+/// A source seen twice by one exposure is a named error (each source's exposures sorted: no hash set of
+/// every pair).
+fn no_duplicates(obs: &[Observation], by_source: &Groups) -> Result<(), SolutionError> {
+    let found = (0..by_source.len()).into_par_iter().find_map_first(|s| {
+        let mut e: Vec<usize> = by_source
+            .get(s)
+            .iter()
+            .map(|&i| obs[i as usize].exposure)
+            .collect();
+        e.sort_unstable();
+        e.windows(2).find(|w| w[0] == w[1]).map(|w| (s, w[0]))
+    });
+    match found {
+        Some((source_id, exposure)) => Err(SolutionError::Duplicate {
+            source_id,
+            exposure,
+        }),
+        None => Ok(()),
+    }
 }
 
 /// The block iteration (Gauss–Seidel over the blocks): sources with the instrument held, then the instrument
@@ -243,13 +224,13 @@ fn block_iterate(
         // the instrument: the attitudes alone, or with the calibration in one block
         let mut new_cal = None;
         let new_attitudes: Vec<Attitude> = if opt.calibration.solves() {
-            let places = places_of(obs, exposures, &params);
             let (c, att) = calibration::fit_with_attitudes(
                 opt.calibration,
                 opt.focal_norm_px,
                 obs,
                 exposures,
-                &places,
+                p.by_exposure,
+                |i| places_of(obs, exposures, &params, i),
                 active,
             )
             .ok_or_else(|| unconstrained(obs, active, opt.calibration.arrays))?;
@@ -263,9 +244,9 @@ fn block_iterate(
                 .into_par_iter()
                 .map(|e| {
                     attitude_block(
-                        &state.pos,
+                        &state.cal,
                         obs,
-                        &p.by_exposure[e],
+                        p.by_exposure.get(e),
                         &exposures[e],
                         &params,
                         active,
@@ -306,7 +287,6 @@ fn block_iterate(
         if let Some(c) = new_cal {
             moved_calibration = c.moved_px(&state.cal) * p.mas_per_px;
             state.cal = c;
-            state.pos = corrected(obs, exposures, &state.cal);
         }
         // the calibration's terms settle to their rounding (≈ 10⁻¹⁰ of their size: 10⁻⁵ mas), which
         // can lie above the tolerance
@@ -317,247 +297,6 @@ fn block_iterate(
         }
     }
     Ok((opt.max_iterations.max(1), false))
-}
-
-/// Does a reference error `sigma` constrain its parameter?
-pub(super) fn anchors(sigma: f64) -> bool {
-    sigma > 0.0 && sigma.is_finite()
-}
-
-fn unsolved() -> SolvedSource {
-    SolvedSource {
-        params: [f64::NAN; 5],
-        sigma: [f64::NAN; 5],
-        observations: 0,
-        chi2: 0.0,
-    }
-}
-
-/// Observed (at `p`, the calibration removed) minus modelled, mas (None for an unsolved source).
-fn residual(
-    p: [f64; 2],
-    g: &ExposureGeometry,
-    a: &Attitude,
-    s: &SolvedSource,
-) -> Option<(f64, f64)> {
-    if !s.params[0].is_finite() {
-        return None;
-    }
-    let m = a.apply(g.centre_mas, g.place(&s.params));
-    Some((p[0] - m[0], p[1] - m[1]))
-}
-
-/// Every observation's place with the calibration's correction removed, mas.
-pub(super) fn corrected(
-    obs: &[Observation],
-    exposures: &[ExposureGeometry],
-    cal: &Calibration,
-) -> Vec<[f64; 2]> {
-    obs.par_iter()
-        .map(|o| {
-            let d = cal.correction_mas(o, &exposures[o.exposure]);
-            [o.xi_mas - d[0], o.eta_mas - d[1]]
-        })
-        .collect()
-}
-
-/// Every observation's source place at its exposure's epoch, mas; None where its source has no parameters.
-fn places_of(
-    obs: &[Observation],
-    exposures: &[ExposureGeometry],
-    params: &[Option<Params>],
-) -> Vec<Option<[f64; 2]>> {
-    obs.par_iter()
-        .map(|o| {
-            params[o.source]
-                .as_ref()
-                .map(|p| exposures[o.exposure].place(p))
-        })
-        .collect()
-}
-
-/// The error of a calibration that cannot be fitted: the first array with fewer than 3 kept observations,
-/// else `arrays` (a distortion term).
-pub(super) fn unconstrained(obs: &[Observation], active: &[bool], arrays: usize) -> SolutionError {
-    let mut n = vec![0usize; arrays];
-    for (o, on) in obs.iter().zip(active) {
-        if *on && o.array < arrays {
-            n[o.array] += 1;
-        }
-    }
-    SolutionError::CalibrationUnconstrained(n.iter().position(|c| *c < 3).unwrap_or(arrays))
-}
-
-/// One source's parameters from its observations (each turned back through its exposure's attitude) and its
-/// reference entry; a source whose full model is singular (too few epochs) gets its position only, with the
-/// reference's (or zero) motion.
-fn source_block(
-    pos: &[[f64; 2]],
-    obs: &[Observation],
-    mine: &[usize],
-    exposures: &[ExposureGeometry],
-    attitudes: &[Attitude],
-    prior: Option<&Reference>,
-    active: &[bool],
-    model: SourceModel,
-) -> SolvedSource {
-    // the normal equations accumulated in place (no per-source buffers: this runs for every source in every
-    // iteration), row by row in the order weighted least squares would take them
-    let fit = |n: usize, fixed: &Params| -> Option<SolvedSource> {
-        let (mut ata, mut atb, mut rows) = ([0.0; 25], [0.0; 5], 0usize);
-        let mut add = |row: &[f64], y: f64, w: f64| {
-            for a in 0..n {
-                atb[a] += w * row[a] * y;
-                for b in 0..n {
-                    ata[a * n + b] += w * row[a] * row[b];
-                }
-            }
-            rows += 1;
-        };
-        let mut used = 0;
-        for &i in mine.iter().filter(|i| active[**i]) {
-            let o = &obs[i];
-            let g = &exposures[o.exposure];
-            let a = &attitudes[o.exposure];
-            let s = a.invert(g.centre_mas, pos[i]);
-            let weight = (a.p * a.p + a.q * a.q) / (o.sigma_mas * o.sigma_mas);
-            for axis in 0..2 {
-                let full = [
-                    if axis == 0 { 1.0 } else { 0.0 },
-                    if axis == 1 { 1.0 } else { 0.0 },
-                    if axis == 0 { g.t_yr } else { 0.0 },
-                    if axis == 1 { g.t_yr } else { 0.0 },
-                    g.parallax_factor[axis],
-                ];
-                // the parameters this model does not solve are moved to the left-hand side
-                let known: f64 = (n..5).map(|k| full[k] * fixed[k]).sum();
-                add(&full[..n], s[axis] - known, weight);
-            }
-            used += 1;
-        }
-        if let Some(r) = prior {
-            for k in 0..n {
-                if anchors(r.sigma[k]) {
-                    let mut row = [0.0; 5];
-                    row[k] = 1.0;
-                    add(&row[..n], r.params[k], 1.0 / (r.sigma[k] * r.sigma[k]));
-                }
-            }
-        }
-        if rows < n {
-            return None;
-        }
-        let normal = &ata[..n * n];
-        let beta = crate::numerics::linalg::solve(normal, &atb[..n], n)?;
-        let cov = crate::numerics::linalg::inverse(normal, n)?;
-        let mut params = *fixed;
-        let mut sigma = [f64::NAN; 5];
-        for k in 0..n {
-            params[k] = beta[k];
-            sigma[k] = cov[k * n + k].max(0.0).sqrt();
-        }
-        Some(SolvedSource {
-            params,
-            sigma,
-            observations: used,
-            chi2: 0.0,
-        })
-    };
-    let fixed = prior.map_or([0.0; 5], |r| {
-        let mut f = [0.0; 5];
-        f[2..].copy_from_slice(&r.params[2..]);
-        f
-    });
-    // what its epochs can give: five parameters from three epochs or more (clusters of observations more
-    // than EPOCH_GAP_YR apart), position and proper motion from two (the parallax then its reference's, or
-    // 0), position alone from one
-    // in the full model a reference with motions enters as priors on all five, whatever the epochs: its
-    // proper motion and parallax then carry their errors into the reference-epoch position instead of being
-    // taken as exact (the position model takes them as they are: its position is the observations' epoch's,
-    // carried back by them)
-    let priors_on_motion = prior.is_some_and(|r| (2..5).all(|k| anchors(r.sigma[k])));
-    let n = match (model, priors_on_motion) {
-        (SourceModel::Position, _) => 2,
-        (SourceModel::Full, true) => 5,
-        (SourceModel::Full, false) => match epochs(mine, obs, exposures, active) {
-            0 | 1 => 2,
-            2 => 4,
-            _ => 5,
-        },
-    };
-    fit(n, &fixed)
-        .or_else(|| (n > 2).then(|| fit(2, &fixed)).flatten())
-        .unwrap_or_else(unsolved)
-}
-
-/// Observations further apart in time than this belong to different epochs, years (≈ 18 days: a visit's
-/// exposures are hours to days apart, visits months).
-const EPOCH_GAP_YR: f64 = 0.05;
-
-/// How many epochs a source's kept observations span.
-fn epochs(
-    mine: &[usize],
-    obs: &[Observation],
-    exposures: &[ExposureGeometry],
-    active: &[bool],
-) -> usize {
-    let mut t: Vec<f64> = mine
-        .iter()
-        .filter(|i| active[**i])
-        .map(|&i| exposures[obs[i].exposure].t_yr)
-        .collect();
-    if t.is_empty() {
-        return 0;
-    }
-    t.sort_by(f64::total_cmp);
-    1 + t.windows(2).filter(|w| w[1] - w[0] > EPOCH_GAP_YR).count()
-}
-
-/// One exposure's attitude from the sources it sees (those with parameters), by linear least squares in
-/// (p, q, a_ξ, a_η); the lever arms are scaled to order 1 for the conditioning.
-fn attitude_block(
-    pos: &[[f64; 2]],
-    obs: &[Observation],
-    mine: &[usize],
-    g: &ExposureGeometry,
-    params: &[Option<Params>],
-    active: &[bool],
-) -> Option<Attitude> {
-    let mut pairs = Vec::with_capacity(mine.len());
-    for &i in mine.iter().filter(|i| active[**i]) {
-        let o = &obs[i];
-        if let Some(p) = &params[o.source] {
-            let s = g.place(p);
-            pairs.push((
-                [s[0] - g.centre_mas[0], s[1] - g.centre_mas[1]],
-                [pos[i][0] - g.centre_mas[0], pos[i][1] - g.centre_mas[1]],
-                1.0 / (o.sigma_mas * o.sigma_mas),
-            ));
-        }
-    }
-    if pairs.len() < 2 {
-        return None;
-    }
-    let scale = pairs
-        .iter()
-        .map(|(d, _, _)| d[0].abs().max(d[1].abs()))
-        .fold(1.0f64, f64::max);
-    let (mut design, mut y, mut w) = (Vec::new(), Vec::new(), Vec::new());
-    for (d, o, weight) in &pairs {
-        let (dx, dy) = (d[0] / scale, d[1] / scale);
-        design.extend_from_slice(&[dx, -dy, 1.0, 0.0]);
-        y.push(o[0]);
-        w.push(*weight);
-        design.extend_from_slice(&[dy, dx, 0.0, 1.0]);
-        y.push(o[1]);
-        w.push(*weight);
-    }
-    let (beta, _) = weighted_lstsq(&design, &y, &w, 4)?;
-    Some(Attitude {
-        p: beta[0] / scale,
-        q: beta[1] / scale,
-        offset_mas: [beta[2], beta[3]],
-    })
 }
 
 /// Every input checked before anything is solved.
@@ -640,7 +379,13 @@ fn validate(
             return Err(SolutionError::DistortionUnconstrained { spread_mas });
         }
     }
-    let mut seen = std::collections::HashSet::with_capacity(obs.len());
+    if obs.len() > u32::MAX as usize {
+        return Err(SolutionError::Knob {
+            field: "observations (count)",
+            value: obs.len() as f64,
+            allowed: "at most 2³² − 1 in one solution",
+        });
+    }
     let mut observed = vec![0usize; n_sources];
     for (index, o) in obs.iter().enumerate() {
         // the focal-plane position only where a calibration reads it
@@ -695,12 +440,6 @@ fn validate(
                 what: "source",
                 value: o.source,
                 limit: n_sources.saturating_sub(1),
-            });
-        }
-        if !seen.insert((o.exposure, o.source)) {
-            return Err(SolutionError::Duplicate {
-                source_id: o.source,
-                exposure: o.exposure,
             });
         }
         observed[o.source] += 1;

@@ -49,7 +49,7 @@ pub struct BenchArgs {
     /// How the astrometric-solution rows are solved: cg (conjugate gradients, the default) and/or block (the
     /// block iteration), each row once per method.
     #[arg(long, value_enum, default_value = "cg", value_delimiter = ',')]
-    pub solution_methods: Vec<SolutionMethod>,
+    pub solution_methods: Vec<crate::solve_cmd::IterationMethod>,
     /// Detection thresholds of the crowded-analysis rows (part crowded), on the largest field.
     #[arg(long, default_value = "3,5,10", value_delimiter = ',')]
     pub crowded_sigmas: Vec<f64>,
@@ -66,13 +66,6 @@ pub struct BenchArgs {
 pub enum SolutionCalibration {
     Full,
     None,
-}
-
-/// How the solution's benchmark solves.
-#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
-pub enum SolutionMethod {
-    Cg,
-    Block,
 }
 
 /// The parts `--parts` may name.
@@ -186,10 +179,7 @@ pub fn bench(a: &BenchArgs) -> Result<()> {
             },
             &a.solution_methods
                 .iter()
-                .map(|m| match m {
-                    SolutionMethod::Cg => engine::analysis::solution::Method::ConjugateGradient,
-                    SolutionMethod::Block => engine::analysis::solution::Method::Block,
-                })
+                .map(|m| m.method())
                 .collect::<Vec<_>>(),
             cfg.seed,
         )?);

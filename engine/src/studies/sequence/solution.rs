@@ -10,7 +10,7 @@ use super::run::SequenceError;
 use crate::analysis::solution::feed::{
     self, DesignExposure, Detection, Fed, FeedOptions, SkyReference,
 };
-use crate::analysis::solution::{CalibrationModel, Options, Solution, SourceModel};
+use crate::analysis::solution::{CalibrationModel, Method, Options, Solution, SourceModel};
 use crate::config::Config;
 use crate::io::csv::Cell;
 use crate::scoring::solution::{BinScore, TrueSource};
@@ -23,6 +23,8 @@ pub struct SolveSpec {
     pub model: Option<SourceModel>,
     /// The global distortion's order (0 or 2 … 5); None: 3 where the exposures point at ≥ 2 places, else 0.
     pub distortion_order: Option<usize>,
+    /// How the solution iterates (conjugate gradients by default; the block iteration as a reference).
+    pub method: Method,
     pub feed: FeedOptions,
 }
 
@@ -145,6 +147,7 @@ fn options(p: &Products, n: usize, spec: &SolveSpec) -> Options {
     // (each array's own terms are quadratic: the global distortion starts at order 3)
     Options {
         model,
+        method: spec.method,
         calibration: CalibrationModel {
             arrays: 4,
             array_order: 2,
