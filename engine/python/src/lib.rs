@@ -16,6 +16,7 @@ mod experiment;
 mod exposure;
 mod scoring;
 mod session;
+mod solution;
 mod transit;
 
 /// The engine's error as the Python exception a user expects: a bad configuration or argument is a
@@ -61,6 +62,7 @@ fn _jsim(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<session::PyAnalysis>()?;
     m.add_function(wrap_pyfunction!(experiment::experiment, m)?)?;
     m.add_function(wrap_pyfunction!(scoring::score, m)?)?;
+    m.add_function(wrap_pyfunction!(solution::solve, m)?)?;
     m.add_function(wrap_pyfunction!(transit::transit_flux, m)?)?;
     m.add_function(wrap_pyfunction!(transit::box_least_squares, m)?)?;
     m.add_function(wrap_pyfunction!(transit::transit, m)?)?;

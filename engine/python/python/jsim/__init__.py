@@ -35,6 +35,7 @@ from ._jsim import (  # noqa: F401, E402
     __version__,
     box_least_squares,
     score,
+    solve,
     transit,
     transit_flux,
 )
@@ -49,6 +50,7 @@ __all__ = [
     "box_least_squares",
     "experiment",
     "score",
+    "solve",
     "transit",
     "transit_flux",
     "__version__",

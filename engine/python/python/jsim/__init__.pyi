@@ -148,6 +148,24 @@ def score(
     """The scoring step (``jsim score``): completeness, accuracy and false detections per magnitude bin
     of measured x, y (optional flags, array) against a truth x, y, mag (optional array)."""
 
+def solve(
+    observations: Dict[str, npt.ArrayLike],
+    exposures: Dict[str, npt.ArrayLike],
+    references: Dict[str, npt.ArrayLike],
+    *,
+    model: str = "full",
+    method: str = "cg",
+    tolerance_sigma: float = 1e-3,
+    clip_sigma: float = 5.0,
+    max_iterations: int = 500,
+) -> Dict[str, Any]:
+    """The astrometric solution (what ``jsim solve`` runs on a sequence's observations) on one tangent
+    plane, mas: ``observations`` (``exposure, source, xi_mas, eta_mas, sigma_mas``), ``exposures``
+    (``t_yr, parallax_xi, parallax_eta, centre_xi_mas, centre_eta_mas``), ``references`` (``source``,
+    ``xi_mas, eta_mas, pm_xi, pm_eta, parallax`` and their ``sigma_…``). Returns per-source arrays (the five
+    parameters, their ``sigma_…``, ``observations``, ``chi2``), per-exposure attitudes (``p, q,
+    offset_xi_mas, offset_eta_mas``) and ``iterations, converged, rejected, chi2_per_dof``."""
+
 def transit_flux(
     t_days: npt.ArrayLike,
     *,

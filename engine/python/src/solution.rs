@@ -1,0 +1,220 @@
+//! `jsim.solve`: the astrometric solution (`engine::analysis::solution::solve`, what `jsim solve` runs after
+//! reading a sequence's products) on arrays: observations on a tangent plane in, every source's five
+//! parameters and every exposure's attitude out.
+
+use crate::scoring::column;
+use engine::analysis::solution::{
+    ExposureGeometry, Method, Observation, Options, Reference, SourceModel, solve as solve_engine,
+};
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+
+/// Column `name` of dict `d` (`what` names the dict in errors).
+fn need(d: &Bound<'_, PyDict>, what: &str, name: &str) -> PyResult<Vec<f64>> {
+    let v = d
+        .get_item(name)?
+        .ok_or_else(|| PyValueError::new_err(format!("{what}: needs a column {name:?}")))?;
+    column(&v, &format!("{what}[{name:?}]"))
+}
+
+/// A column of indices: each a whole number ≥ 0.
+fn indices(d: &Bound<'_, PyDict>, what: &str, name: &str) -> PyResult<Vec<usize>> {
+    need(d, what, name)?
+        .into_iter()
+        .enumerate()
+        .map(|(k, v)| {
+            if v >= 0.0 && v.fract() == 0.0 && v < u32::MAX as f64 {
+                Ok(v as usize)
+            } else {
+                Err(PyValueError::new_err(format!(
+                    "{what}[{name:?}][{k}] = {v}: allowed a whole number 0 … 2³² − 2"
+                )))
+            }
+        })
+        .collect()
+}
+
+/// Columns that must all have `n` values.
+fn same_length(n: usize, what: &str, cols: &[(&str, usize)]) -> PyResult<()> {
+    for (name, len) in cols {
+        if *len != n {
+            return Err(PyValueError::new_err(format!(
+                "{what}[{name:?}]: {len} values, its first column has {n}"
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// The astrometric solution of observations on one tangent plane (mas): `observations` a dict of 1-D arrays
+/// `exposure, source` (indices), `xi_mas, eta_mas, sigma_mas`; `exposures` one row per exposure: `t_yr`
+/// (years from the reference epoch), `parallax_xi, parallax_eta` (its parallax factors), `centre_xi_mas,
+/// centre_eta_mas` (the point its attitude turns about); `references` the catalogue that fixes the frame:
+/// `source`, `xi_mas, eta_mas, pm_xi, pm_eta, parallax` and their `sigma_…` (0 or inf leaves one free).
+/// `model`: "full" (five parameters) or "position"; `method`: "cg" (conjugate gradients, the default) or
+/// "block". Returns a dict of arrays per source (`xi_mas, eta_mas, pm_xi, pm_eta, parallax`, `sigma_…`,
+/// `observations`, `chi2`), per exposure (`p, q, offset_xi_mas, offset_eta_mas`: `o = c + [[p, −q], [q, p]]
+/// (s − c) + offset`) and `iterations, converged, rejected, chi2_per_dof`. Bad input is a `ValueError`
+/// naming the field.
+#[pyfunction]
+#[pyo3(signature = (observations, exposures, references, *, model = "full", method = "cg", tolerance_sigma = 1e-3, clip_sigma = 5.0, max_iterations = 500))]
+#[allow(clippy::too_many_arguments)]
+pub fn solve<'py>(
+    py: Python<'py>,
+    observations: &Bound<'py, PyDict>,
+    exposures: &Bound<'py, PyDict>,
+    references: &Bound<'py, PyDict>,
+    model: &str,
+    method: &str,
+    tolerance_sigma: f64,
+    clip_sigma: f64,
+    max_iterations: usize,
+) -> PyResult<Bound<'py, PyDict>> {
+    let model = match model {
+        "full" => SourceModel::Full,
+        "position" => SourceModel::Position,
+        m => {
+            return Err(PyValueError::new_err(format!(
+                "model = {m:?}: allowed \"full\" or \"position\""
+            )));
+        }
+    };
+    let method = match method {
+        "cg" => Method::ConjugateGradient,
+        "block" => Method::Block,
+        m => {
+            return Err(PyValueError::new_err(format!(
+                "method = {m:?}: allowed \"cg\" or \"block\""
+            )));
+        }
+    };
+    let o = "observations";
+    let (oe, os) = (
+        indices(observations, o, "exposure")?,
+        indices(observations, o, "source")?,
+    );
+    let (ox, oy, osig) = (
+        need(observations, o, "xi_mas")?,
+        need(observations, o, "eta_mas")?,
+        need(observations, o, "sigma_mas")?,
+    );
+    same_length(
+        oe.len(),
+        o,
+        &[
+            ("source", os.len()),
+            ("xi_mas", ox.len()),
+            ("eta_mas", oy.len()),
+            ("sigma_mas", osig.len()),
+        ],
+    )?;
+    let obs: Vec<Observation> = (0..oe.len())
+        .map(|k| Observation {
+            exposure: oe[k],
+            source: os[k],
+            xi_mas: ox[k],
+            eta_mas: oy[k],
+            sigma_mas: osig[k],
+            array: 0,
+            focal_px: [0.0, 0.0],
+        })
+        .collect();
+    let e = "exposures";
+    let t = need(exposures, e, "t_yr")?;
+    let cols: Vec<Vec<f64>> = [
+        "parallax_xi",
+        "parallax_eta",
+        "centre_xi_mas",
+        "centre_eta_mas",
+    ]
+    .iter()
+    .map(|n| need(exposures, e, n))
+    .collect::<PyResult<_>>()?;
+    same_length(
+        t.len(),
+        e,
+        &[
+            ("parallax_xi", cols[0].len()),
+            ("parallax_eta", cols[1].len()),
+            ("centre_xi_mas", cols[2].len()),
+            ("centre_eta_mas", cols[3].len()),
+        ],
+    )?;
+    let geometry: Vec<ExposureGeometry> = (0..t.len())
+        .map(|k| ExposureGeometry {
+            t_yr: t[k],
+            parallax_factor: [cols[0][k], cols[1][k]],
+            centre_mas: [cols[2][k], cols[3][k]],
+            to_plane: [1.0, 0.0, 0.0, 1.0],
+        })
+        .collect();
+    let r = "references";
+    let rs = indices(references, r, "source")?;
+    const PARAMS: [&str; 5] = ["xi_mas", "eta_mas", "pm_xi", "pm_eta", "parallax"];
+    let values: Vec<Vec<f64>> = PARAMS
+        .iter()
+        .map(|n| need(references, r, n))
+        .collect::<PyResult<_>>()?;
+    let sigmas: Vec<Vec<f64>> = PARAMS
+        .iter()
+        .map(|n| need(references, r, &format!("sigma_{n}")))
+        .collect::<PyResult<_>>()?;
+    for (n, v) in PARAMS.iter().zip(&values) {
+        same_length(rs.len(), r, &[(n, v.len())])?;
+    }
+    for (n, v) in PARAMS.iter().zip(&sigmas) {
+        same_length(rs.len(), r, &[(&format!("sigma_{n}"), v.len())])?;
+    }
+    let refs: Vec<Reference> = (0..rs.len())
+        .map(|k| Reference {
+            source: rs[k],
+            params: std::array::from_fn(|j| values[j][k]),
+            sigma: std::array::from_fn(|j| sigmas[j][k]),
+        })
+        .collect();
+    let n_sources = os.iter().chain(&rs).map(|s| s + 1).max().unwrap_or(0);
+    let opt = Options {
+        model,
+        method,
+        tolerance_sigma,
+        clip_sigma,
+        max_iterations,
+        ..Options::default()
+    };
+    let sol = py
+        .detach(|| solve_engine(&obs, &geometry, &refs, n_sources, &opt))
+        .map_err(|e| PyValueError::new_err(e.to_string()))?;
+    let d = PyDict::new(py);
+    let vector = |v: Vec<f64>| crate::convert::vector(py, v);
+    for (j, n) in PARAMS.iter().enumerate() {
+        d.set_item(
+            *n,
+            vector(sol.sources.iter().map(|s| s.params[j]).collect()),
+        )?;
+        d.set_item(
+            format!("sigma_{n}"),
+            vector(sol.sources.iter().map(|s| s.sigma[j]).collect()),
+        )?;
+    }
+    d.set_item(
+        "observations",
+        vector(sol.sources.iter().map(|s| s.observations as f64).collect()),
+    )?;
+    d.set_item("chi2", vector(sol.sources.iter().map(|s| s.chi2).collect()))?;
+    d.set_item("p", vector(sol.attitudes.iter().map(|a| a.p).collect()))?;
+    d.set_item("q", vector(sol.attitudes.iter().map(|a| a.q).collect()))?;
+    d.set_item(
+        "offset_xi_mas",
+        vector(sol.attitudes.iter().map(|a| a.offset_mas[0]).collect()),
+    )?;
+    d.set_item(
+        "offset_eta_mas",
+        vector(sol.attitudes.iter().map(|a| a.offset_mas[1]).collect()),
+    )?;
+    d.set_item("iterations", sol.iterations)?;
+    d.set_item("converged", sol.converged)?;
+    d.set_item("rejected", sol.rejected)?;
+    d.set_item("chi2_per_dof", sol.chi2_per_dof)?;
+    Ok(d)
+}
