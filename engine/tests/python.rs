@@ -16,8 +16,9 @@ use std::process::Command;
 /// What the suite needs: the build tool, the test runner, numpy and astropy for the module's tests, batman
 /// (the transit model's outside reference, GPL-3: used by the tests only, never linked), and matplotlib and
 /// photutils for the docs' example and benchmark scripts (`test_docs_commands.py` runs them), and
-/// astroscrappy (L.A.Cosmic: the outside reference of the single-exposure cosmic-ray detection).
-const PACKAGES: [&str; 8] = [
+/// astroscrappy (L.A.Cosmic: the outside reference of the single-exposure cosmic-ray detection), and scipy
+/// (its least squares: the astrometric solution's outside reference).
+const PACKAGES: [&str; 9] = [
     "maturin>=1.9,<2",
     "numpy>=1.21",
     "pytest>=7",
@@ -26,6 +27,7 @@ const PACKAGES: [&str; 8] = [
     "photutils>=1.9",
     "batman-package>=2.4",
     "astroscrappy>=1.1",
+    "scipy>=1.7",
 ];
 
 fn run(cmd: &mut Command, what: &str) {
@@ -78,7 +80,7 @@ fn the_python_module_passes_its_pytest_suite() {
     let have_all = Command::new(&vpython)
         .args([
             "-c",
-            "import maturin, numpy, pytest, astropy, matplotlib, photutils, batman, astroscrappy",
+            "import maturin, numpy, pytest, astropy, matplotlib, photutils, batman, astroscrappy, scipy",
         ])
         .output()
         .is_ok_and(|o| o.status.success());

@@ -14,6 +14,7 @@ pub mod convolve;
 pub mod cpu;
 pub mod exact_core;
 pub mod gpu;
+pub mod histogram;
 pub mod kernel;
 pub mod own_samples;
 pub mod track;
