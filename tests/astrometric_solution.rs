@@ -27,6 +27,14 @@ fn sequence(n: usize, obs_sigma_mas: f64, ref_sigma: Params, seed: u64) -> Synth
     })
 }
 
+/// The position-only model with the default knobs.
+fn pos_only() -> Options {
+    Options {
+        model: SourceModel::Position,
+        ..Options::default()
+    }
+}
+
 /// Every solved parameter within `tol` (mas, mas/yr) of the truth.
 fn assert_sources_within(sol: &Solution, truth: &[Params], tol: f64) {
     for (s, truth) in sol.sources.iter().zip(truth) {
@@ -172,8 +180,25 @@ fn bad_input_is_named() {
     for (k, o) in lonely.iter_mut().rev().take(5).enumerate() {
         o.source = 200 + k;
     }
-    let e = solve(&lonely, &ex, &t.refs, n, &opt).err();
-    assert!(matches!(e, Some(SolutionError::NoOverlap(36))), "{e:?}");
+    // … it is left out and reported, its attitude undetermined, its sources unsolved; the rest is solved
+    let sol = solve(&lonely, &ex, &t.refs, n, &opt).expect("the rest solved");
+    assert_eq!(sol.skipped_exposures, vec![36]);
+    assert!(sol.attitudes[36].p.is_nan() && sol.attitudes[36].offset_mas[0].is_nan());
+    assert!(sol.sources[200..].iter().all(|s| s.params[0].is_nan()));
+    assert!(sol.sources[..200].iter().all(|s| s.params[0].is_finite()));
+    let alone = solve(&t.obs, &t.exposures, &t.refs, 200, &opt).expect("without it");
+    assert_eq!(sol.sources[..200], alone.sources[..]);
+    // with no exposure tied to another or to the catalogue (every source seen once, no reference seen)
+    // nothing can be solved: a named error
+    let once: Vec<Observation> = (0..4)
+        .map(|k| Observation {
+            exposure: k / 2,
+            source: 10 + k,
+            ..t.obs[0]
+        })
+        .collect();
+    let e = solve(&once, &t.exposures[..2], &t.refs, 200, &pos_only()).err();
+    assert!(matches!(e, Some(SolutionError::NoOverlap(2))), "{e:?}");
     // one epoch cannot give motions
     let first: Vec<Observation> = t.obs.iter().filter(|o| o.exposure == 0).copied().collect();
     let e = run(&first, &t.exposures[..1], &t.refs, &opt);

@@ -55,7 +55,8 @@ fn same_length(n: usize, what: &str, cols: &[(&str, usize)]) -> PyResult<()> {
 /// `model`: "full" (five parameters) or "position"; `method`: "cg" (conjugate gradients, the default) or
 /// "block". Returns a dict of arrays per source (`xi_mas, eta_mas, pm_xi, pm_eta, parallax`, `sigma_…`,
 /// `observations`, `chi2`), per exposure (`p, q, offset_xi_mas, offset_eta_mas`: `o = c + [[p, −q], [q, p]]
-/// (s − c) + offset`) and `iterations, converged, rejected, chi2_per_dof`. Bad input is a `ValueError`
+/// (s − c) + offset`; NaN for an exposure left out, listed in `skipped_exposures`) and `iterations, converged,
+/// rejected, chi2_per_dof`. Bad input is a `ValueError`
 /// naming the field.
 #[pyfunction]
 #[pyo3(signature = (observations, exposures, references, *, model = "full", method = "cg", tolerance_sigma = 1e-3, clip_sigma = 5.0, max_iterations = 500))]
@@ -212,6 +213,7 @@ pub fn solve<'py>(
         "offset_eta_mas",
         vector(sol.attitudes.iter().map(|a| a.offset_mas[1]).collect()),
     )?;
+    d.set_item("skipped_exposures", sol.skipped_exposures)?;
     d.set_item("iterations", sol.iterations)?;
     d.set_item("converged", sol.converged)?;
     d.set_item("rejected", sol.rejected)?;

@@ -164,7 +164,8 @@ def solve(
     (``t_yr, parallax_xi, parallax_eta, centre_xi_mas, centre_eta_mas``), ``references`` (``source``,
     ``xi_mas, eta_mas, pm_xi, pm_eta, parallax`` and their ``sigma_…``). Returns per-source arrays (the five
     parameters, their ``sigma_…``, ``observations``, ``chi2``), per-exposure attitudes (``p, q,
-    offset_xi_mas, offset_eta_mas``) and ``iterations, converged, rejected, chi2_per_dof``."""
+    offset_xi_mas, offset_eta_mas``; NaN for an exposure left out, listed in ``skipped_exposures``) and
+    ``iterations, converged, rejected, chi2_per_dof``."""
 
 def transit_flux(
     t_days: npt.ArrayLike,

@@ -236,7 +236,11 @@ pub struct SolvedSource {
 #[derive(Debug, Clone, PartialEq)]
 pub struct Solution {
     pub sources: Vec<SolvedSource>,
+    /// Each exposure's attitude (NaN for one left out).
     pub attitudes: Vec<Attitude>,
+    /// Exposures left out, in rising order: each saw fewer than two sources tied to the reference catalogue
+    /// or to another exposure (none at all, say), so its attitude is undetermined.
+    pub skipped_exposures: Vec<usize>,
     /// The calibration solved (zero when none was asked).
     pub calibration: Calibration,
     /// Block alternations over all rounds.
@@ -269,8 +273,8 @@ pub enum SolutionError {
     #[error("source {source_id} is observed twice in exposure {exposure} (duplicate ids)")]
     Duplicate { source_id: usize, exposure: usize },
     #[error(
-        "exposure {0} shares fewer than 2 sources with the rest of the sequence and the reference catalogue: its \
-         attitude is undetermined (no overlap)"
+        "no exposure shares 2 sources with the rest of the sequence and the reference catalogue ({0} \
+         exposures): no attitude is determined (no overlap)"
     )]
     NoOverlap(usize),
     #[error("{0} reference sources anchor the frame: at least 2 are needed")]

@@ -25,6 +25,7 @@ pub fn solve(
     opt: &Options,
 ) -> Result<Solution, SolutionError> {
     validate(obs, exposures, refs, n_sources, opt)?;
+    let skipped = unlinked_exposures(obs, exposures.len(), refs, n_sources)?;
     let by_source = Groups::new(n_sources, obs.len(), |i| obs[i].source);
     let by_exposure = Groups::new(exposures.len(), obs.len(), |i| obs[i].exposure);
     no_duplicates(obs, &by_source)?;
@@ -32,7 +33,11 @@ pub fn solve(
     for r in refs {
         prior[r.source] = Some(r);
     }
-    let mut active = vec![true; obs.len()];
+    // an exposure tied to nothing else is reported and left out: its observations are not used
+    let mut active: Vec<bool> = obs
+        .iter()
+        .map(|o| skipped.binary_search(&o.exposure).is_err())
+        .collect();
     // start: every exposure's attitude from the reference sources alone (the frame right from the start),
     // then, with a calibration, the instrument's from them too, and the attitudes again
     let ref_params: Vec<Option<Params>> = prior.iter().map(|r| r.map(|r| r.params)).collect();
@@ -135,12 +140,23 @@ pub fn solve(
         .iter()
         .map(|r| r.sigma.iter().filter(|s| anchors(**s)).count())
         .sum();
-    let unknowns = n_sources * opt.model.len() + 4 * exposures.len() + opt.calibration.unknowns();
+    let unknowns = n_sources * opt.model.len()
+        + 4 * (exposures.len() - skipped.len())
+        + opt.calibration.unknowns();
+    // a left-out exposure has no attitude
+    for &e in &skipped {
+        state.attitudes[e] = Attitude {
+            p: f64::NAN,
+            q: f64::NAN,
+            offset_mas: [f64::NAN; 2],
+        };
+    }
     // no degree of freedom left: no χ² to report
     let dof = (n_terms + priors).saturating_sub(unknowns);
     Ok(Solution {
         sources: state.sources,
         attitudes: state.attitudes,
+        skipped_exposures: skipped,
         calibration: state.cal,
         iterations,
         converged,
@@ -299,6 +315,49 @@ fn block_iterate(
     Ok((opt.max_iterations.max(1), false))
 }
 
+/// The exposures that see fewer than two sources tied to something beyond them (the reference catalogue, or
+/// another exposure), in rising order: their attitudes are undetermined, so they are reported and left out —
+/// and with them what only they tied, until nothing changes. Every exposure unlinked is an error.
+fn unlinked_exposures(
+    obs: &[Observation],
+    n_exposures: usize,
+    refs: &[Reference],
+    n_sources: usize,
+) -> Result<Vec<usize>, SolutionError> {
+    let mut anchored = vec![false; n_sources];
+    for r in refs {
+        if r.source < n_sources && anchors(r.sigma[0]) && anchors(r.sigma[1]) {
+            anchored[r.source] = true;
+        }
+    }
+    let mut skipped = vec![false; n_exposures];
+    loop {
+        let mut seen = vec![0usize; n_sources];
+        for o in obs.iter().filter(|o| !skipped[o.exposure]) {
+            seen[o.source] += 1;
+        }
+        let mut tied = vec![0usize; n_exposures];
+        for o in obs.iter().filter(|o| !skipped[o.exposure]) {
+            if anchored[o.source] || seen[o.source] >= 2 {
+                tied[o.exposure] += 1;
+            }
+        }
+        let newly: Vec<usize> = (0..n_exposures)
+            .filter(|e| !skipped[*e] && tied[*e] < 2)
+            .collect();
+        if newly.is_empty() {
+            break;
+        }
+        for e in newly {
+            skipped[e] = true;
+        }
+    }
+    if n_exposures > 0 && skipped.iter().all(|s| *s) {
+        return Err(SolutionError::NoOverlap(n_exposures));
+    }
+    Ok((0..n_exposures).filter(|e| skipped[*e]).collect())
+}
+
 /// Every input checked before anything is solved.
 fn validate(
     obs: &[Observation],
@@ -386,7 +445,6 @@ fn validate(
             allowed: "at most 2³² − 1 in one solution",
         });
     }
-    let mut observed = vec![0usize; n_sources];
     for (index, o) in obs.iter().enumerate() {
         // the focal-plane position only where a calibration reads it
         let focal: &[(&'static str, f64)] = if cm.solves() {
@@ -442,7 +500,6 @@ fn validate(
                 limit: n_sources.saturating_sub(1),
             });
         }
-        observed[o.source] += 1;
     }
     let anchored: Vec<bool> = {
         let mut a = vec![false; n_sources];
@@ -456,16 +513,6 @@ fn validate(
     let n_anchored = anchored.iter().filter(|a| **a).count();
     if n_anchored < 2 {
         return Err(SolutionError::TooFewReferences(n_anchored));
-    }
-    // each exposure must see ≥ 2 sources tied to something beyond it
-    let mut tied = vec![0usize; exposures.len()];
-    for o in obs {
-        if anchored[o.source] || observed[o.source] >= 2 {
-            tied[o.exposure] += 1;
-        }
-    }
-    if let Some(e) = tied.iter().position(|n| *n < 2) {
-        return Err(SolutionError::NoOverlap(e));
     }
     if opt.model == SourceModel::Full {
         let (lo, hi) = exposures

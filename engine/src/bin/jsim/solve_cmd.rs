@@ -164,6 +164,14 @@ pub fn solve(a: &SolveArgs) -> Result<()> {
             sol.rejected,
             sol.chi2_per_dof
         );
+        if !sol.skipped_exposures.is_empty() {
+            eprintln!(
+                "  {} exposure(s) left out, tied to nothing else (fewer than 2 sources shared with the rest and \
+                 the reference catalogue): {:?}",
+                sol.skipped_exposures.len(),
+                sol.skipped_exposures
+            );
+        }
         for (b, s) in bins.iter().zip(&single) {
             if b.sources > 0 {
                 eprintln!(
@@ -206,6 +214,7 @@ pub fn solve(a: &SolveArgs) -> Result<()> {
             "iterations": sol.iterations,
             "converged": sol.converged,
             "rejected": sol.rejected,
+            "skipped_exposures": sol.skipped_exposures,
             "chi2_per_dof": sol.chi2_per_dof,
             "solve_s": solve_s,
         }));
