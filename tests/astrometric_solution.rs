@@ -183,6 +183,8 @@ fn bad_input_is_named() {
     // … it is left out and reported, its attitude undetermined, its sources unsolved; the rest is solved
     let sol = solve(&lonely, &ex, &t.refs, n, &opt).expect("the rest solved");
     assert_eq!(sol.skipped_exposures, vec![36]);
+    // its observations are left out, not rejected as outliers (and never brought back by the rejection)
+    assert_eq!(sol.rejected, 0);
     assert!(sol.attitudes[36].p.is_nan() && sol.attitudes[36].offset_mas[0].is_nan());
     assert!(sol.sources[200..].iter().all(|s| s.params[0].is_nan()));
     assert!(sol.sources[..200].iter().all(|s| s.params[0].is_finite()));

@@ -34,10 +34,11 @@ pub fn solve(
         prior[r.source] = Some(r);
     }
     // an exposure tied to nothing else is reported and left out: its observations are not used
-    let mut active: Vec<bool> = obs
-        .iter()
-        .map(|o| skipped.binary_search(&o.exposure).is_err())
-        .collect();
+    let mut left_out = vec![false; exposures.len()];
+    for &e in &skipped {
+        left_out[e] = true;
+    }
+    let mut active: Vec<bool> = obs.iter().map(|o| !left_out[o.exposure]).collect();
     // start: every exposure's attitude from the reference sources alone (the frame right from the start),
     // then, with a calibration, the instrument's from them too, and the attitudes again
     let ref_params: Vec<Option<Params>> = prior.iter().map(|r| r.map(|r| r.params)).collect();
@@ -111,7 +112,8 @@ pub fn solve(
         if opt.clip_sigma <= 0.0 {
             break;
         }
-        let (changed, now_rejected) = reject(&problem, &state, &mut active, opt.clip_sigma);
+        let (changed, now_rejected) =
+            reject(&problem, &state, &mut active, &left_out, opt.clip_sigma);
         rejected = now_rejected;
         if changed == 0 {
             break;
@@ -171,11 +173,21 @@ pub fn solve(
 
 /// One round of rejection: each source's worst kept observation beyond `clip` σ goes (one per round: an
 /// outlier drags its source, and with it the residuals of the source's good observations), and a rejected
-/// one that now fits returns. Returns the observations that changed and those now rejected.
-fn reject(p: &Problem, state: &State, active: &mut [bool], clip: f64) -> (usize, usize) {
+/// one that now fits returns. The observations of a left-out exposure (`left_out`) are neither: they stay out.
+/// Returns the observations that changed and those now rejected.
+fn reject(
+    p: &Problem,
+    state: &State,
+    active: &mut [bool],
+    left_out: &[bool],
+    clip: f64,
+) -> (usize, usize) {
     let mut worst: Vec<Option<(usize, f64)>> = vec![None; p.by_source.len()];
     let mut changed = 0;
     for (i, o) in p.obs.iter().enumerate() {
+        if left_out[o.exposure] {
+            continue;
+        }
         let Some((rx, ry)) = residual(
             p.place_at(&state.cal, i),
             &p.exposures[o.exposure],
@@ -198,7 +210,13 @@ fn reject(p: &Problem, state: &State, active: &mut [bool], clip: f64) -> (usize,
         active[i] = false;
         changed += 1;
     }
-    (changed, active.iter().filter(|a| !**a).count())
+    let rejected = p
+        .obs
+        .iter()
+        .zip(active.iter())
+        .filter(|(o, on)| !**on && !left_out[o.exposure])
+        .count();
+    (changed, rejected)
 }
 
 /// A source seen twice by one exposure is a named error (each source's exposures sorted: no hash set of
