@@ -389,8 +389,6 @@ pub(super) fn fit_with_attitudes(
                 [m[0] * d[0] + m[1] * d[1], m[2] * d[0] + m[3] * d[1]]
             };
             let mut phi: Vec<(usize, f64)> = Vec::with_capacity(terms.len() + mono.len());
-            let max_order = model.distortion_order.max(model.array_order);
-            let (mut upow, mut vpow) = (vec![1.0; max_order + 1], vec![1.0; max_order + 1]);
             // C's x block (the y block is the same: one φ, one weight per observation), upper triangle
             let mut cx = vec![0.0; n * n];
             for i in mine.iter().map(|i| *i as usize).filter(|i| active[*i]) {
@@ -400,25 +398,7 @@ pub(super) fn fit_with_attitudes(
                 // σ in px: the plane's mas per px is √|det M|
                 let w = det / (o.sigma_mas * o.sigma_mas);
                 let (y, sp) = (to_focal([o.xi_mas, o.eta_mas]), to_focal(place));
-                let (u, v) = (o.focal_px[0] / norm_px, o.focal_px[1] / norm_px);
-                for k in 1..=max_order {
-                    upow[k] = upow[k - 1] * u;
-                    vpow[k] = vpow[k - 1] * v;
-                }
-                phi.clear();
-                let k = terms.len() * o.array;
-                phi.extend(
-                    terms
-                        .iter()
-                        .enumerate()
-                        .map(|(j, (p, q))| (k + j, upow[*p as usize] * vpow[*q as usize])),
-                );
-                let base = terms.len() * model.arrays;
-                phi.extend(
-                    mono.iter()
-                        .enumerate()
-                        .map(|(j, (p, q))| (base + j, upow[*p as usize] * vpow[*q as usize])),
-                );
+                model.terms_at(o.array, o.focal_px, norm_px, &mut phi);
                 // x: p′ s′x − q′ s′y + a′x + Σ cx φ;  y: q′ s′x + p′ s′y + a′y + Σ cy φ
                 for axis in 0..2 {
                     let att = if axis == 0 {

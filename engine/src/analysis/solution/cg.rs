@@ -97,7 +97,7 @@ fn pcg(
 ) -> (Vec<f64>, usize, bool) {
     let mut x = vec![0.0; b.len()];
     let mut r = b.to_vec();
-    let mut z = pre.apply(&r);
+    let mut z = pre.apply(lin, &r);
     let mut d = z.clone();
     let mut rz = dot(&r, &z);
     let mut steps = 0;
@@ -124,7 +124,7 @@ fn pcg(
         if step <= tol {
             return (x, steps, true);
         }
-        z = pre.apply(&r);
+        z = pre.apply(lin, &r);
         let rz_new = dot(&r, &z);
         let beta = rz_new / rz;
         rz = rz_new;
@@ -533,12 +533,8 @@ impl<'a> Linear<'a> {
         }
         Ok(Preconditioner {
             sources,
-            dims: self.dims.clone(),
-            src_off: self.src_off.clone(),
             exposures,
-            att_off: self.att_off,
             cal: cal_inv,
-            cal_off: self.cal_off,
             sigma,
         })
     }
@@ -589,18 +585,14 @@ fn add_into_slice(a: &mut [f64], b: &[f64]) {
 /// The preconditioner's blocks (inverted) and the formal error of every unknown.
 struct Preconditioner {
     sources: Vec<Vec<f64>>,
-    dims: Vec<usize>,
-    src_off: Vec<usize>,
     exposures: Vec<[f64; 16]>,
-    att_off: usize,
     cal: Vec<f64>,
-    cal_off: usize,
     sigma: Vec<f64>,
 }
 
 impl Preconditioner {
-    /// `M⁻¹ r`, block by block.
-    fn apply(&self, r: &[f64]) -> Vec<f64> {
+    /// `M⁻¹ r`, block by block (the unknowns laid out as `lin` lays them).
+    fn apply(&self, lin: &Linear, r: &[f64]) -> Vec<f64> {
         let mut z = vec![0.0; r.len()];
         let mul = |inv: &[f64], n: usize, o: usize, z: &mut [f64]| {
             for a in 0..n {
@@ -608,14 +600,14 @@ impl Preconditioner {
             }
         };
         for (s, inv) in self.sources.iter().enumerate() {
-            mul(inv, self.dims[s], self.src_off[s], &mut z);
+            mul(inv, lin.dims[s], lin.src_off[s], &mut z);
         }
         for (e, inv) in self.exposures.iter().enumerate() {
-            mul(inv, 4, self.att_off + 4 * e, &mut z);
+            mul(inv, 4, lin.att_off + 4 * e, &mut z);
         }
-        let n2 = r.len() - self.cal_off;
+        let n2 = r.len() - lin.cal_off;
         if n2 > 0 {
-            mul(&self.cal, n2, self.cal_off, &mut z);
+            mul(&self.cal, n2, lin.cal_off, &mut z);
         }
         z
     }
