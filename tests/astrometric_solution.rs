@@ -7,7 +7,7 @@
 
 use engine::analysis::solution::{
     CalibrationModel, ExposureGeometry, Method, Observation, Options, Params, Reference, Solution,
-    SolutionError, SourceModel, solve,
+    SolutionError, SourceModel, solve, solve_on,
 };
 use engine::studies::bench_solution::CALIBRATED;
 use engine::studies::bench_solution::{Synthetic, SyntheticSpec, synthetic};
@@ -468,4 +468,47 @@ fn one_thread_and_two_give_the_same_solution_bit_for_bit() {
     let (one, two) = (with(1), with(2));
     assert_eq!(one, two);
     assert!(one.converged);
+}
+
+/// The distributed solution (each rank solving its own sky tiles, the rest reduced along one fixed tree)
+/// gives one process's solution bit for bit, on 2 and 4 ranks — here threads talking over channels, as MPI
+/// ranks do (the MPI build's own test, `engine/tests/mpi.rs`, runs `mpirun`).
+#[test]
+fn two_and_four_ranks_give_one_process_solution_bit_for_bit() {
+    let t = noisy_calibrated(600, 3, 12);
+    let opt = Options {
+        calibration: CALIBRATED,
+        ..Options::default()
+    };
+    let one = solve(&t.obs, &t.exposures, &t.refs, 600, &opt).expect("solved");
+    assert!(one.converged && one.iterations > 20, "{}", one.iterations);
+    for size in [2, 4] {
+        let all: Vec<Solution> = std::thread::scope(|s| {
+            let handles: Vec<_> = engine::testkit::thread_ranks(size)
+                .into_iter()
+                .map(|r| {
+                    let (t, opt) = (&t, &opt);
+                    s.spawn(move || solve_on(&t.obs, &t.exposures, &t.refs, 600, opt, &r))
+                })
+                .collect();
+            handles
+                .into_iter()
+                .map(|h| h.join().expect("a rank").expect("solved"))
+                .collect()
+        });
+        for (rank, got) in all.iter().enumerate() {
+            assert_eq!(got, &one, "rank {rank} of {size}");
+        }
+    }
+    // three ranks (not a power of two) and the block iteration on two are named errors
+    let three = engine::testkit::thread_ranks(3);
+    let e = solve_on(&t.obs, &t.exposures, &t.refs, 600, &opt, &three[0]).expect_err("refused");
+    assert!(e.to_string().contains("ranks"), "{e}");
+    let two = engine::testkit::thread_ranks(2);
+    let block = Options {
+        method: Method::Block,
+        ..opt
+    };
+    let e = solve_on(&t.obs, &t.exposures, &t.refs, 600, &block, &two[0]).expect_err("refused");
+    assert!(e.to_string().contains("block"), "{e}");
 }

@@ -167,3 +167,84 @@ pub fn erf(x: f64) -> f64 {
             * (-x * x).exp();
     y.copysign(x)
 }
+
+/// Ranks of a solution as threads of this process, talking over channels with MPI's semantics (the
+/// distributed solution's tests without MPI): start one thread per element, each calling
+/// `solve_on(…, &ranks[r])`.
+pub fn thread_ranks(size: usize) -> Vec<ThreadRanks> {
+    use std::sync::mpsc::channel;
+    // to[a][b] sends from a to b; from[b][a] receives it
+    let mut to: Vec<Vec<Sender<Vec<f64>>>> = vec![Vec::new(); size];
+    let mut from: Vec<Vec<Option<Receiver<Vec<f64>>>>> = (0..size)
+        .map(|_| (0..size).map(|_| None).collect())
+        .collect();
+    for (a, row) in to.iter_mut().enumerate() {
+        for inbox in from.iter_mut() {
+            let (tx, rx) = channel();
+            row.push(tx);
+            inbox[a] = Some(rx);
+        }
+    }
+    to.into_iter()
+        .zip(from)
+        .enumerate()
+        .map(|(rank, (to, from))| ThreadRanks {
+            rank,
+            size,
+            to,
+            from: from.into_iter().flatten().map(Mutex::new).collect(),
+        })
+        .collect()
+}
+
+use std::sync::Mutex;
+use std::sync::mpsc::{Receiver, Sender};
+
+/// One of [`thread_ranks`].
+pub struct ThreadRanks {
+    rank: usize,
+    size: usize,
+    to: Vec<Sender<Vec<f64>>>,
+    from: Vec<Mutex<Receiver<Vec<f64>>>>,
+}
+
+impl ThreadRanks {
+    fn recv(&self, from: usize) -> Vec<f64> {
+        match self.from[from].lock().map(|rx| rx.recv()) {
+            Ok(Ok(v)) => v,
+            _ => panic!("rank {from} hung up on rank {}", self.rank),
+        }
+    }
+
+    fn send(&self, to: usize, v: &[f64]) {
+        if self.to[to].send(v.to_vec()).is_err() {
+            panic!("rank {to} hung up on rank {}", self.rank);
+        }
+    }
+}
+
+impl crate::analysis::solution::Ranks for ThreadRanks {
+    fn rank(&self) -> usize {
+        self.rank
+    }
+    fn size(&self) -> usize {
+        self.size
+    }
+    fn exchange(&self, partner: usize, mine: &[f64]) -> Vec<f64> {
+        self.send(partner, mine);
+        self.recv(partner)
+    }
+    fn max_in_place(&self, v: &mut [f64]) {
+        for theirs in self.gather_all(v) {
+            for (a, b) in v.iter_mut().zip(theirs) {
+                *a = a.max(b);
+            }
+        }
+    }
+    fn gather_all(&self, mine: &[f64]) -> Vec<Vec<f64>> {
+        for r in 0..self.size {
+            self.send(r, mine);
+        }
+        (0..self.size).map(|r| self.recv(r)).collect()
+    }
+}

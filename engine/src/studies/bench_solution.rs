@@ -260,6 +260,78 @@ pub fn solution_scaling(
     methods: &[Method],
     seed: u64,
 ) -> Result<Vec<BenchRow>, BenchError> {
+    check_sizes(counts, exposures)?;
+    let mut rows = Vec::new();
+    for &n in counts {
+        for &e in exposures {
+            for &m in methods {
+                rows.push(one_row(n, e, calibration, m, seed)?);
+            }
+        }
+    }
+    Ok(rows)
+}
+
+/// A synthetic sequence solved: the draw, its solution, the solution's time (s), the positions' rms error
+/// over their rms σ and their rms error (mas) against the draw's truth.
+pub struct SyntheticRun {
+    pub syn: Synthetic,
+    pub sol: crate::analysis::solution::Solution,
+    pub time_s: f64,
+    pub error_over_sigma: f64,
+    pub rms_mas: f64,
+}
+
+/// Draw the benchmark's synthetic sequence of `n` sources × `n_exposures` (a multiple of 25) with the
+/// calibration `calibration` and solve it by `method` (on this thread's ranks: [`crate::analysis::solution::ranks::world`]).
+pub fn solve_synthetic(
+    n: usize,
+    n_exposures: usize,
+    calibration: CalibrationModel,
+    method: Method,
+    seed: u64,
+) -> Result<SyntheticRun, BenchError> {
+    check_sizes(&[n], &[n_exposures])?;
+    let syn = synthetic(&SyntheticSpec {
+        epochs: n_exposures / 25,
+        calibration,
+        ..SyntheticSpec::bench(n, seed)
+    });
+    let options = Options {
+        calibration,
+        method,
+        // the block iteration's cap as the benchmark has always run it; the gradients stop at their
+        // criterion well before theirs
+        max_iterations: if method == Method::Block { 500 } else { 5000 },
+        ..Options::default()
+    };
+    let t0 = Instant::now();
+    let sol = solve(&syn.obs, &syn.exposures, &syn.refs, n, &options)?;
+    let time_s = t0.elapsed().as_secs_f64();
+    let (mut err2, mut sig2, mut m) = (0.0, 0.0, 0usize);
+    for (s, p) in sol.sources.iter().zip(&syn.params) {
+        if s.params[0].is_finite() && s.observations > 0 {
+            err2 += (s.params[0] - p[0]).powi(2) + (s.params[1] - p[1]).powi(2);
+            sig2 += s.sigma[0].powi(2) + s.sigma[1].powi(2);
+            m += 1;
+        }
+    }
+    // no source solved: nothing to report
+    let (error_over_sigma, rms_mas) = if m > 0 {
+        ((err2 / sig2).sqrt(), (err2 / (2 * m) as f64).sqrt())
+    } else {
+        (f64::NAN, f64::NAN)
+    };
+    Ok(SyntheticRun {
+        syn,
+        sol,
+        time_s,
+        error_over_sigma,
+        rms_mas,
+    })
+}
+
+fn check_sizes(counts: &[usize], exposures: &[usize]) -> Result<(), BenchError> {
     if let Some(e) = exposures
         .iter()
         .find(|e| **e == 0 || **e % 25 != 0 || **e > 10_000)
@@ -273,15 +345,7 @@ pub fn solution_scaling(
             "--solution-sources {n}: allowed 100 … 2·10⁶"
         )));
     }
-    let mut rows = Vec::new();
-    for &n in counts {
-        for &e in exposures {
-            for &m in methods {
-                rows.push(one_row(n, e, calibration, m, seed)?);
-            }
-        }
-    }
-    Ok(rows)
+    Ok(())
 }
 
 fn one_row(
@@ -292,37 +356,10 @@ fn one_row(
     seed: u64,
 ) -> Result<BenchRow, BenchError> {
     {
-        let syn = synthetic(&SyntheticSpec {
-            epochs: n_exposures / 25,
-            calibration,
-            ..SyntheticSpec::bench(n, seed)
-        });
-        let (truth, exposures, obs) = (&syn.params, &syn.exposures, &syn.obs);
-        let options = Options {
-            calibration,
-            method,
-            // the block iteration's cap as the benchmark has always run it; the gradients stop at their
-            // criterion well before theirs
-            max_iterations: if method == Method::Block { 500 } else { 5000 },
-            ..Options::default()
-        };
-        let t0 = Instant::now();
-        let sol = solve(obs, exposures, &syn.refs, n, &options)?;
-        let time_s = t0.elapsed().as_secs_f64();
-        let (mut err2, mut sig2, mut m) = (0.0, 0.0, 0usize);
-        for (s, p) in sol.sources.iter().zip(truth) {
-            if s.params[0].is_finite() && s.observations > 0 {
-                err2 += (s.params[0] - p[0]).powi(2) + (s.params[1] - p[1]).powi(2);
-                sig2 += s.sigma[0].powi(2) + s.sigma[1].powi(2);
-                m += 1;
-            }
-        }
-        // no source solved: nothing to report
-        let (ratio, rms_mas) = if m > 0 {
-            ((err2 / sig2).sqrt(), (err2 / (2 * m) as f64).sqrt())
-        } else {
-            (f64::NAN, f64::NAN)
-        };
+        let run = solve_synthetic(n, n_exposures, calibration, method, seed)?;
+        let (exposures, obs, sol, time_s) =
+            (&run.syn.exposures, &run.syn.obs, &run.sol, run.time_s);
+        let (ratio, rms_mas) = (run.error_over_sigma, run.rms_mas);
         let input_mib = (obs.len() * std::mem::size_of::<Observation>()) as f64 / 1048576.0;
         Ok(BenchRow {
             rms_err: ratio,

@@ -57,19 +57,22 @@ pub(super) struct State {
 pub(super) fn source_pass(p: &Problem, state: &State, active: &[bool]) -> Vec<SolvedSource> {
     (0..p.by_source.len())
         .into_par_iter()
-        .map(|s| {
-            source_block(
-                &state.cal,
-                p.obs,
-                p.by_source.get(s),
-                p.exposures,
-                &state.attitudes,
-                p.prior[s],
-                active,
-                p.opt.model,
-            )
-        })
+        .map(|s| fit_source(p, state, active, s))
         .collect()
+}
+
+/// Source `s`'s block with the attitudes and the calibration held.
+pub(super) fn fit_source(p: &Problem, state: &State, active: &[bool], s: usize) -> SolvedSource {
+    source_block(
+        &state.cal,
+        p.obs,
+        p.by_source.get(s),
+        p.exposures,
+        &state.attitudes,
+        p.prior[s],
+        active,
+        p.opt.model,
+    )
 }
 
 /// Does a reference error `sigma` constrain its parameter?

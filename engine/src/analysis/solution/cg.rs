@@ -26,23 +26,28 @@
 //! then fitted once more with the instrument held, which gives their reported covariance (as the block
 //! iteration's).
 
-use super::blocks::{Problem, State, anchors, source_pass, unconstrained};
+use super::blocks::{Problem, State, anchors, fit_source, unconstrained};
 use super::calibration::{Calibration, gauge_rows};
-use super::{Attitude, Params};
+use super::ranks::{self, LEAVES, Ranks};
+use super::{Attitude, Params, SolvedSource};
 use crate::analysis::solution::SolutionError;
 use rayon::prelude::*;
 
 /// Relinearisations at most (the attitudes' bilinear term is of order 10⁻⁵: two or three suffice).
 const MAX_OUTER: usize = 20;
 
-/// Run the accelerated solution from `state` (its attitudes and calibration; the sources are fitted first).
-/// Returns the iterations (passes over the observations) and whether the criterion was met.
+/// Run the accelerated solution from `state` (its attitudes and calibration; the sources are fitted first)
+/// on `ranks`: each solves its own sky tiles' sources, and every rank ends with all of them (the same bits
+/// as one process: [`ranks`]). Returns the iterations (passes over the observations) and whether the
+/// criterion was met.
 pub(super) fn iterate(
     p: &Problem,
     state: &mut State,
     active: &[bool],
+    ranks: &dyn Ranks,
 ) -> Result<(usize, bool), SolutionError> {
     let opt = p.opt;
+    let tiles = Tiles::new(p, ranks);
     let lever: Vec<f64> = (0..p.exposures.len())
         .into_par_iter()
         .map(|e| {
@@ -59,31 +64,124 @@ pub(super) fn iterate(
                 .fold(1.0f64, f64::max)
         })
         .collect();
-    state.sources = source_pass(p, state, active);
+    tiles.source_pass(p, state, active);
     let budget = opt.max_iterations.max(1);
     let mut iterations = 1usize;
+    let mut converged = false;
     for _ in 0..MAX_OUTER {
-        let mut lin = Linear::new(p, state, active, &lever);
-        let pre = lin.preconditioner()?;
-        let b = lin.rhs(state);
-        let (x, steps, inner_converged) = pcg(&lin, &pre, &b, opt.tolerance_sigma, budget);
+        let mut lin = Linear::new(p, state, active, &lever, &tiles);
+        let pre = lin.preconditioner(ranks)?;
+        let b = lin.rhs(state, ranks);
+        let (x, steps, inner_converged) = pcg(&lin, &pre, &b, opt.tolerance_sigma, budget, ranks);
         iterations += steps;
         let moved = x
             .iter()
             .zip(&pre.sigma)
             .map(|(v, s)| if *s > 0.0 { v.abs() / s } else { 0.0 })
             .fold(0.0f64, f64::max);
+        let moved = ranks::max_across(ranks, moved);
         lin.update(state, &x);
         if inner_converged && moved <= opt.tolerance_sigma {
-            state.sources = source_pass(p, state, active);
-            return Ok((iterations, true));
+            converged = true;
+            break;
         }
         if iterations >= budget {
             break;
         }
     }
-    state.sources = source_pass(p, state, active);
-    Ok((iterations, false))
+    tiles.source_pass(p, state, active);
+    tiles.gather(state, ranks);
+    Ok((iterations, converged))
+}
+
+/// The sources in sky-tile order, cut into the [`LEAVES`] leaves, and those of this rank's leaves.
+struct Tiles {
+    order: Vec<usize>,
+    per_leaf: usize,
+    /// This rank's leaves.
+    mine: std::ops::Range<usize>,
+    /// Does this rank solve source s?
+    owned: Vec<bool>,
+    size: usize,
+}
+
+impl Tiles {
+    fn new(p: &Problem, ranks: &dyn Ranks) -> Self {
+        let n = p.by_source.len();
+        let order = ranks::tile_order(p.obs, n);
+        let per_leaf = ranks::per_leaf(n);
+        let mine = ranks::leaves_of(ranks.rank(), ranks.size());
+        let mut owned = vec![false; n];
+        for c in mine.clone() {
+            for &s in &order[Self::span(c, per_leaf, n)] {
+                owned[s] = true;
+            }
+        }
+        Self {
+            order,
+            per_leaf,
+            mine,
+            owned,
+            size: ranks.size(),
+        }
+    }
+
+    /// Leaf c's positions in the tile order.
+    fn span(c: usize, per_leaf: usize, n: usize) -> std::ops::Range<usize> {
+        (c * per_leaf).min(n)..((c + 1) * per_leaf).min(n)
+    }
+
+    /// Leaf c's sources.
+    fn leaf(&self, c: usize) -> &[usize] {
+        &self.order[Self::span(c, self.per_leaf, self.order.len())]
+    }
+
+    /// The positions in the tile order of leaves `leaves`' sources.
+    fn run(&self, leaves: std::ops::Range<usize>) -> std::ops::Range<usize> {
+        let n = self.order.len();
+        Self::span(leaves.start, self.per_leaf, n).start
+            ..Self::span(leaves.end - 1, self.per_leaf, n).end
+    }
+
+    /// Each of this rank's sources fitted with the attitudes and the calibration held.
+    fn source_pass(&self, p: &Problem, state: &mut State, active: &[bool]) {
+        let fitted: Vec<(usize, SolvedSource)> = self.order[self.run(self.mine.clone())]
+            .par_iter()
+            .map(|&s| (s, fit_source(p, state, active, s)))
+            .collect();
+        for (s, fit) in fitted {
+            state.sources[s] = fit;
+        }
+    }
+
+    /// Every rank's sources to every rank.
+    fn gather(&self, state: &mut State, ranks: &dyn Ranks) {
+        if self.size == 1 {
+            return;
+        }
+        let mut mine = Vec::new();
+        for &s in &self.order[self.run(self.mine.clone())] {
+            let v = &state.sources[s];
+            mine.extend_from_slice(&v.params);
+            mine.extend_from_slice(&v.sigma);
+            mine.extend_from_slice(&[v.observations as f64, v.chi2]);
+        }
+        for (rank, theirs) in ranks.gather_all(&mine).into_iter().enumerate() {
+            let sources = &self.order[self.run(ranks::leaves_of(rank, self.size))];
+            for (&s, v) in sources.iter().zip(theirs.chunks_exact(12)) {
+                let mut params = [0.0; 5];
+                let mut sigma = [0.0; 5];
+                params.copy_from_slice(&v[..5]);
+                sigma.copy_from_slice(&v[5..10]);
+                state.sources[s] = SolvedSource {
+                    params,
+                    sigma,
+                    observations: v[10] as usize,
+                    chi2: v[11],
+                };
+            }
+        }
+    }
 }
 
 /// Preconditioned conjugate gradients for `N x = b` from x = 0: the solution, the steps taken, and whether
@@ -94,20 +192,21 @@ fn pcg(
     b: &[f64],
     tol: f64,
     budget: usize,
+    ranks: &dyn Ranks,
 ) -> (Vec<f64>, usize, bool) {
     let mut x = vec![0.0; b.len()];
     let mut r = b.to_vec();
     let mut z = pre.apply(lin, &r);
     let mut d = z.clone();
-    let mut rz = dot(&r, &z);
+    let mut rz = lin.dot(&r, &z, ranks);
     let mut steps = 0;
     while steps < budget {
         if !(rz > 0.0) {
             return (x, steps, true);
         }
         steps += 1;
-        let q = lin.apply(&d);
-        let dq = dot(&d, &q);
+        let q = lin.apply(&d, ranks);
+        let dq = lin.dot(&d, &q, ranks);
         if !(dq > 0.0) {
             return (x, steps, true);
         }
@@ -121,11 +220,11 @@ fn pcg(
                 step = step.max(dx.abs() / pre.sigma[k]);
             }
         }
-        if step <= tol {
+        if ranks::max_across(ranks, step) <= tol {
             return (x, steps, true);
         }
         z = pre.apply(lin, &r);
-        let rz_new = dot(&r, &z);
+        let rz_new = lin.dot(&r, &z, ranks);
         let beta = rz_new / rz;
         rz = rz_new;
         for (dk, zk) in d.iter_mut().zip(&z) {
@@ -139,16 +238,47 @@ fn dot(a: &[f64], b: &[f64]) -> f64 {
     a.iter().zip(b).map(|(x, y)| x * y).sum()
 }
 
+/// `Σ over leaves [lo, hi) of leaf(c, its part of the sources' segment)` along [`ranks::tree`]'s tree,
+/// `part` being leaves [lo, hi)'s run of it (`starts[c]`: where leaf c's run begins).
+fn tree_split<T: Send>(
+    lo: usize,
+    hi: usize,
+    part: &mut [f64],
+    starts: &[usize],
+    leaf: &(impl Fn(usize, &mut [f64]) -> T + Sync),
+    add: &(impl Fn(T, T) -> T + Sync),
+) -> T {
+    if hi - lo <= 1 {
+        return leaf(lo, part);
+    }
+    let mid = (lo + hi) / 2;
+    let (a, b) = part.split_at_mut(starts[mid] - starts[lo]);
+    let (x, y) = rayon::join(
+        || tree_split(lo, mid, a, starts, leaf, add),
+        || tree_split(mid, hi, b, starts, leaf, add),
+    );
+    add(x, y)
+}
+
+fn add_vec(mut a: Vec<f64>, b: Vec<f64>) -> Vec<f64> {
+    ranks::add_into(&mut a, &b);
+    a
+}
+
 /// The problem linearised about one state: which unknown sits where, and the Jacobian's columns.
 struct Linear<'a> {
     p: &'a Problem<'a>,
     active: &'a [bool],
     lever: &'a [f64],
+    tiles: &'a Tiles,
     params: Vec<Params>,
     attitudes: Vec<Attitude>,
-    /// Unknowns per source (0: not solved) and where its first one sits.
+    /// Unknowns per source (0: not solved, or another rank's) and where its first one sits (the sources laid
+    /// out in tile order).
     dims: Vec<usize>,
     src_off: Vec<usize>,
+    /// Where each leaf's run of the sources' unknowns begins (and, last, where the sources' end).
+    leaf_start: Vec<usize>,
     att_off: usize,
     cal_off: usize,
     /// The calibration's unknowns per axis (0 when none is solved).
@@ -163,18 +293,36 @@ struct Linear<'a> {
 type Columns = ([[f64; 2]; 5], [[f64; 2]; 4]);
 
 impl<'a> Linear<'a> {
-    fn new(p: &'a Problem<'a>, state: &State, active: &'a [bool], lever: &'a [f64]) -> Self {
+    fn new(
+        p: &'a Problem<'a>,
+        state: &State,
+        active: &'a [bool],
+        lever: &'a [f64],
+        tiles: &'a Tiles,
+    ) -> Self {
         let dims: Vec<usize> = state
             .sources
             .iter()
-            .map(|s| s.sigma.iter().take_while(|v| v.is_finite()).count())
+            .zip(&tiles.owned)
+            .map(|(s, mine)| {
+                if *mine {
+                    s.sigma.iter().take_while(|v| v.is_finite()).count()
+                } else {
+                    0
+                }
+            })
             .collect();
-        let mut src_off = Vec::with_capacity(dims.len());
+        let mut src_off = vec![0; dims.len()];
+        let mut leaf_start = Vec::with_capacity(LEAVES + 1);
         let mut n = 0;
-        for d in &dims {
-            src_off.push(n);
-            n += d;
+        for c in 0..LEAVES {
+            leaf_start.push(n);
+            for &s in tiles.leaf(c) {
+                src_off[s] = n;
+                n += dims[s];
+            }
         }
+        leaf_start.push(n);
         let cal_axis = if p.opt.calibration.solves() {
             p.opt.calibration.per_axis()
         } else {
@@ -186,10 +334,12 @@ impl<'a> Linear<'a> {
             p,
             active,
             lever,
+            tiles,
             params: state.sources.iter().map(|s| s.params).collect(),
             attitudes: state.attitudes.clone(),
             dims,
             src_off,
+            leaf_start,
             att_off,
             cal_off,
             cal_axis,
@@ -197,11 +347,6 @@ impl<'a> Linear<'a> {
             heavy: 0.0,
             cal_now: flatten(&state.cal),
         }
-    }
-
-    /// Does observation `i` enter (kept, its source solved)?
-    fn used(&self, i: usize) -> bool {
-        self.active[i] && self.dims[self.p.obs[i].source] > 0
     }
 
     /// Observation `i`'s source and attitude columns, and its source's place less the exposure's centre.
@@ -241,69 +386,73 @@ impl<'a> Linear<'a> {
         }
     }
 
-    /// `Σᵢ Jᵢᵀ uᵢ` with `uᵢ = f(i, Jᵢ's columns, φᵢ)`, in one pass over the observations by source: each
-    /// source's share written in place, the exposures' and the calibration's summed over chunks of sources
-    /// (no per-observation buffer).
+    /// `Σᵢ Jᵢᵀ uᵢ` with `uᵢ = f(i, Jᵢ's columns, φᵢ)`, in one pass over this rank's observations by source:
+    /// each source's share written in place, the exposures' and the calibration's summed leaf by leaf and
+    /// along the tree across the ranks (no per-observation buffer).
     fn accumulate(
         &self,
         f: impl Fn(usize, &Columns, &[(usize, f64)]) -> [f64; 2] + Sync,
+        ranks: &dyn Ranks,
     ) -> Vec<f64> {
         let mut out = vec![0.0; self.len];
         let (src_part, rest) = out.split_at_mut(self.att_off);
-        let mut slices: Vec<&mut [f64]> = Vec::with_capacity(self.dims.len());
-        let mut tail = src_part;
-        for d in &self.dims {
-            let (head, t) = tail.split_at_mut(*d);
-            slices.push(head);
-            tail = t;
-        }
         let ca = self.cal_axis;
         let shared = rest.len();
-        let chunk = chunk_len(self.dims.len(), shared);
-        let acc = slices
-            .par_chunks_mut(chunk)
-            .enumerate()
-            .map(|(c, chunk_slices)| {
-                let mut acc = vec![0.0; shared];
-                let mut phi = Vec::new();
-                for (k, slice) in chunk_slices.iter_mut().enumerate() {
-                    let s = c * chunk + k;
-                    if self.dims[s] == 0 {
+        let base = 4 * self.p.exposures.len();
+        let (lo, hi) = (self.tiles.mine.start, self.tiles.mine.end);
+        let leaf = |c: usize, part: &mut [f64]| {
+            let mut acc = vec![0.0; shared];
+            let mut phi = Vec::new();
+            for &s in self.tiles.leaf(c) {
+                let n = self.dims[s];
+                if n == 0 {
+                    continue;
+                }
+                let at = self.src_off[s] - self.leaf_start[c];
+                let slice = &mut part[at..at + n];
+                for i in self.p.by_source.get(s).iter().map(|i| *i as usize) {
+                    if !self.active[i] {
                         continue;
                     }
-                    for i in self.p.by_source.get(s).iter().map(|i| *i as usize) {
-                        if !self.active[i] {
-                            continue;
-                        }
-                        let cols = self.columns(i);
-                        self.phi(i, &mut phi);
-                        let u = f(i, &cols, &phi);
-                        let (src, att) = &cols;
-                        for (k, x) in slice.iter_mut().enumerate() {
-                            *x += src[k][0] * u[0] + src[k][1] * u[1];
-                        }
-                        let e = self.p.obs[i].exposure;
-                        for k in 0..4 {
-                            acc[4 * e + k] += att[k][0] * u[0] + att[k][1] * u[1];
-                        }
-                        if !phi.is_empty() {
-                            let m = &self.p.exposures[e].to_plane;
-                            let (gx, gy) = (m[0] * u[0] + m[2] * u[1], m[1] * u[0] + m[3] * u[1]);
-                            let base = 4 * self.p.exposures.len();
-                            for &(j, t) in &phi {
-                                acc[base + j] += t * gx;
-                                acc[base + ca + j] += t * gy;
-                            }
+                    let cols = self.columns(i);
+                    self.phi(i, &mut phi);
+                    let u = f(i, &cols, &phi);
+                    let (src, att) = &cols;
+                    for (k, x) in slice.iter_mut().enumerate() {
+                        *x += src[k][0] * u[0] + src[k][1] * u[1];
+                    }
+                    let e = self.p.obs[i].exposure;
+                    for k in 0..4 {
+                        acc[4 * e + k] += att[k][0] * u[0] + att[k][1] * u[1];
+                    }
+                    if !phi.is_empty() {
+                        let m = &self.p.exposures[e].to_plane;
+                        let (gx, gy) = (m[0] * u[0] + m[2] * u[1], m[1] * u[0] + m[3] * u[1]);
+                        for &(j, t) in &phi {
+                            acc[base + j] += t * gx;
+                            acc[base + ca + j] += t * gy;
                         }
                     }
                 }
-                acc
-            })
-            .collect::<Vec<_>>()
-            .into_iter()
-            .fold(vec![0.0; shared], add_into);
-        rest.copy_from_slice(&acc);
+            }
+            acc
+        };
+        let acc = tree_split(lo, hi, src_part, &self.leaf_start, &leaf, &add_vec);
+        rest.copy_from_slice(&ranks::across(ranks, acc));
         out
+    }
+
+    /// `a · b` over all ranks' unknowns: the sources' share leaf by leaf along the tree, then the exposures'
+    /// and the calibration's (every rank holds the same).
+    fn dot(&self, a: &[f64], b: &[f64], ranks: &dyn Ranks) -> f64 {
+        let (lo, hi) = (self.tiles.mine.start, self.tiles.mine.end);
+        let leaf = |c: usize| {
+            let r = self.leaf_start[c]..self.leaf_start[c + 1];
+            dot(&a[r.clone()], &b[r])
+        };
+        let sources = ranks::tree(lo, hi, &leaf, &|x, y| x + y);
+        let sources = ranks::across(ranks, vec![sources])[0];
+        sources + dot(&a[self.att_off..], &b[self.att_off..])
     }
 
     /// `J v` of observation `i` from its columns.
@@ -356,26 +505,33 @@ impl<'a> Linear<'a> {
     }
 
     /// `N v = Jᵀ W J v + P v`.
-    fn apply(&self, v: &[f64]) -> Vec<f64> {
-        let mut out = self.accumulate(|i, cols, phi| {
-            let jv = self.jv(i, cols, phi, v);
-            let w = self.weight(i);
-            [w * jv[0], w * jv[1]]
-        });
+    fn apply(&self, v: &[f64], ranks: &dyn Ranks) -> Vec<f64> {
+        let mut out = self.accumulate(
+            |i, cols, phi| {
+                let jv = self.jv(i, cols, phi, v);
+                let w = self.weight(i);
+                [w * jv[0], w * jv[1]]
+            },
+            ranks,
+        );
         self.add_priors(v, &mut out);
         out
     }
 
     /// `Jᵀ W r + P (x_ref − x)`, the gauge rows pulling the calibration's gauge to zero.
-    fn rhs(&self, state: &State) -> Vec<f64> {
-        let mut b = self.accumulate(|i, _, _| {
-            let o = &self.p.obs[i];
-            let g = &self.p.exposures[o.exposure];
-            let m = self.attitudes[o.exposure].apply(g.centre_mas, g.place(&self.params[o.source]));
-            let at = self.p.place_at(&state.cal, i);
-            let w = self.weight(i);
-            [w * (at[0] - m[0]), w * (at[1] - m[1])]
-        });
+    fn rhs(&self, state: &State, ranks: &dyn Ranks) -> Vec<f64> {
+        let mut b = self.accumulate(
+            |i, _, _| {
+                let o = &self.p.obs[i];
+                let g = &self.p.exposures[o.exposure];
+                let m =
+                    self.attitudes[o.exposure].apply(g.centre_mas, g.place(&self.params[o.source]));
+                let at = self.p.place_at(&state.cal, i);
+                let w = self.weight(i);
+                [w * (at[0] - m[0]), w * (at[1] - m[1])]
+            },
+            ranks,
+        );
         // P (x_ref − x): the negated prior term of the current values, plus the references' own
         let mut minus_x = vec![0.0; self.len];
         for (s, n) in self.dims.iter().enumerate() {
@@ -400,7 +556,7 @@ impl<'a> Linear<'a> {
 
     /// The block-diagonal preconditioner (each block's inverse) and every unknown's formal error from it.
     /// Sets the gauge penalty's weight.
-    fn preconditioner(&mut self) -> Result<Preconditioner, SolutionError> {
+    fn preconditioner(&mut self, ranks: &dyn Ranks) -> Result<Preconditioner, SolutionError> {
         let sources: Vec<Vec<f64>> = (0..self.dims.len())
             .into_par_iter()
             .map(|s| {
@@ -434,68 +590,70 @@ impl<'a> Linear<'a> {
         let ca = self.cal_axis;
         let n2 = 2 * ca;
         let n_exposures = self.p.exposures.len();
-        // each exposure's 4 × 4 inverted; the calibration's block Σ w (M φ)ᵀ (M φ) summed over chunks of
-        // exposures
-        let chunk = chunk_len(n_exposures, n2 * n2);
-        let blocks: Vec<(Vec<[f64; 16]>, Vec<f64>)> = (0..n_exposures.div_ceil(chunk))
-            .into_par_iter()
-            .map(|c| {
-                let mut cal = vec![0.0; n2 * n2];
-                let mut phi = Vec::new();
-                let invs = (c * chunk..((c + 1) * chunk).min(n_exposures))
-                    .map(|e| {
-                        let m = &self.p.exposures[e].to_plane;
-                        let mtm = [
-                            m[0] * m[0] + m[2] * m[2],
-                            m[0] * m[1] + m[2] * m[3],
-                            m[1] * m[0] + m[3] * m[2],
-                            m[1] * m[1] + m[3] * m[3],
-                        ];
-                        let mut att = [0.0; 16];
-                        let mut count = 0;
-                        for i in self.p.by_exposure.get(e).iter().map(|i| *i as usize) {
-                            if !self.used(i) {
-                                continue;
-                            }
-                            count += 1;
-                            let (_, cols) = self.columns(i);
-                            let w = self.weight(i);
-                            for a in 0..4 {
-                                for b in 0..4 {
-                                    att[a * 4 + b] +=
-                                        w * (cols[a][0] * cols[b][0] + cols[a][1] * cols[b][1]);
-                                }
-                            }
-                            self.phi(i, &mut phi);
-                            for &(j1, f1) in &phi {
-                                for &(j2, f2) in &phi {
-                                    let t = w * f1 * f2;
-                                    for ax in 0..2 {
-                                        for ay in 0..2 {
-                                            cal[(ax * ca + j1) * n2 + ay * ca + j2] +=
-                                                mtm[ax * 2 + ay] * t;
-                                        }
-                                    }
+        // each exposure's 4 × 4 and its count of observations, then the calibration's block
+        // Σ w (M φ)ᵀ (M φ), summed leaf by leaf over the sources and along the tree across the ranks
+        let cal_at = 17 * n_exposures;
+        let (lo, hi) = (self.tiles.mine.start, self.tiles.mine.end);
+        let leaf = |c: usize| {
+            let mut acc = vec![0.0; cal_at + n2 * n2];
+            let mut phi = Vec::new();
+            for &s in self.tiles.leaf(c) {
+                if self.dims[s] == 0 {
+                    continue;
+                }
+                for i in self.p.by_source.get(s).iter().map(|i| *i as usize) {
+                    if !self.active[i] {
+                        continue;
+                    }
+                    let e = self.p.obs[i].exposure;
+                    let (_, cols) = self.columns(i);
+                    let w = self.weight(i);
+                    let att = &mut acc[17 * e..17 * e + 17];
+                    for a in 0..4 {
+                        for b in 0..4 {
+                            att[a * 4 + b] +=
+                                w * (cols[a][0] * cols[b][0] + cols[a][1] * cols[b][1]);
+                        }
+                    }
+                    att[16] += 1.0;
+                    self.phi(i, &mut phi);
+                    let m = &self.p.exposures[e].to_plane;
+                    let mtm = [
+                        m[0] * m[0] + m[2] * m[2],
+                        m[0] * m[1] + m[2] * m[3],
+                        m[1] * m[0] + m[3] * m[2],
+                        m[1] * m[1] + m[3] * m[3],
+                    ];
+                    let cal = &mut acc[cal_at..];
+                    for &(j1, f1) in &phi {
+                        for &(j2, f2) in &phi {
+                            let t = w * f1 * f2;
+                            for ax in 0..2 {
+                                for ay in 0..2 {
+                                    cal[(ax * ca + j1) * n2 + ay * ca + j2] += mtm[ax * 2 + ay] * t;
                                 }
                             }
                         }
-                        let inv = (count >= 2).then(|| inverse_scaled(&att, 4)).flatten();
-                        inv.map_or([0.0; 16], |v| {
-                            let mut a = [0.0; 16];
-                            a.copy_from_slice(&v);
-                            a
-                        })
-                    })
-                    .collect();
-                (invs, cal)
+                    }
+                }
+            }
+            acc
+        };
+        let sums = ranks::across(ranks, ranks::tree(lo, hi, &leaf, &add_vec));
+        let exposures: Vec<[f64; 16]> = sums[..cal_at]
+            .par_chunks(17)
+            .map(|att| {
+                let inv = (att[16] >= 2.0)
+                    .then(|| inverse_scaled(&att[..16], 4))
+                    .flatten();
+                inv.map_or([0.0; 16], |v| {
+                    let mut a = [0.0; 16];
+                    a.copy_from_slice(&v);
+                    a
+                })
             })
             .collect();
-        let mut cal = vec![0.0; n2 * n2];
-        let mut exposures = Vec::with_capacity(n_exposures);
-        for (invs, c) in blocks {
-            exposures.extend(invs);
-            add_into_slice(&mut cal, &c);
-        }
+        let mut cal = sums[cal_at..].to_vec();
         if ca > 0 {
             self.heavy = (0..n2)
                 .map(|i| cal[i * n2 + i])
@@ -557,28 +715,6 @@ impl<'a> Linear<'a> {
         if self.cal_axis > 0 {
             add_flat(&mut state.cal, &x[self.cal_off..]);
         }
-    }
-}
-
-/// Items per parallel chunk. The chunks' partial sums are added in their order, and their number depends on
-/// the problem alone — never on the threads — so that a solution is the same bit for bit on any machine:
-/// [`CHUNKS`], fewer where their accumulators (`accumulator` numbers each) would pass 256 MiB together.
-fn chunk_len(items: usize, accumulator: usize) -> usize {
-    let affordable = (256 << 20) / (8 * accumulator.max(1));
-    items.div_ceil(CHUNKS.min(affordable).max(1)).max(1)
-}
-
-/// Parallel chunks of sources (or exposures) per pass: work for 16 threads, four chunks each.
-const CHUNKS: usize = 64;
-
-fn add_into(mut a: Vec<f64>, b: Vec<f64>) -> Vec<f64> {
-    add_into_slice(&mut a, &b);
-    a
-}
-
-fn add_into_slice(a: &mut [f64], b: &[f64]) {
-    for (x, y) in a.iter_mut().zip(b) {
-        *x += y;
     }
 }
 

@@ -37,10 +37,14 @@ pub mod calibration;
 mod cg;
 pub mod feed;
 mod groups;
+#[cfg(feature = "mpi")]
+pub mod mpi;
+pub mod ranks;
 mod solve;
 
 pub use calibration::{Calibration, CalibrationModel};
-pub use solve::solve;
+pub use ranks::{Ranks, Single};
+pub use solve::{solve, solve_on};
 
 /// One measured position of a source in one exposure, on the tangent plane (mas), with its 1σ error per axis.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -7,6 +7,7 @@ use super::blocks::{
 };
 use super::calibration::{self, Calibration};
 use super::groups::Groups;
+use super::ranks::Ranks;
 use super::{
     Attitude, ExposureGeometry, Method, Observation, Options, Params, Reference, Solution,
     SolutionError, SourceModel,
@@ -16,7 +17,8 @@ use rayon::prelude::*;
 /// How far a converged calibration's correction still moves from step to step: its rounding, mas.
 const CALIBRATION_ROUNDING_MAS: f64 = 1e-5;
 
-/// Solve `n_sources` sources and every exposure's attitude from `obs`, anchored by `refs`.
+/// Solve `n_sources` sources and every exposure's attitude from `obs`, anchored by `refs` — on this thread's
+/// ranks ([`super::ranks::world`]: this process alone unless the `jsim-mpi` binary set MPI's).
 pub fn solve(
     obs: &[Observation],
     exposures: &[ExposureGeometry],
@@ -24,6 +26,35 @@ pub fn solve(
     n_sources: usize,
     opt: &Options,
 ) -> Result<Solution, SolutionError> {
+    solve_on(
+        obs,
+        exposures,
+        refs,
+        n_sources,
+        opt,
+        &*super::ranks::world(),
+    )
+}
+
+/// [`solve`] on `ranks` (every rank calls it with the same input): the conjugate gradients share the sources
+/// out by sky tile ([`super::ranks`]); every rank returns the same solution, the same bits as one process's.
+/// The block iteration runs on one rank only.
+pub fn solve_on(
+    obs: &[Observation],
+    exposures: &[ExposureGeometry],
+    refs: &[Reference],
+    n_sources: usize,
+    opt: &Options,
+    ranks: &dyn Ranks,
+) -> Result<Solution, SolutionError> {
+    super::ranks::check(ranks.size())?;
+    if ranks.size() > 1 && opt.method == Method::Block {
+        return Err(SolutionError::Knob {
+            field: "ranks (with the block iteration)",
+            value: ranks.size() as f64,
+            allowed: "1: the block iteration, the reference, runs on one rank (conjugate gradients on several)",
+        });
+    }
     validate(obs, exposures, refs, n_sources, opt)?;
     let skipped = unlinked_exposures(obs, exposures.len(), refs, n_sources)?;
     let by_source = Groups::new(n_sources, obs.len(), |i| obs[i].source);
@@ -105,7 +136,7 @@ pub fn solve(
     for _round in 0..opt.max_rejection_rounds.max(1) {
         let (its, this_round) = match opt.method {
             Method::Block => block_iterate(&problem, &mut state, &active)?,
-            Method::ConjugateGradient => super::cg::iterate(&problem, &mut state, &active)?,
+            Method::ConjugateGradient => super::cg::iterate(&problem, &mut state, &active, ranks)?,
         };
         iterations += its;
         converged = this_round;

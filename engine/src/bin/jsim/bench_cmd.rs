@@ -68,6 +68,16 @@ pub enum SolutionCalibration {
     None,
 }
 
+impl SolutionCalibration {
+    /// The engine's calibration model for it.
+    pub fn model(self) -> engine::analysis::solution::CalibrationModel {
+        match self {
+            SolutionCalibration::Full => engine::studies::bench_solution::CALIBRATED,
+            SolutionCalibration::None => engine::analysis::solution::CalibrationModel::NONE,
+        }
+    }
+}
+
 /// The parts `--parts` may name.
 pub const PARTS: [&str; 9] = [
     "methods",
@@ -173,10 +183,7 @@ pub fn bench(a: &BenchArgs) -> Result<()> {
         rows.extend(engine::studies::bench_solution::solution_scaling(
             &a.solution_sources,
             &a.solution_exposures,
-            match a.solution_calibration {
-                SolutionCalibration::Full => engine::studies::bench_solution::CALIBRATED,
-                SolutionCalibration::None => engine::analysis::solution::CalibrationModel::NONE,
-            },
+            a.solution_calibration.model(),
             &a.solution_methods
                 .iter()
                 .map(|m| m.method())

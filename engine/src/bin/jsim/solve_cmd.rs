@@ -116,6 +116,13 @@ pub fn solve(a: &SolveArgs) -> Result<()> {
             p.exposures_run
         );
     }
+    if engine::analysis::solution::ranks::world().rank() != 0 {
+        // another MPI rank (jsim-mpi): the same solutions, rank 0 alone scores, prints and writes them
+        for &n in &ns {
+            sq::solve_first(&p, n, &spec)?;
+        }
+        return Ok(());
+    }
     eprintln!(
         "read {} exposures' {} detections and {} reference stars in {:.1} s",
         p.exposures_run,

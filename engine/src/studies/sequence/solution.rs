@@ -194,6 +194,34 @@ pub fn solve_first(
     Ok((fed, opt, sol))
 }
 
+/// A solved source's columns in a sources table (after its index, and its sky position where given).
+pub const SOURCE_COLUMNS: [&str; 12] = [
+    "xi_mas",
+    "eta_mas",
+    "pm_xi",
+    "pm_eta",
+    "parallax",
+    "xi_error",
+    "eta_error",
+    "pm_xi_error",
+    "pm_eta_error",
+    "parallax_error",
+    "observations",
+    "chi2",
+];
+
+/// A solved source's cells under [`SOURCE_COLUMNS`].
+pub fn source_cells(v: &crate::analysis::solution::SolvedSource) -> Vec<Cell> {
+    let mut row: Vec<Cell> = v
+        .params
+        .iter()
+        .chain(&v.sigma)
+        .map(|x| Cell::F(*x))
+        .collect();
+    row.extend([Cell::I(v.observations as i64), Cell::F(v.chi2)]);
+    row
+}
+
 /// Write the solution into `out`: `sources.csv`, `attitudes.csv`, `calibration.csv`.
 pub fn write_solution(
     out: &Path,
@@ -209,38 +237,17 @@ pub fn write_solution(
         .map(|(s, v)| {
             let (ra, dec) = feed::plane_to_sky(p.tangent_deg, v.params[0], v.params[1]);
             let mut row = vec![Cell::I(s as i64), Cell::F(ra), Cell::F(dec)];
-            row.extend(v.params.iter().map(|x| Cell::F(*x)));
-            row.extend(v.sigma.iter().map(|x| Cell::F(*x)));
-            row.extend([
-                Cell::I(v.observations as i64),
-                Cell::F(v.chi2),
-                Cell::I(i64::from(fed.reference[s].is_some())),
-            ]);
+            row.extend(source_cells(v));
+            row.push(Cell::I(i64::from(fed.reference[s].is_some())));
             row
         })
         .collect();
-    crate::io::csv::write(
-        &out.join("sources.csv"),
-        &[
-            "source",
-            "ra",
-            "dec",
-            "xi_mas",
-            "eta_mas",
-            "pm_xi",
-            "pm_eta",
-            "parallax",
-            "xi_error",
-            "eta_error",
-            "pm_xi_error",
-            "pm_eta_error",
-            "parallax_error",
-            "observations",
-            "chi2",
-            "in_reference",
-        ],
-        &rows,
-    )?;
+    let header: Vec<&str> = ["source", "ra", "dec"]
+        .into_iter()
+        .chain(SOURCE_COLUMNS)
+        .chain(["in_reference"])
+        .collect();
+    crate::io::csv::write(&out.join("sources.csv"), &header, &rows)?;
     let rows: Vec<Vec<Cell>> = sol
         .attitudes
         .iter()
