@@ -12,47 +12,8 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
-fn in_ci() -> bool {
-    std::env::var("CI").is_ok_and(|v| !v.is_empty() && v != "0" && v != "false")
-}
-
-fn mpirun() -> Option<PathBuf> {
-    std::env::var_os("PATH")
-        .map(|p| std::env::split_paths(&p).collect::<Vec<_>>())
-        .unwrap_or_default()
-        .into_iter()
-        .chain([PathBuf::from("/usr/bin")])
-        .map(|d| d.join("mpirun"))
-        .find(|p| p.is_file())
-}
-
-/// Build `jsim-mpi` beside this test's `jsim` (same profile and target directory).
-fn build_jsim_mpi() -> PathBuf {
-    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-    let mut cmd = Command::new(cargo);
-    cmd.args([
-        "build",
-        "-p",
-        "engine",
-        "--features",
-        "mpi",
-        "--bin",
-        "jsim-mpi",
-    ]);
-    if !cfg!(debug_assertions) {
-        cmd.arg("--release");
-    }
-    let out = cmd
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .output()
-        .expect("cargo runs");
-    assert!(
-        out.status.success(),
-        "building jsim-mpi (feature mpi) failed — are libopenmpi-dev and libclang-dev installed?\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    Path::new(env!("CARGO_BIN_EXE_jsim")).with_file_name("jsim-mpi")
-}
+mod support;
+use support::{build_jsim_mpi, max_relative, mpirun_or_skip, numbers};
 
 fn scratch(name: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("jsim-mpi-test-{}-{name}", std::process::id()));
@@ -79,44 +40,9 @@ fn run_ranks(mpirun: &Path, bin: &Path, n: usize, args: &[&str]) -> (bool, Strin
     )
 }
 
-/// Every number of a CSV file, row by row.
-fn numbers(path: &Path) -> Vec<f64> {
-    let text = std::fs::read_to_string(path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-    text.lines()
-        .skip(1)
-        .flat_map(|l| {
-            l.split(',')
-                .map(|v| v.parse::<f64>().expect("a number"))
-                .collect::<Vec<_>>()
-        })
-        .collect()
-}
-
-/// The largest relative difference of two equal-length lists (NaN against NaN: none).
-fn max_relative(a: &[f64], b: &[f64]) -> f64 {
-    assert_eq!(a.len(), b.len());
-    a.iter()
-        .zip(b)
-        .map(|(x, y)| {
-            if x.is_nan() && y.is_nan() {
-                0.0
-            } else {
-                (x - y).abs() / x.abs().max(y.abs()).max(1e-300)
-            }
-        })
-        .fold(0.0, f64::max)
-}
-
 #[test]
 fn one_two_and_four_ranks_give_the_same_solution() {
-    let Some(mpirun) = mpirun() else {
-        assert!(
-            !in_ci(),
-            "mpirun is missing and CI is set: .ci/run installs openmpi-bin and libopenmpi-dev"
-        );
-        eprintln!(
-            "SKIPPED: mpirun not found (apt-get install libopenmpi-dev openmpi-bin libclang-dev)"
-        );
+    let Some(mpirun) = mpirun_or_skip() else {
         return;
     };
     let bin = build_jsim_mpi();

@@ -5,6 +5,9 @@
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
+mod support;
+use support::SMALL_SEQUENCE as SMALL;
+
 fn jsim() -> Command {
     Command::new(env!("CARGO_BIN_EXE_jsim"))
 }
@@ -15,25 +18,6 @@ fn temp(name: &str) -> PathBuf {
     std::fs::create_dir_all(&d).expect("tmp");
     d
 }
-
-/// Small arrays, a static Gaussian ACE, a sparse field: seconds per exposure.
-const SMALL: [&str; 15] = [
-    "ace.case=\"gaussian\"",
-    "instrument.detector_px=256",
-    "instrument.photosensitive_px=240",
-    "readout.channels=2",
-    "readout.channel_width_px=128",
-    "optics.pupil_samples=64",
-    "optics.psf_oversampling=8",
-    "optics.psf_radius_px=8",
-    "band.wavelength_step_um=0.1",
-    "fidelity.subpixels=4",
-    "fidelity.stamp_radius_px=8",
-    "fidelity.backend=\"cpu\"",
-    "ace.span_s=60.0",
-    "focal_plane.gap_px=40.0",
-    "scene.bulge.density_per_arcmin2=40.0",
-];
 
 fn spec(dir: &Path) -> PathBuf {
     let p = dir.join("seq.toml");

@@ -27,11 +27,11 @@ const TOOLS: [&str; 8] = [
     "scancel",
     "sinfo",
 ];
-fn in_ci() -> bool {
-    std::env::var("CI")
-        .map(|v| !v.is_empty() && v != "0" && v != "false")
-        .unwrap_or(false)
-}
+mod support;
+use support::{SMALL_SEQUENCE, build_jsim_mpi, in_ci, max_relative, numbers};
+
+/// One private cluster at a time (the tests' daemons would share the machine's CPUs and its node name).
+static ONE_CLUSTER: std::sync::Mutex<()> = std::sync::Mutex::new(());
 
 fn find_tool(name: &str) -> Option<PathBuf> {
     let mut dirs: Vec<PathBuf> = std::env::var_os("PATH")
@@ -125,8 +125,8 @@ impl Cluster {
     }
 
     /// Start munged, slurmctld and slurmd. `Err` carries a description (the daemons' logs included).
-    fn start(tools: BTreeMap<&'static str, PathBuf>) -> Result<Cluster, String> {
-        let dir = std::env::temp_dir().join(format!("jsim-slurm-{}", std::process::id()));
+    fn start(tools: BTreeMap<&'static str, PathBuf>, tag: &str) -> Result<Cluster, String> {
+        let dir = std::env::temp_dir().join(format!("jsim-slurm-{}-{tag}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
         std::fs::create_dir_all(&dir).map_err(|e| e.to_string())?;
         let (_, user, _) = output(Command::new("id").arg("-un"));
@@ -405,9 +405,8 @@ fn run_ok(cmd: &mut Command, what: &str) -> String {
     out
 }
 
-#[test]
-fn slurm_array_resumes_after_a_cancelled_task_and_matches_one_process() {
-    let t_start = Instant::now();
+/// The private cluster, or None (with a note) where Slurm is not installed outside CI.
+fn cluster(tag: &str) -> Option<Cluster> {
     let mut tools = BTreeMap::new();
     let mut missing = Vec::new();
     for t in TOOLS {
@@ -427,11 +426,20 @@ fn slurm_array_resumes_after_a_cancelled_task_and_matches_one_process() {
             panic!("CI is set and the Slurm test cannot run: {msg} (.ci/run installs them)");
         }
         eprintln!("skipping the Slurm test: {msg}");
-        return;
+        return None;
     }
-    let mut cluster = match Cluster::start(tools) {
-        Ok(c) => c,
+    match Cluster::start(tools, tag) {
+        Ok(c) => Some(c),
         Err(e) => panic!("the Slurm daemons did not start: {e}"),
+    }
+}
+
+#[test]
+fn slurm_array_resumes_after_a_cancelled_task_and_matches_one_process() {
+    let _one = ONE_CLUSTER.lock().unwrap_or_else(|e| e.into_inner());
+    let t_start = Instant::now();
+    let Some(mut cluster) = cluster("sweep") else {
+        return;
     };
     eprintln!(
         "slurm cluster up in {:.1} s ({})",
@@ -572,4 +580,122 @@ fn slurm_array_resumes_after_a_cancelled_task_and_matches_one_process() {
         "slurm test done in {:.1} s",
         t_start.elapsed().as_secs_f64()
     );
+}
+
+/// The whole chain on a real Slurm: a sequence's job array (`jsim sequence --emit-slurm`, 2 shards) and its
+/// gathering, then the solution on 2 MPI ranks started by `srun` (`jsim solve --emit-slurm --ranks 2`),
+/// submitted at once by the sequence's submit.sh with `afterok` dependencies; the solution agrees with one
+/// process's `jsim solve` of the same catalogues to 10⁻⁹ relative.
+#[test]
+fn a_sequence_then_its_solution_on_two_mpi_ranks_under_slurm() {
+    let _one = ONE_CLUSTER.lock().unwrap_or_else(|e| e.into_inner());
+    let Some(mut cluster) = cluster("solve") else {
+        return;
+    };
+    if support::mpirun_or_skip().is_none() {
+        return;
+    }
+    let jsim_mpi = build_jsim_mpi();
+    let work = cluster.dir.join("work");
+    std::fs::create_dir_all(&work).expect("work");
+    let spec = work.join("seq.toml");
+    std::fs::write(
+        &spec,
+        "[sequence]\nstares_l = 2\nstares_b = 1\nexposures_per_stare = 2\nvisit_dither_px = 20.0\n",
+    )
+    .expect("spec");
+    let seq = work.join("seq");
+    let mut cmd = jsim();
+    cmd.args(["sequence", "--countermeasure", "none", "--spec"])
+        .arg(&spec);
+    for s in SMALL_SEQUENCE {
+        cmd.args(["--set", s]);
+    }
+    cmd.arg("--out").arg(&seq).args([
+        "--emit-slurm",
+        "--shards",
+        "2",
+        "--cpus-per-task",
+        "1",
+        "--time",
+        "00:20:00",
+    ]);
+    run_ok(&mut cmd, "jsim sequence --emit-slurm");
+    // a bad rank count is named and writes nothing
+    let (ok, _, err) = output(
+        jsim()
+            .args(["solve", "--sequence"])
+            .arg(&seq)
+            .args(["--emit-slurm", "--ranks", "3", "--jsim-mpi"])
+            .arg(&jsim_mpi),
+    );
+    assert!(!ok && err.contains("--ranks 3"), "{err}");
+    assert!(!seq.join("slurm/solve.sbatch").exists());
+    let by_slurm = work.join("solution-slurm");
+    run_ok(
+        jsim()
+            .args(["solve", "--sequence"])
+            .arg(&seq)
+            .args([
+                "--emit-slurm",
+                "--ranks",
+                "2",
+                "--time",
+                "00:20:00",
+                "--jsim-mpi",
+            ])
+            .arg(&jsim_mpi)
+            .arg("--out")
+            .arg(&by_slurm),
+        "jsim solve --emit-slurm",
+    );
+    let script = std::fs::read_to_string(seq.join("slurm/solve.sbatch")).expect("solve.sbatch");
+    assert!(script.contains("#SBATCH --ntasks=2") && script.contains("srun --mpi=pmix"));
+    let said = run_ok(
+        Command::new("bash")
+            .arg(seq.join("slurm/submit.sh"))
+            .env("SLURM_CONF", &cluster.conf),
+        "submit.sh",
+    );
+    eprintln!("{said}");
+    let id = |what: &str| -> String {
+        said.lines()
+            .find_map(|l| {
+                l.strip_prefix(&format!("submitted {what} job "))
+                    .map(|r| r.split_whitespace().next().unwrap_or("").to_string())
+            })
+            .unwrap_or_else(|| panic!("no {what} job id in {said:?}"))
+    };
+    let solve = id("solve");
+    let array = said
+        .split_whitespace()
+        .skip_while(|w| *w != "array")
+        .nth(2)
+        .unwrap_or_default()
+        .to_string();
+    cluster.wait_jobs_done(&format!("{array},{solve}"), 900);
+    let state = cluster.job_state(&solve);
+    let log = std::fs::read_to_string(seq.join(format!("slurm/logs/solve-{solve}.out")))
+        .unwrap_or_default();
+    if state != "COMPLETED" {
+        cluster.fail(&format!("solve job {solve} ended {state}:\n{log}"));
+    }
+    assert!(log.contains("on 2 rank(s)"), "{log}");
+    // one process, the same catalogues
+    let one = work.join("solution-one");
+    run_ok(
+        jsim()
+            .args(["solve", "--sequence"])
+            .arg(&seq)
+            .arg("--out")
+            .arg(&one),
+        "jsim solve",
+    );
+    for f in ["sources.csv", "attitudes.csv"] {
+        let worst = max_relative(&numbers(&one.join(f)), &numbers(&by_slurm.join(f)));
+        eprintln!(
+            "{f}: largest relative difference {worst:e} (2 ranks under Slurm against one process)"
+        );
+        assert!(worst <= 1e-9, "{f}: {worst:e}");
+    }
 }

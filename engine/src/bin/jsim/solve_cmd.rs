@@ -75,6 +75,98 @@ pub struct SolveArgs {
     /// .png, mission_budget.csv, solution.json.
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// Write a Slurm job instead of solving: slurm/solve.sbatch in the sequence's directory (the solution on
+    /// --ranks MPI ranks, `srun jsim-mpi solve …` with these options) and submit-solve.sh; the sequence's own
+    /// submit.sh (`jsim sequence --emit-slurm`) then chains it after its array and gathering jobs.
+    #[arg(long)]
+    pub emit_slurm: bool,
+    /// MPI ranks of the Slurm job (a power of two, 1 … 64).
+    #[arg(long, default_value_t = 2, requires = "emit_slurm")]
+    pub ranks: usize,
+    /// Nodes the ranks spread over.
+    #[arg(long, default_value_t = 1, requires = "emit_slurm")]
+    pub nodes: usize,
+    /// Threads per rank.
+    #[arg(long, default_value_t = 1, requires = "emit_slurm")]
+    pub cpus_per_rank: usize,
+    /// The job's wall-clock limit.
+    #[arg(long, default_value = "04:00:00", requires = "emit_slurm")]
+    pub time: String,
+    /// Slurm partition.
+    #[arg(long, requires = "emit_slurm")]
+    pub partition: Option<String>,
+    /// The `jsim-mpi` binary the ranks run (default: beside this jsim; build it with `cargo build --release
+    /// -p engine --features mpi`).
+    #[arg(long, requires = "emit_slurm")]
+    pub jsim_mpi: Option<PathBuf>,
+}
+
+/// `jsim solve --emit-slurm`: the job script of this solution on MPI ranks.
+fn emit_slurm(a: &SolveArgs) -> Result<()> {
+    let here = std::env::current_exe()?;
+    let jsim_mpi = match &a.jsim_mpi {
+        Some(p) => std::path::absolute(p)?,
+        None => here.with_file_name("jsim-mpi"),
+    };
+    if !jsim_mpi.is_file() {
+        bail!(
+            "--jsim-mpi {}: no such binary (build it with `cargo build --release -p engine --features mpi`, or \
+             name it)",
+            jsim_mpi.display()
+        );
+    }
+    let sequence = std::path::absolute(&a.sequence)?;
+    if !sequence.join("sequence.toml").is_file() {
+        bail!(
+            "--sequence {}: no sequence planned there (run `jsim sequence --emit-slurm --out DIR` first)",
+            sequence.display()
+        );
+    }
+    let mut args: Vec<String> = vec!["--sequence".into(), sequence.display().to_string()];
+    let mut opt = |k: &str, v: String| {
+        args.push(k.into());
+        args.push(v);
+    };
+    if !a.exposures.is_empty() {
+        let ns: Vec<String> = a.exposures.iter().map(|n| n.to_string()).collect();
+        opt("--exposures", ns.join(","));
+    }
+    opt("--model", a.model.clone());
+    if let Some(d) = a.distortion_order {
+        opt("--distortion-order", d.to_string());
+    }
+    opt("--method", format!("{:?}", a.method).to_lowercase());
+    opt("--sigma-floor-mas", a.sigma_floor_mas.to_string());
+    opt("--match-radius-mas", a.match_radius_mas.to_string());
+    opt("--mission-exposures", a.mission_exposures.to_string());
+    opt(
+        "--mission-stare-exposures",
+        a.mission_stare_exposures.to_string(),
+    );
+    opt("--mission-years", a.mission_years.to_string());
+    opt(
+        "--season-half-width-days",
+        a.season_half_width_days.to_string(),
+    );
+    if let Some(o) = &a.out {
+        opt("--out", std::path::absolute(o)?.display().to_string());
+    }
+    let job = engine::studies::sequence::slurm::SolveJob {
+        ranks: a.ranks,
+        nodes: a.nodes,
+        cpus_per_rank: a.cpus_per_rank,
+        partition: a.partition.clone(),
+        time: a.time.clone(),
+        jsim_mpi,
+    };
+    let scripts = engine::studies::sequence::slurm::emit_solve(&sequence, &job, &args)
+        .map_err(anyhow::Error::msg)?;
+    eprintln!(
+        "wrote {} and {} (the sequence's submit.sh chains the solution after its jobs)",
+        scripts[0].display(),
+        scripts[1].display()
+    );
+    Ok(())
 }
 
 pub fn solve(a: &SolveArgs) -> Result<()> {
@@ -94,8 +186,6 @@ pub fn solve(a: &SolveArgs) -> Result<()> {
             ..Default::default()
         },
     };
-    let t = Instant::now();
-    let p = sq::read_products(&a.sequence)?;
     let mission = MissionPattern {
         exposures_per_star: a.mission_exposures,
         exposures_per_stare: a.mission_stare_exposures,
@@ -104,6 +194,11 @@ pub fn solve(a: &SolveArgs) -> Result<()> {
         ..MissionPattern::default()
     };
     mission.validate().map_err(anyhow::Error::msg)?;
+    if a.emit_slurm {
+        return emit_slurm(a);
+    }
+    let t = Instant::now();
+    let p = sq::read_products(&a.sequence)?;
     let mut ns = a.exposures.clone();
     if ns.is_empty() {
         ns.push(p.exposures_run);
@@ -136,6 +231,7 @@ pub fn solve(a: &SolveArgs) -> Result<()> {
     let truth = sq::read_truth(&a.sequence, &p)?;
     let (lo, hi) = (p.cfg.scene.bulge.hw_min, p.cfg.scene.bulge.hw_max);
     let edges = engine::scoring::crowded::edges(lo, hi, 1.0);
+    let ranks = engine::analysis::solution::ranks::world().size();
     let mut table: Vec<PrecisionRow> = Vec::new();
     let mut summary = Vec::new();
     for (k, &n) in ns.iter().enumerate() {
@@ -154,7 +250,7 @@ pub fn solve(a: &SolveArgs) -> Result<()> {
         eprintln!(
             "{n} exposures: {} observations of {} sources ({} in the reference catalogue), {} detections left \
              out, {} arrays unaligned; {:?} model, distortion order {}; {} iterations{}, {} rejected, χ²/dof \
-             {:.3}; {solve_s:.1} s",
+             {:.3}; {solve_s:.1} s on {ranks} rank(s)",
             fed.obs.len(),
             fed.n_sources,
             fed.refs.len(),

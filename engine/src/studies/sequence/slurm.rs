@@ -32,6 +32,35 @@ fn word(p: &Path) -> Result<String, String> {
     Ok(io::shell_quote(p))
 }
 
+/// A wall-clock limit Slurm reads: `MM`, `HH:MM:SS` or `D-HH:MM:SS`.
+fn check_time(time: &str) -> Result<(), String> {
+    let ok = !time.is_empty()
+        && time
+            .split(['-', ':'])
+            .all(|p| !p.is_empty() && p.len() <= 4 && p.bytes().all(|b| b.is_ascii_digit()));
+    if !ok {
+        return Err(format!(
+            "--time {time:?}: expected MM, HH:MM:SS or D-HH:MM:SS"
+        ));
+    }
+    Ok(())
+}
+
+/// A partition's name: letters, digits, '_' and '-'.
+fn check_partition(partition: Option<&str>) -> Result<(), String> {
+    if let Some(p) = partition
+        && (p.is_empty()
+            || !p
+                .bytes()
+                .all(|b| b.is_ascii_alphanumeric() || b == b'_' || b == b'-'))
+    {
+        return Err(format!(
+            "--partition {p:?}: letters, digits, '_' and '-' only"
+        ));
+    }
+    Ok(())
+}
+
 /// Write `config.toml`, `sequence.toml` and `slurm/{array.sbatch, gather.sbatch, submit.sh}` into `dir`
 /// (absolute); returns the scripts' paths.
 pub fn emit(plan: &Plan, cfg: &Config, dir: &Path, job: &SlurmJob) -> Result<Vec<PathBuf>, String> {
@@ -45,27 +74,8 @@ pub fn emit(plan: &Plan, cfg: &Config, dir: &Path, job: &SlurmJob) -> Result<Vec
     if job.cpus_per_task == 0 {
         return Err("--cpus-per-task 0: must be ≥ 1".into());
     }
-    let ok_time = !job.time.is_empty()
-        && job
-            .time
-            .split(['-', ':'])
-            .all(|p| !p.is_empty() && p.len() <= 4 && p.bytes().all(|b| b.is_ascii_digit()));
-    if !ok_time {
-        return Err(format!(
-            "--time {:?}: expected MM, HH:MM:SS or D-HH:MM:SS",
-            job.time
-        ));
-    }
-    if let Some(p) = &job.partition
-        && (p.is_empty()
-            || !p
-                .bytes()
-                .all(|b| b.is_ascii_alphanumeric() || b == b'_' || b == b'-'))
-    {
-        return Err(format!(
-            "--partition {p:?}: letters, digits, '_' and '-' only"
-        ));
-    }
+    check_time(&job.time)?;
+    check_partition(job.partition.as_deref())?;
     let (jsim, out) = (word(&job.jsim)?, word(dir)?);
     let sdir = dir.join("slurm");
     let logs = sdir.join("logs");
@@ -122,15 +132,32 @@ here=\"$(cd \"$(dirname \"${BASH_SOURCE[0]}\")\" && pwd)\"
 array=$(sbatch --parsable \"$@\" \"$here/array.sbatch\")
 array=\"${array%%;*}\"
 gather=$(sbatch --parsable \"$@\" --dependency=afterok:\"$array\" --kill-on-invalid-dep=yes \"$here/gather.sbatch\")
-echo \"submitted sequence array job $array and gather job ${gather%%;*}\"
+gather=\"${gather%%;*}\"
+echo \"submitted sequence array job $array and gather job $gather\"
+# the solution on MPI ranks, once the catalogues are all there (written by `jsim solve --emit-slurm`)
+if [ -f \"$here/solve.sbatch\" ]; then
+  solve=$(sbatch --parsable \"$@\" --dependency=afterok:\"$array\":\"$gather\" --kill-on-invalid-dep=yes \"$here/solve.sbatch\")
+  echo \"submitted solve job ${solve%%;*}\"
+fi
 "
     .to_string();
+    write_scripts(
+        &sdir,
+        [
+            ("array.sbatch", array),
+            ("gather.sbatch", gather),
+            ("submit.sh", submit),
+        ],
+    )
+}
+
+/// Write executable scripts into `sdir`; their paths.
+fn write_scripts<const N: usize>(
+    sdir: &Path,
+    scripts: [(&str, String); N],
+) -> Result<Vec<PathBuf>, String> {
     let mut paths = Vec::new();
-    for (name, text) in [
-        ("array.sbatch", array),
-        ("gather.sbatch", gather),
-        ("submit.sh", submit),
-    ] {
+    for (name, text) in scripts {
         let p = sdir.join(name);
         io::write_atomic(&p, text.as_bytes()).map_err(|e| e.to_string())?;
         #[cfg(unix)]
@@ -141,4 +168,105 @@ echo \"submitted sequence array job $array and gather job ${gather%%;*}\"
         paths.push(p);
     }
     Ok(paths)
+}
+
+/// What the solution's job asks of the cluster: MPI ranks over nodes.
+#[derive(Debug, Clone)]
+pub struct SolveJob {
+    /// MPI ranks (a power of two, 1 … 64: the solution's sky tiles are shared out equally).
+    pub ranks: usize,
+    /// Nodes the ranks spread over, 1 … ranks.
+    pub nodes: usize,
+    /// Threads per rank.
+    pub cpus_per_rank: usize,
+    pub partition: Option<String>,
+    /// Wall-clock limit (`HH:MM:SS`, `D-HH:MM:SS`, `MM`).
+    pub time: String,
+    /// The `jsim-mpi` binary the ranks run (absolute).
+    pub jsim_mpi: PathBuf,
+}
+
+/// Write `slurm/solve.sbatch` (the solution of the sequence in `dir` on `job.ranks` MPI ranks started by
+/// `srun`, each running `jsim-mpi solve` with `solve_args`) and `slurm/submit-solve.sh` (submits it alone,
+/// for a sequence that has run); the sequence's `submit.sh` chains it after its array and gathering jobs.
+/// Returns the scripts' paths.
+pub fn emit_solve(
+    dir: &Path,
+    job: &SolveJob,
+    solve_args: &[String],
+) -> Result<Vec<PathBuf>, String> {
+    if crate::analysis::solution::ranks::check(job.ranks).is_err() {
+        return Err(format!(
+            "--ranks {}: allowed a power of two, 1 … 64 (the solution shares its 64 sky tiles out equally)",
+            job.ranks
+        ));
+    }
+    if job.nodes == 0 || job.nodes > job.ranks {
+        return Err(format!(
+            "--nodes {}: allowed 1 … {} (the ranks)",
+            job.nodes, job.ranks
+        ));
+    }
+    if job.cpus_per_rank == 0 {
+        return Err("--cpus-per-rank 0: must be ≥ 1".into());
+    }
+    check_time(&job.time)?;
+    check_partition(job.partition.as_deref())?;
+    if let Some(a) = solve_args
+        .iter()
+        .find(|a| a.contains('\n') || a.contains('\''))
+    {
+        return Err(format!(
+            "{a:?}: quotes and newlines are not supported in Slurm scripts"
+        ));
+    }
+    let jsim_mpi = word(&job.jsim_mpi)?;
+    let sdir = dir.join("slurm");
+    let logs = sdir.join("logs");
+    io::ensure_dir(&logs).map_err(|e| e.to_string())?;
+    let partition = job
+        .partition
+        .as_ref()
+        .map(|p| format!("#SBATCH --partition={p}\n"))
+        .unwrap_or_default();
+    let args: Vec<String> = solve_args
+        .iter()
+        .map(|a| io::shell_quote(Path::new(a)))
+        .collect();
+    let solve = format!(
+        "#!/bin/bash
+#SBATCH --job-name=jsim-solve
+#SBATCH --nodes={nodes}
+#SBATCH --ntasks={ranks}
+#SBATCH --cpus-per-task={cpus}
+#SBATCH --time={time}
+{partition}#SBATCH --output={logs}/solve-%j.out
+# The astrometric solution on {ranks} MPI ranks over {nodes} node(s): each rank solves its share of the sky
+# tiles' sources, the attitudes and the calibration are reduced every iteration; rank 0 writes.
+# Generated by `jsim solve --emit-slurm`. srun starts the ranks through PMIx (OpenMPI); where the cluster's
+# Slurm has no PMIx plugin, replace `srun --mpi=pmix` by `mpirun`.
+set -euo pipefail
+export RAYON_NUM_THREADS=\"${{SLURM_CPUS_PER_TASK:-{cpus}}}\"
+exec srun --mpi=pmix {jsim_mpi} solve {args}
+",
+        nodes = job.nodes,
+        ranks = job.ranks,
+        cpus = job.cpus_per_rank,
+        time = job.time,
+        logs = logs.display(),
+        args = args.join(" "),
+    );
+    let submit = "#!/bin/bash
+# Submit the solution alone (its sequence has run; a sequence's submit.sh chains it by itself).
+# Usage: submit-solve.sh [extra sbatch options, e.g. --dependency=afterok:JOB --account=myproject]
+set -euo pipefail
+here=\"$(cd \"$(dirname \"${BASH_SOURCE[0]}\")\" && pwd)\"
+solve=$(sbatch --parsable \"$@\" \"$here/solve.sbatch\")
+echo \"submitted solve job ${solve%%;*}\"
+"
+    .to_string();
+    write_scripts(
+        &sdir,
+        [("solve.sbatch", solve), ("submit-solve.sh", submit)],
+    )
 }
