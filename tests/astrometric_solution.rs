@@ -201,6 +201,48 @@ fn bad_input_is_named() {
         .collect();
     let e = solve(&once, &t.exposures[..2], &t.refs, 200, &pos_only()).err();
     assert!(matches!(e, Some(SolutionError::NoOverlap(2))), "{e:?}");
+    // a second patch of sky — its own exposures and sources, tied to one another but not to the first — with
+    // no reference star: its frame is undetermined, a named error listing its exposures (36 … 71)
+    let e0 = t.exposures.len();
+    let mut two = t.obs.clone();
+    two.extend(t.obs.iter().map(|o| Observation {
+        exposure: o.exposure + e0,
+        source: o.source + 200,
+        xi_mas: o.xi_mas + 1e8,
+        ..*o
+    }));
+    let mut ex2 = t.exposures.clone();
+    ex2.extend(t.exposures.iter().map(|g| ExposureGeometry {
+        centre_mas: [g.centre_mas[0] + 1e8, g.centre_mas[1]],
+        ..*g
+    }));
+    let e = solve(&two, &ex2, &t.refs, 400, &opt).expect_err("a singular gauge");
+    match &e {
+        SolutionError::UnanchoredGroup { exposures, anchors } => {
+            assert_eq!(exposures, &(e0..2 * e0).collect::<Vec<_>>());
+            assert_eq!(*anchors, 0);
+        }
+        other => panic!("{other:?}"),
+    }
+    let msg = e.to_string();
+    assert!(
+        msg.contains("36, 37") && msg.contains("(36 in all)") && msg.contains("singular gauge"),
+        "{msg}"
+    );
+    // with its own reference stars it is solved
+    let mut refs2 = t.refs.clone();
+    refs2.extend(t.refs.iter().map(|r| Reference {
+        source: r.source + 200,
+        params: [
+            r.params[0] + 1e8,
+            r.params[1],
+            r.params[2],
+            r.params[3],
+            r.params[4],
+        ],
+        ..*r
+    }));
+    assert!(solve(&two, &ex2, &refs2, 400, &opt).is_ok());
     // one epoch cannot give motions
     let first: Vec<Observation> = t.obs.iter().filter(|o| o.exposure == 0).copied().collect();
     let e = run(&first, &t.exposures[..1], &t.refs, &opt);

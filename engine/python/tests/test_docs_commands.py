@@ -13,6 +13,7 @@ reductions below, which make the whole page set run in a few minutes:
 * `jsim bench` gets `--quick` and small star counts (its own star-count and solution-size options are replaced);
 * `jsim sequence` runs at most 2 exposures (`--exposures`; its Slurm scripts are only written), and `jsim solve`
   solves those (`--exposures 1,2`);
+* `jsim solve-synthetic` solves 300 sources × 25 exposures;
 * `jsim transit` stares at most 1.7 h with 3 comparison stars, and its precision study takes two magnitudes of
   0.3 h;
 * the sweep files are copied with the same reduced `[base]` and 4 exposures in stares of 2;
@@ -62,7 +63,7 @@ BENCH = {"--quick": None, "--stars": "50,100", "--bulge-stars": "50,100", "--ref
 PLACEHOLDER = re.compile(r"(…|<|\$|^[A-Z]{1,4}(\.[a-z]+)?$|=[A-Z]{1,4}$|^(DIR|PATH)$|NNN|^/$|^--[a-z-]+,$)")
 # producers before consumers; within a rank, the pages' order
 RANK = {"config": 0, "psf": 1, "ace": 1, "predict": 1, "simulate": 2, "crowded_image.py": 3, "crowded": 3,
-        "experiment": 4, "bench": 4, "sequence": 4, "transit": 4, "analyze": 5, "solve": 5, "photutils_catalogue.py": 6, "focal_plane_image.py": 6,
+        "experiment": 4, "bench": 4, "sequence": 4, "transit": 4, "analyze": 5, "solve": 5, "solve-synthetic": 1, "photutils_catalogue.py": 6, "focal_plane_image.py": 6,
         "crowded_photutils.py": 6, "check_real_image.py": 6, "simulate_reference.py": 6, "persistence_cost.py": 6, "score": 7, "sweep": 8, "merge": 9, "report": 10}
 
 
@@ -122,6 +123,12 @@ def reduce(words, jsim_bin="jsim"):
             words[words.index("--jsim") + 1] = jsim_bin
             words += ["--config", "small.toml", "--repeat", "1"]
         return [sys.executable] + words[1:]
+    if name == "solve-synthetic":
+        for opt, value in (("--sources", "300"), ("--exposures", "25")):
+            if opt in words:
+                words[words.index(opt) + 1] = value
+            else:
+                words += [opt, value]
     if name == "bench":
         for opt, value in BENCH.items():
             if opt in words:

@@ -257,6 +257,16 @@ pub struct Solution {
     pub chi2_per_dof: f64,
 }
 
+/// A list of indices for a message: all of them up to ten, else the first ten and the count.
+fn list_of(v: &[usize]) -> String {
+    let shown: Vec<String> = v.iter().take(10).map(|e| e.to_string()).collect();
+    if v.len() > 10 {
+        format!("{} … ({} in all)", shown.join(", "), v.len())
+    } else {
+        shown.join(", ")
+    }
+}
+
 /// A solution that cannot be made.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum SolutionError {
@@ -283,6 +293,16 @@ pub enum SolutionError {
     NoOverlap(usize),
     #[error("{0} reference sources anchor the frame: at least 2 are needed")]
     TooFewReferences(usize),
+    #[error(
+        "exposures {} are tied to one another but not to the rest, and hold {anchors} reference source(s): their \
+         frame (shift, turn, scale) is undetermined — a singular gauge; add reference stars there, or leave those \
+         exposures out",
+        list_of(exposures)
+    )]
+    UnanchoredGroup {
+        exposures: Vec<usize>,
+        anchors: usize,
+    },
     #[error(
         "the sequence spans {span_yr:.3} yr: proper motions and parallaxes are unconstrained (degenerate); solve \
          positions only (SourceModel::Position) or observe over more epochs"

@@ -57,6 +57,7 @@ pub fn solve_on(
     }
     validate(obs, exposures, refs, n_sources, opt)?;
     let skipped = unlinked_exposures(obs, exposures.len(), refs, n_sources)?;
+    anchored_groups(obs, exposures.len(), refs, n_sources, &skipped)?;
     let by_source = Groups::new(n_sources, obs.len(), |i| obs[i].source);
     let by_exposure = Groups::new(exposures.len(), obs.len(), |i| obs[i].exposure);
     no_duplicates(obs, &by_source)?;
@@ -405,6 +406,64 @@ fn unlinked_exposures(
         return Err(SolutionError::NoOverlap(n_exposures));
     }
     Ok((0..n_exposures).filter(|e| skipped[*e]).collect())
+}
+
+/// Every group of exposures tied together (through the sources they share) must hold at least two anchored
+/// reference sources: a group tied to no reference — a patch of sky whose reference stars are missing — has
+/// its own frame (shift, turn, scale, and with time their rates) undetermined, a singular gauge. Such a group
+/// is a named error listing its exposures (the left-out `skipped` ones aside).
+fn anchored_groups(
+    obs: &[Observation],
+    n_exposures: usize,
+    refs: &[Reference],
+    n_sources: usize,
+    skipped: &[usize],
+) -> Result<(), SolutionError> {
+    // union–find over exposures (0 … E − 1) and sources (E …)
+    let mut parent: Vec<usize> = (0..n_exposures + n_sources).collect();
+    fn root(parent: &mut [usize], mut k: usize) -> usize {
+        while parent[k] != k {
+            parent[k] = parent[parent[k]];
+            k = parent[k];
+        }
+        k
+    }
+    let mut left_out = vec![false; n_exposures];
+    for &e in skipped {
+        left_out[e] = true;
+    }
+    for o in obs.iter().filter(|o| !left_out[o.exposure]) {
+        let (a, b) = (
+            root(&mut parent, o.exposure),
+            root(&mut parent, n_exposures + o.source),
+        );
+        if a != b {
+            parent[a.max(b)] = a.min(b);
+        }
+    }
+    let mut anchors_in = vec![0usize; n_exposures + n_sources];
+    for r in refs {
+        if r.source < n_sources && anchors(r.sigma[0]) && anchors(r.sigma[1]) {
+            let g = root(&mut parent, n_exposures + r.source);
+            anchors_in[g] += 1;
+        }
+    }
+    let mut members: std::collections::BTreeMap<usize, Vec<usize>> = Default::default();
+    for e in (0..n_exposures).filter(|e| !left_out[*e]) {
+        let g = root(&mut parent, e);
+        members.entry(g).or_default().push(e);
+    }
+    if members.len() < 2 {
+        // one group: the overall count of references is validate's to check
+        return Ok(());
+    }
+    match members.iter().find(|(g, _)| anchors_in[**g] < 2) {
+        Some((g, exposures)) => Err(SolutionError::UnanchoredGroup {
+            exposures: exposures.clone(),
+            anchors: anchors_in[*g],
+        }),
+        None => Ok(()),
+    }
 }
 
 /// Every input checked before anything is solved.
