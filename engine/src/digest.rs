@@ -15,6 +15,14 @@ pub fn sha256_short_hex(bytes: &[u8]) -> String {
     hex(&Sha256::digest(bytes)[..8])
 }
 
+/// The first 48 bits of SHA-256 of `bytes` as an integer: an identifier a table stores exactly in any
+/// numeric column (a double holds integers to 2⁵³).
+pub fn sha256_id48(bytes: &[u8]) -> u64 {
+    Sha256::digest(bytes)[..6]
+        .iter()
+        .fold(0u64, |id, b| (id << 8) | u64::from(*b))
+}
+
 fn hex(bytes: &[u8]) -> String {
     bytes.iter().map(|b| format!("{b:02x}")).collect()
 }
@@ -31,6 +39,7 @@ mod tests {
             "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad"
         );
         assert_eq!(sha256_short_hex(b"abc"), "ba7816bf8f01cfea");
+        assert_eq!(sha256_id48(b"abc"), 0xba7816bf8f01);
         assert_eq!(sha256_hex(b"").len(), 64);
     }
 }

@@ -221,9 +221,16 @@ fn persistence_along_a_sequence_is_the_same_straight_or_sharded() {
     let o = run(&off, &spec, &[]);
     assert!(o.status.success(), "{}", stderr(&o));
     let without = table(&off.join("catalogue.fits"));
+    // exposure e's rows, all columns but the sequence's identity (its configuration differs between runs)
+    let id_column = engine::studies::sequence::run::CATALOGUE_HEADER
+        .iter()
+        .position(|c| *c == "sequence_id")
+        .expect("the identity column");
     let rows = |t: &Vec<Vec<f64>>, e: f64| -> Vec<Vec<f64>> {
         t.iter()
-            .map(|c| {
+            .enumerate()
+            .filter(|(k, _)| *k != id_column)
+            .map(|(_, c)| {
                 c.iter()
                     .zip(&t[0])
                     .filter(|(_, x)| **x == e)
@@ -345,6 +352,45 @@ fn a_sequence_is_solved_from_its_products_and_scored() {
     let products =
         engine::studies::sequence::solution::read_products(&bare).expect("products alone");
     assert_eq!(products.exposures_run, 8);
+    // a catalogue of another sequence (another plan: one visit, other times) mixed in is refused by name,
+    // and nothing is written
+    let other = dir.join("other");
+    let one_visit = self::spec(&dir);
+    let o = run(&other, &one_visit, &["--exposures", "2"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let mixed = dir.join("mixed");
+    std::fs::create_dir_all(mixed.join("exposures")).expect("mkdir");
+    for e in std::fs::read_dir(&bare).expect("bare").flatten() {
+        if e.path().is_file() {
+            std::fs::copy(e.path(), mixed.join(e.file_name())).expect("copy");
+        }
+    }
+    for e in std::fs::read_dir(bare.join("exposures"))
+        .expect("exposures")
+        .flatten()
+    {
+        std::fs::copy(e.path(), mixed.join("exposures").join(e.file_name())).expect("copy");
+    }
+    std::fs::copy(
+        other.join("exposures/00001.csv"),
+        mixed.join("exposures/00001.csv"),
+    )
+    .expect("copy");
+    let o = jsim()
+        .args(["solve", "--sequence"])
+        .arg(&mixed)
+        .output()
+        .expect("solve");
+    let err = stderr(&o);
+    assert!(!o.status.success(), "{err}");
+    assert!(
+        err.contains("00001.csv") && err.contains("another sequence"),
+        "{err}"
+    );
+    assert!(
+        !mixed.join("solution").exists(),
+        "nothing is written on error"
+    );
     let sol = dir.join("solution");
     let o = jsim()
         .args(["solve", "--sequence"])

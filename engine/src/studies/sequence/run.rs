@@ -21,7 +21,7 @@ pub const FIELD_NAME: &str = "field.csv";
 pub const CATALOGUE_NAME: &str = "catalogue.fits";
 
 /// The measured columns of an exposure's catalogue (and of `catalogue.fits`).
-pub const CATALOGUE_HEADER: [&str; 12] = [
+pub const CATALOGUE_HEADER: [&str; 13] = [
     "exposure",
     "stare",
     "array",
@@ -34,6 +34,7 @@ pub const CATALOGUE_HEADER: [&str; 12] = [
     "ra_deg",
     "dec_deg",
     "mjd_tdb",
+    "sequence_id",
 ];
 
 /// A sequence run failed.
@@ -78,6 +79,29 @@ pub fn write_setup(plan: &Plan, cfg: &Config, dir: &Path) -> Result<(PathBuf, Pa
     .map_err(|e| e.to_string())?;
     crate::io::write_atomic(&spec, spec_text.as_bytes()).map_err(|e| e.to_string())?;
     Ok((config, spec))
+}
+
+/// The sequence's identity, written in every row of its catalogues (`sequence_id`): the first 48 bits of
+/// SHA-256 over its products `design.toml`, `sequence.toml` and the reference catalogue — the plan and the
+/// field's draw — so that the solution, reading the same products, refuses a catalogue of another sequence.
+pub fn sequence_id(dir: &Path) -> Result<u64, SequenceError> {
+    let mut bytes = Vec::new();
+    for name in [
+        DESIGN_NAME,
+        "sequence.toml",
+        crate::io::sky_reference::REFERENCE_NAME,
+    ] {
+        let path = dir.join(name);
+        let b = std::fs::read(&path).map_err(|e| {
+            SequenceError::Invalid(format!(
+                "{}: {e} (written by `jsim sequence`)",
+                path.display()
+            ))
+        })?;
+        bytes.extend_from_slice(&(b.len() as u64).to_le_bytes());
+        bytes.extend(b);
+    }
+    Ok(crate::digest::sha256_id48(&bytes))
 }
 
 /// The file of exposure `index`'s catalogue.
@@ -191,6 +215,7 @@ pub fn run_exposure(
         .first()
         .ok_or_else(|| SequenceError::Invalid("no countermeasure to run".into()))?;
     let mjd_tdb = super::plan::mid_exposure(&c, e).tdb_mjd();
+    let id = sequence_id(dir)? as i64;
     let scale = c.instrument.plate_scale_mas();
     // the sky positions a pipeline gives: through the design WCS at the planned pointing (the images'
     // headers carry the simulator's true one)
@@ -217,6 +242,7 @@ pub fn run_exposure(
                 Cell::F(ra),
                 Cell::F(dec),
                 Cell::F(mjd_tdb),
+                Cell::I(id),
             ]);
             truth_rows.push(vec![
                 Cell::I(e.index as i64),

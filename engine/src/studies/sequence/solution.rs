@@ -74,7 +74,7 @@ pub fn read_products(dir: &Path) -> Result<Products, SequenceError> {
             dir.display()
         )));
     }
-    let designs = plan.exposures[..exposures_run]
+    let designs: Vec<DesignExposure> = plan.exposures[..exposures_run]
         .iter()
         .map(|e| {
             let c = design_config(&cfg, &plan, e);
@@ -82,8 +82,9 @@ pub fn read_products(dir: &Path) -> Result<Products, SequenceError> {
             DesignExposure { cfg: c, mid }
         })
         .collect();
+    let id = super::run::sequence_id(dir)?;
     let mut detections = Vec::new();
-    for e in &plan.exposures[..exposures_run] {
+    for (e, d) in plan.exposures[..exposures_run].iter().zip(&designs) {
         let path = super::run::exposure_path(dir, e.index);
         let (h, rows) = crate::io::csv::read(&path)?;
         let col = |n: &str| crate::io::csv::column_f64(&path, &h, &rows, n);
@@ -94,6 +95,12 @@ pub fn read_products(dir: &Path) -> Result<Products, SequenceError> {
             col("y_px")?,
             col("flux_e")?,
         );
+        let seen = Seen {
+            exposure: &ex,
+            mjd: &col("mjd_tdb")?,
+            sequence_id: &col("sequence_id")?,
+        };
+        same_sequence(&path, e.index, d.mid.tdb_mjd(), id, &seen)?;
         let any = |n: &str| crate::io::csv::column_f64_any(&path, &h, &rows, n);
         let (cx, cy, fl) = (any("crlb_x_px")?, any("crlb_y_px")?, col("flags")?);
         for i in 0..rows.len() {
@@ -120,6 +127,51 @@ pub fn read_products(dir: &Path) -> Result<Products, SequenceError> {
         references,
         tangent_deg,
     })
+}
+
+/// How far a catalogue's time may stand from its planned exposure's, days (0.09 s: the plan's exposures are
+/// 12.5 s apart at least, a visit's months).
+const SAME_EXPOSURE_DAYS: f64 = 1e-6;
+
+/// What a catalogue says of where its rows come from.
+struct Seen<'a> {
+    exposure: &'a [f64],
+    mjd: &'a [f64],
+    sequence_id: &'a [f64],
+}
+
+/// A catalogue belongs to this sequence's exposure `index`: every row carries this sequence's identity
+/// ([`super::run::sequence_id`], from the products the solution reads) and names that exposure at its
+/// planned mid-exposure time. A catalogue of another sequence is refused by name.
+fn same_sequence(
+    path: &Path,
+    index: usize,
+    planned_mjd: f64,
+    id: u64,
+    seen: &Seen,
+) -> Result<(), SequenceError> {
+    let row = |i: usize| format!("{}: row {}", path.display(), i + 2);
+    if let Some(i) = seen.sequence_id.iter().position(|v| *v != id as f64) {
+        return Err(invalid(format!(
+            "{} carries sequence_id {}, where this sequence (its design.toml, sequence.toml and reference \
+             catalogue) is {id}: a catalogue of another sequence is not read into this one",
+            row(i),
+            seen.sequence_id[i]
+        )));
+    }
+    let bad = (0..seen.exposure.len()).find(|&i| {
+        seen.exposure[i] != index as f64 || (seen.mjd[i] - planned_mjd).abs() > SAME_EXPOSURE_DAYS
+    });
+    match bad {
+        Some(i) => Err(invalid(format!(
+            "{} is exposure {} at MJD {:.6} (TDB), where this sequence's exposure {index} is at MJD \
+             {planned_mjd:.6}: a catalogue of another exposure is not read as this one",
+            row(i),
+            seen.exposure[i],
+            seen.mjd[i],
+        ))),
+        None => Ok(()),
+    }
 }
 
 /// The options a solution of the first `n` exposures gets from `spec`.
