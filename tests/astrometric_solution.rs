@@ -6,8 +6,8 @@
 //! at 4σ of their sampling error); outliers are rejected; bad input is named.
 
 use engine::analysis::solution::{
-    CalibrationModel, ExposureGeometry, Method, Observation, Options, Params, Reference, Solution,
-    SolutionError, SourceModel, solve, solve_on,
+    CalibrationModel, Checkpointing, ExposureGeometry, Method, Observation, Options, Params,
+    Reference, Single, Solution, SolutionError, SourceModel, solve, solve_on, solve_with,
 };
 use engine::studies::bench_solution::CALIBRATED;
 use engine::studies::bench_solution::{Synthetic, SyntheticSpec, synthetic};
@@ -525,18 +525,8 @@ fn two_and_four_ranks_give_one_process_solution_bit_for_bit() {
     let one = solve(&t.obs, &t.exposures, &t.refs, 600, &opt).expect("solved");
     assert!(one.converged && one.iterations > 20, "{}", one.iterations);
     for size in [2, 4] {
-        let all: Vec<Solution> = std::thread::scope(|s| {
-            let handles: Vec<_> = engine::testkit::thread_ranks(size)
-                .into_iter()
-                .map(|r| {
-                    let (t, opt) = (&t, &opt);
-                    s.spawn(move || solve_on(&t.obs, &t.exposures, &t.refs, 600, opt, &r))
-                })
-                .collect();
-            handles
-                .into_iter()
-                .map(|h| h.join().expect("a rank").expect("solved"))
-                .collect()
+        let all = engine::testkit::on_thread_ranks(size, |r| {
+            solve_on(&t.obs, &t.exposures, &t.refs, 600, &opt, r).expect("solved")
         });
         for (rank, got) in all.iter().enumerate() {
             assert_eq!(got, &one, "rank {rank} of {size}");
@@ -553,4 +543,138 @@ fn two_and_four_ranks_give_one_process_solution_bit_for_bit() {
     };
     let e = solve_on(&t.obs, &t.exposures, &t.refs, 600, &block, &two[0]).expect_err("refused");
     assert!(e.to_string().contains("block"), "{e}");
+}
+
+/// An interrupted solution resumes from its checkpoint and ends with the bits of one never interrupted —
+/// interrupted at every checkpoint in turn (each relinearisation and each rejection round), resumed on one
+/// rank and on two; a checkpoint of another input is a named error; none is left once done.
+#[test]
+fn an_interrupted_solution_resumes_from_its_checkpoint_to_the_same_bits() {
+    let t = noisy_calibrated(600, 3, 12);
+    let opt = Options {
+        calibration: CALIBRATED,
+        ..Options::default()
+    };
+    let whole = solve(&t.obs, &t.exposures, &t.refs, 600, &opt).expect("solved");
+    let dir = std::env::temp_dir().join(format!("jsim-resume-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).expect("dir");
+    let path = dir.join("solution.checkpoint");
+    let ck = |interrupt_after| Checkpointing {
+        path: &path,
+        interrupt_after,
+    };
+    let mut interruptions = 0;
+    for k in 1.. {
+        let _ = std::fs::remove_file(&path);
+        match solve_with(
+            &t.obs,
+            &t.exposures,
+            &t.refs,
+            600,
+            &opt,
+            &Single,
+            Some(ck(Some(k))),
+        ) {
+            Err(SolutionError::Interrupted(n)) => assert_eq!(n, k),
+            Ok(done) => {
+                // fewer checkpoints than k: it ran to the end, as the whole one
+                assert_eq!(done, whole);
+                assert!(!path.exists(), "no checkpoint is left once done");
+                break;
+            }
+            Err(e) => panic!("{e}"),
+        }
+        assert!(path.exists(), "checkpoint {k} written");
+        interruptions += 1;
+        // resumed on one process …
+        let resumed = solve_with(
+            &t.obs,
+            &t.exposures,
+            &t.refs,
+            600,
+            &opt,
+            &Single,
+            Some(ck(None)),
+        )
+        .expect("resumed");
+        assert_eq!(resumed, whole, "resumed after checkpoint {k}");
+        assert!(!path.exists());
+        // … and, from the same checkpoint, on two ranks
+        let _ = solve_with(
+            &t.obs,
+            &t.exposures,
+            &t.refs,
+            600,
+            &opt,
+            &Single,
+            Some(ck(Some(k))),
+        );
+        let two = engine::testkit::on_thread_ranks(2, |r| {
+            solve_with(&t.obs, &t.exposures, &t.refs, 600, &opt, r, Some(ck(None)))
+                .expect("resumed")
+        });
+        assert!(
+            two.iter().all(|s| *s == whole),
+            "two ranks after checkpoint {k}"
+        );
+        // interrupted on two ranks (rank 0 writes), resumed on one
+        for e in engine::testkit::on_thread_ranks(2, |r| {
+            solve_with(
+                &t.obs,
+                &t.exposures,
+                &t.refs,
+                600,
+                &opt,
+                r,
+                Some(ck(Some(k))),
+            )
+        }) {
+            assert!(matches!(e, Err(SolutionError::Interrupted(_))), "{e:?}");
+        }
+        let resumed = solve_with(
+            &t.obs,
+            &t.exposures,
+            &t.refs,
+            600,
+            &opt,
+            &Single,
+            Some(ck(None)),
+        )
+        .expect("resumed");
+        assert_eq!(
+            resumed, whole,
+            "written on two ranks, resumed on one, after checkpoint {k}"
+        );
+    }
+    eprintln!("interrupted and resumed at each of {interruptions} checkpoints");
+    assert!(interruptions >= 4, "{interruptions} checkpoints");
+    // a checkpoint of another input is refused by name
+    let _ = solve_with(
+        &t.obs,
+        &t.exposures,
+        &t.refs,
+        600,
+        &opt,
+        &Single,
+        Some(ck(Some(1))),
+    );
+    let other = Options {
+        clip_sigma: 4.0,
+        ..opt
+    };
+    let e = solve_with(
+        &t.obs,
+        &t.exposures,
+        &t.refs,
+        600,
+        &other,
+        &Single,
+        Some(ck(None)),
+    )
+    .expect_err("another input");
+    assert!(
+        matches!(e, SolutionError::Checkpoint { .. }) && e.to_string().contains("another input"),
+        "{e}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
 }

@@ -200,6 +200,21 @@ pub fn thread_ranks(size: usize) -> Vec<ThreadRanks> {
 use std::sync::Mutex;
 use std::sync::mpsc::{Receiver, Sender};
 
+/// `f` run on each of `size` [`thread_ranks`] at once; their results in rank order.
+pub fn on_thread_ranks<T: Send>(size: usize, f: impl Fn(&ThreadRanks) -> T + Sync) -> Vec<T> {
+    std::thread::scope(|s| {
+        let f = &f;
+        let handles: Vec<_> = thread_ranks(size)
+            .into_iter()
+            .map(|r| s.spawn(move || f(&r)))
+            .collect();
+        handles
+            .into_iter()
+            .map(|h| h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
+            .collect()
+    })
+}
+
 /// One of [`thread_ranks`].
 pub struct ThreadRanks {
     rank: usize,

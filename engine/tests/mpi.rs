@@ -112,3 +112,122 @@ fn one_two_and_four_ranks_give_the_same_solution() {
     assert!(!ok && err.contains("`psf` runs on one rank"), "{err}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// The jsim-mpi ranks whose command line names `marker` (not mpirun's).
+fn ranks_running(marker: &str) -> Vec<u32> {
+    let mut pids = Vec::new();
+    for e in std::fs::read_dir("/proc").into_iter().flatten().flatten() {
+        let Ok(pid) = e.file_name().to_string_lossy().parse::<u32>() else {
+            continue;
+        };
+        let cmd = std::fs::read(e.path().join("cmdline")).unwrap_or_default();
+        let args: Vec<String> = cmd
+            .split(|b| *b == 0)
+            .map(|a| String::from_utf8_lossy(a).into_owned())
+            .collect();
+        if args.first().is_some_and(|a| a.ends_with("jsim-mpi")) && args.iter().any(|a| a == marker)
+        {
+            pids.push(pid);
+        }
+    }
+    pids
+}
+
+/// A rank killed mid-solve (SIGKILL, once the first checkpoint is on disk) leaves a resumable checkpoint:
+/// the same command run again resumes from it and ends with the uninterrupted solution, and removes it.
+#[test]
+fn a_rank_killed_mid_solve_leaves_a_checkpoint_the_rerun_resumes_from() {
+    let Some(mpirun) = mpirun_or_skip() else {
+        return;
+    };
+    let bin = build_jsim_mpi();
+    let dir = scratch("killed");
+    std::fs::create_dir_all(&dir).expect("dir");
+    // long enough to be killed midway in either profile
+    let (sources, exposures) = if cfg!(debug_assertions) {
+        ("3000", "100")
+    } else {
+        ("20000", "200")
+    };
+    let ck = dir.join("solution.checkpoint");
+    let ck_arg = ck.display().to_string();
+    let out = dir.join("solution");
+    let args: Vec<String> = [
+        "solve-synthetic",
+        "--sources",
+        sources,
+        "--exposures",
+        exposures,
+        "--checkpoint",
+        &ck_arg,
+        "--out",
+    ]
+    .iter()
+    .map(|s| s.to_string())
+    .chain([out.display().to_string()])
+    .collect();
+    let mut child = Command::new(&mpirun)
+        .args(["--oversubscribe", "-np", "2"])
+        .arg(&bin)
+        .args(&args)
+        .env("RAYON_NUM_THREADS", "1")
+        .env("OMPI_ALLOW_RUN_AS_ROOT", "1")
+        .env("OMPI_ALLOW_RUN_AS_ROOT_CONFIRM", "1")
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .expect("mpirun starts");
+    let t0 = std::time::Instant::now();
+    while !ck.exists() {
+        assert!(
+            t0.elapsed().as_secs() < 300,
+            "no checkpoint after 300 s (did the solve start?)"
+        );
+        assert!(
+            child.try_wait().expect("mpirun").is_none(),
+            "mpirun ended before its first checkpoint"
+        );
+        std::thread::sleep(std::time::Duration::from_millis(5));
+    }
+    let victims = ranks_running(&ck_arg);
+    assert_eq!(victims.len(), 2, "two ranks running: {victims:?}");
+    let killed = Command::new("kill")
+        .args(["-KILL", &victims[1].to_string()])
+        .status()
+        .expect("kill");
+    assert!(killed.success());
+    let status = child.wait().expect("mpirun ends");
+    assert!(
+        !status.success(),
+        "the run finished before a rank could be killed: make the problem larger"
+    );
+    assert!(ck.exists(), "the killed run left its checkpoint");
+    assert!(!out.join("sources.csv").exists());
+    // rerun: resumed from the checkpoint, the uninterrupted solution, the checkpoint gone
+    let a: Vec<&str> = args.iter().map(String::as_str).collect();
+    let (ok, err) = run_ranks(&mpirun, &bin, 2, &a);
+    assert!(ok, "{err}");
+    assert!(!ck.exists(), "the checkpoint is removed once done");
+    let whole = dir.join("whole");
+    let o = Command::new(env!("CARGO_BIN_EXE_jsim"))
+        .args([
+            "solve-synthetic",
+            "--sources",
+            sources,
+            "--exposures",
+            exposures,
+            "--out",
+        ])
+        .arg(&whole)
+        .output()
+        .expect("jsim runs");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    for f in ["sources.csv", "attitudes.csv"] {
+        let worst = max_relative(&numbers(&whole.join(f)), &numbers(&out.join(f)));
+        eprintln!(
+            "{f}: killed and resumed against uninterrupted, largest relative difference {worst:e}"
+        );
+        assert!(worst <= 1e-9, "{f}: {worst:e}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -11,7 +11,7 @@
 use super::bench::{BenchError, BenchRow};
 use crate::analysis::solution::{
     Attitude, Calibration, CalibrationModel, ExposureGeometry, Method, Observation, Options,
-    Params, Reference, solve,
+    Params, Reference,
 };
 use crate::rng::{self, Stream};
 use rand::RngExt;
@@ -283,13 +283,15 @@ pub struct SyntheticRun {
 }
 
 /// Draw the benchmark's synthetic sequence of `n` sources × `n_exposures` (a multiple of 25) with the
-/// calibration `calibration` and solve it by `method` (on this thread's ranks: [`crate::analysis::solution::ranks::world`]).
+/// calibration `calibration` and solve it by `method` (on this thread's ranks: [`crate::analysis::solution::ranks::world`]),
+/// resumed from and checkpointed to `checkpoint` if given.
 pub fn solve_synthetic(
     n: usize,
     n_exposures: usize,
     calibration: CalibrationModel,
     method: Method,
     seed: u64,
+    checkpoint: Option<&std::path::Path>,
 ) -> Result<SyntheticRun, BenchError> {
     check_sizes(&[n], &[n_exposures])?;
     let syn = synthetic(&SyntheticSpec {
@@ -306,7 +308,18 @@ pub fn solve_synthetic(
         ..Options::default()
     };
     let t0 = Instant::now();
-    let sol = solve(&syn.obs, &syn.exposures, &syn.refs, n, &options)?;
+    let sol = crate::analysis::solution::solve_with(
+        &syn.obs,
+        &syn.exposures,
+        &syn.refs,
+        n,
+        &options,
+        &*crate::analysis::solution::ranks::world(),
+        checkpoint.map(|path| crate::analysis::solution::Checkpointing {
+            path,
+            interrupt_after: None,
+        }),
+    )?;
     let time_s = t0.elapsed().as_secs_f64();
     let (mut err2, mut sig2, mut m) = (0.0, 0.0, 0usize);
     for (s, p) in sol.sources.iter().zip(&syn.params) {
@@ -356,7 +369,7 @@ fn one_row(
     seed: u64,
 ) -> Result<BenchRow, BenchError> {
     {
-        let run = solve_synthetic(n, n_exposures, calibration, method, seed)?;
+        let run = solve_synthetic(n, n_exposures, calibration, method, seed, None)?;
         let (exposures, obs, sol, time_s) =
             (&run.syn.exposures, &run.syn.obs, &run.sol, run.time_s);
         let (ratio, rms_mas) = (run.error_over_sigma, run.rms_mas);

@@ -40,11 +40,17 @@ const MAX_OUTER: usize = 20;
 /// on `ranks`: each solves its own sky tiles' sources, and every rank ends with all of them (the same bits
 /// as one process: [`ranks`]). Returns the iterations (passes over the observations) and whether the
 /// criterion was met.
+///
+/// `resume`: the iterations this round had made when its checkpoint was written (the state is the
+/// checkpoint's, at a relinearisation: the sources are not fitted first). `save`, if given, is called at each
+/// relinearisation with every source gathered to every rank and the iterations so far.
 pub(super) fn iterate(
     p: &Problem,
     state: &mut State,
     active: &[bool],
     ranks: &dyn Ranks,
+    resume: Option<(usize, Option<Steps>)>,
+    mut save: Option<&mut SaveFn>,
 ) -> Result<(usize, bool), SolutionError> {
     let opt = p.opt;
     let tiles = Tiles::new(p, ranks);
@@ -64,15 +70,47 @@ pub(super) fn iterate(
                 .fold(1.0f64, f64::max)
         })
         .collect();
-    tiles.source_pass(p, state, active);
+    let (mut iterations, mut steps_back) = match resume {
+        Some((k, steps)) => (k, steps),
+        None => {
+            tiles.source_pass(p, state, active);
+            (1, None)
+        }
+    };
     let budget = opt.max_iterations.max(1);
-    let mut iterations = 1usize;
     let mut converged = false;
     for _ in 0..MAX_OUTER {
+        if save.is_some() {
+            // a checkpoint within this relinearisation holds the state it starts from: every source of it
+            tiles.gather(state, ranks);
+        }
         let mut lin = Linear::new(p, state, active, &lever, &tiles);
         let pre = lin.preconditioner(ranks)?;
         let b = lin.rhs(state, ranks);
-        let (x, steps, inner_converged) = pcg(&lin, &pre, &b, opt.tolerance_sigma, budget, ranks);
+        let start = steps_back.take().map(|g| lin.local(&g)).transpose()?;
+        let (x, steps, inner_converged) = {
+            let before = iterations;
+            let (lin, st) = (&lin, &*state);
+            let mut inner = save.as_mut().map(|f| {
+                move |at: &Steps| -> Result<(), SolutionError> {
+                    let whole = lin.whole(at, ranks);
+                    f(st, before, Some(&whole))
+                }
+            });
+            let inner = inner
+                .as_mut()
+                .map(|f| f as &mut dyn FnMut(&Steps) -> Result<(), SolutionError>);
+            pcg(
+                lin,
+                &pre,
+                &b,
+                opt.tolerance_sigma,
+                budget,
+                ranks,
+                start,
+                inner,
+            )?
+        };
         iterations += steps;
         let moved = x
             .iter()
@@ -87,6 +125,10 @@ pub(super) fn iterate(
         }
         if iterations >= budget {
             break;
+        }
+        if let Some(save) = save.as_mut() {
+            tiles.gather(state, ranks);
+            save(state, iterations, None)?;
         }
     }
     tiles.source_pass(p, state, active);
@@ -186,6 +228,10 @@ impl Tiles {
 
 /// Preconditioned conjugate gradients for `N x = b` from x = 0: the solution, the steps taken, and whether
 /// the last step moved every unknown by less than `tol` of its σ (or the residual vanished).
+///
+/// `start`: where an interrupted run stood (this rank's share); `save`, if given, is called every
+/// [`SAVE_STEPS`] steps with where it stands.
+#[allow(clippy::too_many_arguments)]
 fn pcg(
     lin: &Linear,
     pre: &Preconditioner,
@@ -193,22 +239,31 @@ fn pcg(
     tol: f64,
     budget: usize,
     ranks: &dyn Ranks,
-) -> (Vec<f64>, usize, bool) {
-    let mut x = vec![0.0; b.len()];
-    let mut r = b.to_vec();
+    start: Option<Steps>,
+    mut save: Option<&mut dyn FnMut(&Steps) -> Result<(), SolutionError>>,
+) -> Result<(Vec<f64>, usize, bool), SolutionError> {
+    let Steps {
+        mut steps,
+        mut x,
+        mut r,
+        mut d,
+    } = start.unwrap_or_else(|| Steps {
+        steps: 0,
+        x: vec![0.0; b.len()],
+        r: b.to_vec(),
+        d: pre.apply(lin, b),
+    });
     let mut z = pre.apply(lin, &r);
-    let mut d = z.clone();
     let mut rz = lin.dot(&r, &z, ranks);
-    let mut steps = 0;
     while steps < budget {
         if !(rz > 0.0) {
-            return (x, steps, true);
+            return Ok((x, steps, true));
         }
         steps += 1;
         let q = lin.apply(&d, ranks);
         let dq = lin.dot(&d, &q, ranks);
         if !(dq > 0.0) {
-            return (x, steps, true);
+            return Ok((x, steps, true));
         }
         let alpha = rz / dq;
         let mut step = 0.0f64;
@@ -221,7 +276,7 @@ fn pcg(
             }
         }
         if ranks::max_across(ranks, step) <= tol {
-            return (x, steps, true);
+            return Ok((x, steps, true));
         }
         z = pre.apply(lin, &r);
         let rz_new = lin.dot(&r, &z, ranks);
@@ -230,8 +285,38 @@ fn pcg(
         for (dk, zk) in d.iter_mut().zip(&z) {
             *dk = zk + beta * *dk;
         }
+        if let Some(save) = save.as_mut()
+            && steps % SAVE_STEPS == 0
+            && steps < budget
+        {
+            let at = Steps {
+                steps,
+                x: x.clone(),
+                r: r.clone(),
+                d: d.clone(),
+            };
+            save(&at)?;
+        }
     }
-    (x, steps, false)
+    Ok((x, steps, false))
+}
+
+/// A checkpoint's writer: the state, the iterations before (within a relinearisation) or after it, and where
+/// the gradients stand within one.
+pub(super) type SaveFn<'a> =
+    dyn FnMut(&State, usize, Option<&Steps>) -> Result<(), SolutionError> + 'a;
+
+/// Steps of the gradients between two checkpoints within a relinearisation.
+const SAVE_STEPS: usize = 20;
+
+/// Where the gradients stand: the steps taken, the solution so far, the residual and the search direction
+/// (in a rank's layout of the unknowns within [`pcg`], in the whole problem's in a checkpoint).
+#[derive(Debug, Clone, PartialEq)]
+pub(super) struct Steps {
+    pub steps: usize,
+    pub x: Vec<f64>,
+    pub r: Vec<f64>,
+    pub d: Vec<f64>,
 }
 
 fn dot(a: &[f64], b: &[f64]) -> f64 {
@@ -279,6 +364,10 @@ struct Linear<'a> {
     src_off: Vec<usize>,
     /// Where each leaf's run of the sources' unknowns begins (and, last, where the sources' end).
     leaf_start: Vec<usize>,
+    /// In the whole problem's layout (every rank's sources in tile order): where this rank's first source's
+    /// unknowns sit, and the sources' unknowns in all.
+    whole_before: usize,
+    whole_sources: usize,
     att_off: usize,
     cal_off: usize,
     /// The calibration's unknowns per axis (0 when none is solved).
@@ -300,18 +389,19 @@ impl<'a> Linear<'a> {
         lever: &'a [f64],
         tiles: &'a Tiles,
     ) -> Self {
-        let dims: Vec<usize> = state
+        let all_dims: Vec<usize> = state
             .sources
             .iter()
-            .zip(&tiles.owned)
-            .map(|(s, mine)| {
-                if *mine {
-                    s.sigma.iter().take_while(|v| v.is_finite()).count()
-                } else {
-                    0
-                }
-            })
+            .map(|s| s.sigma.iter().take_while(|v| v.is_finite()).count())
             .collect();
+        let dims: Vec<usize> = all_dims
+            .iter()
+            .zip(&tiles.owned)
+            .map(|(n, mine)| if *mine { *n } else { 0 })
+            .collect();
+        let first_mine = tiles.run(tiles.mine.clone()).start;
+        let whole_before: usize = tiles.order[..first_mine].iter().map(|s| all_dims[*s]).sum();
+        let whole_sources: usize = all_dims.iter().sum();
         let mut src_off = vec![0; dims.len()];
         let mut leaf_start = Vec::with_capacity(LEAVES + 1);
         let mut n = 0;
@@ -340,6 +430,8 @@ impl<'a> Linear<'a> {
             dims,
             src_off,
             leaf_start,
+            whole_before,
+            whole_sources,
             att_off,
             cal_off,
             cal_axis,
@@ -440,6 +532,57 @@ impl<'a> Linear<'a> {
         let acc = tree_split(lo, hi, src_part, &self.leaf_start, &leaf, &add_vec);
         rest.copy_from_slice(&ranks::across(ranks, acc));
         out
+    }
+
+    /// Where the gradients stand in the whole problem's layout, from every rank's share (a gather).
+    fn whole(&self, at: &Steps, ranks: &dyn Ranks) -> Steps {
+        let joined = |v: &[f64]| -> Vec<f64> {
+            let mut all: Vec<f64> = ranks
+                .gather_all(&v[..self.att_off])
+                .into_iter()
+                .flatten()
+                .collect();
+            all.extend_from_slice(&v[self.att_off..]);
+            all
+        };
+        Steps {
+            steps: at.steps,
+            x: joined(&at.x),
+            r: joined(&at.r),
+            d: joined(&at.d),
+        }
+    }
+
+    /// This rank's share of where the gradients stand in the whole problem's layout (a checkpoint's that does
+    /// not fit the problem is a named error).
+    fn local(&self, whole: &Steps) -> Result<Steps, SolutionError> {
+        let want = self.whole_sources + (self.len - self.att_off);
+        if [&whole.x, &whole.r, &whole.d]
+            .iter()
+            .any(|v| v.len() != want)
+        {
+            return Err(SolutionError::Checkpoint {
+                path: "(resumed)".into(),
+                why: format!(
+                    "its gradients hold {} unknowns where the problem has {want}",
+                    whole.x.len()
+                ),
+            });
+        }
+        let mine = |v: &[f64]| -> Vec<f64> {
+            let src = self.whole_before..self.whole_before + self.att_off;
+            v[src]
+                .iter()
+                .chain(&v[self.whole_sources..])
+                .copied()
+                .collect()
+        };
+        Ok(Steps {
+            steps: whole.steps,
+            x: mine(&whole.x),
+            r: mine(&whole.r),
+            d: mine(&whole.d),
+        })
     }
 
     /// `a · b` over all ranks' unknowns: the sources' share leaf by leaf along the tree, then the exposures'

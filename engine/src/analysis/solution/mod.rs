@@ -35,6 +35,7 @@
 mod blocks;
 pub mod calibration;
 mod cg;
+mod checkpoint;
 pub mod feed;
 mod groups;
 #[cfg(feature = "mpi")]
@@ -44,7 +45,7 @@ mod solve;
 
 pub use calibration::{Calibration, CalibrationModel};
 pub use ranks::{Ranks, Single};
-pub use solve::{solve, solve_on};
+pub use solve::{Checkpointing, solve, solve_on, solve_with};
 
 /// One measured position of a source in one exposure, on the tangent plane (mas), with its 1σ error per axis.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -335,4 +336,11 @@ pub enum SolutionError {
         "the reference catalogue must carry proper motions and parallaxes (with errors) to anchor {0}"
     )]
     FrameUnanchored(&'static str),
+    #[error("solution checkpoint {path}: {why}")]
+    Checkpoint { path: String, why: String },
+    #[error(
+        "the solution was interrupted after {0} checkpoint(s), as asked (interrupt_after): rerun with the same \
+         checkpoint to resume"
+    )]
+    Interrupted(usize),
 }

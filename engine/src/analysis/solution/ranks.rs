@@ -191,8 +191,6 @@ fn morton(x: u32, y: u32) -> u64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::testkit::thread_ranks;
-
     #[test]
     fn ranks_finish_the_single_process_tree_bit_for_bit() {
         // leaf values of wildly different magnitudes: any other order of the additions changes the bits
@@ -208,20 +206,9 @@ mod tests {
         };
         let single = tree(0, LEAVES, &leaf, &add);
         for size in [2, 4, 8] {
-            let results: Vec<Vec<f64>> = std::thread::scope(|s| {
-                let handles: Vec<_> = thread_ranks(size)
-                    .into_iter()
-                    .map(|t| {
-                        s.spawn(move || {
-                            let r = leaves_of(t.rank(), t.size());
-                            across(&t, tree(r.start, r.end, &leaf, &add))
-                        })
-                    })
-                    .collect();
-                handles
-                    .into_iter()
-                    .map(|h| h.join().expect("rank"))
-                    .collect()
+            let results = crate::testkit::on_thread_ranks(size, |t| {
+                let r = leaves_of(t.rank(), t.size());
+                across(t, tree(r.start, r.end, &leaf, &add))
             });
             for r in &results {
                 assert_eq!(

@@ -6,6 +6,7 @@ use super::blocks::{
     unsolved,
 };
 use super::calibration::{self, Calibration};
+use super::checkpoint;
 use super::groups::Groups;
 use super::ranks::Ranks;
 use super::{
@@ -46,6 +47,56 @@ pub fn solve_on(
     n_sources: usize,
     opt: &Options,
     ranks: &dyn Ranks,
+) -> Result<Solution, SolutionError> {
+    solve_with(obs, exposures, refs, n_sources, opt, ranks, None)
+}
+
+/// A solution's checkpoint ([`super::checkpoint`]): the file it is written to and resumed from.
+#[derive(Debug, Clone, Copy)]
+pub struct Checkpointing<'a> {
+    pub path: &'a std::path::Path,
+    /// Stop with [`SolutionError::Interrupted`] after writing this many checkpoints (None: never) — how the
+    /// tests interrupt a solution where they choose.
+    pub interrupt_after: Option<usize>,
+}
+
+/// Writes the checkpoints of one solution (rank 0 writes; every rank counts).
+struct Saver<'a> {
+    ck: Checkpointing<'a>,
+    fingerprint: u64,
+    writes: bool,
+    saved: usize,
+}
+
+impl Saver<'_> {
+    fn save(
+        &mut self,
+        at: checkpoint::At,
+        state: &State,
+        active: &[bool],
+        steps: Option<&super::cg::Steps>,
+    ) -> Result<(), SolutionError> {
+        if self.writes {
+            checkpoint::write(self.ck.path, self.fingerprint, &at, state, active, steps)?;
+        }
+        self.saved += 1;
+        if self.ck.interrupt_after == Some(self.saved) {
+            return Err(SolutionError::Interrupted(self.saved));
+        }
+        Ok(())
+    }
+}
+
+/// [`solve_on`] with a checkpoint: resumed from it when it is there (of this very input: else a named
+/// error), written at each relinearisation and each rejection round, removed when the solution is done.
+pub fn solve_with(
+    obs: &[Observation],
+    exposures: &[ExposureGeometry],
+    refs: &[Reference],
+    n_sources: usize,
+    opt: &Options,
+    ranks: &dyn Ranks,
+    checkpointing: Option<Checkpointing>,
 ) -> Result<Solution, SolutionError> {
     super::ranks::check(ranks.size())?;
     if ranks.size() > 1 && opt.method == Method::Block {
@@ -134,10 +185,41 @@ pub fn solve_on(
     };
     let (mut iterations, mut rejected) = (0, 0);
     let mut converged = true;
-    for _round in 0..opt.max_rejection_rounds.max(1) {
+    let mut saver = checkpointing.map(|ck| Saver {
+        ck,
+        fingerprint: checkpoint::fingerprint(obs, exposures, refs, n_sources, opt),
+        writes: ranks.rank() == 0,
+        saved: 0,
+    });
+    let (mut first_round, mut resume) = (0, None);
+    if let Some(sv) = &saver
+        && let Some(back) = checkpoint::read(sv.ck.path, sv.fingerprint, &state.cal)?
+    {
+        (state, active) = (back.state, back.active);
+        (iterations, rejected) = (back.at.iterations_before, back.at.rejected);
+        first_round = back.at.round;
+        resume = back.at.in_round.map(|k| (k, back.steps));
+    }
+    for round in first_round..opt.max_rejection_rounds.max(1) {
         let (its, this_round) = match opt.method {
             Method::Block => block_iterate(&problem, &mut state, &active)?,
-            Method::ConjugateGradient => super::cg::iterate(&problem, &mut state, &active, ranks)?,
+            Method::ConjugateGradient => {
+                let before = (iterations, rejected);
+                let active = &active;
+                let mut save = saver.as_mut().map(|sv| {
+                    move |st: &State, k: usize, steps: Option<&super::cg::Steps>| {
+                        let at = checkpoint::At {
+                            round,
+                            iterations_before: before.0,
+                            rejected: before.1,
+                            in_round: Some(k),
+                        };
+                        sv.save(at, st, active, steps)
+                    }
+                });
+                let save = save.as_mut().map(|f| f as &mut super::cg::SaveFn);
+                super::cg::iterate(&problem, &mut state, active, ranks, resume.take(), save)?
+            }
         };
         iterations += its;
         converged = this_round;
@@ -150,6 +232,21 @@ pub fn solve_on(
         if changed == 0 {
             break;
         }
+        if let Some(sv) = saver.as_mut() {
+            let next = checkpoint::At {
+                round: round + 1,
+                iterations_before: iterations,
+                rejected,
+                in_round: None,
+            };
+            sv.save(next, &state, &active, None)?;
+        }
+    }
+    if let Some(sv) = &saver
+        && sv.writes
+    {
+        // done: nothing to resume
+        let _ = std::fs::remove_file(sv.ck.path);
     }
     // χ² per source and overall
     let mut chi2_total = 0.0;

@@ -75,6 +75,11 @@ pub struct SolveArgs {
     /// .png, mission_budget.csv, solution.json.
     #[arg(long)]
     pub out: Option<PathBuf>,
+    /// Resume from this checkpoint if it is there, write it as the solution goes (each relinearisation,
+    /// every 20 steps of the gradients, each rejection round), remove it when done: a run killed midway is
+    /// rerun with the same options to the same solution (with several --exposures, one file each: FILE.N).
+    #[arg(long, value_name = "FILE")]
+    pub checkpoint: Option<PathBuf>,
     /// Write a Slurm job instead of solving: slurm/solve.sbatch in the sequence's directory (the solution on
     /// --ranks MPI ranks, `srun jsim-mpi solve …` with these options) and submit-solve.sh; the sequence's own
     /// submit.sh (`jsim sequence --emit-slurm`) then chains it after its array and gathering jobs.
@@ -99,6 +104,19 @@ pub struct SolveArgs {
     /// -p engine --features mpi`).
     #[arg(long, requires = "emit_slurm")]
     pub jsim_mpi: Option<PathBuf>,
+}
+
+/// The checkpoint of the solution of the first `n` exposures: --checkpoint, suffixed `.n` when several are
+/// solved.
+fn checkpoint(a: &SolveArgs, n: usize, ns: &[usize]) -> Option<PathBuf> {
+    let path = a.checkpoint.as_ref()?;
+    Some(if ns.len() > 1 {
+        let mut p = path.clone().into_os_string();
+        p.push(format!(".{n}"));
+        PathBuf::from(p)
+    } else {
+        path.clone()
+    })
 }
 
 /// `jsim solve --emit-slurm`: the job script of this solution on MPI ranks.
@@ -151,6 +169,12 @@ fn emit_slurm(a: &SolveArgs) -> Result<()> {
     if let Some(o) = &a.out {
         opt("--out", std::path::absolute(o)?.display().to_string());
     }
+    // a job that is cut off (its time limit, a node lost) resumes when resubmitted
+    let ck = match &a.checkpoint {
+        Some(c) => std::path::absolute(c)?,
+        None => sequence.join("slurm").join("solution.checkpoint"),
+    };
+    opt("--checkpoint", ck.display().to_string());
     let job = engine::studies::sequence::slurm::SolveJob {
         ranks: a.ranks,
         nodes: a.nodes,
@@ -214,7 +238,7 @@ pub fn solve(a: &SolveArgs) -> Result<()> {
     if engine::analysis::solution::ranks::world().rank() != 0 {
         // another MPI rank (jsim-mpi): the same solutions, rank 0 alone scores, prints and writes them
         for &n in &ns {
-            sq::solve_first(&p, n, &spec)?;
+            sq::solve_first(&p, n, &spec, checkpoint(a, n, &ns).as_deref())?;
         }
         return Ok(());
     }
@@ -236,7 +260,7 @@ pub fn solve(a: &SolveArgs) -> Result<()> {
     let mut summary = Vec::new();
     for (k, &n) in ns.iter().enumerate() {
         let t = Instant::now();
-        let (fed, opt, sol) = sq::solve_first(&p, n, &spec)?;
+        let (fed, opt, sol) = sq::solve_first(&p, n, &spec, checkpoint(a, n, &ns).as_deref())?;
         let solve_s = t.elapsed().as_secs_f64();
         let true_all = sq::true_sources(&fed, &truth);
         // positions only: scored at the epoch of each source's observations (what its σ describes)

@@ -29,6 +29,11 @@ pub struct SyntheticArgs {
     /// The draw's seed.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// Resume from this checkpoint if it is there, write it as the solution goes (each relinearisation,
+    /// every 20 steps of the gradients, each rejection round), remove it when done: a run killed midway is
+    /// rerun with the same options to the same solution.
+    #[arg(long, value_name = "FILE")]
+    pub checkpoint: Option<PathBuf>,
     /// Output directory: sources.csv, attitudes.csv, solution.json.
     #[arg(long, default_value = "out/solve-synthetic")]
     pub out: PathBuf,
@@ -42,6 +47,7 @@ pub fn solve_synthetic(a: &SyntheticArgs) -> Result<()> {
         a.calibration.model(),
         a.method.method(),
         a.seed,
+        a.checkpoint.as_deref(),
     )?;
     // every rank holds the same solution: rank 0 alone writes it
     if world.rank() != 0 {

@@ -352,8 +352,8 @@ mod tests {
         let dir = std::env::temp_dir().join(format!("jsim-merge-{}", std::process::id()));
         std::fs::create_dir_all(dir.join("exposures")).expect("mkdir");
         let header = CATALOGUE_HEADER.join(",");
-        let good = "0,0,1,10.5,20.5,1000,0.01,0.01,0,266.4,-28.9,62946.0";
-        let flagged = "0,0,1,3.2,20.5,500,inf,inf,788,266.4,-28.9,62946.0";
+        let good = "0,0,1,10.5,20.5,1000,0.01,0.01,0,266.4,-28.9,62946.0,12345";
+        let flagged = "0,0,1,3.2,20.5,500,inf,inf,788,266.4,-28.9,62946.0,12345";
         std::fs::write(
             exposure_path(&dir, 0),
             format!("{header}\n{good}\n{flagged}\n"),

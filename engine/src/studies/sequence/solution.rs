@@ -213,11 +213,13 @@ fn options(p: &Products, n: usize, spec: &SolveSpec) -> Options {
     }
 }
 
-/// Feed and solve the first `n` exposures.
+/// Feed and solve the first `n` exposures (on this thread's ranks), resumed from and checkpointed to
+/// `checkpoint` if given.
 pub fn solve_first(
     p: &Products,
     n: usize,
     spec: &SolveSpec,
+    checkpoint: Option<&Path>,
 ) -> Result<(Fed, Options, Solution), SequenceError> {
     if n == 0 || n > p.exposures_run {
         return Err(invalid(format!(
@@ -240,9 +242,19 @@ pub fn solve_first(
     )
     .map_err(invalid)?;
     let opt = options(p, n, spec);
-    let sol =
-        crate::analysis::solution::solve(&fed.obs, &fed.exposures, &fed.refs, fed.n_sources, &opt)
-            .map_err(invalid)?;
+    let sol = crate::analysis::solution::solve_with(
+        &fed.obs,
+        &fed.exposures,
+        &fed.refs,
+        fed.n_sources,
+        &opt,
+        &*crate::analysis::solution::ranks::world(),
+        checkpoint.map(|path| crate::analysis::solution::Checkpointing {
+            path,
+            interrupt_after: None,
+        }),
+    )
+    .map_err(invalid)?;
     Ok((fed, opt, sol))
 }
 
