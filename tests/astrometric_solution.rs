@@ -559,8 +559,9 @@ fn an_interrupted_solution_resumes_from_its_checkpoint_to_the_same_bits() {
     let dir = std::env::temp_dir().join(format!("jsim-resume-{}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("dir");
     let path = dir.join("solution.checkpoint");
+    let store = engine::io::checkpoint::FileStore::new(&path);
     let ck = |interrupt_after| Checkpointing {
-        path: &path,
+        store: &store,
         interrupt_after,
     };
     let mut interruptions = 0;

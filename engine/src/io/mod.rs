@@ -4,6 +4,7 @@
 
 pub mod analysis_input;
 pub mod calibrated;
+pub mod checkpoint;
 pub mod crowded;
 pub mod csv;
 pub mod ecsv;

@@ -307,6 +307,7 @@ pub fn solve_synthetic(
         max_iterations: if method == Method::Block { 500 } else { 5000 },
         ..Options::default()
     };
+    let store = checkpoint.map(crate::io::checkpoint::FileStore::new);
     let t0 = Instant::now();
     let sol = crate::analysis::solution::solve_with(
         &syn.obs,
@@ -315,10 +316,12 @@ pub fn solve_synthetic(
         n,
         &options,
         &*crate::analysis::solution::ranks::world(),
-        checkpoint.map(|path| crate::analysis::solution::Checkpointing {
-            path,
-            interrupt_after: None,
-        }),
+        store
+            .as_ref()
+            .map(|store| crate::analysis::solution::Checkpointing {
+                store,
+                interrupt_after: None,
+            }),
     )?;
     let time_s = t0.elapsed().as_secs_f64();
     let (mut err2, mut sig2, mut m) = (0.0, 0.0, 0usize);

@@ -21,7 +21,6 @@ use super::cg::Steps;
 use super::{
     Attitude, ExposureGeometry, Observation, Options, Reference, SolutionError, SolvedSource,
 };
-use std::path::Path;
 
 const MAGIC: &[u8; 8] = b"JSIMCKP1";
 
@@ -93,16 +92,28 @@ pub(super) fn fingerprint(
     u64::from_le_bytes([d[0], d[1], d[2], d[3], d[4], d[5], d[6], d[7]])
 }
 
-/// Write where a solution stands (`at`, `state`, `active`) for the input `fingerprint` to `path`,
-/// atomically.
-pub(super) fn write(
-    path: &Path,
+/// Where a checkpoint is kept. The analysis makes and reads its bytes; a front end keeps them (a file:
+/// `io::checkpoint::FileStore`, written atomically).
+pub trait CheckpointStore {
+    /// The checkpoint's bytes, or None when there is none.
+    fn load(&self) -> Result<Option<Vec<u8>>, String>;
+    /// Keep `bytes` as the checkpoint, replacing the last one whole.
+    fn save(&self, bytes: &[u8]) -> Result<(), String>;
+    /// The solution is done: drop the checkpoint.
+    fn clear(&self);
+    /// What to call it in a message (its path).
+    fn name(&self) -> String;
+}
+
+/// Where a solution stands (`at`, `state`, `active`, and within a relinearisation the gradients' `steps`)
+/// for the input `fingerprint`, as the checkpoint's bytes.
+pub(super) fn encode(
     fingerprint: u64,
     at: &At,
     state: &State,
     active: &[bool],
     steps: Option<&Steps>,
-) -> Result<(), SolutionError> {
+) -> Vec<u8> {
     let mut b: Vec<u8> = MAGIC.to_vec();
     let cal = cal_values(&state.cal);
     for v in [
@@ -142,22 +153,18 @@ pub(super) fn write(
             }
         }
     }
-    crate::io::write_atomic(path, &b).map_err(|e| checkpoint_error(path, &e.to_string()))
+    b
 }
 
-/// The checkpoint at `path` if there is one: it must be of the input `fingerprint`, with a calibration of
-/// `template`'s model (the values replaced).
-pub(super) fn read(
-    path: &Path,
+/// A checkpoint's bytes read back (`name` for the messages): they must be of the input `fingerprint`, with
+/// a calibration of `template`'s model (the values replaced).
+pub(super) fn decode(
+    b: &[u8],
+    name: &str,
     fingerprint: u64,
     template: &Calibration,
-) -> Result<Option<Saved>, SolutionError> {
-    let b = match std::fs::read(path) {
-        Ok(b) => b,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(None),
-        Err(e) => return Err(checkpoint_error(path, &e.to_string())),
-    };
-    let bad = || checkpoint_error(path, "not a jsim solution checkpoint, or cut short");
+) -> Result<Saved, SolutionError> {
+    let bad = || checkpoint_error(name, "not a jsim solution checkpoint, or cut short");
     if b.len() < 8 + 9 * 8 || &b[..8] != MAGIC {
         return Err(bad());
     }
@@ -168,7 +175,7 @@ pub(super) fn read(
     };
     if word(0) != fingerprint {
         return Err(checkpoint_error(
-            path,
+            name,
             "written for another input (other observations, references or options): remove it to start \
              afresh",
         ));
@@ -239,7 +246,7 @@ pub(super) fn read(
         .collect();
     let values: Vec<f64> = (0..n_cal).map(|_| next()).collect();
     set_cal_values(&mut cal, &values);
-    Ok(Some(Saved {
+    Ok(Saved {
         at: At {
             round: word(1) as usize,
             iterations_before: word(2) as usize,
@@ -253,12 +260,12 @@ pub(super) fn read(
         },
         active: b[at + 8 * doubles..tail].iter().map(|v| *v != 0).collect(),
         steps,
-    }))
+    })
 }
 
-fn checkpoint_error(path: &Path, why: &str) -> SolutionError {
+pub(super) fn checkpoint_error(name: &str, why: &str) -> SolutionError {
     SolutionError::Checkpoint {
-        path: path.display().to_string(),
+        path: name.to_string(),
         why: why.to_string(),
     }
 }
@@ -331,24 +338,23 @@ mod tests {
             cal: cal.clone(),
         };
         let active = vec![true, false, true, true];
-        let dir = std::env::temp_dir().join(format!("jsim-ckpt-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).expect("dir");
-        let path = dir.join("solution.checkpoint");
         let steps = Steps {
             steps: 40,
             x: vec![1.5, -2.0, f64::MIN_POSITIVE],
             r: vec![0.25, 3e300, -0.0],
             d: vec![7.0, 8.0, 9.0],
         };
-        write(&path, 42, &at, &state, &active, Some(&steps)).expect("written");
-        let with_steps = read(&path, 42, &Calibration::zero(model, 3000.0))
-            .expect("read")
-            .expect("there");
+        let template = Calibration::zero(model, 3000.0);
+        let with_steps = decode(
+            &encode(42, &at, &state, &active, Some(&steps)),
+            "c",
+            42,
+            &template,
+        )
+        .expect("read");
         assert_eq!(with_steps.steps, Some(steps));
-        write(&path, 42, &at, &state, &active, None).expect("written");
-        let back = read(&path, 42, &Calibration::zero(model, 3000.0))
-            .expect("read")
-            .expect("there");
+        let back =
+            decode(&encode(42, &at, &state, &active, None), "c", 42, &template).expect("read");
         assert_eq!(back.at, at);
         assert_eq!(back.steps, None);
         assert_eq!(back.active, active);
@@ -359,20 +365,14 @@ mod tests {
             format!("{:?}", state.sources)
         );
         assert_eq!(back.state.attitudes, state.attitudes);
-        let Err(e) = read(&path, 43, &cal) else {
+        let bytes = encode(42, &at, &state, &active, None);
+        let Err(e) = decode(&bytes, "c", 43, &template) else {
             panic!("another input must be refused")
         };
         assert!(e.to_string().contains("another input"), "{e}");
-        std::fs::write(&path, b"JSIMCKP1 short").expect("write");
-        let Err(e) = read(&path, 42, &cal) else {
-            panic!("a file cut short must be refused")
+        let Err(e) = decode(&bytes[..bytes.len() - 3], "c", 42, &template) else {
+            panic!("a checkpoint cut short must be refused")
         };
         assert!(e.to_string().contains("cut short"), "{e}");
-        assert!(
-            read(&dir.join("none"), 42, &cal)
-                .expect("no file")
-                .is_none()
-        );
-        let _ = std::fs::remove_dir_all(&dir);
     }
 }

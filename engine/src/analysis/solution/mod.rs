@@ -35,7 +35,7 @@
 mod blocks;
 pub mod calibration;
 mod cg;
-mod checkpoint;
+pub mod checkpoint;
 pub mod feed;
 mod groups;
 #[cfg(feature = "mpi")]
@@ -44,6 +44,7 @@ pub mod ranks;
 mod solve;
 
 pub use calibration::{Calibration, CalibrationModel};
+pub use checkpoint::CheckpointStore;
 pub use ranks::{Ranks, Single};
 pub use solve::{Checkpointing, solve, solve_on, solve_with};
 

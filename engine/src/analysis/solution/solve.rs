@@ -51,10 +51,11 @@ pub fn solve_on(
     solve_with(obs, exposures, refs, n_sources, opt, ranks, None)
 }
 
-/// A solution's checkpoint ([`super::checkpoint`]): the file it is written to and resumed from.
-#[derive(Debug, Clone, Copy)]
+/// A solution's checkpoint ([`super::checkpoint`]): where it is kept and resumed from (a file:
+/// `io::checkpoint::FileStore`).
+#[derive(Clone, Copy)]
 pub struct Checkpointing<'a> {
-    pub path: &'a std::path::Path,
+    pub store: &'a dyn checkpoint::CheckpointStore,
     /// Stop with [`SolutionError::Interrupted`] after writing this many checkpoints (None: never) — how the
     /// tests interrupt a solution where they choose.
     pub interrupt_after: Option<usize>,
@@ -77,7 +78,11 @@ impl Saver<'_> {
         steps: Option<&super::cg::Steps>,
     ) -> Result<(), SolutionError> {
         if self.writes {
-            checkpoint::write(self.ck.path, self.fingerprint, &at, state, active, steps)?;
+            let bytes = checkpoint::encode(self.fingerprint, &at, state, active, steps);
+            self.ck
+                .store
+                .save(&bytes)
+                .map_err(|e| checkpoint::checkpoint_error(&self.ck.store.name(), &e))?;
         }
         self.saved += 1;
         if self.ck.interrupt_after == Some(self.saved) {
@@ -193,8 +198,13 @@ pub fn solve_with(
     });
     let (mut first_round, mut resume) = (0, None);
     if let Some(sv) = &saver
-        && let Some(back) = checkpoint::read(sv.ck.path, sv.fingerprint, &state.cal)?
+        && let Some(bytes) = sv
+            .ck
+            .store
+            .load()
+            .map_err(|e| checkpoint::checkpoint_error(&sv.ck.store.name(), &e))?
     {
+        let back = checkpoint::decode(&bytes, &sv.ck.store.name(), sv.fingerprint, &state.cal)?;
         (state, active) = (back.state, back.active);
         (iterations, rejected) = (back.at.iterations_before, back.at.rejected);
         first_round = back.at.round;
@@ -246,7 +256,7 @@ pub fn solve_with(
         && sv.writes
     {
         // done: nothing to resume
-        let _ = std::fs::remove_file(sv.ck.path);
+        sv.ck.store.clear();
     }
     // χ² per source and overall
     let mut chi2_total = 0.0;

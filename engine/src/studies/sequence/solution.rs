@@ -242,6 +242,7 @@ pub fn solve_first(
     )
     .map_err(invalid)?;
     let opt = options(p, n, spec);
+    let store = checkpoint.map(crate::io::checkpoint::FileStore::new);
     let sol = crate::analysis::solution::solve_with(
         &fed.obs,
         &fed.exposures,
@@ -249,10 +250,12 @@ pub fn solve_first(
         fed.n_sources,
         &opt,
         &*crate::analysis::solution::ranks::world(),
-        checkpoint.map(|path| crate::analysis::solution::Checkpointing {
-            path,
-            interrupt_after: None,
-        }),
+        store
+            .as_ref()
+            .map(|store| crate::analysis::solution::Checkpointing {
+                store,
+                interrupt_after: None,
+            }),
     )
     .map_err(invalid)?;
     Ok((fed, opt, sol))
