@@ -42,6 +42,7 @@ mod groups;
 pub mod mpi;
 pub mod ranks;
 mod solve;
+mod tiles;
 
 pub use calibration::{Calibration, CalibrationModel};
 pub use checkpoint::CheckpointStore;

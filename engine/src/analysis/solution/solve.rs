@@ -127,47 +127,7 @@ pub fn solve_with(
         left_out[e] = true;
     }
     let mut active: Vec<bool> = obs.iter().map(|o| !left_out[o.exposure]).collect();
-    // start: every exposure's attitude from the reference sources alone (the frame right from the start),
-    // then, with a calibration, the instrument's from them too, and the attitudes again
-    let ref_params: Vec<Option<Params>> = prior.iter().map(|r| r.map(|r| r.params)).collect();
-    let mut cal = Calibration::zero(opt.calibration, opt.focal_norm_px);
-    let mut attitudes: Vec<Attitude> = (0..exposures.len())
-        .map(|e| {
-            attitude_block(
-                &cal,
-                obs,
-                by_exposure.get(e),
-                &exposures[e],
-                &ref_params,
-                &active,
-            )
-            .unwrap_or(Attitude::IDENTITY)
-        })
-        .collect();
-    if opt.calibration.solves() {
-        // the arrays' affine terms alone from the references: a start the full model refines
-        let start = calibration::CalibrationModel {
-            array_order: 1,
-            distortion_order: 0,
-            ..opt.calibration
-        };
-        if let Some((c, att)) = calibration::fit_with_attitudes(
-            start,
-            opt.focal_norm_px,
-            obs,
-            exposures,
-            &by_exposure,
-            |i| places_of(obs, exposures, &ref_params, i),
-            &active,
-        ) {
-            cal = c.extended_to(opt.calibration);
-            for (a, n) in attitudes.iter_mut().zip(att) {
-                if let Some(n) = n {
-                    *a = n;
-                }
-            }
-        }
-    }
+    let (attitudes, cal) = start(obs, exposures, &by_exposure, &prior, opt, &active);
     // mas per focal-plane px (for the calibration's share of the convergence test)
     let mas_per_px = exposures.first().map_or(1.0, |g| {
         (g.to_plane[0] * g.to_plane[3] - g.to_plane[1] * g.to_plane[2])
@@ -258,25 +218,7 @@ pub fn solve_with(
         // done: nothing to resume
         sv.ck.store.clear();
     }
-    // χ² per source and overall
-    let mut chi2_total = 0.0;
-    let mut n_terms = 0usize;
-    for (i, o) in obs.iter().enumerate() {
-        if !active[i] {
-            continue;
-        }
-        if let Some((rx, ry)) = residual(
-            problem.place_at(&state.cal, i),
-            &exposures[o.exposure],
-            &state.attitudes[o.exposure],
-            &state.sources[o.source],
-        ) {
-            let c = (rx * rx + ry * ry) / (o.sigma_mas * o.sigma_mas);
-            state.sources[o.source].chi2 += c;
-            chi2_total += c;
-            n_terms += 2;
-        }
-    }
+    let (chi2_total, n_terms) = chi2(&problem, &mut state, &active);
     let priors: usize = refs
         .iter()
         .map(|r| r.sigma.iter().filter(|s| anchors(**s)).count())
@@ -308,6 +250,81 @@ pub fn solve_with(
             f64::NAN
         },
     })
+}
+
+/// The start: every exposure's attitude from the reference sources alone (the frame right from the start),
+/// then, with a calibration, the instrument's from them too, and the attitudes again.
+fn start(
+    obs: &[Observation],
+    exposures: &[ExposureGeometry],
+    by_exposure: &Groups,
+    prior: &[Option<&Reference>],
+    opt: &Options,
+    active: &[bool],
+) -> (Vec<Attitude>, Calibration) {
+    let ref_params: Vec<Option<Params>> = prior.iter().map(|r| r.map(|r| r.params)).collect();
+    let mut cal = Calibration::zero(opt.calibration, opt.focal_norm_px);
+    let mut attitudes: Vec<Attitude> = (0..exposures.len())
+        .map(|e| {
+            attitude_block(
+                &cal,
+                obs,
+                by_exposure.get(e),
+                &exposures[e],
+                &ref_params,
+                active,
+            )
+            .unwrap_or(Attitude::IDENTITY)
+        })
+        .collect();
+    if opt.calibration.solves() {
+        // the arrays' affine terms alone from the references: a start the full model refines
+        let start = calibration::CalibrationModel {
+            array_order: 1,
+            distortion_order: 0,
+            ..opt.calibration
+        };
+        if let Some((c, att)) = calibration::fit_with_attitudes(
+            start,
+            opt.focal_norm_px,
+            obs,
+            exposures,
+            by_exposure,
+            |i| places_of(obs, exposures, &ref_params, i),
+            active,
+        ) {
+            cal = c.extended_to(opt.calibration);
+            for (a, n) in attitudes.iter_mut().zip(att) {
+                if let Some(n) = n {
+                    *a = n;
+                }
+            }
+        }
+    }
+    (attitudes, cal)
+}
+
+/// Each source's χ² (added to it) and the total over the observations kept, with its count of terms.
+fn chi2(p: &Problem, state: &mut State, active: &[bool]) -> (f64, usize) {
+    let mut chi2_total = 0.0;
+    let mut n_terms = 0usize;
+    for (i, o) in p.obs.iter().enumerate() {
+        if !active[i] {
+            continue;
+        }
+        if let Some((rx, ry)) = residual(
+            p.place_at(&state.cal, i),
+            &p.exposures[o.exposure],
+            &state.attitudes[o.exposure],
+            &state.sources[o.source],
+        ) {
+            let c = (rx * rx + ry * ry) / (o.sigma_mas * o.sigma_mas);
+            state.sources[o.source].chi2 += c;
+            chi2_total += c;
+            n_terms += 2;
+        }
+    }
+    (chi2_total, n_terms)
 }
 
 /// One round of rejection: each source's worst kept observation beyond `clip` σ goes (one per round: an
