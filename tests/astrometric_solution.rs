@@ -6,7 +6,7 @@
 //! at 4σ of their sampling error); outliers are rejected; bad input is named.
 
 use engine::analysis::solution::{
-    CalibrationModel, Checkpointing, ExposureGeometry, Method, Observation, Options, Params,
+    CalibrationModel, Checkpointing, ExposureGeometry, Method, Observation, Options, Params, Ranks,
     Reference, Single, Solution, SolutionError, SourceModel, solve, solve_on, solve_with,
 };
 use engine::studies::bench_solution::CALIBRATED;
@@ -564,18 +564,22 @@ fn an_interrupted_solution_resumes_from_its_checkpoint_to_the_same_bits() {
         store: &store,
         interrupt_after,
     };
-    let mut interruptions = 0;
-    for k in 1.. {
-        let _ = std::fs::remove_file(&path);
-        match solve_with(
+    // the solution on `ranks`, checkpointed (interrupted after that many checkpoints, if given)
+    let run = |ranks: &dyn Ranks, interrupt_after| {
+        solve_with(
             &t.obs,
             &t.exposures,
             &t.refs,
             600,
             &opt,
-            &Single,
-            Some(ck(Some(k))),
-        ) {
+            ranks,
+            Some(ck(interrupt_after)),
+        )
+    };
+    let mut interruptions = 0;
+    for k in 1.. {
+        let _ = std::fs::remove_file(&path);
+        match run(&Single, Some(k)) {
             Err(SolutionError::Interrupted(n)) => assert_eq!(n, k),
             Ok(done) => {
                 // fewer checkpoints than k: it ran to the end, as the whole one
@@ -588,60 +592,21 @@ fn an_interrupted_solution_resumes_from_its_checkpoint_to_the_same_bits() {
         assert!(path.exists(), "checkpoint {k} written");
         interruptions += 1;
         // resumed on one process …
-        let resumed = solve_with(
-            &t.obs,
-            &t.exposures,
-            &t.refs,
-            600,
-            &opt,
-            &Single,
-            Some(ck(None)),
-        )
-        .expect("resumed");
+        let resumed = run(&Single, None).expect("resumed");
         assert_eq!(resumed, whole, "resumed after checkpoint {k}");
         assert!(!path.exists());
         // … and, from the same checkpoint, on two ranks
-        let _ = solve_with(
-            &t.obs,
-            &t.exposures,
-            &t.refs,
-            600,
-            &opt,
-            &Single,
-            Some(ck(Some(k))),
-        );
-        let two = engine::testkit::on_thread_ranks(2, |r| {
-            solve_with(&t.obs, &t.exposures, &t.refs, 600, &opt, r, Some(ck(None)))
-                .expect("resumed")
-        });
+        let _ = run(&Single, Some(k));
+        let two = engine::testkit::on_thread_ranks(2, |r| run(r, None).expect("resumed"));
         assert!(
             two.iter().all(|s| *s == whole),
             "two ranks after checkpoint {k}"
         );
         // interrupted on two ranks (rank 0 writes), resumed on one
-        for e in engine::testkit::on_thread_ranks(2, |r| {
-            solve_with(
-                &t.obs,
-                &t.exposures,
-                &t.refs,
-                600,
-                &opt,
-                r,
-                Some(ck(Some(k))),
-            )
-        }) {
+        for e in engine::testkit::on_thread_ranks(2, |r| run(r, Some(k))) {
             assert!(matches!(e, Err(SolutionError::Interrupted(_))), "{e:?}");
         }
-        let resumed = solve_with(
-            &t.obs,
-            &t.exposures,
-            &t.refs,
-            600,
-            &opt,
-            &Single,
-            Some(ck(None)),
-        )
-        .expect("resumed");
+        let resumed = run(&Single, None).expect("resumed");
         assert_eq!(
             resumed, whole,
             "written on two ranks, resumed on one, after checkpoint {k}"
@@ -650,15 +615,7 @@ fn an_interrupted_solution_resumes_from_its_checkpoint_to_the_same_bits() {
     eprintln!("interrupted and resumed at each of {interruptions} checkpoints");
     assert!(interruptions >= 4, "{interruptions} checkpoints");
     // a checkpoint of another input is refused by name
-    let _ = solve_with(
-        &t.obs,
-        &t.exposures,
-        &t.refs,
-        600,
-        &opt,
-        &Single,
-        Some(ck(Some(1))),
-    );
+    let _ = run(&Single, Some(1));
     let other = Options {
         clip_sigma: 4.0,
         ..opt

@@ -307,21 +307,14 @@ pub fn solve_synthetic(
         max_iterations: if method == Method::Block { 500 } else { 5000 },
         ..Options::default()
     };
-    let store = checkpoint.map(crate::io::checkpoint::FileStore::new);
     let t0 = Instant::now();
-    let sol = crate::analysis::solution::solve_with(
+    let sol = super::sequence::solution::solve_checkpointed(
         &syn.obs,
         &syn.exposures,
         &syn.refs,
         n,
         &options,
-        &*crate::analysis::solution::ranks::world(),
-        store
-            .as_ref()
-            .map(|store| crate::analysis::solution::Checkpointing {
-                store,
-                interrupt_after: None,
-            }),
+        checkpoint,
     )?;
     let time_s = t0.elapsed().as_secs_f64();
     let (mut err2, mut sig2, mut m) = (0.0, 0.0, 0usize);

@@ -242,13 +242,35 @@ pub fn solve_first(
     )
     .map_err(invalid)?;
     let opt = options(p, n, spec);
-    let store = checkpoint.map(crate::io::checkpoint::FileStore::new);
-    let sol = crate::analysis::solution::solve_with(
+    let sol = solve_checkpointed(
         &fed.obs,
         &fed.exposures,
         &fed.refs,
         fed.n_sources,
         &opt,
+        checkpoint,
+    )
+    .map_err(invalid)?;
+    Ok((fed, opt, sol))
+}
+
+/// The solution on this thread's ranks ([`crate::analysis::solution::ranks::world`]), resumed from and
+/// checkpointed to the file `checkpoint` if given: what `jsim solve` and `jsim solve-synthetic` run.
+pub fn solve_checkpointed(
+    obs: &[crate::analysis::solution::Observation],
+    exposures: &[crate::analysis::solution::ExposureGeometry],
+    refs: &[crate::analysis::solution::Reference],
+    n_sources: usize,
+    opt: &Options,
+    checkpoint: Option<&Path>,
+) -> Result<Solution, crate::analysis::solution::SolutionError> {
+    let store = checkpoint.map(crate::io::checkpoint::FileStore::new);
+    crate::analysis::solution::solve_with(
+        obs,
+        exposures,
+        refs,
+        n_sources,
+        opt,
         &*crate::analysis::solution::ranks::world(),
         store
             .as_ref()
@@ -257,8 +279,6 @@ pub fn solve_first(
                 interrupt_after: None,
             }),
     )
-    .map_err(invalid)?;
-    Ok((fed, opt, sol))
 }
 
 /// A solved source's columns in a sources table (after its index, and its sky position where given).
