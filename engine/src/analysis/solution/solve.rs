@@ -127,7 +127,6 @@ pub fn solve_with(
         left_out[e] = true;
     }
     let mut active: Vec<bool> = obs.iter().map(|o| !left_out[o.exposure]).collect();
-    let (attitudes, cal) = start(obs, exposures, &by_exposure, &prior, opt, &active);
     // mas per focal-plane px (for the calibration's share of the convergence test)
     let mas_per_px = exposures.first().map_or(1.0, |g| {
         (g.to_plane[0] * g.to_plane[3] - g.to_plane[1] * g.to_plane[2])
@@ -143,11 +142,6 @@ pub fn solve_with(
         opt,
         mas_per_px,
     };
-    let mut state = State {
-        sources: vec![unsolved(); n_sources],
-        attitudes,
-        cal,
-    };
     let (mut iterations, mut rejected) = (0, 0);
     let mut converged = true;
     let mut saver = checkpointing.map(|ck| Saver {
@@ -157,19 +151,37 @@ pub fn solve_with(
         saved: 0,
     });
     let (mut first_round, mut resume) = (0, None);
-    if let Some(sv) = &saver
-        && let Some(bytes) = sv
+    let saved = match &saver {
+        Some(sv) => sv
             .ck
             .store
             .load()
             .map_err(|e| checkpoint::checkpoint_error(&sv.ck.store.name(), &e))?
-    {
-        let back = checkpoint::decode(&bytes, &sv.ck.store.name(), sv.fingerprint, &state.cal)?;
-        (state, active) = (back.state, back.active);
-        (iterations, rejected) = (back.at.iterations_before, back.at.rejected);
-        first_round = back.at.round;
-        resume = back.at.in_round.map(|k| (k, back.steps));
-    }
+            .map(|bytes| {
+                let template = Calibration::zero(opt.calibration, opt.focal_norm_px);
+                checkpoint::decode(&bytes, &sv.ck.store.name(), sv.fingerprint, &template)
+            })
+            .transpose()?,
+        None => None,
+    };
+    // from the checkpoint where there is one, else the start from the references
+    let mut state = match saved {
+        Some(back) => {
+            active = back.active;
+            (iterations, rejected) = (back.at.iterations_before, back.at.rejected);
+            first_round = back.at.round;
+            resume = back.at.in_round.map(|k| (k, back.steps));
+            back.state
+        }
+        None => {
+            let (attitudes, cal) = start(obs, exposures, &by_exposure, &prior, opt, &active);
+            State {
+                sources: vec![unsolved(); n_sources],
+                attitudes,
+                cal,
+            }
+        }
+    };
     for round in first_round..opt.max_rejection_rounds.max(1) {
         let (its, this_round) = match opt.method {
             Method::Block => block_iterate(&problem, &mut state, &active)?,
