@@ -585,11 +585,9 @@ pub struct SingleExposure {
     pub robust_mas: f64,
 }
 
-/// The solved calibration against the instrument's, on a 9 × 9 grid over each array: the correction the
-/// instrument needs at a pixel — the design place of the pixel minus the place of the sky it truly sees, on
-/// the plane, turned back into focal-plane px by the design map at the axis (the solution's own convention)
-/// — and the solved one, and their difference with the attitudes' gauge removed. Rows: array, x_px, y_px,
-/// focal u, v (px), true Δ, solved Δ, residual (px).
+/// The solved calibration against the instrument's, on a 9 × 9 grid over each array ([`needed_corrections`]):
+/// the correction the instrument needs and the solved one, and their difference with the attitudes' gauge
+/// removed. Rows: array, x_px, y_px, focal u, v (px), true Δ, solved Δ, residual (px).
 pub fn calibration_map(
     p: &Products,
     truth: &Truth,
@@ -597,23 +595,86 @@ pub fn calibration_map(
 ) -> Result<Vec<[f64; 11]>, SequenceError> {
     let e = &p.plan.exposures[0];
     let design = design_config(&p.cfg, &p.plan, e);
-    // the arrays as assembled, at the same (planned) pointing
-    let mut flown = exposure_config(&truth.cfg, &p.plan, e);
+    let flown = exposure_config(&truth.cfg, &p.plan, e);
+    let needed = needed_corrections(&design, &flown, p.tangent_deg)?;
+    let mut points = Vec::with_capacity(needed.len());
+    let rows: Vec<[f64; 11]> = needed
+        .iter()
+        .map(|n| {
+            let solved = sol.calibration.correction_px(n.array, n.focal_px);
+            // the gauge (a shift, turn and scale the attitudes can take from the arrays) acts on where the
+            // sky's light would land as designed, not on the measured place: its lever arm
+            points.push([
+                n.focal_px[0] - n.needed_px[0],
+                n.focal_px[1] - n.needed_px[1],
+            ]);
+            [
+                n.array as f64 + 1.0,
+                n.pixel[0],
+                n.pixel[1],
+                n.focal_px[0],
+                n.focal_px[1],
+                n.needed_px[0],
+                n.needed_px[1],
+                solved[0],
+                solved[1],
+                0.0,
+                0.0,
+            ]
+        })
+        .collect();
+    let diff: Vec<[f64; 2]> = rows.iter().map(|r| [r[7] - r[5], r[8] - r[6]]).collect();
+    let res = crate::scoring::solution::calibration_residuals(&points, &diff);
+    Ok(rows
+        .into_iter()
+        .zip(res)
+        .map(|(mut r, d)| {
+            (r[9], r[10]) = (d[0], d[1]);
+            r
+        })
+        .collect())
+}
+
+/// What the instrument needs at one pixel of one array.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NeededCorrection {
+    /// 0-based array.
+    pub array: usize,
+    /// The pixel (x, y) of the array.
+    pub pixel: [f64; 2],
+    /// Its design focal-plane place, px from the optical axis.
+    pub focal_px: [f64; 2],
+    /// The correction, focal-plane px.
+    pub needed_px: [f64; 2],
+}
+
+/// The correction the instrument flown as `flown` needs against its design `design`, on a 9 × 9 grid over
+/// each array: the design place of a pixel minus the place of the sky it truly sees, on the plane at
+/// `tangent_deg`, turned back into focal-plane px by the design map at the axis (the solution's own
+/// convention). `flown` is realised first ([`crate::instrument::realise`]: its arrays as assembled *and* its
+/// distortion beyond the design), both at the design's (planned) pointing, so only the instrument differs.
+pub fn needed_corrections(
+    design: &Config,
+    flown: &Config,
+    tangent_deg: (f64, f64),
+) -> Result<Vec<NeededCorrection>, SequenceError> {
+    let mut flown = crate::instrument::realise(flown).map_err(invalid)?;
     flown.sky = design.sky;
-    let nominal = crate::sky::focal_plane(&design).nominal();
-    let wd: Vec<_> = (0..4)
-        .map(|k| crate::sky::array_wcs(&design, k))
-        .collect::<Result<_, _>>()
-        .map_err(invalid)?;
-    let (_, m) = feed::focal_map(&wd[0], &nominal, p.tangent_deg).map_err(invalid)?;
+    let nominal = crate::sky::focal_plane(design).nominal();
+    let wcs = |c: &Config| -> Result<Vec<_>, SequenceError> {
+        (0..4)
+            .map(|k| crate::sky::array_wcs(c, k))
+            .collect::<Result<_, _>>()
+            .map_err(invalid)
+    };
+    let (wd, wt) = (wcs(design)?, wcs(&flown)?);
+    let (_, m) = feed::focal_map(&wd[0], &nominal, tangent_deg).map_err(invalid)?;
     let inv = crate::analysis::solution::calibration::inverse2(&m)
         .ok_or_else(|| invalid("the design focal-plane map is singular"))?;
-    let plane = |s: (f64, f64)| crate::sky::apparent::offset_mas(p.tangent_deg, s);
-    let n = p.cfg.instrument.detector_px as f64;
-    let mut points = Vec::new();
-    let mut rows = Vec::new();
-    for (k, wd) in wd.iter().enumerate() {
-        let wt = crate::sky::array_wcs(&flown, k).map_err(invalid)?;
+    let plane = |s: (f64, f64)| crate::sky::apparent::offset_mas(tangent_deg, s);
+    let n = design.instrument.detector_px as f64;
+    let mut out = Vec::new();
+    for (k, (wd, wt)) in wd.iter().zip(&wt).enumerate() {
         for j in 0..9 {
             for i in 0..9 {
                 let (x, y) = ((i as f64 + 0.5) / 9.0 * n, (j as f64 + 0.5) / 9.0 * n);
@@ -624,35 +685,17 @@ pub fn calibration_map(
                 };
                 let (a, b) = (plane(sky_design), plane(sky_true));
                 let d = [a.0 - b.0, a.1 - b.1];
-                let truth = [inv[0] * d[0] + inv[1] * d[1], inv[2] * d[0] + inv[3] * d[1]];
                 let f = nominal.to_focal_plane(k, x, y);
-                let solved = sol.calibration.correction_px(k, [f.0, f.1]);
-                // the gauge (a shift, turn and scale the attitudes can take from the arrays) acts on where
-                // the sky's light would land as designed, not on the measured place: its lever arm
-                points.push([f.0 - truth[0], f.1 - truth[1]]);
-                rows.push([
-                    k as f64 + 1.0,
-                    x,
-                    y,
-                    f.0,
-                    f.1,
-                    truth[0],
-                    truth[1],
-                    solved[0],
-                    solved[1],
-                    0.0,
-                    0.0,
-                ]);
+                out.push(NeededCorrection {
+                    array: k,
+                    pixel: [x, y],
+                    focal_px: [f.0, f.1],
+                    needed_px: [inv[0] * d[0] + inv[1] * d[1], inv[2] * d[0] + inv[3] * d[1]],
+                });
             }
         }
     }
-    let diff: Vec<[f64; 2]> = rows.iter().map(|r| [r[7] - r[5], r[8] - r[6]]).collect();
-    let res = crate::scoring::solution::calibration_residuals(&points, &diff);
-    for (r, d) in rows.iter_mut().zip(res) {
-        r[9] = d[0];
-        r[10] = d[1];
-    }
-    Ok(rows)
+    Ok(out)
 }
 
 /// One row of the precision-against-N table.
@@ -662,4 +705,56 @@ pub struct PrecisionRow {
     pub bin: BinScore,
     /// The single-exposure accuracy in the bin over the first N exposures ([`single_exposure_errors`]).
     pub single: SingleExposure,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::{Layout, SipTerm};
+
+    fn poly(t: &[SipTerm], u: f64, v: f64) -> f64 {
+        t.iter()
+            .map(|t| t.value * u.powi(t.p as i32) * v.powi(t.q as i32))
+            .sum()
+    }
+
+    /// The correction the scoring holds the solved calibration against includes the distortion beyond the
+    /// design (it once took the flown configuration unrealised: the arrays' assembly only, and a zero map for
+    /// an instrument whose only deviation is its distortion). Independent check: its length at every grid
+    /// point is the length of the added SIP displacement evaluated at the pixel's focal-plane place (a turn
+    /// of the arrays does not change a length).
+    #[test]
+    fn the_needed_correction_holds_the_distortion_beyond_the_design() {
+        let mut flown = Config::default();
+        flown.focal_plane.layout = Layout::Quad;
+        flown.as_built.distortion_px = 0.03;
+        // the arrays where designed: the distortion is the only deviation
+        flown.focal_plane.array_offsets_px = [[0.0; 2]; 4];
+        flown.focal_plane.array_rotation_errors_deg = [0.0; 4];
+        let design = crate::instrument::design_of(&flown);
+        let tangent = (design.sky.ra_deg, design.sky.dec_deg);
+        let built = crate::instrument::realise(&flown).expect("realise");
+        let needed = needed_corrections(&design, &flown, tangent).expect("needed");
+        assert_eq!(needed.len(), 4 * 81);
+        let (mut worst, mut largest) = (0.0f64, 0.0f64);
+        for n in &needed {
+            let [u, v] = n.focal_px;
+            let d = |b: &[SipTerm], a: &[SipTerm]| poly(b, u, v) - poly(a, u, v);
+            let dx = d(&built.focal_plane.sip_a, &design.focal_plane.sip_a);
+            let dy = d(&built.focal_plane.sip_b, &design.focal_plane.sip_b);
+            let expected = dx.hypot(dy);
+            let got = n.needed_px[0].hypot(n.needed_px[1]);
+            worst = worst.max((got - expected).abs());
+            largest = largest.max(expected);
+        }
+        assert!(largest > 0.02, "the drawn distortion reaches {largest} px");
+        assert!(worst < 1e-3 * largest, "off by {worst} px of {largest}");
+        // without the deviation nothing is needed
+        let none = needed_corrections(&design, &design, tangent).expect("needed");
+        let most = none
+            .iter()
+            .map(|n| n.needed_px[0].hypot(n.needed_px[1]))
+            .fold(0.0, f64::max);
+        assert!(most < 1e-9, "{most}");
+    }
 }
