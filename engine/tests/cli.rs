@@ -739,3 +739,133 @@ fn a_real_hst_exposure_is_analysed_chip_by_chip_with_its_choices_stated() {
     assert!(!dir.join("bad").exists());
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// `jsim score` scores a catalogue referenced to the reference catalogue in that catalogue's frame (the
+/// header's design WCS) when the image's header is not the instrument as built: the truth CSV and the
+/// TRUTH extension carry `x_header, y_header`, `--frame auto` takes them for a `…@catalogue` analysis, and
+/// the accuracy is then the one `jsim analyze` reports (it scores in that frame in memory). In the image's
+/// frame the roll and distortion the header does not know count as error.
+#[test]
+fn jsim_score_scores_a_catalogue_referenced_analysis_in_the_headers_frame() {
+    let dir = temp("score-frame");
+    let cfg = small_toml(&dir);
+    let deviations = [
+        "--set",
+        "scene.grid_n=5",
+        "--set",
+        "scene.grid_spacing_px=45.0",
+        "--set",
+        "fidelity.images=1",
+        "--set",
+        "as_built.pointing_offset_arcsec=[2.0, -1.0]",
+        "--set",
+        "as_built.roll_offset_arcsec=120.0",
+        "--set",
+        "as_built.distortion_px=0.03",
+    ];
+    let sim = dir.join("sim");
+    let out = jsim()
+        .args(["simulate", "--config"])
+        .arg(&cfg)
+        .args(deviations)
+        .args(["--ace", "gaussian", "--out"])
+        .arg(&sim)
+        .output()
+        .expect("run");
+    assert!(out.status.success(), "{}", stderr_of(&out));
+    let csv = std::fs::read_to_string(sim.join("truth_000.csv")).expect("truth");
+    assert!(
+        csv.lines()
+            .next()
+            .is_some_and(|h| h.ends_with(",x_header,y_header")),
+        "{}",
+        csv.lines().next().unwrap_or("")
+    );
+    let an = dir.join("an");
+    let out = jsim()
+        .args(["analyze", "--config"])
+        .arg(&cfg)
+        .args(deviations)
+        .args(["--countermeasure", "plate-affine@catalogue", "--image"])
+        .arg(sim.join("img_000.fits"))
+        .arg("--out")
+        .arg(&an)
+        .output()
+        .expect("run");
+    assert!(out.status.success(), "{}", stderr_of(&out));
+    let json = |p: &Path| -> serde_json::Value {
+        serde_json::from_str(&std::fs::read_to_string(p).expect("json")).expect("json")
+    };
+    let analysed = json(&an.join("summary.json"))["report"]["accuracy_mas"]
+        .as_f64()
+        .expect("accuracy");
+    let score = |truth: &str, frame: &str, name: &str| -> (f64, String) {
+        let out = jsim()
+            .args(["score", "--catalogue"])
+            .arg(an.join("catalogue.csv"))
+            .arg("--truth")
+            .arg(sim.join(truth))
+            .args(["--frame", frame, "--out"])
+            .arg(dir.join(name))
+            .output()
+            .expect("run");
+        assert!(out.status.success(), "{}", stderr_of(&out));
+        let acc = json(&dir.join(name).join("score.json"))["all"]["accuracy_mas"]
+            .as_f64()
+            .expect("accuracy");
+        (acc, String::from_utf8_lossy(&out.stdout).to_string())
+    };
+    let (auto, said) = score("truth_000.csv", "auto", "auto");
+    assert!(said.contains("x_header, y_header"), "{said}");
+    let (fits, _) = score("img_000.fits", "auto", "fits");
+    let (image, said) = score("truth_000.csv", "image", "image");
+    assert!(said.contains("truth's x, y"), "{said}");
+    assert_eq!(
+        auto, fits,
+        "the CSV and the TRUTH extension hold the same frame"
+    );
+    assert!(
+        (auto - analysed).abs() <= 1e-9 * analysed,
+        "jsim score {auto} mas, jsim analyze {analysed} mas"
+    );
+    assert!(
+        image > 2.0 * auto,
+        "image frame {image}, header frame {auto}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Without deviations the truth has no header frame: asking for it is a named error, and `auto` scores a
+/// catalogue-referenced analysis in the image's frame (the same frame).
+#[test]
+fn the_header_frame_of_a_truth_without_one_is_a_named_error() {
+    let dir = temp("score-no-frame");
+    let truth = dir.join("truth.csv");
+    std::fs::write(&truth, "x,y,mag\n10,10,12\n20,20,12\n").expect("write");
+    let cat = dir.join("catalogue.csv");
+    std::fs::write(&cat, "x,y\n10.01,10\n20,20.01\n").expect("write");
+    let out = jsim()
+        .args([
+            "score",
+            "--plate-scale-mas",
+            "472",
+            "--frame",
+            "header",
+            "--catalogue",
+        ])
+        .arg(&cat)
+        .arg("--truth")
+        .arg(&truth)
+        .arg("--out")
+        .arg(dir.join("s"))
+        .output()
+        .expect("run");
+    assert!(!out.status.success());
+    let e = stderr_of(&out);
+    assert!(
+        e.contains("x_header, y_header") && e.contains("truth.csv"),
+        "{e}"
+    );
+    assert!(!dir.join("s").exists(), "nothing written");
+    let _ = std::fs::remove_dir_all(&dir);
+}

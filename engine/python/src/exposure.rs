@@ -44,12 +44,8 @@ impl PyExposure {
         };
         let dq = convert::plane(py, std::mem::take(&mut exp.image.dq), n, n)?;
         exp.star_e = Vec::new();
-        let wcs = sim.wcs();
-        let truth = convert::table(
-            py,
-            &files::truth_header(),
-            &files::truth_rows(&exp.truth, wcs),
-        )?;
+        let (truth_header, truth_rows) = files::truth_table(&sim, &exp.truth);
+        let truth = convert::table(py, &truth_header, &truth_rows)?;
         let header = PyDict::new(py);
         // the values as the FITS file's cards hold them (a double keeps 15 significant digits)
         for c in files::headers(&sim, &exp) {
@@ -164,6 +160,10 @@ impl PyExposure {
                     .telemetry_record(&engine::analysis::countermeasures::TelemetryQuality::DEFAULT)
                     .ok()
                     .flatten();
+                // the truth in the header's frame, as the TRUTH extension's x_header, y_header (a
+                // catalogue-referenced countermeasure is scored against it, as `jsim analyze` scores it)
+                input.truth_in_header =
+                    engine::scoring::image::catalogue_truth(&self.sim, &self.exp.truth);
                 input
             })
             .map_err(PyValueError::new_err)

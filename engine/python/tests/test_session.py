@@ -191,3 +191,32 @@ def test_help_states_the_units():
         assert unit in jsim.Session.simulate.__doc__, unit
     assert "mas" in jsim.Session.predict.__doc__
     assert "_mas" in jsim.__doc__
+
+
+def test_an_exposure_off_its_design_carries_the_truth_in_the_headers_frame():
+    """With a pointing, roll and distortion the header does not know, Exposure.truth carries x_header, y_header
+    (each star's true sky place through the header's design WCS), and jsim.score on them gives the accuracy the
+    analysis referenced to the catalogue reports; on x, y the roll and distortion count as error."""
+    cfg = small_config(**{
+        "as_built.pointing_offset_arcsec": [2.0, -1.0],
+        "as_built.roll_offset_arcsec": 120.0,
+        "as_built.distortion_px": 0.03,
+        "fidelity.images": 1,
+        "ace.case": "gaussian",
+    })
+    s = jsim.Session(cfg, backend="cpu")
+    e = s.simulate(0)
+    assert {"x_header", "y_header"} <= set(e.truth)
+    a = s.analyze(e, countermeasure="plate-affine@catalogue")
+    measured = {"x": a.catalogue["x"], "y": a.catalogue["y"], "flags": a.catalogue["flags"]}
+    scale = e.header["PLTSCALE"]
+
+    def accuracy(xcol, ycol):
+        t = {"x": e.truth[xcol], "y": e.truth[ycol], "mag": e.truth["mag_hw"]}
+        return jsim.score(measured, t, plate_scale_mas=scale)["all"]["accuracy_mas"]
+
+    header, image = accuracy("x_header", "y_header"), accuracy("x", "y")
+    assert header == pytest.approx(a.summary["accuracy_mas"], rel=1e-9)
+    assert image > 2.0 * header
+    # without deviations the truth has no header frame (the frames agree)
+    assert "x_header" not in s.__class__(small_config(), backend="cpu").simulate(0).truth

@@ -427,9 +427,23 @@ pub fn truth_rows(t: &[TruthRow], wcs: Option<&ArrayWcs>) -> Vec<Vec<Cell>> {
         .collect()
 }
 
-/// Write the truth catalogue as CSV ([`truth_header`]).
-pub fn write_truth_csv(path: &Path, t: &[TruthRow], wcs: Option<&ArrayWcs>) -> Result<(), IoError> {
-    csv::write(path, &truth_header(), &truth_rows(t, wcs))
+/// A simulated exposure's truth as a table: [`truth_header`]'s columns through the simulator's WCS and, when
+/// its header is not the instrument as built ([`Simulator::wcs_deviates`]), [`TRUTH_IN_HEADER`] after them
+/// ([`header_frame_columns`]) — what `truth_NNN.csv` and Python's `Exposure.truth` hold, so that `jsim score`
+/// can score a catalogue-referenced catalogue in its own frame.
+pub fn truth_table(sim: &Simulator, t: &[TruthRow]) -> (Vec<&'static str>, Vec<Vec<Cell>>) {
+    let mut header = truth_header();
+    let mut rows = truth_rows(t, sim.wcs());
+    if sim.wcs_deviates() {
+        header.extend(TRUTH_IN_HEADER);
+        for (row, r) in rows.iter_mut().zip(t) {
+            let (x, y) = sim
+                .in_header_frame_px(r.x_px, r.y_px)
+                .unwrap_or((f64::NAN, f64::NAN));
+            row.extend([Cell::F(x), Cell::F(y)]);
+        }
+    }
+    (header, rows)
 }
 
 /// The truth catalogue from its columns ([`TRUTH_HEADER`], in that order).
@@ -452,7 +466,7 @@ pub fn truth_from_columns(cols: &[Vec<f64>]) -> Vec<TruthRow> {
         .collect()
 }
 
-/// Read a truth catalogue (CSV written by [`write_truth_csv`], or the TRUTH extension of an image).
+/// Read a truth catalogue (CSV written by [`write_exposure`], or the TRUTH extension of an image).
 pub fn read_truth(path: &Path) -> Result<Vec<TruthRow>, IoError> {
     let is_fits = path
         .extension()
@@ -536,7 +550,8 @@ pub fn write_exposure(
         None => Pixels::F32(&exp.image.adu),
     };
     write_image_file(&image, sim, exp, pixels, &exp.image.dq)?;
-    write_truth_csv(&truth_csv, &exp.truth, sim.wcs())?;
+    let (header, rows) = truth_table(sim, &exp.truth);
+    csv::write(&truth_csv, &header, &rows)?;
     Ok(ExposureFiles { image, truth_csv })
 }
 

@@ -8,7 +8,8 @@
 //!   rejection flag (`flags & REJECT`) count as detections (completeness) but not in the accuracy, as the
 //!   analysis' own report does. Other columns are ignored.
 //! * **Truth**: a CSV with `x, y` and a magnitude column (`mag`, `mag_hw` or `hw`, the first found), or a jsim
-//!   image (FITS) whose TRUTH extension gives `x, y, mag_hw`. Both with one convention of pixels.
+//!   image (FITS) whose TRUTH extension gives `x, y, mag_hw`. Both with one convention of pixels. In the
+//!   header's frame ([`TruthFrame::Header`]) `x_header, y_header` take the place of `x, y`.
 
 use super::IoError;
 use super::csv::{self, Cell};
@@ -55,13 +56,57 @@ pub fn read_measured(path: &Path) -> Result<Vec<Measured>, IoError> {
         .collect())
 }
 
-/// Read a truth list (see the module's documentation).
-pub fn read_truth_list(path: &Path) -> Result<Vec<TrueStar>, IoError> {
-    let is_fits = path
-        .extension()
-        .is_some_and(|e| e.eq_ignore_ascii_case("fits") || e.eq_ignore_ascii_case("fit"));
-    let (cols, arrays) = if is_fits {
-        let cols = super::fits::read_table(path, "TRUTH", &["x", "y", "mag_hw"])?;
+/// Which of a truth's positions a catalogue is scored against.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum TruthFrame {
+    /// `x, y`: where the stars truly landed on the image.
+    Image,
+    /// `x_header, y_header`: each star's true sky place through the header's (design) WCS — the frame of a
+    /// catalogue referenced to the reference catalogue (`plate-*@catalogue`), which jsim's simulated truth
+    /// carries when the header is not the instrument as built.
+    Header,
+}
+
+impl TruthFrame {
+    /// The position columns read in this frame.
+    pub fn columns(self) -> [&'static str; 2] {
+        match self {
+            TruthFrame::Image => ["x", "y"],
+            TruthFrame::Header => super::exposure::TRUTH_IN_HEADER,
+        }
+    }
+}
+
+fn is_fits(path: &Path) -> bool {
+    path.extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("fits") || e.eq_ignore_ascii_case("fit"))
+}
+
+/// Whether a truth list (CSV or an image's TRUTH extension) carries the header-frame columns.
+pub fn truth_has_header_frame(path: &Path) -> bool {
+    let [x, y] = TruthFrame::Header.columns();
+    if is_fits(path) {
+        super::fits::read_table(path, "TRUTH", &[x, y]).is_ok()
+    } else {
+        csv::read(path).is_ok_and(|(h, _)| h.iter().any(|c| c == x) && h.iter().any(|c| c == y))
+    }
+}
+
+/// Read a truth list (see the module's documentation), its positions in `frame` (a truth without the
+/// header-frame columns is a named error in [`TruthFrame::Header`]).
+pub fn read_truth_list(path: &Path, frame: TruthFrame) -> Result<Vec<TrueStar>, IoError> {
+    let [x, y] = frame.columns();
+    if frame == TruthFrame::Header && !truth_has_header_frame(path) {
+        return Err(format_err(
+            path,
+            format!(
+                "no columns `{x}, {y}`: this truth has no header frame (jsim writes one only when the \
+                 image's header is not the instrument as built; score in the image's frame)"
+            ),
+        ));
+    }
+    let (cols, arrays) = if is_fits(path) {
+        let cols = super::fits::read_table(path, "TRUTH", &[x, y, "mag_hw"])?;
         let arrays = super::fits::read_table(path, "TRUTH", &["array"])
             .ok()
             .map(|a| a[0].iter().map(|v| *v as u32).collect::<Vec<u32>>());
@@ -80,7 +125,7 @@ pub fn read_truth_list(path: &Path) -> Result<Vec<TrueStar>, IoError> {
                     ),
                 )
             })?;
-        let cols = ["x", "y", mag]
+        let cols = [x, y, mag]
             .iter()
             .map(|c| csv::column_f64(path, &h, &rows, c))
             .collect::<Result<Vec<_>, _>>()?;

@@ -6,6 +6,7 @@ use anyhow::{Context, Result};
 use engine::analysis::countermeasures::{Countermeasure, Plan};
 use engine::analysis::report::StarResult;
 use engine::config::{AceCase, Config, ReadoutOrder};
+use engine::io::score::TruthFrame;
 use engine::io::{analysis_input, calibrated, csv, exposure, products};
 use engine::jitter::AceSeries;
 use engine::scoring::vectors::VectorMap;
@@ -554,17 +555,64 @@ pub struct ScoreArgs {
     /// Width of the magnitude bins.
     #[arg(long, default_value_t = 1.0)]
     pub bin_mag: f64,
+    /// The truth's frame: `image` (x, y: where the stars landed), `header` (x_header, y_header: their true
+    /// sky places through the header's design WCS, the frame of a catalogue referenced to the reference
+    /// catalogue) or `auto` (header when the summary.json beside the catalogue names a `…@catalogue`
+    /// countermeasure and the truth has the columns, else image).
+    #[arg(long, value_enum, default_value_t = FrameArg::Auto)]
+    pub frame: FrameArg,
     /// Output directory (score.csv, score.json).
     #[arg(long, default_value = "out/score")]
     pub out: PathBuf,
 }
 
+/// `jsim score --frame`.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum FrameArg {
+    Auto,
+    Image,
+    Header,
+}
+
+/// The `summary.json` beside a catalogue, if any.
+fn summary_beside(catalogue: &Path) -> Option<serde_json::Value> {
+    let text = std::fs::read_to_string(catalogue.parent()?.join("summary.json")).ok()?;
+    serde_json::from_str(&text).ok()
+}
+
 /// The plate scale recorded in the `summary.json` beside a catalogue, if any.
 fn summary_plate_scale(catalogue: &Path) -> Option<f64> {
-    let dir = catalogue.parent()?;
-    let text = std::fs::read_to_string(dir.join("summary.json")).ok()?;
-    let v: serde_json::Value = serde_json::from_str(&text).ok()?;
-    v.get("plate_scale_mas")?.as_f64()
+    summary_beside(catalogue)?.get("plate_scale_mas")?.as_f64()
+}
+
+/// The frame `jsim score` scores in ([`FrameArg`]), and why.
+fn score_frame(a: &ScoreArgs) -> (TruthFrame, &'static str) {
+    match a.frame {
+        FrameArg::Image => (TruthFrame::Image, "--frame image"),
+        FrameArg::Header => (TruthFrame::Header, "--frame header"),
+        FrameArg::Auto => {
+            let referenced = summary_beside(&a.catalogue)
+                .and_then(|v| v.get("countermeasure")?.as_str().map(str::to_string))
+                .and_then(|c| c.parse::<Countermeasure>().ok())
+                .is_some_and(|c| c.is_catalogue_plate());
+            match (
+                referenced,
+                engine::io::score::truth_has_header_frame(&a.truth),
+            ) {
+                (true, true) => (
+                    TruthFrame::Header,
+                    "the catalogue is referenced to the reference catalogue (summary.json) and the \
+                     truth carries the header's frame",
+                ),
+                (true, false) => (
+                    TruthFrame::Image,
+                    "the catalogue is referenced to the reference catalogue, but the truth has no header \
+                     frame: the header is the instrument as built",
+                ),
+                _ => (TruthFrame::Image, "the catalogue is in the image's frame"),
+            }
+        }
+    }
 }
 
 /// `jsim score`
@@ -594,7 +642,8 @@ pub fn score(a: &ScoreArgs) -> Result<()> {
     opts.validate()
         .map_err(|e| anyhow::anyhow!("--{}", e.replace('_', "-")))?;
     let measured = engine::io::score::read_measured(&a.catalogue)?;
-    let truth = engine::io::score::read_truth_list(&a.truth)?;
+    let (frame, why) = score_frame(a);
+    let truth = engine::io::score::read_truth_list(&a.truth, frame)?;
     let s = engine::scoring::score(&measured, &truth, &opts).map_err(anyhow::Error::msg)?;
     let mut outputs = Outputs::in_dir(&a.out)?;
     for name in ["score.csv", "score.json"] {
@@ -618,6 +667,8 @@ pub fn score(a: &ScoreArgs) -> Result<()> {
         s.offset_x_px,
         s.offset_y_px
     );
+    let [fx, fy] = frame.columns();
+    println!("scored against the truth's {fx}, {fy}: {why}");
     println!("  mag bin      true  matched  scored  complete  accuracy [mas]");
     for b in s.bins.iter().chain(std::iter::once(&s.all)) {
         println!(
