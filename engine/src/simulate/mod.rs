@@ -560,13 +560,23 @@ impl Simulator {
         })
     }
 
-    /// Star jobs for integration (PSF, kernel, rate).
+    /// Star jobs for integration (PSF, kernel, rate). Each distinct PSF's kernel is built once here and
+    /// shared by its stars: the shared [`KernelCache`] forgets everything beyond its size, and a field of more
+    /// colour × zone PSFs than that (an as-built wavefront that changes across the focal plane) would
+    /// otherwise rebuild a kernel for star after star, each held by its job (memory growing with the stars,
+    /// not with the PSFs).
     pub fn jobs(&self) -> Result<Vec<StarJob>, SimError> {
+        let mut built: HashMap<usize, Arc<PixelKernel>> = HashMap::new();
         self.stars
             .iter()
             .map(|s| {
                 let psf = self.psf_for(s);
-                let kernel = self.kernel_for(&psf)?;
+                let kernel = match built.entry(Arc::as_ptr(&psf) as usize) {
+                    std::collections::hash_map::Entry::Occupied(k) => k.get().clone(),
+                    std::collections::hash_map::Entry::Vacant(v) => {
+                        v.insert(self.kernel_for(&psf)?).clone()
+                    }
+                };
                 let rate =
                     photometry::electrons_per_s(s.mag_hw, self.cfg.photometry.zero_point_e_per_s);
                 let threshold = self.cfg.fidelity.wing_threshold_e;
@@ -856,5 +866,46 @@ impl Simulator {
             sigma_y_mas: sy,
             drift_mas: ((bx - ax).powi(2) + (by - ay).powi(2)).sqrt(),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::collections::HashSet;
+
+    /// More colour × zone PSFs than the shared kernel cache holds (an as-built wavefront changing across the
+    /// array, one zone per star): every star's job still shares its PSF's one kernel. The cache once forgot
+    /// its entries as it filled and the jobs held a fresh kernel per star — the as-built bulge exposure grew
+    /// past 19 GB without finishing.
+    #[test]
+    fn a_field_of_many_psfs_builds_one_kernel_per_psf() {
+        let mut c = crate::testkit::small_config();
+        c.instrument.detector_px = 256;
+        c.instrument.photosensitive_px = 240;
+        c.readout.channels = 2;
+        // four stars to a zone, the zones visited row after row of stars: a key comes back after others
+        c.scene.grid_n = 30;
+        c.scene.grid_spacing_px = 7.0;
+        c.optics.pupil_samples = 32;
+        c.optics.psf_oversampling = 4;
+        c.optics.psf_radius_px = 4;
+        c.band.wavelength_step_um = 0.2;
+        c.fidelity.stamp_radius_px = 4;
+        c.as_built.wavefront_field_rms_nm = 20.0;
+        c.optics.field_zone_px = 12;
+        let sim = Simulator::new(&c).expect("simulator");
+        let jobs = sim.jobs().expect("jobs");
+        let psfs: HashSet<usize> = jobs.iter().map(|j| Arc::as_ptr(&j.psf) as usize).collect();
+        let kernels: HashSet<usize> = jobs
+            .iter()
+            .map(|j| Arc::as_ptr(&j.kernel) as usize)
+            .collect();
+        assert!(
+            psfs.len() > KernelCache::MAX_ENTRIES,
+            "{} PSFs: the case needs more than the cache holds",
+            psfs.len()
+        );
+        assert_eq!(kernels.len(), psfs.len());
     }
 }
