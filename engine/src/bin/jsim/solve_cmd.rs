@@ -303,9 +303,8 @@ pub fn solve(a: &SolveArgs) -> Result<()> {
             if b.sources > 0 {
                 eprintln!(
                     "  Hw {:.0}–{:.0}: {:>6} sources, {:>4.0} obs; position {:.3} mas rms, {:.3} robust, {:.1} % \
-                     beyond 5σ (σ {:.3}; single {:.2} rms, {:.2} robust → √N {:.3}); pm {:.3} mas/yr (σ {:.3}); \
-                     parallax {:.3} mas \
-                     (σ {:.3})",
+                     beyond 5σ (σ {:.3}, pull {:.2}; single {:.2} rms, {:.2} robust → √N {:.3}); pm {:.3} mas/yr \
+                     (σ {:.3}); parallax {:.3} mas (σ {:.3}, pull {:.2})",
                     b.hw_lo,
                     b.hw_hi,
                     b.sources,
@@ -314,13 +313,15 @@ pub fn solve(a: &SolveArgs) -> Result<()> {
                     b.position_robust_mas,
                     100.0 * b.outlier_fraction,
                     b.position_sigma_mas,
+                    b.position_pull,
                     s.rms_mas,
                     s.robust_mas,
                     s.robust_mas / b.observations.sqrt(),
                     b.pm_rms_mas_per_yr,
                     b.pm_sigma_mas_per_yr,
                     b.parallax_rms_mas,
-                    b.parallax_sigma_mas
+                    b.parallax_sigma_mas,
+                    b.parallax_pull
                 );
             }
             table.push(PrecisionRow {
@@ -503,6 +504,8 @@ pub fn solve(a: &SolveArgs) -> Result<()> {
                 Cell::F(b.pm_sigma_mas_per_yr),
                 Cell::F(b.parallax_rms_mas),
                 Cell::F(b.parallax_sigma_mas),
+                Cell::F(b.position_pull),
+                Cell::F(b.parallax_pull),
             ]
         })
         .collect();
@@ -525,6 +528,8 @@ pub fn solve(a: &SolveArgs) -> Result<()> {
             "pm_sigma_mas_per_yr",
             "parallax_rms_mas",
             "parallax_sigma_mas",
+            "position_pull",
+            "parallax_pull",
         ],
         &rows,
     )?;
