@@ -258,9 +258,10 @@ pub fn sequence(a: &SequenceArgs) -> Result<()> {
         .filter(|e| shard.contains(e.index))
         .collect();
     let (mut sim_s, mut an_s, mut done) = (0.0, 0.0, 0usize);
+    let out = run::SequenceDir::open(&a.out)?;
     for (k, e) in mine.iter().enumerate() {
         crate::outputs::interrupted()?;
-        let r = run::run_exposure(&session, &plan, &cfg, &field, e, &cm, &mut memory, &a.out)?;
+        let r = run::run_exposure(&session, &plan, &cfg, &field, e, &cm, &mut memory, &out)?;
         if r.skipped {
             eprintln!(
                 "exposure {} ({}/{}): already written",

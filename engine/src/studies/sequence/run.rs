@@ -104,6 +104,25 @@ pub fn sequence_id(dir: &Path) -> Result<u64, SequenceError> {
     Ok(crate::digest::sha256_id48(&bytes))
 }
 
+/// A sequence's output directory with its identity ([`sequence_id`], hashed once: the reference catalogue
+/// it covers is tens of MB).
+#[derive(Debug, Clone)]
+pub struct SequenceDir {
+    pub path: PathBuf,
+    pub id: u64,
+}
+
+impl SequenceDir {
+    /// The directory of a sequence whose products (`design.toml`, `sequence.toml`, the reference catalogue)
+    /// are written.
+    pub fn open(path: &Path) -> Result<Self, SequenceError> {
+        Ok(Self {
+            path: path.to_path_buf(),
+            id: sequence_id(path)?,
+        })
+    }
+}
+
 /// The file of exposure `index`'s catalogue.
 pub fn exposure_path(dir: &Path, index: usize) -> PathBuf {
     dir.join("exposures").join(format!("{index:05}.csv"))
@@ -179,8 +198,9 @@ pub fn run_exposure(
     e: &PlannedExposure,
     cm: &Countermeasures,
     memory: &mut super::persistence::Memory,
-    dir: &Path,
+    out: &SequenceDir,
 ) -> Result<ExposureRun, SequenceError> {
+    let dir = out.path.as_path();
     let path = exposure_path(dir, e.index);
     if path.exists() {
         return Ok(ExposureRun {
@@ -215,7 +235,7 @@ pub fn run_exposure(
         .first()
         .ok_or_else(|| SequenceError::Invalid("no countermeasure to run".into()))?;
     let mjd_tdb = super::plan::mid_exposure(&c, e).tdb_mjd();
-    let id = sequence_id(dir)? as i64;
+    let id = out.id as i64;
     let scale = c.instrument.plate_scale_mas();
     // the sky positions a pipeline gives: through the design WCS at the planned pointing (the images'
     // headers carry the simulator's true one)
