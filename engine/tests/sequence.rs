@@ -391,6 +391,46 @@ fn a_sequence_is_solved_from_its_products_and_scored() {
         !mixed.join("solution").exists(),
         "nothing is written on error"
     );
+    // an exposure whose every star is flagged (saturated, say) is reported and left out; the rest is solved
+    let flagged = dir.join("flagged");
+    std::fs::create_dir_all(flagged.join("exposures")).expect("mkdir");
+    for (from, to) in [
+        (&out, &flagged),
+        (&out.join("exposures"), &flagged.join("exposures")),
+    ] {
+        for e in std::fs::read_dir(from).expect("dir").flatten() {
+            if e.path().is_file() {
+                std::fs::copy(e.path(), to.join(e.file_name())).expect("copy");
+            }
+        }
+    }
+    let cat = flagged.join("exposures/00003.csv");
+    let text = std::fs::read_to_string(&cat).expect("catalogue");
+    let mut lines = text.lines();
+    let head = lines.next().expect("header");
+    let f = head.split(',').position(|c| c == "flags").expect("flags");
+    let mut all_flagged = vec![head.to_string()];
+    for l in lines {
+        let mut cells: Vec<&str> = l.split(',').collect();
+        cells[f] = "4";
+        all_flagged.push(cells.join(","));
+    }
+    std::fs::write(&cat, all_flagged.join("\n") + "\n").expect("write");
+    let o = jsim()
+        .args(["solve", "--sequence"])
+        .arg(&flagged)
+        .args(["--exposures", "8", "--out"])
+        .arg(dir.join("flagged-solution"))
+        .output()
+        .expect("solve");
+    let err = stderr(&o);
+    assert!(o.status.success(), "{err}");
+    assert!(err.contains("left out") && err.contains("[3]"), "{err}");
+    let summary: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(dir.join("flagged-solution/solution.json")).expect("json"),
+    )
+    .expect("parse");
+    assert_eq!(summary[0]["skipped_exposures"], serde_json::json!([3]));
     let sol = dir.join("solution");
     let o = jsim()
         .args(["solve", "--sequence"])
