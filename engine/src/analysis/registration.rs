@@ -42,6 +42,19 @@ const MIN_VOTES: u32 = 3;
 const CLIP_SIGMA: f64 = 3.0;
 /// Fewest pairs for the quadratic map (12 parameters); fewer keep the affine one.
 pub const MIN_QUADRATIC_PAIRS: usize = 30;
+/// Parameters per axis of the map a registration over `pairs` matched fits ends with when nothing fails
+/// ([`Registration::parameters`]): the full quadratic from [`MIN_QUADRATIC_PAIRS`], affine from 6, else a
+/// shift — what a planner expects it to absorb.
+pub fn parameters_for(pairs: usize) -> usize {
+    if pairs >= MIN_QUADRATIC_PAIRS {
+        6
+    } else if pairs >= 6 {
+        3
+    } else {
+        1
+    }
+}
+
 /// The quadratic map's unit of length, px.
 const UNIT_PX: f64 = 1000.0;
 

@@ -395,10 +395,20 @@ impl Predictor {
                     Reference::Stack => Some(self.mean_before_plate(before)?),
                     _ => None,
                 };
+                // against the catalogue the registration's 2-D quadratic is fitted first to the same
+                // differences: the two remove the union of their polynomial spaces
+                let registration = match reference {
+                    Reference::Catalogue { .. } => Some(
+                        crate::analysis::registration::parameters_for(self.stars.len()),
+                    ),
+                    _ => None,
+                };
                 let fitted = |v: &[f64]| -> Result<Vec<f64>, PredictError> {
-                    model
-                        .residuals(&self.stars, v)
-                        .ok_or_else(|| PredictError::Degenerate(cm.to_string()))
+                    match registration {
+                        Some(r) => model.residuals_with_registration(r, &self.stars, v),
+                        None => model.residuals(&self.stars, v),
+                    }
+                    .ok_or_else(|| PredictError::Degenerate(cm.to_string()))
                 };
                 let axis = |a: fn(&(f64, f64)) -> f64| -> Result<Vec<f64>, PredictError> {
                     let v: Vec<f64> = match &mean {
@@ -417,7 +427,11 @@ impl Predictor {
                 let ry = axis(|p| p.1)?;
                 let r: Vec<(f64, f64)> = rx.into_iter().zip(ry).collect();
                 // the phase scatter is each star's own: no smooth model absorbs it
-                Ok((with_scatter(rms2(&r), scatter), 2 * model.n_params()))
+                let p = match registration {
+                    Some(reg) => model.n_params_with_registration(reg),
+                    None => model.n_params(),
+                };
+                Ok((with_scatter(rms2(&r), scatter), 2 * p))
             }
             // the shift correction leaves the telemetry's error and the shape term; the forward model models
             // the shape and leaves what the telemetry's errors move
