@@ -383,6 +383,38 @@ fn jsim_analyze_on_a_saved_crowded_exposure_gives_jsim_crowdeds_bins() {
             })
             .collect()
     };
+    // the undetected stars' light moves a catalogue-referenced fit as it moves the plain one: the shift is
+    // evaluated where the star lies on the image (it was once taken at the fit's place in the catalogue's
+    // frame, off the image's by the arrays' assembly: 3 × the plain one's on the bulge at Hw 14–15)
+    let undetected = |cm: &str| -> Vec<(f64, f64)> {
+        let text = std::fs::read_to_string(study.join("crowded_bins.csv")).expect("bins");
+        let head: Vec<&str> = text.lines().next().expect("header").split(',').collect();
+        let col = |n: &str| head.iter().position(|c| *c == n).expect(n) - 1;
+        let (n_col, u_col) = (col("isolated_n"), col("isolated_undetected_mas"));
+        text.lines()
+            .skip(1)
+            .filter_map(|l| {
+                let after = l.strip_prefix('"')?.split_once('"')?.1;
+                let c: Vec<&str> = after.trim_start_matches(',').split(',').collect();
+                (c[0] == cm).then(|| {
+                    let v = |k: usize| c[k].parse::<f64>().unwrap_or(f64::NAN);
+                    (v(n_col), v(u_col))
+                })
+            })
+            .collect()
+    };
+    let (plain, referenced) = (undetected("none"), undetected("plate-affine@catalogue"));
+    assert!(!plain.is_empty() && plain.len() == referenced.len());
+    for (p, r) in plain.iter().zip(&referenced) {
+        if p.0 >= 10.0 && p.1 > 0.0 {
+            assert!(
+                (r.1 / p.1 - 1.0).abs() < 0.25,
+                "undetected shift {} mas (catalogue) against {} (none)",
+                r.1,
+                p.1
+            );
+        }
+    }
     for cm in ["none", "telemetry", "plate-affine@catalogue"] {
         let an = dir.join(format!("analyze-{}", cm.replace(['@', ':'], "-")));
         let out = jsim()

@@ -270,10 +270,11 @@ pub fn mag_bins(arrays: &[ArrayStars<'_>], scale_mas: f64, edges: &[f64]) -> Vec
             match c {
                 Class::Isolated => {
                     per[b][0].push(v);
-                    if let Some(sh) = a
-                        .undetected
-                        .and_then(|u| u.star(s.x, s.y, s.flux_e, s.sky_e))
-                    {
+                    // where the star lies among the undetected stars: its true place plus its error, in
+                    // the truth's frame (a catalogue-referenced countermeasure reports its fit in the
+                    // catalogue's frame, off the image's by the pointing and the arrays' assembly)
+                    let (x, y) = (t.x_px + s.dx_px, t.y_px + s.dy_px);
+                    if let Some(sh) = a.undetected.and_then(|u| u.star(x, y, s.flux_e, s.sky_e)) {
                         let sq =
                             |d: (f64, f64)| (d.0 * d.0 + d.1 * d.1) / 2.0 * scale_mas * scale_mas;
                         und[b].push((sq(sh.all_px), sq(sh.faint_px)));
