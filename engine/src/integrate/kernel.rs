@@ -501,8 +501,9 @@ pub fn subpixel_sum(psf: &PsfTable, map: &IntraPixelMap, dx_px: f64, dy_px: f64)
 }
 
 /// Pixel kernels by (PSF, Gaussian blur, intra-pixel map), shared by every simulator of a session. Each entry
-/// holds the PSF it was built from, so the PSF's address (the key) cannot be reused while it is cached. At
-/// most [`KernelCache::MAX_ENTRIES`] kernels are kept (the cache is emptied when a new one would pass that).
+/// holds the PSF it was built from, so the PSF's address (the key) cannot be reused while it is cached. When
+/// a new kernel would pass [`KernelCache::MAX_ENTRIES`], the kernels no caller holds any more are forgotten;
+/// those still held stay (the cache then holds no more than its callers do).
 #[derive(Default)]
 pub struct KernelCache {
     entries: Mutex<HashMap<(usize, u64), Vec<(Arc<PsfTable>, IntraPixelMap, Arc<PixelKernel>)>>>,
@@ -533,7 +534,13 @@ impl KernelCache {
         let k = Arc::new(PixelKernel::build(&table, map)?);
         let mut entries = lock();
         if entries.values().map(Vec::len).sum::<usize>() >= Self::MAX_ENTRIES {
-            entries.clear();
+            // forget the kernels nobody else holds: one a caller still holds (a dataset's star jobs) stays,
+            // so a field of more PSFs than the cache's size never builds a kernel twice, and the memory
+            // held is what the callers hold
+            for v in entries.values_mut() {
+                v.retain(|(_, _, k)| Arc::strong_count(k) > 1);
+            }
+            entries.retain(|_, v| !v.is_empty());
         }
         entries
             .entry(key)

@@ -560,23 +560,14 @@ impl Simulator {
         })
     }
 
-    /// Star jobs for integration (PSF, kernel, rate). Each distinct PSF's kernel is built once here and
-    /// shared by its stars: the shared [`KernelCache`] forgets everything beyond its size, and a field of more
-    /// colour × zone PSFs than that (an as-built wavefront that changes across the focal plane) would
-    /// otherwise rebuild a kernel for star after star, each held by its job (memory growing with the stars,
-    /// not with the PSFs).
+    /// Star jobs for integration (PSF, kernel, rate). Stars of one PSF share its one kernel: the shared
+    /// [`KernelCache`] keeps every kernel a job still holds, however many colour × zone PSFs the field has.
     pub fn jobs(&self) -> Result<Vec<StarJob>, SimError> {
-        let mut built: HashMap<usize, Arc<PixelKernel>> = HashMap::new();
         self.stars
             .iter()
             .map(|s| {
                 let psf = self.psf_for(s);
-                let kernel = match built.entry(Arc::as_ptr(&psf) as usize) {
-                    std::collections::hash_map::Entry::Occupied(k) => k.get().clone(),
-                    std::collections::hash_map::Entry::Vacant(v) => {
-                        v.insert(self.kernel_for(&psf)?).clone()
-                    }
-                };
+                let kernel = self.kernel_for(&psf)?;
                 let rate =
                     photometry::electrons_per_s(s.mag_hw, self.cfg.photometry.zero_point_e_per_s);
                 let threshold = self.cfg.fidelity.wing_threshold_e;
@@ -874,9 +865,9 @@ mod tests {
     use super::*;
     use std::collections::HashSet;
 
-    /// More colour × zone PSFs than the shared kernel cache holds (an as-built wavefront changing across the
-    /// array, one zone per star): every star's job still shares its PSF's one kernel. The cache once forgot
-    /// its entries as it filled and the jobs held a fresh kernel per star — the as-built bulge exposure grew
+    /// More colour × zone PSFs than the shared kernel cache's size (an as-built wavefront changing across
+    /// the array): every star's job still shares its PSF's one kernel. The cache once forgot all its entries
+    /// as it filled, held or not, and the jobs held a fresh kernel per star — the as-built bulge exposure grew
     /// past 19 GB without finishing.
     #[test]
     fn a_field_of_many_psfs_builds_one_kernel_per_psf() {
