@@ -75,6 +75,10 @@ pub struct PsfBank {
     /// The monochromatic sets most recently used, newest last, at most [`PsfBank::MONO_CACHE_BYTES`]
     /// together (always the newest one): a new colour of a known wavefront costs one weighted sum.
     mono: Mutex<Vec<(MonoKey, Arc<psf::MonochromaticSet>)>>,
+    /// Memory the kept monochromatic sets may hold ([`PsfBank::MONO_CACHE_BYTES`] unless a test lowers it).
+    mono_cache_bytes: usize,
+    /// Monochromatic sets computed so far (a set is the costly part of a PSF: one MFT per wavelength).
+    mono_built: std::sync::atomic::AtomicUsize,
 }
 
 /// Key of a monochromatic set: the wavefront and the table's extent (0 for the main PSF, the halo radius).
@@ -97,7 +101,59 @@ impl PsfBank {
             grid: field::grid_of(&cfg.optics).ok().flatten(),
             cache: Mutex::new(HashMap::new()),
             mono: Mutex::new(Vec::new()),
+            mono_cache_bytes: Self::MONO_CACHE_BYTES,
+            mono_built: Default::default(),
         }
+    }
+
+    /// The same bank keeping at most `bytes` of monochromatic sets (the newest always).
+    pub fn with_mono_cache_bytes(mut self, bytes: usize) -> Self {
+        self.mono_cache_bytes = bytes;
+        self
+    }
+
+    /// Compute the PSFs of `wanted` (colour, wavefront) not yet in the bank, wavefront by wavefront: each
+    /// wavefront's monochromatic set is computed once and serves all its colours, however the stars asking
+    /// for them are ordered (asked star by star, a field of more wavefronts than the kept sets recomputed a
+    /// set for nearly every new colour). The colours of one wavefront are summed in parallel.
+    pub fn prepare(&self, wanted: impl IntoIterator<Item = (f64, FieldKey)>, halo_px: usize) {
+        use rayon::prelude::*;
+        let mut order: Vec<FieldKey> = Vec::new();
+        let mut colours: HashMap<FieldKey, Vec<f64>> = HashMap::new();
+        {
+            let cache = self.cache.lock().unwrap_or_else(|e| e.into_inner());
+            for (j_minus_h, field) in wanted {
+                let key = BankKey {
+                    j_minus_h_milli: (j_minus_h * 1000.0).round() as i64,
+                    field,
+                    halo_px,
+                };
+                if cache.contains_key(&key) {
+                    continue;
+                }
+                let list = colours.entry(key.field.clone()).or_insert_with(|| {
+                    order.push(key.field.clone());
+                    Vec::new()
+                });
+                let c = key.j_minus_h_milli as f64 / 1000.0;
+                if !list.contains(&c) {
+                    list.push(c);
+                }
+            }
+        }
+        for field in order {
+            let list = &colours[&field];
+            // the first colour computes the set; the others find it kept
+            self.table(list[0], &field, halo_px);
+            list[1..].par_iter().for_each(|&c| {
+                self.table(c, &field, halo_px);
+            });
+        }
+    }
+
+    /// Monochromatic sets computed so far.
+    pub fn monochromatic_sets_built(&self) -> usize {
+        self.mono_built.load(std::sync::atomic::Ordering::Relaxed)
     }
 
     /// `bank` when it serves `cfg`, else a fresh bank for `cfg`.
@@ -249,10 +305,12 @@ impl PsfBank {
         }
         // computed outside the lock (it runs in parallel over wavelengths)
         let set = Arc::new(psf::monochromatic_set(req));
+        self.mono_built
+            .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         let mut kept = lock();
         kept.push((key, set.clone()));
         while kept.len() > 1
-            && kept.iter().map(|(_, s)| s.bytes()).sum::<usize>() > Self::MONO_CACHE_BYTES
+            && kept.iter().map(|(_, s)| s.bytes()).sum::<usize>() > self.mono_cache_bytes
         {
             kept.remove(0);
         }

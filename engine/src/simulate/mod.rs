@@ -403,6 +403,16 @@ impl Simulator {
         }
     }
 
+    /// Compute the PSFs (`halo_px` 0) or halo tables of every star's colour and wavefront not yet in the
+    /// bank, wavefront by wavefront ([`PsfBank::prepare`]).
+    fn prepare_psfs(&self, halo_px: usize) {
+        let wanted = self
+            .stars
+            .iter()
+            .map(|s| (self.psf_colour(s), self.bank.field_key(s.x_px, s.y_px)));
+        self.bank.prepare(wanted, halo_px);
+    }
+
     /// The PSF of a star (from the bank).
     pub fn psf_for(&self, star: &Star) -> Arc<PsfTable> {
         self.in_array_axes(self.bank.get(
@@ -563,6 +573,7 @@ impl Simulator {
     /// Star jobs for integration (PSF, kernel, rate). Stars of one PSF share its one kernel: the shared
     /// [`KernelCache`] keeps every kernel a job still holds, however many colour × zone PSFs the field has.
     pub fn jobs(&self) -> Result<Vec<StarJob>, SimError> {
+        self.prepare_psfs(0);
         self.stars
             .iter()
             .map(|s| {
@@ -637,6 +648,7 @@ impl Simulator {
         let map = IntraPixelMap::uniform(2);
         let mut out = Vec::with_capacity(self.stars.len());
         let mut kernels: HashMap<usize, Arc<PixelKernel>> = HashMap::new();
+        self.prepare_psfs(self.cfg.fidelity.halo_radius_px);
         for s in &self.stars {
             let halo = self.in_array_axes(self.bank.halo(
                 self.psf_colour(s),
@@ -865,26 +877,33 @@ mod tests {
     use super::*;
     use std::collections::HashSet;
 
-    /// More colour × zone PSFs than the shared kernel cache's size (an as-built wavefront changing across
-    /// the array): every star's job still shares its PSF's one kernel. The cache once forgot all its entries
-    /// as it filled, held or not, and the jobs held a fresh kernel per star — the as-built bulge exposure grew
-    /// past 19 GB without finishing.
-    #[test]
-    fn a_field_of_many_psfs_builds_one_kernel_per_psf() {
+    /// A 256-px array of `grid_n`² stars `spacing_px` apart, coarse optics, an as-built wavefront changing by
+    /// 20 nm rms across the array, shared over zones of `zone_px`.
+    fn zoned_field(grid_n: usize, spacing_px: f64, zone_px: usize) -> Config {
         let mut c = crate::testkit::small_config();
         c.instrument.detector_px = 256;
         c.instrument.photosensitive_px = 240;
         c.readout.channels = 2;
-        // four stars to a zone, the zones visited row after row of stars: a key comes back after others
-        c.scene.grid_n = 30;
-        c.scene.grid_spacing_px = 7.0;
+        c.scene.grid_n = grid_n;
+        c.scene.grid_spacing_px = spacing_px;
         c.optics.pupil_samples = 32;
         c.optics.psf_oversampling = 4;
         c.optics.psf_radius_px = 4;
         c.band.wavelength_step_um = 0.2;
         c.fidelity.stamp_radius_px = 4;
         c.as_built.wavefront_field_rms_nm = 20.0;
-        c.optics.field_zone_px = 12;
+        c.optics.field_zone_px = zone_px;
+        c
+    }
+
+    /// More colour × zone PSFs than the shared kernel cache's size (an as-built wavefront changing across
+    /// the array): every star's job still shares its PSF's one kernel. The cache once forgot all its entries
+    /// as it filled, held or not, and the jobs held a fresh kernel per star — the as-built bulge exposure grew
+    /// past 19 GB without finishing.
+    #[test]
+    fn a_field_of_many_psfs_builds_one_kernel_per_psf() {
+        // four stars to a zone, the zones visited row after row of stars: a key comes back after others
+        let c = zoned_field(30, 7.0, 12);
         let sim = Simulator::new(&c).expect("simulator");
         let jobs = sim.jobs().expect("jobs");
         let psfs: HashSet<usize> = jobs.iter().map(|j| Arc::as_ptr(&j.psf) as usize).collect();
@@ -898,5 +917,53 @@ mod tests {
             psfs.len()
         );
         assert_eq!(kernels.len(), psfs.len());
+    }
+
+    /// Each wavefront's monochromatic set is computed once however the stars are ordered: a bank that keeps
+    /// one set at a time, stars of three colours row by row across 16 zones (a zone's next colour comes after
+    /// the other zones), computes one set per wavefront (asked star by star it computed one per PSF: 48).
+    #[test]
+    fn a_field_of_many_wavefronts_computes_each_monochromatic_set_once() {
+        let c = zoned_field(16, 14.0, 64);
+        let built = crate::instrument::realise(&c).expect("as built");
+        let bank = Arc::new(PsfBank::new(&built).with_mono_cache_bytes(1));
+        let (integrator, _) = Integrator::choose(c.fidelity.backend);
+        let mut sim = Simulator::build(
+            &c,
+            bank.clone(),
+            Arc::new(KernelCache::default()),
+            integrator,
+        )
+        .expect("simulator");
+        // three colours, row after row of 16 stars: a zone's next colour comes after the other zones
+        for (i, s) in sim.stars.iter_mut().enumerate() {
+            s.j_minus_h = 1.0 + 0.5 * ((i / 16) % 3) as f64;
+        }
+        // the wavefronts: one per zone, less any two zones that round alike
+        let zones: HashSet<crate::optics::FieldKey> = sim
+            .stars
+            .iter()
+            .map(|s| bank.field_key(s.x_px, s.y_px))
+            .collect();
+        let colours: HashSet<i64> = sim
+            .stars
+            .iter()
+            .map(|s| (sim.psf_colour(s) * 1000.0).round() as i64)
+            .collect();
+        assert!(
+            zones.len() >= 9 && colours.len() >= 3,
+            "{zones:?} {colours:?}"
+        );
+        sim.jobs().expect("jobs");
+        let psfs: HashSet<(i64, crate::optics::FieldKey)> = sim
+            .stars
+            .iter()
+            .map(|s| {
+                let c = (sim.psf_colour(s) * 1000.0).round() as i64;
+                (c, bank.field_key(s.x_px, s.y_px))
+            })
+            .collect();
+        assert_eq!(bank.len(), psfs.len());
+        assert_eq!(bank.monochromatic_sets_built(), zones.len());
     }
 }
