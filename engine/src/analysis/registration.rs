@@ -14,7 +14,7 @@
 //!    not fooled when the offset exceeds the catalogue's mean star spacing (≈ 8 px on the bulge at Hw 16.5).
 //! 2. **Refinement**: the fits matched to the nearest catalogue star through the map within 3, 1.5, then
 //!    1 px, and the map refitted by least squares after each: affine (`numerics::affine`; a shift with
-//!    fewer than 6 pairs), then, with at least [`MIN_QUADRATIC_PAIRS`] pairs, a full quadratic in each axis
+//!    fewer than [`MIN_AFFINE_PAIRS`]), then, with at least [`MIN_QUADRATIC_PAIRS`] pairs, a full quadratic in each axis
 //!    (`x' = Σ c_pq u^p v^q`, p + q ≤ 2, u, v the catalogue position from the pairs' centre in units of
 //!    1000 px) — the low-order distortion beyond the design that the as-built instrument has. The last fit
 //!    is made again without the pairs beyond 3 × its residual rms in either axis (blends, saturated cores).
@@ -24,7 +24,7 @@
 //! those pairs by σ √(P/N) per axis, rms (the mean leverage is P/N): [`Registration::predicted_error_px`],
 //! what every registered position keeps. `scoring` measures the map's true error against it.
 
-use crate::numerics::affine;
+use crate::numerics::affine::{self, MIN_AFFINE_PAIRS};
 use crate::numerics::neighbours::Neighbours;
 
 /// The brightest fits that register the catalogue (bright stars are rarely mismatched).
@@ -48,7 +48,7 @@ pub const MIN_QUADRATIC_PAIRS: usize = 30;
 pub fn parameters_for(pairs: usize) -> usize {
     if pairs >= MIN_QUADRATIC_PAIRS {
         6
-    } else if pairs >= 6 {
+    } else if pairs >= MIN_AFFINE_PAIRS {
         3
     } else {
         1
@@ -171,7 +171,7 @@ pub fn register(fits: &[(f64, f64)], flux: &[f64], catalogue: &[(f64, f64)]) -> 
             if pairs.len() < MIN_VOTES as usize {
                 return reg;
             }
-            reg = if last && pairs.len() >= MIN_QUADRATIC_PAIRS {
+            reg = if last && parameters_for(pairs.len()) == 6 {
                 fit_quadratic(&pairs).unwrap_or_else(|| affine_of(&pairs))
             } else {
                 affine_of(&pairs)
@@ -200,7 +200,7 @@ fn quadratic_basis(p: (f64, f64), centre: (f64, f64)) -> [f64; 3] {
 fn affine_of(pairs: &[([f64; 2], [f64; 2])]) -> Registration {
     Registration {
         map: affine::fit(pairs),
-        parameters: if pairs.len() >= 6 { 3 } else { 1 },
+        parameters: parameters_for(pairs.len()).min(3),
         ..Registration::NONE
     }
 }

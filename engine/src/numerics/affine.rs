@@ -2,6 +2,9 @@
 //! of points: what registers one set of positions onto another (a catalogue onto an image, an array's
 //! detections onto the reference stars of the solution).
 
+/// Fewest pairs for the affine fit (6 parameters); fewer give the mean shift.
+pub const MIN_AFFINE_PAIRS: usize = 6;
+
 /// The identity map.
 pub const IDENTITY: [f64; 6] = [0.0, 1.0, 0.0, 0.0, 0.0, 1.0];
 
@@ -13,7 +16,7 @@ pub fn apply(m: &[f64; 6], p: [f64; 2]) -> [f64; 2] {
     ]
 }
 
-/// The least-squares map from `pairs`' first to second points: affine with ≥ 6 pairs, else the mean shift
+/// The least-squares map from `pairs`' first to second points: affine with ≥ [`MIN_AFFINE_PAIRS`] pairs, else the mean shift
 /// (the identity for none). The coordinates are centred on their means before the fit.
 pub fn fit(pairs: &[([f64; 2], [f64; 2])]) -> [f64; 6] {
     if pairs.is_empty() {
@@ -23,7 +26,7 @@ pub fn fit(pairs: &[([f64; 2], [f64; 2])]) -> [f64; 6] {
     let mean = |f: &dyn Fn(&([f64; 2], [f64; 2])) -> f64| pairs.iter().map(f).sum::<f64>() / n;
     let (ox, oy) = (mean(&|p| p.0[0]), mean(&|p| p.0[1]));
     let (rx, ry) = (mean(&|p| p.1[0]), mean(&|p| p.1[1]));
-    if pairs.len() >= 6 {
+    if pairs.len() >= MIN_AFFINE_PAIRS {
         let mut design = Vec::with_capacity(pairs.len() * 3);
         let (mut yx, mut yy) = (Vec::new(), Vec::new());
         for (o, r) in pairs {

@@ -598,6 +598,7 @@ pub fn calibration_map(
     let flown = exposure_config(&truth.cfg, &p.plan, e);
     let needed = needed_corrections(&design, &flown, p.tangent_deg)?;
     let mut points = Vec::with_capacity(needed.len());
+    let mut diff = Vec::with_capacity(needed.len());
     let rows: Vec<[f64; 11]> = needed
         .iter()
         .map(|n| {
@@ -608,6 +609,7 @@ pub fn calibration_map(
                 n.focal_px[0] - n.needed_px[0],
                 n.focal_px[1] - n.needed_px[1],
             ]);
+            diff.push([solved[0] - n.needed_px[0], solved[1] - n.needed_px[1]]);
             [
                 n.array as f64 + 1.0,
                 n.pixel[0],
@@ -623,7 +625,6 @@ pub fn calibration_map(
             ]
         })
         .collect();
-    let diff: Vec<[f64; 2]> = rows.iter().map(|r| [r[7] - r[5], r[8] - r[6]]).collect();
     let res = crate::scoring::solution::calibration_residuals(&points, &diff);
     Ok(rows
         .into_iter()
