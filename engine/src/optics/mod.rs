@@ -317,6 +317,21 @@ impl PsfBank {
         set
     }
 
+    /// Memory the bank holds, bytes: its PSF tables and its kept monochromatic sets.
+    pub fn bytes(&self) -> usize {
+        let tables: usize = self
+            .cache
+            .lock()
+            .map(|c| c.values().map(|t| t.data.len() * 8).sum())
+            .unwrap_or(0);
+        let sets: usize = self
+            .mono
+            .lock()
+            .map(|m| m.iter().map(|(_, s)| s.bytes()).sum())
+            .unwrap_or(0);
+        tables + sets
+    }
+
     /// Number of PSFs computed so far.
     pub fn len(&self) -> usize {
         self.cache.lock().map(|c| c.len()).unwrap_or(0)

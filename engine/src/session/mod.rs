@@ -26,6 +26,10 @@ use std::sync::{Arc, Mutex, MutexGuard};
 
 /// At most this many PSF banks (distinct instrument/optics/band) are kept; the oldest goes first.
 pub const MAX_BANKS: usize = 8;
+/// The banks kept hold at most this much memory together, bytes ([`PsfBank::bytes`]; the newest is always
+/// kept). A sequence under the as-built focus breathing has a new wavefront, so a new bank, at every exposure
+/// (≈ 1 GB each on the bulge): eight of them filled this machine's 24 GB.
+pub const MAX_BANK_BYTES: usize = 2 << 30;
 /// At most this many simulators (distinct datasets) are kept; the oldest goes first.
 pub const MAX_SIMULATORS: usize = 4;
 
@@ -35,6 +39,8 @@ pub struct Session {
     integrators: Mutex<HashMap<Backend, Integrator>>,
     notes: Mutex<Vec<String>>,
     banks: Mutex<Vec<Arc<PsfBank>>>,
+    /// [`MAX_BANK_BYTES`] unless a test lowers it (0: the default).
+    bank_bytes: usize,
     kernels: Arc<KernelCache>,
     simulators: Mutex<Vec<(String, Arc<Simulator>)>>,
 }
@@ -87,8 +93,28 @@ impl Session {
         if v.len() >= MAX_BANKS {
             v.remove(0);
         }
+        // the older banks go first while all of them, the new one's future tables aside, pass the budget
+        let budget = if self.bank_bytes == 0 {
+            MAX_BANK_BYTES
+        } else {
+            self.bank_bytes
+        };
+        while !v.is_empty() && v.iter().map(|b| b.bytes()).sum::<usize>() > budget {
+            v.remove(0);
+        }
         v.push(b.clone());
         b
+    }
+
+    /// The same session keeping at most `bytes` of PSF banks (the newest always).
+    pub fn with_bank_bytes(mut self, bytes: usize) -> Self {
+        self.bank_bytes = bytes.max(1);
+        self
+    }
+
+    /// PSF banks kept.
+    pub fn banks_kept(&self) -> usize {
+        lock(&self.banks).len()
     }
 
     /// A new simulator of `cfg` (validated) on the session's bank, kernels and integrator.
@@ -255,5 +281,40 @@ mod tests {
         // a different magnitude shares the optics: one bank
         assert!(Arc::ptr_eq(&a.bank(), &c.bank()));
         assert!(s.take_notes().is_empty());
+    }
+
+    /// The banks kept stay within the session's memory budget, the newest always kept: with a budget
+    /// smaller than one bank, a second optics drops the first bank (the count limit alone kept it).
+    #[test]
+    fn the_banks_kept_stay_within_the_memory_budget() {
+        let mut cfg = Config::default();
+        cfg.optics.pupil_samples = 32;
+        cfg.optics.psf_oversampling = 2;
+        cfg.optics.psf_radius_px = 3;
+        cfg.band.wavelength_step_um = 0.2;
+        let s = Session::new();
+        let a = s.bank(&cfg);
+        a.get(2.0, &a.centre_key());
+        let one = a.bytes();
+        assert!(one > 0);
+        let mut other = cfg.clone();
+        other.optics.psf_radius_px = 4;
+        s.bank(&other);
+        assert_eq!(s.banks_kept(), 2, "the default budget keeps both");
+        let s = Session::new().with_bank_bytes(one - 1);
+        let a = s.bank(&cfg);
+        a.get(2.0, &a.centre_key());
+        s.bank(&other);
+        assert_eq!(
+            s.banks_kept(),
+            1,
+            "the first bank's {one} B pass the budget"
+        );
+        assert!(s.bank(&other).serves(&other));
+        // the newest is kept however large
+        let s = Session::new().with_bank_bytes(1);
+        let a = s.bank(&cfg);
+        a.get(2.0, &a.centre_key());
+        assert!(Arc::ptr_eq(&a, &s.bank(&cfg)));
     }
 }
