@@ -6,7 +6,7 @@
 //! 1. proper motion and parallax, `pmpx`: the coordinate direction from the observer's barycentric position
 //!    after Δt = epoch − catalogue epoch (TDB Julian years; no radial velocity);
 //! 2. light deflection by the Sun, `ldsun` (≈ 4 mas at 90° from the Sun);
-//! 3. aberration by the observer's barycentric velocity, `ab` (≈ 20″ from the Earth, 5″ from the orbit).
+//! 3. aberration by the observer's barycentric velocity, `ab` (20.5″ sin θ from the Earth, ≤ 5.2″ from the orbit).
 //!
 //! The pointing is the apparent direction of the configured axis (the attitude control holds the target
 //! where the star trackers see it), so a field shows the *differential* effects: a scale change of up to

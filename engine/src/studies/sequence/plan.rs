@@ -274,6 +274,37 @@ mod tests {
         assert!(c.validate().is_ok());
     }
 
+    /// The aberration the design WCS leaves at the default sequence's axes (docs/astrometric-solution.md):
+    /// the apparent less the catalogue direction of each exposure's planned axis. Near the equinoxes the
+    /// Earth moves nearly along the line of sight to the Galactic centre (θ ≈ 6–9°: 20.5″ sin θ ≈ 2–3″),
+    /// and the orbit's 7.6 km/s adds or takes up to 5.2″ with its phase — not the ≈ 20″ of the solstices.
+    #[test]
+    fn the_default_sequence_sees_an_aberration_of_a_few_arcseconds() {
+        let cfg = Config::default();
+        let p = plan(&Spec::default(), &cfg).expect("plan");
+        let (mut lo, mut hi) = (f64::INFINITY, 0.0f64);
+        for e in &p.exposures {
+            let c = exposure_config(&cfg, &p, e);
+            let place = crate::sky::scene_place(&c)
+                .expect("place")
+                .expect("apparent place on");
+            let axis = (c.sky.ra_deg, c.sky.dec_deg);
+            let none = crate::sky::apparent::Motion::default();
+            let mut astrometric = place;
+            astrometric.apparent = false;
+            let a = crate::sky::apparent::direction(axis.0, axis.1, &none, &astrometric);
+            let b = crate::sky::apparent::direction(axis.0, axis.1, &none, &place);
+            let s = crate::sky::apparent::separation_mas(a, b) / 1e3;
+            (lo, hi) = (lo.min(s), hi.max(s));
+        }
+        eprintln!(
+            "aberration over {} exposures: {lo:.2}–{hi:.2}″",
+            p.exposures.len()
+        );
+        // 0.32–7.19″ over its 312 exposures: the orbit's part cancels the Earth's at some phases
+        assert!(lo < 1.0 && hi > 6.0 && hi < 8.0, "{lo}–{hi}″");
+    }
+
     #[test]
     fn pointing_errors_have_their_size() {
         let cfg = Config::default();
