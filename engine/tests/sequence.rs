@@ -113,9 +113,38 @@ fn a_sequence_runs_resumes_and_shards_to_the_same_catalogue() {
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(stderr(&o).contains("not every exposure has run yet"));
     assert!(!sharded.join("catalogue.fits").exists());
-    let o = run(&sharded, &spec, &["--shard", "1/2"]);
+    // the second shard keeps its images: the same table, and each image's orbit phase is plan.csv's
+    let o = run(&sharded, &spec, &["--shard", "1/2", "--keep-images"]);
     assert!(o.status.success(), "{}", stderr(&o));
     assert_eq!(table(&sharded.join("catalogue.fits")), t);
+    let (h, rows) = engine::io::csv::read(&sharded.join("plan.csv")).expect("plan");
+    let phase = engine::io::csv::column_f64(Path::new("plan.csv"), &h, &rows, "orbit_phase_deg")
+        .expect("orbit_phase_deg");
+    assert!(phase.iter().all(|p| (0.0..360.0).contains(p)), "{phase:?}");
+    // the phase advances 360° per 96.7-min orbit (600 km) between exposures
+    let mjd =
+        engine::io::csv::column_f64(Path::new("plan.csv"), &h, &rows, "mjd_tdb").expect("mjd");
+    let dt_s = (mjd[1] - mjd[0]) * 86_400.0;
+    let advance = (phase[1] - phase[0]).rem_euclid(360.0);
+    assert!(
+        dt_s > 0.0 && (advance / (360.0 * dt_s / 5802.0) - 1.0).abs() < 0.01,
+        "{advance}° in {dt_s} s"
+    );
+    for e in 0..4 {
+        let image = engine::studies::sequence::run::image_path(&sharded, e);
+        assert_eq!(image.exists(), e % 2 == 1, "{}", image.display());
+        if e % 2 == 1 {
+            for array in ["ARRAY1", "ARRAY4"] {
+                let k = engine::io::fits::read_f64_key_in(&image, Some(array), "ORBPHASE")
+                    .expect("ORBPHASE");
+                assert!(
+                    (k - phase[e]).abs() < 1e-6,
+                    "{array}: {k} against {}",
+                    phase[e]
+                );
+            }
+        }
+    }
     let _ = std::fs::remove_dir_all(&dir);
 }
 

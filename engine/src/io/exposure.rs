@@ -26,7 +26,8 @@ pub fn truth_name(index: usize) -> String {
 }
 
 /// The time and place cards of an exposure starting `t_start_s` into the ACE series: `TIMESYS` (UTC),
-/// `DATE-OBS` and `MJD-OBS` (UTC of `observation.start_utc` + `TSTART`), `MJD-TDB`; and where the stars
+/// `DATE-OBS` and `MJD-OBS` (UTC of `observation.start_utc` + `TSTART`), `MJD-TDB`, `ORBPHASE` (the orbit's
+/// argument of latitude then, degrees: the phase of the orbit's aberration and focus breathing); and where the stars
 /// were placed: `APPLACE` (1: apparent place, 0: catalogue place), `APPMJD` (the instant of that place,
 /// image 0's mid-exposure, MJD UTC), `CATEPOCH` (the catalogue positions' Julian epoch, TDB), the
 /// spacecraft's geocentric position `SCGCRSX/Y/Z` (km) and velocity `SCGCRSVX/VY/VZ` (km/s), GCRS, at
@@ -47,6 +48,11 @@ pub fn observation_cards(cfg: &crate::config::Config, t_start_s: f64) -> Vec<Car
         Card::s("DATE-OBS", start.utc_iso(), "exposure start (UTC)"),
         Card::f("MJD-OBS", start.utc_mjd(), "[d] exposure start, MJD (UTC)"),
         Card::f("MJD-TDB", start.tdb_mjd(), "[d] exposure start, MJD (TDB)"),
+        Card::f(
+            "ORBPHASE",
+            orbit.argument_of_latitude_deg(&start),
+            "[deg] orbit's argument of latitude at start",
+        ),
         Card::i(
             "APPLACE",
             i64::from(cfg.observation.apparent_place),

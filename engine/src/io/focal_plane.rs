@@ -109,6 +109,16 @@ pub fn write_focal_plane_exposure(
     exp: &FocalPlaneExposure,
 ) -> Result<PathBuf, IoError> {
     let path = dir.join(focal_plane_name(exp.index));
+    write_focal_plane_exposure_to(&path, fps, exp)?;
+    Ok(path)
+}
+
+/// Write focal-plane exposure `exp` as the file `path` (written whole or not at all).
+pub fn write_focal_plane_exposure_to(
+    path: &Path,
+    fps: &FocalPlaneSimulator,
+    exp: &FocalPlaneExposure,
+) -> Result<(), IoError> {
     let config_text = fps.cfg.to_toml();
     let stored: Vec<Option<Vec<u16>>> = exp
         .arrays
@@ -162,6 +172,6 @@ pub fn write_focal_plane_exposure(
         name: "CONFIG",
         text: &config_text,
     });
-    fits::write(&path, &hdus)?;
-    Ok(path)
+    fits::write(path, &hdus)?;
+    Ok(())
 }

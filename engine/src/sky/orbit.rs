@@ -73,6 +73,13 @@ impl Orbit {
         c.clamp(-1.0, 1.0).acos()
     }
 
+    /// The argument of latitude at `t`, degrees in [0, 360): `phase_deg` + 360° (t − phase_epoch)/P (the
+    /// angle [`Orbit::geocentric`] places the spacecraft at, from the ascending node).
+    pub fn argument_of_latitude_deg(&self, t: &Epoch) -> f64 {
+        (self.phase_deg + 360.0 * t.seconds_since(&self.phase_epoch) / self.period_s())
+            .rem_euclid(360.0)
+    }
+
     /// The spacecraft's geocentric position (km) and velocity (km/s) at `t`, the Sun's geocentric
     /// direction `sun` (unit vector) giving the node.
     pub fn geocentric(&self, t: &Epoch, sun: [f64; 3]) -> ([f64; 3], [f64; 3]) {

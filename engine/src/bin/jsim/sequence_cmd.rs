@@ -51,6 +51,10 @@ pub struct SequenceArgs {
     /// CPUs per task.
     #[arg(long, default_value_t = 2)]
     pub cpus_per_task: usize,
+    /// Keep each exposure's image (`exposures/fp_NNNNN.fits`, the focal plane's four arrays, as `jsim
+    /// simulate` writes them; ≈ 31 MB each) beside its catalogue.
+    #[arg(long)]
+    pub keep_images: bool,
     /// Coverage map cell, degrees.
     #[arg(long, default_value_t = 0.01)]
     pub cell_deg: f64,
@@ -107,6 +111,7 @@ pub fn sequence(a: &SequenceArgs) -> Result<()> {
             Cell::S(e.start.utc_iso()),
             Cell::F(e.start.tdb_mjd()),
             Cell::S(e.seed.to_string()), // unsigned: a u64 seed ≥ 2⁶³ is no i64
+            Cell::F(e.orbit_phase_deg),
         ]);
         flown_rows.push(vec![
             Cell::I(e.index as i64),
@@ -118,8 +123,18 @@ pub fn sequence(a: &SequenceArgs) -> Result<()> {
     engine::io::csv::write(
         &outputs.path("plan.csv"),
         &[
-            "exposure", "stare", "visit", "l_deg", "b_deg", "ra_deg", "dec_deg", "pa_deg",
-            "date_obs", "mjd_tdb", "seed",
+            "exposure",
+            "stare",
+            "visit",
+            "l_deg",
+            "b_deg",
+            "ra_deg",
+            "dec_deg",
+            "pa_deg",
+            "date_obs",
+            "mjd_tdb",
+            "seed",
+            "orbit_phase_deg",
         ],
         &plan_rows,
     )?;
@@ -209,6 +224,7 @@ pub fn sequence(a: &SequenceArgs) -> Result<()> {
             time: a.time.clone(),
             cpus_per_task: a.cpus_per_task,
             jsim: std::env::current_exe()?,
+            keep_images: a.keep_images,
         };
         for name in [
             "config.toml",
@@ -258,7 +274,8 @@ pub fn sequence(a: &SequenceArgs) -> Result<()> {
         .filter(|e| shard.contains(e.index))
         .collect();
     let (mut sim_s, mut an_s, mut done) = (0.0, 0.0, 0usize);
-    let out = run::SequenceDir::open(&a.out)?;
+    let mut out = run::SequenceDir::open(&a.out)?;
+    out.keep_images = a.keep_images;
     for (k, e) in mine.iter().enumerate() {
         crate::outputs::interrupted()?;
         let r = run::run_exposure(&session, &plan, &cfg, &field, e, &cm, &mut memory, &out)?;

@@ -110,6 +110,8 @@ pub fn sequence_id(dir: &Path) -> Result<u64, SequenceError> {
 pub struct SequenceDir {
     pub path: PathBuf,
     pub id: u64,
+    /// Keep each exposure's image beside its catalogue ([`image_path`]).
+    pub keep_images: bool,
 }
 
 impl SequenceDir {
@@ -119,6 +121,7 @@ impl SequenceDir {
         Ok(Self {
             path: path.to_path_buf(),
             id: sequence_id(path)?,
+            keep_images: false,
         })
     }
 }
@@ -126,6 +129,11 @@ impl SequenceDir {
 /// The file of exposure `index`'s catalogue.
 pub fn exposure_path(dir: &Path, index: usize) -> PathBuf {
     dir.join("exposures").join(format!("{index:05}.csv"))
+}
+
+/// The image of exposure `index` when the sequence keeps its images (`jsim sequence --keep-images`).
+pub fn image_path(dir: &Path, index: usize) -> PathBuf {
+    dir.join("exposures").join(format!("fp_{index:05}.fits"))
 }
 
 /// Draw the mock bulge over the whole region of `plan` (every stare's field, its pointing error and the
@@ -274,6 +282,14 @@ pub fn run_exposure(
         }
     }
     crate::io::ensure_dir(&dir.join("exposures"))?;
+    if out.keep_images {
+        // before the catalogue, which marks the exposure done
+        crate::io::focal_plane::write_focal_plane_exposure_to(
+            &image_path(dir, e.index),
+            &fps,
+            &exp,
+        )?;
+    }
     // the truth first: a catalogue on disk always has its scoring beside it
     crate::io::csv::write(
         &dir.join("exposures")

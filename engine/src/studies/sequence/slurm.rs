@@ -19,6 +19,8 @@ pub struct SlurmJob {
     pub cpus_per_task: usize,
     /// The `jsim` binary the tasks run (absolute).
     pub jsim: PathBuf,
+    /// The tasks keep their exposures' images (`jsim sequence --keep-images`).
+    pub keep_images: bool,
 }
 
 /// One shell word of a script; quotes and newlines are refused (paths also stand in `#SBATCH` lines).
@@ -88,7 +90,12 @@ pub fn emit(plan: &Plan, cfg: &Config, dir: &Path, job: &SlurmJob) -> Result<Vec
         .as_ref()
         .map(|p| format!("#SBATCH --partition={p}\n"))
         .unwrap_or_default();
-    let run = format!("{jsim} sequence --config {cfg_w} --spec {spec_w} --out {out}");
+    let keep = if job.keep_images {
+        " --keep-images"
+    } else {
+        ""
+    };
+    let run = format!("{jsim} sequence --config {cfg_w} --spec {spec_w} --out {out}{keep}");
     let array = format!(
         "#!/bin/bash
 #SBATCH --job-name=jsim-sequence
