@@ -4,7 +4,7 @@
 //! in this list (no import cycles):
 //!
 //! ```text
-//! foundations  numerics, rng, digest, photometry        maths, seeded streams, content digests, magnitudes
+//! foundations  numerics, rng, digest, photometry, formats   maths, seeded streams, digests, magnitudes, CSV
 //! config       the configuration: types, defaults, validation (imports no physics)
 //! sky          pointing, TAN (+SIP) world coordinates of an array (the CDS `wcs` crate), the 2 × 2 focal plane
 //! stages       scene ─► optics ─► readout ─► jitter ─► integrate (kernel, track, cpu, gpu) ─► detector
@@ -43,6 +43,7 @@ pub mod config;
 pub mod detector;
 pub mod digest;
 pub mod error;
+pub mod formats;
 pub mod instrument;
 pub mod integrate;
 pub mod io;

@@ -108,16 +108,14 @@ impl IntraPixelMap {
             path: path.display().to_string(),
             source,
         })?;
-        let rows: Vec<Vec<f64>> = text
-            .lines()
-            .map(str::trim)
-            .filter(|l| !l.is_empty() && !l.starts_with('#'))
-            .map(|l| {
-                l.split(',')
+        let rows: Vec<Vec<f64>> = crate::formats::csv::records(path, &text)
+            .map(|r| {
+                let r = r.map_err(|e| err(e.to_string()))?;
+                r.cells
+                    .iter()
                     .map(|v| {
-                        v.trim()
-                            .parse::<f64>()
-                            .map_err(|e| err(format!("`{v}`: {e}")))
+                        v.parse::<f64>()
+                            .map_err(|e| err(format!("line {}: `{v}`: {e}", r.line)))
                     })
                     .collect()
             })

@@ -44,30 +44,22 @@ pub fn write(path: &Path, header: &[&str], rows: &[Vec<Cell>]) -> Result<(), IoE
     write_atomic(path, render(header, rows).as_bytes())
 }
 
-/// Read a CSV with a header into (header, rows of strings). Quoted cells are not supported beyond
-/// the plain comma-separated numbers and names this project writes.
+/// Read a CSV with a header into (header, rows of strings) ([`crate::formats::csv`]: quoted cells, `#`
+/// comments and blank lines as RFC 4180 and the `csv` crate have them).
 pub fn read(path: &Path) -> Result<(Vec<String>, Vec<Vec<String>>), IoError> {
-    let text = std::fs::read_to_string(path).map_err(|e| IoError::io(path, e))?;
-    let mut lines = text
-        .lines()
-        .filter(|l| !l.trim().is_empty() && !l.starts_with('#'));
-    let header: Vec<String> = lines
-        .next()
-        .ok_or_else(|| IoError::Format {
+    let records = crate::formats::csv::read(path).map_err(|e| match e {
+        crate::formats::csv::CsvError::Io { source, .. } => IoError::io(path, source),
+        e => IoError::Format {
             path: path.to_path_buf(),
-            message: "empty file".into(),
-        })?
-        .split(',')
-        .map(|s| s.trim().to_string())
-        .collect();
-    let rows = lines
-        .map(|l| {
-            l.split(',')
-                .map(|s| s.trim().trim_matches('"').to_string())
-                .collect()
-        })
-        .collect();
-    Ok((header, rows))
+            message: e.to_string(),
+        },
+    })?;
+    let mut rows = records.into_iter().map(|r| r.cells);
+    let header = rows.next().ok_or_else(|| IoError::Format {
+        path: path.to_path_buf(),
+        message: "empty file".into(),
+    })?;
+    Ok((header, rows.collect()))
 }
 
 /// Column `name` of a table read with [`read`], parsed as f64 where `inf` and `NaN` are values too (a

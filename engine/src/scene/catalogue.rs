@@ -79,6 +79,8 @@ struct Layout {
     a_hw: Option<usize>,
     /// pmra, pmdec, parallax.
     motion: [Option<usize>; 3],
+    /// Identifier columns (`id`, `name`, `source_id`): read past, any text.
+    identifiers: Vec<usize>,
 }
 
 impl Layout {
@@ -169,6 +171,13 @@ impl Layout {
             j_h_2mass,
             a_hw: find(&["a_hw"]),
             motion: [find(&["pmra"]), find(&["pmdec"]), find(&["parallax"])],
+            identifiers: (0..names.len())
+                .filter(|&i| {
+                    ["id", "name", "source_id"]
+                        .iter()
+                        .any(|k| names[i].trim().eq_ignore_ascii_case(k))
+                })
+                .collect(),
         })
     }
 
@@ -182,6 +191,7 @@ impl Layout {
             j_h_2mass: None,
             a_hw: None,
             motion: [None; 3],
+            identifiers: Vec::new(),
         }
     }
 }
@@ -335,12 +345,17 @@ fn read_csv(path: &Path, lim: &Limits) -> Result<Catalogue, SceneError> {
     })?;
     let mut layout: Option<Layout> = None;
     let mut rows = Vec::new();
-    for (k, line) in text.lines().enumerate() {
-        let l = line.trim();
-        if l.is_empty() || l.starts_with('#') {
-            continue;
-        }
-        let cols: Vec<&str> = l.split(',').map(str::trim).collect();
+    for record in crate::formats::csv::records(path, &text) {
+        let record = record.map_err(|e| SceneError::Parse {
+            path: p.clone(),
+            line: match &e {
+                crate::formats::csv::CsvError::Syntax { line, .. } => *line as usize,
+                _ => 0,
+            },
+            message: e.to_string(),
+        })?;
+        let line = record.line as usize;
+        let cols: Vec<&str> = record.cells.iter().map(String::as_str).collect();
         let lay = match &layout {
             Some(lay) => lay,
             None => {
@@ -368,13 +383,13 @@ fn read_csv(path: &Path, lim: &Limits) -> Result<Catalogue, SceneError> {
         }
         let at = |message: String| SceneError::Parse {
             path: p.clone(),
-            line: k + 1,
+            line,
             message,
         };
         // a value that is present must be a number; an absent or empty one takes the default
         let mut values = Vec::with_capacity(cols.len());
         for (i, v) in cols.iter().enumerate() {
-            values.push(if v.is_empty() {
+            values.push(if v.is_empty() || lay.identifiers.contains(&i) {
                 None
             } else {
                 Some(
@@ -498,6 +513,30 @@ mod tests {
                 "{name}: {msg}"
             );
         }
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    /// A catalogue as spreadsheets and pandas write it: every cell quoted, a name holding a comma, a
+    /// comment and a blank line. The stars are read as written (a comma-split reader cut the name in two
+    /// and took `"x"` for an unknown column), and a bad value is named at its line.
+    #[test]
+    fn a_quoted_catalogue_is_read_as_written() {
+        let dir = std::env::temp_dir().join(format!("jsim-cat-quoted-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("tmp");
+        let p = dir.join("quoted.csv");
+        std::fs::write(
+            &p,
+            "# two stars\n\"name\",\"x\",\"y\",\"hw\"\n\n\"Star, the first\",\"100.5\",\"200.25\",\"12.5\"\n\"B\",300,400,13\n",
+        )
+        .expect("write");
+        let Catalogue::Pixels(stars) = read(&p, 12.5, 2.0, 1968.0).expect("read") else {
+            panic!("pixel positions")
+        };
+        let got: Vec<(f64, f64, f64)> = stars.iter().map(|s| (s.x_px, s.y_px, s.mag_hw)).collect();
+        assert_eq!(got, vec![(100.5, 200.25, 12.5), (300.0, 400.0, 13.0)]);
+        std::fs::write(&p, "# a comment\nx,y,hw\n\n1,2,12\n3,oops,12\n").expect("write");
+        let msg = read(&p, 12.5, 2.0, 1968.0).expect_err("oops").to_string();
+        assert!(msg.contains("line 5") && msg.contains("oops"), "{msg}");
         let _ = std::fs::remove_dir_all(&dir);
     }
 }
