@@ -9,6 +9,17 @@ use crate::optics::psf::PsfTable;
 use crate::scoring::image::ScoredStar;
 use crate::truth::TruthRow;
 
+/// The default configuration with coarse PSF tables (`pupil_samples` across the pupil, `oversampling` cells
+/// per pixel out to `radius_px`, 0.2-µm wavelength steps): PSF-bank tests that count and compare tables.
+pub fn coarse_psf_config(pupil_samples: usize, oversampling: usize, radius_px: usize) -> Config {
+    let mut cfg = Config::default();
+    cfg.optics.pupil_samples = pupil_samples;
+    cfg.optics.psf_oversampling = oversampling;
+    cfg.optics.psf_radius_px = radius_px;
+    cfg.band.wavelength_step_um = 0.2;
+    cfg
+}
+
 /// A 512² detector (4 channels of 128 columns), an 8 × 8 grid of stars 56 px apart, a coarser PSF grid and
 /// wavelength sampling, and a 2-minute ACE series; everything else (optics, noise, photometry) as the
 /// paper. Runs in seconds in the dev profile.

@@ -65,18 +65,32 @@ struct BankKey {
 }
 
 /// Computes each distinct PSF once and shares it between stars and images.
+///
+/// A PSF depends on the instrument, the band and the optics, and on the wavefront only through its key
+/// ([`FieldKey`]: the coefficients themselves). Banks whose configurations differ in their wavefront alone
+/// (`optics.fringe`, `optics.field_table`: the exposures of a sequence under the as-built focus breathing)
+/// therefore share one [`PsfStore`] ([`PsfBank::serving`]): an exposure whose wavefront rounds to one already
+/// seen takes its PSFs as they are.
 pub struct PsfBank {
     instrument: Instrument,
     optics: Optics,
     band: Band,
     /// The field table as a grid (none: one wavefront everywhere).
     grid: Option<field::FieldGrid>,
-    cache: Mutex<HashMap<BankKey, Arc<PsfTable>>>,
+    store: Arc<PsfStore>,
+    /// Memory the kept monochromatic sets may hold ([`PsfBank::MONO_CACHE_BYTES`] unless a test lowers it).
+    mono_cache_bytes: usize,
+}
+
+/// The PSFs of banks that differ in their wavefront alone, keyed by colour and wavefront.
+#[derive(Default)]
+struct PsfStore {
+    /// Each table with the order it was made in (the oldest unheld go first past [`PsfBank::TABLE_BYTES`]).
+    cache: Mutex<HashMap<BankKey, (u64, Arc<PsfTable>)>>,
+    made: std::sync::atomic::AtomicU64,
     /// The monochromatic sets most recently used, newest last, at most [`PsfBank::MONO_CACHE_BYTES`]
     /// together (always the newest one): a new colour of a known wavefront costs one weighted sum.
     mono: Mutex<Vec<(MonoKey, Arc<psf::MonochromaticSet>)>>,
-    /// Memory the kept monochromatic sets may hold ([`PsfBank::MONO_CACHE_BYTES`] unless a test lowers it).
-    mono_cache_bytes: usize,
     /// Monochromatic sets computed so far (a set is the costly part of a PSF: one MFT per wavelength).
     mono_built: std::sync::atomic::AtomicUsize,
 }
@@ -91,19 +105,47 @@ struct MonoKey {
 impl PsfBank {
     /// Memory the kept monochromatic sets may hold (one set of the default optics: 61 × 417² cells, 85 MB).
     pub const MONO_CACHE_BYTES: usize = 400 << 20;
+    /// Memory a store's PSF tables may hold before the oldest that no one else holds go (one table of the
+    /// default optics: 417² cells, 1.4 MB; the as-built bulge's 279 colour × zone PSFs and their halos, ≈ 0.6
+    /// GB, are one exposure's).
+    pub const TABLE_BYTES: usize = 1 << 30;
 
     pub fn new(cfg: &Config) -> Self {
+        Self::with_store(cfg, Arc::new(PsfStore::default()))
+    }
+
+    fn with_store(cfg: &Config, store: Arc<PsfStore>) -> Self {
         Self {
             instrument: cfg.instrument.clone(),
             optics: cfg.optics.clone(),
             band: cfg.band.clone(),
             // a validated configuration's table is a grid; an invalid one falls back to `fringe`
             grid: field::grid_of(&cfg.optics).ok().flatten(),
-            cache: Mutex::new(HashMap::new()),
-            mono: Mutex::new(Vec::new()),
+            store,
             mono_cache_bytes: Self::MONO_CACHE_BYTES,
-            mono_built: Default::default(),
         }
+    }
+
+    /// A bank of `cfg` sharing this bank's PSFs, when `cfg` differs from this bank's configuration in its
+    /// wavefront alone (`optics.fringe`, `optics.field_table`); `None` otherwise.
+    pub fn sharing(&self, cfg: &Config) -> Option<Self> {
+        let rest = |o: &Optics| Optics {
+            fringe: Vec::new(),
+            field_table: Vec::new(),
+            ..o.clone()
+        };
+        (self.instrument == cfg.instrument
+            && self.band == cfg.band
+            && rest(&self.optics) == rest(&cfg.optics))
+        .then(|| Self {
+            mono_cache_bytes: self.mono_cache_bytes,
+            ..Self::with_store(cfg, self.store.clone())
+        })
+    }
+
+    /// Whether two banks share their PSFs.
+    pub fn shares_with(&self, other: &Self) -> bool {
+        Arc::ptr_eq(&self.store, &other.store)
     }
 
     /// The same bank keeping at most `bytes` of monochromatic sets (the newest always).
@@ -121,7 +163,7 @@ impl PsfBank {
         let mut order: Vec<FieldKey> = Vec::new();
         let mut colours: HashMap<FieldKey, Vec<f64>> = HashMap::new();
         {
-            let cache = self.cache.lock().unwrap_or_else(|e| e.into_inner());
+            let cache = self.store.cache.lock().unwrap_or_else(|e| e.into_inner());
             for (j_minus_h, field) in wanted {
                 let key = BankKey {
                     j_minus_h_milli: (j_minus_h * 1000.0).round() as i64,
@@ -153,15 +195,18 @@ impl PsfBank {
 
     /// Monochromatic sets computed so far.
     pub fn monochromatic_sets_built(&self) -> usize {
-        self.mono_built.load(std::sync::atomic::Ordering::Relaxed)
+        self.store
+            .mono_built
+            .load(std::sync::atomic::Ordering::Relaxed)
     }
 
-    /// `bank` when it serves `cfg`, else a fresh bank for `cfg`.
+    /// `bank` when it serves `cfg`; else a bank of `cfg` sharing its PSFs when only the wavefront differs
+    /// ([`PsfBank::sharing`]); else a fresh bank for `cfg`.
     pub fn serving(bank: Arc<Self>, cfg: &Config) -> Arc<Self> {
         if bank.serves(cfg) {
             bank
         } else {
-            Arc::new(Self::new(cfg))
+            Arc::new(bank.sharing(cfg).unwrap_or_else(|| Self::new(cfg)))
         }
     }
 
@@ -240,7 +285,8 @@ impl PsfBank {
             field: field.clone(),
             halo_px,
         };
-        if let Some(p) = self
+        if let Some((_, p)) = self
+            .store
             .cache
             .lock()
             .unwrap_or_else(|e| e.into_inner())
@@ -283,17 +329,38 @@ impl PsfBank {
             }
         }
         let table = Arc::new(table);
-        self.cache
-            .lock()
-            .unwrap_or_else(|e| e.into_inner())
-            .insert(key, table.clone());
+        let order = self
+            .store
+            .made
+            .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        let mut cache = self.store.cache.lock().unwrap_or_else(|e| e.into_inner());
+        cache.insert(key, (order, table.clone()));
+        // past the budget the oldest tables no one else holds go (a star job, a kernel in the kernel cache
+        // or a caller holding one keeps it): made again identically if asked for again
+        let bytes = |c: &HashMap<BankKey, (u64, Arc<PsfTable>)>| -> usize {
+            c.values().map(|(_, t)| t.data.len() * 8).sum()
+        };
+        if bytes(&cache) > Self::TABLE_BYTES {
+            let mut unheld: Vec<(u64, BankKey)> = cache
+                .iter()
+                .filter(|(_, (_, t))| Arc::strong_count(t) == 1)
+                .map(|(k, (o, _))| (*o, k.clone()))
+                .collect();
+            unheld.sort_by_key(|(o, _)| *o);
+            for (_, k) in unheld {
+                if bytes(&cache) <= Self::TABLE_BYTES {
+                    break;
+                }
+                cache.remove(&k);
+            }
+        }
         table
     }
 
     /// The monochromatic set of a wavefront and extent: kept from an earlier colour, or computed (and kept,
     /// dropping the oldest sets beyond [`Self::MONO_CACHE_BYTES`]).
     fn monochromatic_set(&self, key: MonoKey, req: &PsfRequest<'_>) -> Arc<psf::MonochromaticSet> {
-        let lock = || self.mono.lock().unwrap_or_else(|e| e.into_inner());
+        let lock = || self.store.mono.lock().unwrap_or_else(|e| e.into_inner());
         {
             let mut kept = lock();
             if let Some(i) = kept.iter().position(|(k, _)| *k == key) {
@@ -305,7 +372,8 @@ impl PsfBank {
         }
         // computed outside the lock (it runs in parallel over wavelengths)
         let set = Arc::new(psf::monochromatic_set(req));
-        self.mono_built
+        self.store
+            .mono_built
             .fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         let mut kept = lock();
         kept.push((key, set.clone()));
@@ -317,14 +385,17 @@ impl PsfBank {
         set
     }
 
-    /// Memory the bank holds, bytes: its PSF tables and its kept monochromatic sets.
+    /// Memory the bank holds, bytes: its PSF tables and its kept monochromatic sets (shared with the banks
+    /// it shares its PSFs with).
     pub fn bytes(&self) -> usize {
         let tables: usize = self
+            .store
             .cache
             .lock()
-            .map(|c| c.values().map(|t| t.data.len() * 8).sum())
+            .map(|c| c.values().map(|(_, t)| t.data.len() * 8).sum())
             .unwrap_or(0);
         let sets: usize = self
+            .store
             .mono
             .lock()
             .map(|m| m.iter().map(|(_, s)| s.bytes()).sum())
@@ -334,7 +405,7 @@ impl PsfBank {
 
     /// Number of PSFs computed so far.
     pub fn len(&self) -> usize {
-        self.cache.lock().map(|c| c.len()).unwrap_or(0)
+        self.store.cache.lock().map(|c| c.len()).unwrap_or(0)
     }
 
     pub fn is_empty(&self) -> bool {
@@ -369,11 +440,7 @@ mod tests {
     /// otherwise; without a field table every star shares the one PSF of `optics.fringe`.
     #[test]
     fn the_bank_shares_psfs_by_wavefront_within_the_tolerance() {
-        let mut cfg = Config::default();
-        cfg.optics.pupil_samples = 64;
-        cfg.optics.psf_oversampling = 4;
-        cfg.optics.psf_radius_px = 4;
-        cfg.band.wavelength_step_um = 0.2;
+        let mut cfg = crate::testkit::coarse_psf_config(64, 4, 4);
         cfg.optics.wfe_unit = WfeUnit::Um;
         // Z7 (coma) from 0 to 0.1 µm across 1000 px: 0.1 nm per px
         cfg.optics.field_table = [
@@ -422,13 +489,49 @@ mod tests {
         );
     }
 
+    /// Banks whose configurations differ in their wavefront alone share their PSFs: a focus that rounds to
+    /// the same wavefront key takes the PSF as it is (the same table), another focus gets its own, and a
+    /// configuration that differs in anything else (the pupil's sampling) gets a bank of its own.
+    #[test]
+    fn banks_that_differ_in_their_wavefront_alone_share_their_psfs() {
+        let mut cfg = crate::testkit::coarse_psf_config(32, 2, 3);
+        cfg.optics.wfe_unit = WfeUnit::Um;
+        let with_focus = |z4_um: f64| {
+            let mut c = cfg.clone();
+            c.optics.field_table = [(0.0, 0.0), (1000.0, 0.0), (0.0, 1000.0), (1000.0, 1000.0)]
+                .into_iter()
+                .map(|(x_px, y_px)| crate::config::FieldWfe {
+                    x_px,
+                    y_px,
+                    fringe: vec![0.0, 0.0, 0.0, z4_um, 0.0, 0.0, 0.02],
+                })
+                .collect();
+            c
+        };
+        let a = Arc::new(PsfBank::new(&with_focus(0.010)));
+        // 0.2 nm more focus: the same 1-nm key; 5 nm more: another
+        let near = with_focus(0.0102);
+        let far = with_focus(0.015);
+        assert!(!a.serves(&near));
+        let b = PsfBank::serving(a.clone(), &near);
+        let c = PsfBank::serving(a.clone(), &far);
+        assert!(b.shares_with(&a) && c.shares_with(&a) && b.serves(&near) && c.serves(&far));
+        let pa = a.get(2.0, &a.field_key(500.0, 500.0));
+        assert!(Arc::ptr_eq(&pa, &b.get(2.0, &b.field_key(500.0, 500.0))));
+        let pc = c.get(2.0, &c.field_key(500.0, 500.0));
+        assert!(!Arc::ptr_eq(&pa, &pc));
+        // the shared table is the one a bank of its own computes
+        let own = PsfBank::new(&far);
+        assert_eq!(own.get(2.0, &own.field_key(500.0, 500.0)).data, pc.data);
+        assert_eq!(a.len(), 2);
+        let mut coarse = near.clone();
+        coarse.optics.pupil_samples = 24;
+        assert!(!PsfBank::serving(a.clone(), &coarse).shares_with(&a));
+    }
+
     #[test]
     fn bank_reuses_psfs() {
-        let mut cfg = Config::default();
-        cfg.optics.psf_oversampling = 4;
-        cfg.optics.psf_radius_px = 4;
-        cfg.optics.pupil_samples = 64;
-        cfg.band.wavelength_step_um = 0.2;
+        let cfg = crate::testkit::coarse_psf_config(64, 4, 4);
         let bank = PsfBank::new(&cfg);
         let k = bank.centre_key();
         let a = bank.get(2.0, &k);

@@ -89,7 +89,13 @@ impl Session {
         if let Some(b) = v.iter().find(|b| b.serves(cfg)) {
             return b.clone();
         }
-        let b = Arc::new(PsfBank::new(cfg));
+        // a configuration that differs in its wavefront alone shares the PSFs (the focus breathing)
+        let b = Arc::new(
+            v.iter()
+                .rev()
+                .find_map(|b| b.sharing(cfg))
+                .unwrap_or_else(|| PsfBank::new(cfg)),
+        );
         if v.len() >= MAX_BANKS {
             v.remove(0);
         }
@@ -99,7 +105,17 @@ impl Session {
         } else {
             self.bank_bytes
         };
-        while !v.is_empty() && v.iter().map(|b| b.bytes()).sum::<usize>() > budget {
+        // (banks sharing their PSFs counted once; the new bank's shared PSFs count)
+        let held = |v: &[Arc<PsfBank>]| -> usize {
+            let mut distinct: Vec<&Arc<PsfBank>> = Vec::new();
+            for x in v.iter().chain([&b]) {
+                if !distinct.iter().any(|d| d.shares_with(x)) {
+                    distinct.push(x);
+                }
+            }
+            distinct.iter().map(|d| d.bytes()).sum()
+        };
+        while !v.is_empty() && held(&v) > budget {
             v.remove(0);
         }
         v.push(b.clone());
@@ -287,11 +303,7 @@ mod tests {
     /// smaller than one bank, a second optics drops the first bank (the count limit alone kept it).
     #[test]
     fn the_banks_kept_stay_within_the_memory_budget() {
-        let mut cfg = Config::default();
-        cfg.optics.pupil_samples = 32;
-        cfg.optics.psf_oversampling = 2;
-        cfg.optics.psf_radius_px = 3;
-        cfg.band.wavelength_step_um = 0.2;
+        let cfg = crate::testkit::coarse_psf_config(32, 2, 3);
         let s = Session::new();
         let a = s.bank(&cfg);
         a.get(2.0, &a.centre_key());
@@ -301,6 +313,11 @@ mod tests {
         other.optics.psf_radius_px = 4;
         s.bank(&other);
         assert_eq!(s.banks_kept(), 2, "the default budget keeps both");
+        // a focus of its own: a bank of its own configuration, sharing the PSFs
+        let mut focus = cfg.clone();
+        focus.optics.fringe = vec![0.0, 0.0, 0.0, 0.01];
+        let f = s.bank(&focus);
+        assert!(f.serves(&focus) && f.shares_with(&a) && !f.shares_with(&s.bank(&other)));
         let s = Session::new().with_bank_bytes(one - 1);
         let a = s.bank(&cfg);
         a.get(2.0, &a.centre_key());
