@@ -236,8 +236,13 @@ impl PySession {
     /// `"on"` (the crowded-field analysis) or `"off"` (isolated stars), as `jsim analyze --crowding`; default: the
     /// session configuration's `analysis.crowding`. `flat`: the calibration flat product (a 2-D array of the image's
     /// shape, e.g. `Exposure.calibration_flat[0]` or `flat_cal.fits`) with its relative error `flat_error`; without
-    /// it a bare array is not flat-fielded (said in `assumptions`).
-    #[pyo3(signature = (image, header = None, *, dq = None, truth = None, config = None, countermeasure = "none", epsf_zones = None, crowding = None, flat = None, flat_error = None))]
+    /// it a bare array is not flat-fielded (said in `assumptions`). The other products, as files, as `jsim
+    /// analyze` takes them: `refcat=` (the reference catalogue, `refcat.csv`), `model_psf=` (the design model
+    /// PSF, `psf_model.fits`) and `telemetry=` (`telemetry_NNN.fits`, refused when it covers another exposure
+    /// than the header's IMAGEIDX): with the flat, the array and its header give `analyze_file`'s result bit
+    /// for bit.
+    #[pyo3(signature = (image, header = None, *, dq = None, truth = None, config = None, countermeasure = "none", epsf_zones = None, crowding = None, flat = None, flat_error = None, refcat = None, model_psf = None, telemetry = None))]
+    #[allow(clippy::too_many_arguments)]
     fn analyze(
         &self,
         py: Python<'_>,
@@ -251,6 +256,9 @@ impl PySession {
         crowding: Option<&str>,
         flat: Option<&Bound<'_, PyAny>>,
         flat_error: Option<f64>,
+        refcat: Option<std::path::PathBuf>,
+        model_psf: Option<std::path::PathBuf>,
+        telemetry: Option<std::path::PathBuf>,
     ) -> PyResult<PyAnalysis> {
         let cm: Countermeasure = countermeasure.parse().or_py()?;
         // the session's configuration, with `crowding=` when given
@@ -265,9 +273,13 @@ impl PySession {
                 || config.is_some()
                 || flat.is_some()
                 || flat_error.is_some()
+                || refcat.is_some()
+                || model_psf.is_some()
+                || telemetry.is_some()
             {
                 return Err(PyTypeError::new_err(
-                    "an Exposure brings its own header, dq, truth, config and flat: pass none of them",
+                    "an Exposure brings its own header, dq, truth, config and products (flat, refcat, \
+                     model_psf, telemetry): pass none of them",
                 ));
             }
             exp.borrow().analysis_input(py, &self.cfg)?
@@ -298,7 +310,19 @@ impl PySession {
                     return Err(PyValueError::new_err("flat_error= without flat="));
                 }
             };
+            let index = header
+                .and_then(|h| h.get_item("IMAGEIDX").ok().flatten())
+                .and_then(|v| v.extract::<f64>().ok())
+                .filter(|i| *i >= 0.0 && i.fract() == 0.0)
+                .map(|i| i as usize);
             self.array_input(py, image, header, dq, truth, config, flat)?
+                .with_product_files(engine::io::analysis_input::ProductFiles {
+                    reference: refcat.as_deref(),
+                    model_psf: model_psf.as_deref(),
+                    telemetry: telemetry.as_deref(),
+                    image_index: index,
+                })
+                .or_py()?
         };
         let analysis = py
             .detach(|| self.session.analyze_input(&cfg, &input, epsf_zones, cm))

@@ -243,6 +243,27 @@ def test_a_file_with_its_products_analyses_in_python_as_in_jsim_analyze(tmp_path
     session = jsim.Session(small_config(), backend="cpu")
     for cm in ["telemetry-model", "plate-poly:3@catalogue"]:
         assert_python_is_the_cli(jsim_bin, image, cm, tmp_path, session.analyze_file(image, countermeasure=cm))
+    # the array form with the same products gives the file form's measurements bit for bit: the image and its
+    # header as astropy reads them, the flat as an array, the other products as files
+    sim = tmp_path / "sim"
+    with fits.open(image) as h, fits.open(sim / "flat_cal.fits") as f:
+        data = h[0].data.astype(np.float32)
+        header = {k: v for k, v in h[0].header.items() if k and k not in ("COMMENT", "HISTORY")}
+        dq = np.ascontiguousarray(h["DQ"].data.astype(np.uint8))
+        flat, flat_error = f[0].data.astype(np.float32), float(f[0].header["FLATERR"])
+    products = dict(refcat=sim / "refcat.csv", model_psf=sim / "psf_model.fits", telemetry=sim / "telemetry_000.fits")
+    measured = ["x", "y", "flux_e", "sky_e", "crlb_x_mas", "crlb_y_mas", "flags"]
+    for cm in ["telemetry-model", "plate-poly:3@catalogue"]:
+        a = session.analyze(data, header, dq=dq, flat=flat, flat_error=flat_error, countermeasure=cm, **products)
+        b = session.analyze_file(image, countermeasure=cm)
+        for name in measured:
+            np.testing.assert_array_equal(a.catalogue[name], b.catalogue[name], err_msg=f"{cm}: {name}")
+    # without the telemetry the forward model has nothing to correct with, and says so
+    bare = session.analyze(data, header, dq=dq, flat=flat, flat_error=flat_error, countermeasure="telemetry-model")
+    assert any("no attitude telemetry" in a for a in bare.assumptions)
+    # a telemetry of another exposure than the header's is refused by name
+    with pytest.raises(OSError, match="telemetry of exposure 0"):
+        session.analyze(data, dict(header, IMAGEIDX=1), dq=dq, flat=flat, flat_error=flat_error, **products)
     # a focal-plane file is refused by name
     fp = tmp_path / "fp"
     quad = [s for s in sets if not s.startswith("ace.case")] + [

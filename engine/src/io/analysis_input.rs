@@ -305,7 +305,54 @@ impl AnalysisInput {
     }
 }
 
+/// The instrument products of an image held in memory, each a file (`jsim analyze`'s `--refcat`,
+/// `psf_model.fits`, `--telemetry`): what the Python module's array form takes beside its flat.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct ProductFiles<'a> {
+    /// The reference catalogue (`refcat.csv`), its single-array rows.
+    pub reference: Option<&'a Path>,
+    /// The design model PSF (`psf_model.fits`), with its derivative planes when it holds them.
+    pub model_psf: Option<&'a Path>,
+    /// The attitude telemetry (`telemetry_NNN.fits`), refused when it covers another exposure than
+    /// `image_index` (the header's IMAGEIDX), when that is known.
+    pub telemetry: Option<&'a Path>,
+    pub image_index: Option<usize>,
+}
+
 impl AnalysisInput {
+    /// This input with the products of `files` read as `jsim analyze` reads them beside a file (a product not
+    /// given stays as it was).
+    pub fn with_product_files(mut self, files: ProductFiles<'_>) -> Result<Self, IoError> {
+        if let Some(p) = files.reference {
+            self.reference = Some(
+                instrument::read_reference_catalogue(p, 0)?
+                    .iter()
+                    .map(instrument::RefStar::catalogue_star)
+                    .collect(),
+            );
+        }
+        if let Some(p) = files.model_psf {
+            self.model_psf = Some(instrument::read_model_psf(p, None)?);
+            self.model_psf_terms = instrument::read_model_psf_terms(p)?;
+        }
+        if let Some(p) = files.telemetry {
+            let (rec, covers) = instrument::read_telemetry(p)?;
+            if let Some(i) = files.image_index
+                && i != covers
+            {
+                return Err(IoError::Format {
+                    path: p.to_path_buf(),
+                    message: format!(
+                        "telemetry of exposure {covers}, the image is exposure {i} (IMAGEIDX): not this \
+                         exposure's"
+                    ),
+                });
+            }
+            self.telemetry = Some(rec);
+        }
+        Ok(self)
+    }
+
     /// What the analysis under `cm` assumes of this input: [`AnalysisInput::assumptions`], and for the
     /// telemetry correction without a telemetry product, that it has nothing to correct with.
     pub fn assumptions_for(
