@@ -46,10 +46,6 @@ const KNOWN_CYCLES: &[&str] = &[
     "analysis::crowded::forced → analysis::crowded::pass → analysis::pipeline → analysis::crowded::forced",
     // convolve.rs takes kernel::PixelKernel; kernel.rs caches convolve::Polyphase
     "integrate::convolve → integrate::kernel → integrate::convolve",
-    // crowded.rs builds on image::ScoredStar; image.rs calls crowded::match_catalogue
-    "scoring::crowded → scoring::image → scoring::crowded",
-    // persistence.rs takes run's FIELD_NAME and SequenceError; run.rs holds a persistence::Memory
-    "studies::sequence::persistence → studies::sequence::run → studies::sequence::persistence",
 ];
 
 /// Uses of forbidden items that exist today: (file under engine/src, what it names, why). The test fails on any

@@ -3,7 +3,7 @@
 //! * **Match** ([`match_stars`]): isolated fields — each fitted position, less the common offset (the median
 //!   displacement to the nearest true star within [`OFFSET_SEARCH_PX`], when ≥ 3 such pairs exist), takes
 //!   the nearest true star within [`MATCH_RADIUS_PX`]; crowded fields — position *and* flux
-//!   ([`super::crowded::match_catalogue`]). Every analysis of a plan holds the plain analysis' stars in
+//!   ([`super::matching::match_catalogue`]). Every analysis of a plan holds the plain analysis' stars in
 //!   the same order (a countermeasure corrects them; `exact-epsf` refits the same detections), so the plain
 //!   analysis' match scores them all and each countermeasure is scored on the same stars.
 //! * Position accuracy = the standard deviation over the used stars (matched, not rejected, finite) of
@@ -179,7 +179,7 @@ pub fn phase_bias(d: &[f64], phase: &[f64]) -> f64 {
 /// Match an analysis' stars to the truth (see the module's documentation); `crowded`: by position and flux.
 pub fn match_stars(stars: &[StarResult], truth: &[TruthRow], crowded: bool) -> Vec<Option<usize>> {
     if crowded {
-        return super::crowded::match_catalogue(stars, truth);
+        return super::matching::match_catalogue(stars, truth);
     }
     let pos: Vec<(f64, f64)> = stars.iter().map(|s| (s.x, s.y)).collect();
     let refs: Vec<(f64, f64)> = truth.iter().map(|t| (t.x_px, t.y_px)).collect();

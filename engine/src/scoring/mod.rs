@@ -19,6 +19,7 @@ pub mod crowded;
 pub mod dataset;
 pub mod focal_plane;
 pub mod image;
+pub mod matching;
 pub mod solution;
 pub mod undetected;
 pub mod vectors;

@@ -15,6 +15,24 @@ pub mod slurm;
 pub mod solution;
 pub mod spec;
 
+/// The field's sky catalogue in a sequence's output directory (what every exposure reads).
+pub const FIELD_NAME: &str = "field.csv";
+
+/// A sequence run failed.
+#[derive(Debug, thiserror::Error)]
+pub enum SequenceError {
+    #[error("sequence: {0}")]
+    Invalid(String),
+    #[error(transparent)]
+    Io(#[from] crate::io::IoError),
+    #[error(transparent)]
+    Scene(#[from] crate::scene::SceneError),
+    #[error(transparent)]
+    Simulation(#[from] crate::simulate::SimError),
+    #[error(transparent)]
+    Source(#[from] crate::session::source::SourceError),
+}
+
 pub use coverage::{Coverage, coverage};
 pub use plan::{Plan, PlannedExposure, Stare, exposure_config, plan};
 pub use spec::Spec;

@@ -8,7 +8,7 @@
 //! Hw ≤ 17), an exposure's own charge is its remake, and a straight run keeps it instead of making it again.
 
 use super::plan::{Plan, PlannedExposure, exposure_config};
-use super::run::{FIELD_NAME, SequenceError};
+use super::{FIELD_NAME, SequenceError};
 use crate::config::{Config, SceneKind};
 use crate::detector::persistence::{ChargeMap, released_e};
 use crate::io::csv::Cell;

@@ -15,8 +15,7 @@ use crate::io::fits::{self, Card, Column, Hdu};
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-/// The field's sky catalogue in the output directory.
-pub const FIELD_NAME: &str = "field.csv";
+pub use super::{FIELD_NAME, SequenceError};
 /// The gathered catalogue of every exposure.
 pub const CATALOGUE_NAME: &str = "catalogue.fits";
 
@@ -36,21 +35,6 @@ pub const CATALOGUE_HEADER: [&str; 13] = [
     "mjd_tdb",
     "sequence_id",
 ];
-
-/// A sequence run failed.
-#[derive(Debug, thiserror::Error)]
-pub enum SequenceError {
-    #[error("sequence: {0}")]
-    Invalid(String),
-    #[error(transparent)]
-    Io(#[from] crate::io::IoError),
-    #[error(transparent)]
-    Scene(#[from] crate::scene::SceneError),
-    #[error(transparent)]
-    Simulation(#[from] crate::simulate::SimError),
-    #[error(transparent)]
-    Source(#[from] crate::session::source::SourceError),
-}
 
 /// The instrument as designed, the sequence's product for its analysis: [`DESIGN_NAME`].
 pub const DESIGN_NAME: &str = "design.toml";
