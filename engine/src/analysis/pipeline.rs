@@ -12,7 +12,7 @@ use crate::analysis::crowded::CrowdedSummary;
 use crate::analysis::detection::{detect, starts};
 use crate::analysis::epsf::Epsf;
 use crate::analysis::epsf::build::{self, BuildOptions, StarStart};
-use crate::analysis::epsf::fit::{FitOptions, StarFit, fit_star, flags};
+use crate::analysis::epsf::fit::{StarFit, fit_star, flags};
 use crate::analysis::image::AnalysisImage;
 use crate::analysis::report::{Report, StarResult, star_results};
 use crate::analysis::response::FitNoise;
@@ -67,22 +67,7 @@ impl Options {
     }
 }
 
-/// The ePSF builder's options from the analysis configuration.
-pub fn build_options(cfg: &AnalysisCfg) -> BuildOptions {
-    BuildOptions {
-        oversampling: cfg.epsf_oversampling,
-        half_px: cfg.epsf_radius_px,
-        iterations: cfg.epsf_iterations,
-        smoothing: cfg.smoothing,
-        clip_sigma: cfg.clip_sigma,
-        fit: FitOptions {
-            radius_px: cfg.fit_radius_px,
-            max_iter: cfg.fit_max_iter,
-            fit_sky: cfg.fit_sky,
-        },
-        recentre: true,
-    }
-}
+pub use super::epsf::build::build_options;
 
 /// What the global analysis of an image prepared: enough to apply further countermeasures to its fits
 /// without detecting the stars and building the ePSF again.

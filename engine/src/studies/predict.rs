@@ -168,7 +168,7 @@ impl Predictor {
             map: IntraPixelMap::from_config(&cfg.detector, cfg.fidelity.subpixels)?,
             kernel,
             psi,
-            build: crate::analysis::pipeline::build_options(analysis),
+            build: crate::analysis::epsf::build::build_options(analysis),
             noise: crate::session::source::simulation_fit_noise(sim, analysis.fit_radius_px),
             timing: sim.timing,
             series: sim.series_arc(),

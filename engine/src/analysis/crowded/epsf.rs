@@ -6,10 +6,10 @@ use super::group_fit::Member;
 use super::link_radius_px;
 use super::pass::{fit_pass, members_of, model_image};
 use crate::analysis::epsf::Epsf;
+use crate::analysis::epsf::build::build_options;
 use crate::analysis::epsf::build::{BuildOptions, update};
 use crate::analysis::epsf::fit::{StarFit, flags};
 use crate::analysis::image::AnalysisImage;
-use crate::analysis::pipeline::build_options;
 use crate::config::Analysis as AnalysisCfg;
 use crate::numerics::neighbours::Neighbours;
 use crate::numerics::stats;
@@ -76,7 +76,7 @@ pub fn epsf_candidates(
     // everywhere, as on a real detector), then a clean core and S/N ≥ RELAXED_EPSF_SNR (few bright stars)
     let count = |ok: &[bool]| ok.iter().filter(|o| **o).count();
     let mut ok = ok_with(true, MIN_EPSF_SNR);
-    if count(&ok) < crate::analysis::pipeline::MIN_EPSF_STARS {
+    if count(&ok) < crate::analysis::detection::MIN_EPSF_STARS {
         for (strict, min_snr) in [(false, MIN_EPSF_SNR), (false, RELAXED_EPSF_SNR)] {
             ok = ok_with(strict, min_snr);
             if count(&ok) >= PREFERRED_EPSF_STARS {

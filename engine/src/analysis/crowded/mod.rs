@@ -31,12 +31,13 @@ pub use epsf::{MAX_CROWDED_ITERATIONS, MAX_EPSF_STARS, MIN_EPSF_SNR, build_epsf,
 pub use pass::{GroupStats, fit_pass, model_image};
 pub use summary::CrowdedSummary;
 
+use crate::analysis::detection::MIN_EPSF_STARS;
 use crate::analysis::detection::sky_and_noise;
 use crate::analysis::epsf::Epsf;
+use crate::analysis::epsf::build::build_options;
 use crate::analysis::epsf::build::{self, StarStart, initial_start};
 use crate::analysis::epsf::fit::{PixelData, StarFit, flags};
 use crate::analysis::image::AnalysisImage;
-use crate::analysis::pipeline::{MIN_EPSF_STARS, build_options};
 use crate::config::Analysis as AnalysisCfg;
 use crate::numerics::neighbours::Neighbours;
 use crate::numerics::stats;

@@ -5,9 +5,9 @@ use super::group_fit::{MAX_GROUP_STARS, Member, Outsiders, fit_group, fit_group_
 use super::link_radius_px;
 use crate::analysis::countermeasures::forward::{Forward, fit_reach_px};
 use crate::analysis::epsf::Epsf;
+use crate::analysis::epsf::build::build_options;
 use crate::analysis::epsf::fit::{PixelData, StarFit, annulus_sky, flags};
 use crate::analysis::image::AnalysisImage;
-use crate::analysis::pipeline::build_options;
 use crate::config::Analysis as AnalysisCfg;
 use crate::numerics::neighbours::{self, Neighbours};
 use crate::numerics::stats;

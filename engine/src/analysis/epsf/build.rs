@@ -40,6 +40,23 @@ pub struct BuildOptions {
     pub recentre: bool,
 }
 
+/// The ePSF builder's options from the analysis configuration.
+pub fn build_options(cfg: &crate::config::Analysis) -> BuildOptions {
+    BuildOptions {
+        oversampling: cfg.epsf_oversampling,
+        half_px: cfg.epsf_radius_px,
+        iterations: cfg.epsf_iterations,
+        smoothing: cfg.smoothing,
+        clip_sigma: cfg.clip_sigma,
+        fit: FitOptions {
+            radius_px: cfg.fit_radius_px,
+            max_iter: cfg.fit_max_iter,
+            fit_sky: cfg.fit_sky,
+        },
+        recentre: true,
+    }
+}
+
 /// The result of a build: the ePSF and the final fit of every star.
 #[derive(Debug, Clone)]
 pub struct Built {
