@@ -200,7 +200,7 @@ pub struct PixelKernel {
     /// [`PixelKernel::envelope`], made on first use.
     envelope: std::sync::OnceLock<Vec<f64>>,
     /// [`PixelKernel::polyphase`], made on first use.
-    polyphase: std::sync::OnceLock<super::convolve::Polyphase>,
+    polyphase: std::sync::OnceLock<super::polyphase::Polyphase>,
 }
 
 impl PixelKernel {
@@ -273,9 +273,10 @@ impl PixelKernel {
 
     /// K by column residue, for the fast method's blocked convolution ([`super::convolve`]); made on
     /// first use, so kernels only the GPU or the direct method reads never hold it.
-    pub fn polyphase(&self) -> &super::convolve::Polyphase {
-        self.polyphase
-            .get_or_init(|| super::convolve::Polyphase::of(self))
+    pub fn polyphase(&self) -> &super::polyphase::Polyphase {
+        self.polyphase.get_or_init(|| {
+            super::polyphase::Polyphase::of_table(self.nodes_per_px, self.n(), &self.data)
+        })
     }
 
     /// Stamp half-size that keeps all of K's light for a star anywhere in its pixel:

@@ -17,6 +17,7 @@ pub mod gpu;
 pub mod histogram;
 pub mod kernel;
 pub mod own_samples;
+pub mod polyphase;
 pub mod track;
 
 use crate::config::{Backend, Method};
