@@ -1,27 +1,9 @@
 //! # JASMINE image simulator and ePSF astrometry engine
 //!
-//! The data flow is one way; each module owns one stage or job and imports only from the modules above it
-//! in this list (no import cycles):
-//!
-//! ```text
-//! foundations  numerics, rng, digest, photometry, formats   maths, seeded streams, digests, magnitudes, CSV
-//! config       the configuration: types, defaults, validation (imports no physics)
-//! sky          pointing, TAN (+SIP) world coordinates of an array (the CDS `wcs` crate), the 2 × 2 focal plane
-//! stages       scene ─► optics ─► readout ─► jitter ─► integrate (kernel, track, cpu, gpu) ─► detector
-//!              stars    PSF       windows    ACE       pixel integration, CPU or wgpu        flat, noise, ADC
-//!              truth: the answer key of a simulation (only scoring and `@oracle` read it)
-//! image        simulate: one dataset's exposures (image + truth)
-//! analysis     image, detection, epsf, countermeasures, response, report, vectors, and the one per-image
-//!              pipeline — from an image and the instrument's products; it never sees the simulator
-//! scoring      the only step that reads the truth: measured positions matched to true ones by position,
-//!              completeness, accuracy and false detections per magnitude bin
-//! io           fits, csv, plot (figures), exposure (image files), analysis_input (reading an image for
-//!              analysis), products (the schema of every output), score (`jsim score`'s files)
-//! session      the engine session: PSF banks, kernels, the integrator, simulators (what front ends hold);
-//!              source: a simulated exposure's products and oracles for the pipeline
-//! studies      experiment, bench, sweep (spec, record, shard, run, merge, report, slurm), predict
-//! error        engine::Error, joining every module's error
-//! ```
+//! The data flow is one way — configuration → sky → scene, optics, readout, jitter, integrate, detector →
+//! simulate → analysis → scoring → io → session → studies — and each module imports only from the layers
+//! before its own, with no import cycle between modules or inside one. `docs/ARCHITECTURE.md` draws it and
+//! names what each module owns; `tests/architecture.rs` holds the code to it.
 //!
 //! Front ends (the `jsim` CLI in `src/bin/jsim`, the explorer in `app/`, the Python module in `python/`)
 //! parse, call a [`session::Session`] and print; every number, schema and reduction lives here.
