@@ -179,6 +179,10 @@ impl Default for FocalPlaneLayout {
 pub struct Bulge {
     /// Stars per square arcminute with Hw ≤ `hw_max`.
     pub density_per_arcmin2: f64,
+    /// The brightest and faintest Hw drawn. The count is `density_per_arcmin2` × the area whatever they are:
+    /// a lower `hw_max` with the same density draws as many stars, all brighter — not the same field cut at
+    /// `hw_max` (for that, lower the density to the luminosity function's share, ≈ 10^(α·(hw_max − 17)) of the
+    /// default's).
     pub hw_min: f64,
     pub hw_max: f64,
     /// α of dN/dHw ∝ 10^(α·Hw).
