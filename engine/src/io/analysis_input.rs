@@ -336,19 +336,7 @@ impl AnalysisInput {
             self.model_psf_terms = instrument::read_model_psf_terms(p)?;
         }
         if let Some(p) = files.telemetry {
-            let (rec, covers) = instrument::read_telemetry(p)?;
-            if let Some(i) = files.image_index
-                && i != covers
-            {
-                return Err(IoError::Format {
-                    path: p.to_path_buf(),
-                    message: format!(
-                        "telemetry of exposure {covers}, the image is exposure {i} (IMAGEIDX): not this \
-                         exposure's"
-                    ),
-                });
-            }
-            self.telemetry = Some(rec);
+            self.telemetry = Some(read_telemetry_of(p, files.image_index)?);
         }
         Ok(self)
     }
@@ -727,16 +715,25 @@ fn read_telemetry_for(
         }
         (None, None) => return Ok(None),
     };
-    let (rec, covers) = instrument::read_telemetry(&path)?;
+    read_telemetry_of(&path, index).map(Some)
+}
+
+/// The attitude telemetry product at `path`, refused by name when it covers another exposure than `index`
+/// (the image's IMAGEIDX), when that is known.
+fn read_telemetry_of(
+    path: &Path,
+    index: Option<usize>,
+) -> Result<crate::analysis::countermeasures::telemetry::TelemetryRecord, IoError> {
+    let (rec, covers) = instrument::read_telemetry(path)?;
     if let Some(i) = index
         && i != covers
     {
         return Err(IoError::Format {
-            path,
+            path: path.to_path_buf(),
             message: format!(
                 "telemetry of exposure {covers} (IMAGEIDX), the image is exposure {i}: not this exposure's"
             ),
         });
     }
-    Ok(Some(rec))
+    Ok(rec)
 }

@@ -337,10 +337,8 @@ impl PsfBank {
         cache.insert(key, (order, table.clone()));
         // past the budget the oldest tables no one else holds go (a star job, a kernel in the kernel cache
         // or a caller holding one keeps it): made again identically if asked for again
-        let bytes = |c: &HashMap<BankKey, (u64, Arc<PsfTable>)>| -> usize {
-            c.values().map(|(_, t)| t.data.len() * 8).sum()
-        };
-        if bytes(&cache) > Self::TABLE_BYTES {
+        let mut bytes = table_bytes(&cache);
+        if bytes > Self::TABLE_BYTES {
             let mut unheld: Vec<(u64, BankKey)> = cache
                 .iter()
                 .filter(|(_, (_, t))| Arc::strong_count(t) == 1)
@@ -348,10 +346,12 @@ impl PsfBank {
                 .collect();
             unheld.sort_by_key(|(o, _)| *o);
             for (_, k) in unheld {
-                if bytes(&cache) <= Self::TABLE_BYTES {
+                if bytes <= Self::TABLE_BYTES {
                     break;
                 }
-                cache.remove(&k);
+                if let Some((_, t)) = cache.remove(&k) {
+                    bytes -= t.data.len() * 8;
+                }
             }
         }
         table
@@ -392,7 +392,7 @@ impl PsfBank {
             .store
             .cache
             .lock()
-            .map(|c| c.values().map(|(_, t)| t.data.len() * 8).sum())
+            .map(|c| table_bytes(&c))
             .unwrap_or(0);
         let sets: usize = self
             .store
@@ -411,6 +411,11 @@ impl PsfBank {
     pub fn is_empty(&self) -> bool {
         self.len() == 0
     }
+}
+
+/// Memory the tables of a store's cache hold, bytes.
+fn table_bytes(cache: &HashMap<BankKey, (u64, Arc<PsfTable>)>) -> usize {
+    cache.values().map(|(_, t)| t.data.len() * 8).sum()
 }
 
 /// Monochromatic PSF of the configured optics at λ (for FWHM and validation), on the configured grid.
