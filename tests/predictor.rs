@@ -115,7 +115,7 @@ fn the_predictor_knows_the_design_and_not_the_instrument_as_built() {
     built.as_built = AsBuilt {
         seed: 2,
         wavefront_rms_nm: 40.0,
-        ..AsBuilt::default()
+        ..AsBuilt::design()
     };
     let predict = |c: &engine::config::Config| {
         let sim = engine::simulate::Simulator::new(c).expect("simulator");

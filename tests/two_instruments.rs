@@ -23,7 +23,7 @@ fn deviating(knowledge: Knowledge, field_rms_nm: f64) -> Config {
         gain_error: 0.02,
         read_noise_error: 0.05,
         knowledge,
-        ..AsBuilt::default()
+        ..AsBuilt::design()
     };
     c.validate().expect("valid");
     c
@@ -332,7 +332,7 @@ fn a_pointing_offset_moves_the_stars_and_not_the_header() {
     cfg.validate().expect("valid");
     let sim = Simulator::new(&cfg).expect("sim");
     let mut plain = cfg.clone();
-    plain.as_built = AsBuilt::default();
+    plain.as_built = AsBuilt::design();
     let plan = Simulator::new(&plain).expect("sim");
     // the header is the plan's, bit for bit
     let (h, p) = (

@@ -21,8 +21,9 @@ pub fn coarse_psf_config(pupil_samples: usize, oversampling: usize, radius_px: u
 }
 
 /// A 512² detector (4 channels of 128 columns), an 8 × 8 grid of stars 56 px apart, a coarser PSF grid and
-/// wavelength sampling, and a 2-minute ACE series; everything else (optics, noise, photometry) as the
-/// paper. Runs in seconds in the dev profile.
+/// wavelength sampling, and a 2-minute ACE series; the instrument exactly as designed (no `[as_built]`
+/// deviation, each star its own wavefront: a component test switches on what it tests); everything else
+/// (optics, noise, photometry) as the paper. Runs in seconds in the dev profile.
 pub fn small_config() -> Config {
     let mut c = Config::default();
     c.instrument.detector_px = 512;
@@ -39,6 +40,8 @@ pub fn small_config() -> Config {
     c.fidelity.images = 3;
     c.fidelity.backend = Backend::Cpu;
     c.ace.span_s = 120.0;
+    c.as_built = crate::config::AsBuilt::design();
+    c.optics.field_zone_px = 0;
     if let Err(e) = c.validate() {
         panic!("the small test config must be valid: {e}");
     }

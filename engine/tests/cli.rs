@@ -901,3 +901,86 @@ fn the_header_frame_of_a_truth_without_one_is_a_named_error() {
     assert!(!dir.join("s").exists(), "nothing written");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// `--instrument design` is the telescope exactly as designed: the same image as every `[as_built]` deviation set
+/// to 0 by hand, and another than the default (as built), whose run names its deviations. Applied before `--set`:
+/// `--instrument design --set as_built.wavefront_rms_nm=30` is the design with that one deviation, whatever the
+/// order on the command line.
+#[test]
+fn the_instrument_option_chooses_the_design_or_the_instrument_as_built() {
+    let dir = temp("instrument");
+    let cfg = small_toml(&dir);
+    let run = |name: &str, extra: &[&str]| {
+        let out = jsim()
+            .args(["simulate", "--config"])
+            .arg(&cfg)
+            .args(["--ace", "gaussian", "--images", "1"])
+            .args(extra)
+            .arg("--out")
+            .arg(dir.join(name))
+            .output()
+            .expect("run");
+        assert!(out.status.success(), "{name}: {}", stderr_of(&out));
+        let text = format!(
+            "{}{}",
+            String::from_utf8_lossy(&out.stdout),
+            stderr_of(&out)
+        );
+        let img = engine::io::fits::read_image(&dir.join(name).join("img_000.fits")).expect("img");
+        (img.data, text)
+    };
+    let zeros: Vec<String> = [
+        "wavefront_rms_nm=0",
+        "wavefront_field_rms_nm=0",
+        "focus_breathing_nm=0",
+        "distortion_px=0",
+        "gain_error=0",
+        "read_noise_error=0",
+        "pointing_offset_arcsec=[0.0,0.0]",
+        "roll_offset_arcsec=0",
+    ]
+    .iter()
+    .flat_map(|kv| ["--set".to_string(), format!("as_built.{kv}")])
+    .collect();
+    let zeros: Vec<&str> = zeros.iter().map(String::as_str).collect();
+    let (design, design_text) = run("design", &["--instrument", "design"]);
+    let (by_hand, _) = run("by-hand", &zeros);
+    let (built, built_text) = run("built", &[]);
+    assert_eq!(design, by_hand, "--instrument design = every deviation 0");
+    assert_ne!(design, built, "the default is the instrument as built");
+    assert!(
+        !design_text.contains("the instrument as built"),
+        "{design_text}"
+    );
+    assert!(
+        built_text.contains("the instrument as built")
+            && built_text.contains("30 nm rms wavefront"),
+        "{built_text}"
+    );
+    let (_, one) = run(
+        "one",
+        &[
+            "--set",
+            "as_built.wavefront_rms_nm=30",
+            "--instrument",
+            "design",
+        ],
+    );
+    assert!(
+        one.contains("30 nm rms wavefront") && !one.contains("gain error"),
+        "{one}"
+    );
+    let out = jsim()
+        .args(["simulate", "--instrument", "perfect", "--out"])
+        .arg(dir.join("bad"))
+        .output()
+        .expect("run");
+    assert!(!out.status.success());
+    assert!(
+        stderr_of(&out).contains("--instrument"),
+        "{}",
+        stderr_of(&out)
+    );
+    assert!(!dir.join("bad").exists());
+    let _ = std::fs::remove_dir_all(&dir);
+}

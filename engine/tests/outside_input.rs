@@ -132,6 +132,8 @@ fn coarse_config(n: usize) -> engine::Config {
     cfg.optics.psf_radius_px = 8;
     cfg.band.wavelength_step_um = 0.1;
     cfg.fidelity.backend = engine::config::Backend::Cpu;
+    // the telescope as designed: these tests hold the products against the truth of the instrument that made them
+    cfg.as_built = engine::config::AsBuilt::design();
     cfg
 }
 

@@ -64,12 +64,23 @@ pub(crate) fn toml_text(v: &Bound<'_, PyAny>) -> PyResult<String> {
 #[pymethods]
 impl PyConfig {
     /// The default configuration: the paper's scene (400 stars, Hw 12.5, J − H = 2), realistic ACE,
-    /// rolling readout, 11 images.
+    /// rolling readout, 11 images, imaged by a typical instrument as built (`[as_built]`; products from the
+    /// design).
     #[staticmethod]
     fn default() -> Self {
         Self {
             inner: Config::default(),
         }
+    }
+
+    /// A copy imaged by the telescope exactly as designed: every `[as_built]` deviation 0, its seed and
+    /// knowledge kept (what `--instrument design` does on the command line: the control).
+    fn as_designed(&self) -> Self {
+        let mut inner = self.inner.clone();
+        inner.as_built = inner
+            .as_built
+            .for_instrument(engine::config::InstrumentModel::Design);
+        Self { inner }
     }
 
     /// A configuration from a TOML file (a `pathlib.Path`, or a `str` without `=`: a file name) or from

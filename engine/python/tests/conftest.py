@@ -1,4 +1,5 @@
-"""Shared fixtures: a small configuration (the engine's testkit::small_config) and the jsim binary."""
+"""Shared fixtures: a small configuration (the engine's testkit::small_config: the instrument as designed, a test
+switching on the deviations it tests) and the jsim binary."""
 
 import os
 import shutil
@@ -26,7 +27,7 @@ SMALL = {
 
 
 def small_config(**changes):
-    cfg = jsim.Config.default()
+    cfg = jsim.Config.default().as_designed()
     for k, v in {**SMALL, **changes}.items():
         cfg.set(k, v)
     return cfg

@@ -29,7 +29,8 @@ ORACLE = 'as_built.knowledge="as-built"'
 def simulate(jsim_bin, out, scene, *extra):
     sets = [f"{k}={v}" if not isinstance(v, str) else f'{k}="{v}"' for k, v in SMALL.items()]
     sets += [f"focal_plane.gap_px={GAP}", "fidelity.images=1", *extra]
-    cmd = [jsim_bin, "simulate", "--config", str(SIP_EXAMPLE), "--scene", scene, "--ace", "gaussian"]
+    cmd = [jsim_bin, "simulate", "--instrument", "design", "--config", str(SIP_EXAMPLE), "--scene", scene,
+           "--ace", "gaussian"]
     for s in sets:
         cmd += ["--set", s]
     subprocess.run(cmd + ["--out", str(out)], check=True, capture_output=True, text=True)

@@ -33,6 +33,20 @@ def test_config_round_trips_through_toml(cfg, tmp_path):
     assert cfg.get("ace.modes.0.freq_hz") == 25.0
 
 
+def test_the_default_is_the_instrument_as_built_and_as_designed_is_the_control():
+    built = jsim.Config.default()
+    assert built.get("as_built.wavefront_rms_nm") == 30.0
+    design = built.as_designed()
+    for field in ("wavefront_rms_nm", "focus_breathing_nm", "distortion_px", "gain_error", "roll_offset_arcsec"):
+        assert design.get(f"as_built.{field}") == 0.0, field
+    assert design.get("as_built.seed") == built.get("as_built.seed")
+    assert built.get("as_built.wavefront_rms_nm") == 30.0  # a copy: the original is unchanged
+    # the small test configuration is the design; its one deviation switched on images differently
+    a = jsim.Session(small_config(), backend="cpu").simulate(0)
+    b = jsim.Session(small_config(**{"as_built.wavefront_rms_nm": 30.0}), backend="cpu").simulate(0)
+    assert not np.array_equal(a.image, b.image)
+
+
 def test_a_bad_field_raises_value_error_naming_it(cfg):
     with pytest.raises(ValueError, match="ace.no_such_field"):
         cfg.set("ace.no_such_field", 1)

@@ -8,9 +8,10 @@
 //! design — unless `knowledge = "as-built"`, the `oracle` control that hands the analysis the as-built
 //! instrument so that a table can show what honest knowledge costs.
 //!
-//! Every deviation is 0 by default: images and products are then those of the design, bit for bit.
-//! `engine/configs/as_built.toml` sets the typical deviations (the figures and their reasons are there and in
-//! docs/instrument-products.md).
+//! The default is the typical instrument as built ([`AsBuilt::default`]; the figures and their reasons are in
+//! the default configuration's `[as_built]` block and docs/instrument-products.md). [`AsBuilt::design`] has every
+//! deviation 0 — the design itself, images and products bit for bit the design's — and is the control that
+//! `--instrument design` selects on the command line.
 
 use super::{ConfigError, invalid};
 use serde::{Deserialize, Serialize};
@@ -37,7 +38,19 @@ impl Knowledge {
     }
 }
 
-/// How the instrument as built departs from its design (all 0: the design itself).
+/// Which of the two instruments takes the images (`--instrument` on the command line, `instrument` in a sweep
+/// file).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum InstrumentModel {
+    /// The configuration's `[as_built]` deviations (by default the typical ones).
+    #[default]
+    AsBuilt,
+    /// Every deviation 0: the telescope exactly as designed, the control.
+    Design,
+}
+
+/// How the instrument as built departs from its design ([`AsBuilt::design`]: all 0, the design itself).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct AsBuilt {
@@ -74,20 +87,20 @@ pub struct AsBuilt {
     pub knowledge: Knowledge,
 }
 
+/// The typical instrument as built: the default (each figure's reason in the default configuration's
+/// `[as_built]` block; no as-built JASMINE figure is public, so each is a stated choice and a knob).
 impl Default for AsBuilt {
     fn default() -> Self {
         Self {
-            seed: 1,
-            wavefront_rms_nm: 0.0,
-            wavefront_field_rms_nm: 0.0,
-            focus_breathing_nm: 0.0,
-            breathing_period_s: 5802.0,
-            distortion_px: 0.0,
-            gain_error: 0.0,
-            read_noise_error: 0.0,
-            pointing_offset_arcsec: [0.0; 2],
-            roll_offset_arcsec: 0.0,
-            knowledge: Knowledge::Design,
+            wavefront_rms_nm: 30.0,
+            wavefront_field_rms_nm: 10.0,
+            focus_breathing_nm: 10.0,
+            distortion_px: 0.03,
+            gain_error: 0.01,
+            read_noise_error: 0.05,
+            pointing_offset_arcsec: [1.4, -0.9],
+            roll_offset_arcsec: 7.0,
+            ..Self::design()
         }
     }
 }
@@ -104,6 +117,32 @@ pub const MAX_RELATIVE_ERROR: f64 = 0.5;
 pub const MAX_POINTING_OFFSET_ARCSEC: f64 = 3600.0;
 
 impl AsBuilt {
+    /// The design itself: every deviation 0, the design's knowledge (the control; `--instrument design`).
+    pub fn design() -> Self {
+        Self {
+            seed: 1,
+            wavefront_rms_nm: 0.0,
+            wavefront_field_rms_nm: 0.0,
+            focus_breathing_nm: 0.0,
+            breathing_period_s: 5802.0,
+            distortion_px: 0.0,
+            gain_error: 0.0,
+            read_noise_error: 0.0,
+            pointing_offset_arcsec: [0.0; 2],
+            roll_offset_arcsec: 0.0,
+            knowledge: Knowledge::Design,
+        }
+    }
+
+    /// These deviations for `instrument`: themselves for the as-built one, none (seed, knowledge and period
+    /// kept) for the design.
+    pub fn for_instrument(&self, instrument: InstrumentModel) -> AsBuilt {
+        match instrument {
+            InstrumentModel::AsBuilt => self.clone(),
+            InstrumentModel::Design => self.realised(),
+        }
+    }
+
     /// Whether the as-built instrument is the design (every deviation 0) and the products are the design's.
     pub fn is_design(&self) -> bool {
         self.has_no_deviation() && self.knowledge == Knowledge::Design
@@ -128,7 +167,7 @@ impl AsBuilt {
             seed: self.seed,
             knowledge: self.knowledge,
             breathing_period_s: self.breathing_period_s,
-            ..AsBuilt::default()
+            ..AsBuilt::design()
         }
     }
 
@@ -250,9 +289,14 @@ mod tests {
     use super::*;
 
     #[test]
-    fn the_default_is_the_design() {
-        assert!(AsBuilt::default().is_design());
-        assert!(AsBuilt::default().validate().is_ok());
+    fn the_default_deviates_and_the_design_does_not() {
+        assert!(AsBuilt::design().is_design());
+        assert!(AsBuilt::design().validate().is_ok());
+        let typical = AsBuilt::default();
+        assert!(!typical.has_no_deviation());
+        assert_eq!(typical.knowledge, Knowledge::Design);
+        assert!(typical.validate().is_ok());
+        assert_eq!(typical.realised(), AsBuilt::design());
     }
 
     #[test]
@@ -278,11 +322,11 @@ mod tests {
 
     #[test]
     fn a_run_names_the_deviations_and_the_oracle() {
-        assert_eq!(AsBuilt::default().describe(), None);
+        assert_eq!(AsBuilt::design().describe(), None);
         let a = AsBuilt {
             wavefront_rms_nm: 30.0,
             gain_error: 0.01,
-            ..AsBuilt::default()
+            ..AsBuilt::design()
         };
         let line = a.describe().expect("a line");
         assert!(
@@ -292,7 +336,7 @@ mod tests {
         assert!(line.contains("products from the design"), "{line}");
         let oracle = AsBuilt {
             knowledge: Knowledge::AsBuilt,
-            ..AsBuilt::default()
+            ..AsBuilt::design()
         };
         assert!(oracle.describe().expect("a line").contains("ORACLE"));
     }

@@ -12,7 +12,7 @@ pub(crate) mod seed;
 mod sky;
 mod text;
 mod validate;
-pub use as_built::{AsBuilt, Knowledge};
+pub use as_built::{AsBuilt, InstrumentModel, Knowledge};
 pub use detector::{Detector, IntraPixel, Persistence, Sampling, noise_floor_e2};
 pub use sky::{Bulge, FocalPlaneLayout, Layout, Observation, SipTerm, Sky};
 pub use validate::MAX_ACE_SIGMA_MAS;
@@ -68,9 +68,8 @@ pub struct Config {
     pub focal_plane: FocalPlaneLayout,
     pub fidelity: Fidelity,
     pub analysis: Analysis,
-    /// How the instrument as built departs from the design above (`[as_built]`; all 0 by default). Left out
-    /// of the TOML (and so of the hash) when it is the design, so configurations from before it keep theirs.
-    #[serde(skip_serializing_if = "AsBuilt::is_design")]
+    /// How the instrument as built departs from the design above (`[as_built]`; by default a typical
+    /// instrument as built, [`AsBuilt::design`] for none). Always written: a file without it means the default.
     pub as_built: AsBuilt,
 }
 
@@ -300,15 +299,10 @@ pub struct Optics {
     /// position). The speed-against-error knob of the field-dependent PSF.
     pub field_wfe_step_nm: f64,
     /// Zones of PSF sharing with a field table, px: a star takes the wavefront at the centre of its square
-    /// zone of this side (0: at its own position, the default). With a smooth field variation of gradient
-    /// g (nm per px) a star's wavefront is off by at most g·side/√2; `jsim bench --parts knobs` ("field zones") gives
-    /// the time and the error against 0. Left out of the TOML (and the hash) when 0.
-    #[serde(skip_serializing_if = "is_zero_px")]
+    /// zone of this side (0: at its own position; 656, the default: 3 × 3 zones of the 1968-px array). With a
+    /// smooth field variation of gradient g (nm per px) a star's wavefront is off by at most g·side/√2;
+    /// `jsim bench --parts knobs` ("field zones") gives the time and the error against 0.
     pub field_zone_px: usize,
-}
-
-fn is_zero_px(v: &usize) -> bool {
-    *v == 0
 }
 
 impl Default for Optics {
@@ -324,7 +318,7 @@ impl Default for Optics {
             fringe: default_fringe(),
             field_table: Vec::new(),
             field_wfe_step_nm: 1.0,
-            field_zone_px: 0,
+            field_zone_px: 656,
         }
     }
 }

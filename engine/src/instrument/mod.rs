@@ -64,7 +64,7 @@ pub fn design_of(cfg: &Config) -> Config {
     place_arrays_nominally(&mut d);
     d.as_built = crate::config::AsBuilt {
         seed: cfg.as_built.seed,
-        ..Default::default()
+        ..crate::config::AsBuilt::design()
     };
     d
 }

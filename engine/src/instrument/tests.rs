@@ -42,9 +42,9 @@ fn deviation_um(design: &Config, built: &Config, x: f64, y: f64) -> Vec<f64> {
 
 #[test]
 fn without_deviations_the_built_instrument_is_the_design_bit_for_bit() {
-    let c = Config::default();
+    let c = deviating(AsBuilt::design());
     assert_eq!(realise(&c).expect("realise"), c);
-    let mut seeded = Config::default();
+    let mut seeded = c.clone();
     seeded.as_built.seed = 77;
     assert_eq!(realise(&seeded).expect("realise"), seeded);
 }
@@ -54,7 +54,7 @@ fn the_wavefront_deviation_has_the_rms_asked_for_at_the_centre_and_across_the_fi
     let design = deviating(AsBuilt {
         wavefront_rms_nm: 30.0,
         wavefront_field_rms_nm: 20.0,
-        ..AsBuilt::default()
+        ..AsBuilt::design()
     });
     let built = realise(&design).expect("realise");
     let n = design.instrument.detector_px as f64;
@@ -100,7 +100,7 @@ fn realising_twice_changes_nothing_and_the_seed_is_the_instruments_own() {
         distortion_px: 0.03,
         gain_error: 0.01,
         read_noise_error: 0.05,
-        ..AsBuilt::default()
+        ..AsBuilt::design()
     });
     let built = realise(&design).expect("realise");
     assert_eq!(realise(&built).expect("again"), built);
@@ -120,7 +120,7 @@ fn realising_twice_changes_nothing_and_the_seed_is_the_instruments_own() {
 fn the_distortion_beyond_the_design_has_the_asked_length_at_the_corners() {
     let design = deviating(AsBuilt {
         distortion_px: 0.04,
-        ..AsBuilt::default()
+        ..AsBuilt::design()
     });
     let built = realise(&design).expect("realise");
     let (d, b) = (
@@ -154,7 +154,7 @@ fn gains_of_many_instruments_spread_as_the_log_normal_asked_for() {
             let design = deviating(AsBuilt {
                 seed: s,
                 gain_error: sigma,
-                ..AsBuilt::default()
+                ..AsBuilt::design()
             });
             let built = realise(&design).expect("realise");
             (built.detector.gain_e_per_adu / design.detector.gain_e_per_adu).ln()
@@ -174,7 +174,7 @@ fn gains_of_many_instruments_spread_as_the_log_normal_asked_for() {
 fn the_focus_breathes_with_the_orbit() {
     let mut design = deviating(AsBuilt {
         focus_breathing_nm: 10.0,
-        ..AsBuilt::default()
+        ..AsBuilt::design()
     });
     let z4_nm = |cfg: &Config| {
         let built = realise(cfg).expect("realise");
@@ -199,12 +199,12 @@ fn the_focus_breathes_with_the_orbit() {
 fn the_products_come_from_the_design_unless_the_oracle_is_asked_for_by_name() {
     let mut design = deviating(AsBuilt {
         wavefront_rms_nm: 30.0,
-        ..AsBuilt::default()
+        ..AsBuilt::design()
     });
     let built = realise(&design).expect("realise");
     assert_eq!(products_config(&design, &built), design);
     design.as_built.knowledge = Knowledge::AsBuilt;
     let built = realise(&design).expect("realise");
     assert_eq!(products_config(&design, &built), built);
-    assert_eq!(design_of(&design).as_built, AsBuilt::default());
+    assert_eq!(design_of(&design).as_built, AsBuilt::design());
 }

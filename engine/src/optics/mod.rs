@@ -462,6 +462,7 @@ mod tests {
         })
         .collect();
         cfg.optics.field_wfe_step_nm = 1.0;
+        cfg.optics.field_zone_px = 0;
         cfg.validate().expect("valid");
         let bank = PsfBank::new(&cfg);
         // 2 px apart: 0.2 nm, the same 1-nm step; 30 px apart: 3 nm, another PSF

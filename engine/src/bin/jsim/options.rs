@@ -1,12 +1,12 @@
 //! The configuration options of the commands. Each command offers only the options that change what it does:
-//! every one reads a configuration (`--config FILE`, `--set field=value`, [`BaseArgs`]); the shortcuts —
+//! every one reads a configuration (`--config FILE`, `--set field=value`, `--instrument`, [`BaseArgs`]); the shortcuts —
 //! `--seed`, `--mag`, `--scene`, `--ace`, `--readout`, `--images`, `--backend`, `--method` — are small groups
 //! a command flattens where they apply. They are applied in one order (file, shortcuts, --set) and the result
 //! is validated once ([`ConfigArgs::load`]), so the order on the command line never matters.
 
 use anyhow::{Context, Result, bail};
 use clap::Args;
-use engine::config::{AceCase, Backend, Config, Method, ReadoutOrder};
+use engine::config::{AceCase, Backend, Config, InstrumentModel, Method, ReadoutOrder};
 use std::path::PathBuf;
 
 /// `--config` and `--set`: the configuration of every command.
@@ -18,6 +18,37 @@ pub struct BaseArgs {
     /// Set any field: --set ace.sigma_mas=150 (repeatable).
     #[arg(long = "set", value_name = "FIELD=VALUE")]
     pub set: Vec<String>,
+    /// The instrument that takes the images: as-built (the configuration's `[as_built]` deviations, by default
+    /// the typical ones) or design (every deviation 0: the telescope exactly as designed, the control). Applied
+    /// after the file and before `--set`.
+    #[arg(long, value_enum, value_name = "as-built|design")]
+    pub instrument: Option<InstrumentChoice>,
+}
+
+/// `--instrument`: which of the two instruments takes the images.
+#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
+pub enum InstrumentChoice {
+    /// The configuration's `[as_built]` deviations (the default).
+    AsBuilt,
+    /// Every deviation 0: the design itself.
+    Design,
+}
+
+impl BaseArgs {
+    /// The configuration file (or the default) with `--instrument` applied; `--set` is applied by the caller.
+    fn base_config(&self) -> Result<Config> {
+        let mut cfg = match &self.config {
+            Some(p) => Config::load(p)?,
+            None => Config::default(),
+        };
+        if let Some(choice) = self.instrument {
+            cfg.as_built = cfg.as_built.for_instrument(match choice {
+                InstrumentChoice::AsBuilt => InstrumentModel::AsBuilt,
+                InstrumentChoice::Design => InstrumentModel::Design,
+            });
+        }
+        Ok(cfg)
+    }
 }
 
 /// `--seed`.
@@ -104,10 +135,7 @@ pub struct ConfigArgs {
 impl ConfigArgs {
     /// The configuration these options describe, validated.
     pub fn load(&self) -> Result<Config> {
-        let mut cfg = match &self.base.config {
-            Some(p) => Config::load(p)?,
-            None => Config::default(),
-        };
+        let mut cfg = self.base.base_config()?;
         if let Some(s) = self.seed.seed {
             cfg.seed = s;
         }
@@ -252,6 +280,7 @@ impl AnalysisConfigArgs {
             base: BaseArgs {
                 config: self.config.clone(),
                 set: self.set.clone(),
+                instrument: None,
             },
             ..Default::default()
         }

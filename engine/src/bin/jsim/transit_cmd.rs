@@ -62,6 +62,7 @@ pub fn load(a: &TransitArgs) -> Result<(engine::config::Config, Spec)> {
         base: BaseArgs {
             config: a.base.config.clone(),
             set: cfg_sets,
+            instrument: a.base.instrument,
         },
         seed: a.seed.clone(),
         ace: a.ace.clone(),

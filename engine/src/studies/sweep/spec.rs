@@ -23,6 +23,7 @@ struct SweepFile {
     threshold_mas: Option<f64>,
     common_random_numbers: Option<bool>,
     telemetry: Option<TelemetryFile>,
+    instrument: Option<crate::config::InstrumentModel>,
     base: Option<toml::Value>,
     set: Option<toml::Table>,
     grid: Option<toml::Table>,
@@ -213,6 +214,10 @@ impl Sweep {
                 ));
             }
         };
+        // the instrument (as built by default; "design" zeroes every deviation), before [set] and the grid
+        if let Some(instrument) = f.instrument {
+            base.as_built = base.as_built.for_instrument(instrument);
+        }
         if let Some(set) = &f.set {
             let mut leaves = Vec::new();
             flatten("", set, &mut leaves);
@@ -549,6 +554,40 @@ readout.order = ["rolling", "sample-hold"]
         assert_eq!(s.points[0].config.scene.grid_n, 5);
         assert_eq!(s.n_units(), 12);
         assert_eq!(s.unit(5), (1, 1));
+    }
+
+    /// A sweep's `instrument = "design"` zeroes the default's deviations before `[set]` and the grid, so a file
+    /// can sweep one deviation of the design alone; without it the points are the instrument as built.
+    #[test]
+    fn a_sweeps_instrument_comes_before_its_set_and_grid() {
+        let text = format!(
+            "instrument = \"design\"\n{}[set]\n\"as_built.gain_error\" = 0.02\n",
+            QUICK.replace(
+                "[grid]",
+                "[grid]\n\"as_built.wavefront_rms_nm\" = [0.0, 50.0]"
+            )
+        );
+        let s = Sweep::from_toml_str(&text, Path::new("t.toml"), Path::new(".")).expect("parses");
+        for p in &s.points {
+            let a = &p.config.as_built;
+            assert_eq!(a.gain_error, 0.02);
+            assert_eq!((a.focus_breathing_nm, a.distortion_px), (0.0, 0.0));
+        }
+        assert_eq!(s.points[0].config.as_built.wavefront_rms_nm, 0.0);
+        assert_eq!(
+            s.points
+                .last()
+                .expect("a point")
+                .config
+                .as_built
+                .wavefront_rms_nm,
+            50.0
+        );
+        assert_eq!(quick().base.as_built, crate::config::AsBuilt::default());
+        let bad = format!("instrument = \"perfect\"\n{QUICK}");
+        let e = Sweep::from_toml_str(&bad, Path::new("t.toml"), Path::new("."))
+            .expect_err("an unknown instrument is an error");
+        assert!(e.to_string().contains("instrument"), "{e}");
     }
 
     #[test]
