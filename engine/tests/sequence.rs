@@ -620,3 +620,78 @@ fn plan_csv_seeds_parse_back_as_the_exposures_u64_seeds() {
         .collect();
     assert_eq!(seeds, expected);
 }
+
+/// Every file under `dir` (recursively), by its path relative to `dir`.
+fn files_under(dir: &Path) -> Vec<PathBuf> {
+    let mut out = Vec::new();
+    let mut todo = vec![dir.to_path_buf()];
+    while let Some(d) = todo.pop() {
+        for entry in std::fs::read_dir(&d).expect("read_dir").flatten() {
+            let p = entry.path();
+            if p.is_dir() {
+                todo.push(p);
+            } else {
+                out.push(p.strip_prefix(dir).expect("under").to_path_buf());
+            }
+        }
+    }
+    out.sort();
+    out
+}
+
+/// A sequence killed outright (SIGKILL: no handler runs) at five moments of its run, each rerun resuming the
+/// last, then run to its end, gives what one uninterrupted run gives — every exposure's catalogue and the
+/// gathered `catalogue.fits` byte for byte — and leaves no temporary file behind. The kills land at fractions
+/// of the uninterrupted run's time, so they fall in the setup, the exposures and the gathering alike.
+#[test]
+fn a_sequence_killed_five_times_resumes_to_the_same_bytes() {
+    let dir = temp("kill");
+    let spec = spec(&dir);
+    let whole = dir.join("whole");
+    let t = std::time::Instant::now();
+    let o = run(&whole, &spec, &[]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let whole_s = t.elapsed().as_secs_f64();
+    let killed = dir.join("killed");
+    let mut kills = 0;
+    for k in 1..=5 {
+        let mut c = jsim();
+        c.args(["sequence", "--countermeasure", "none", "--spec"])
+            .arg(&spec);
+        for s in SMALL {
+            c.args(["--set", s]);
+        }
+        let mut child = c
+            .arg("--out")
+            .arg(&killed)
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .expect("spawn");
+        std::thread::sleep(std::time::Duration::from_secs_f64(whole_s * k as f64 / 7.0));
+        if child.try_wait().expect("wait").is_none() {
+            child.kill().expect("SIGKILL");
+            kills += 1;
+        }
+        let _ = child.wait();
+    }
+    assert!(kills >= 3, "only {kills} of the 5 runs were still running when killed");
+    let o = run(&killed, &spec, &[]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let (a, b) = (files_under(&whole), files_under(&killed));
+    assert_eq!(a, b, "the same files");
+    for f in &a {
+        let name = f.to_string_lossy();
+        assert!(!name.contains(".tmp"), "a temporary file is left: {name}");
+        // the catalogues and the gathered table are the run's results: byte for byte (the timing reports
+        // and figures may differ)
+        if name.ends_with(".csv") && name.starts_with("exposures/") || name == "catalogue.fits" {
+            assert_eq!(
+                std::fs::read(whole.join(f)).expect("whole"),
+                std::fs::read(killed.join(f)).expect("killed"),
+                "{name} differs after the kills"
+            );
+        }
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
