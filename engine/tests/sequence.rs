@@ -675,7 +675,10 @@ fn a_sequence_killed_five_times_resumes_to_the_same_bytes() {
         }
         let _ = child.wait();
     }
-    assert!(kills >= 3, "only {kills} of the 5 runs were still running when killed");
+    assert!(
+        kills >= 3,
+        "only {kills} of the 5 runs were still running when killed"
+    );
     let o = run(&killed, &spec, &[]);
     assert!(o.status.success(), "{}", stderr(&o));
     let (a, b) = (files_under(&whole), files_under(&killed));

@@ -310,11 +310,7 @@ impl PySession {
                     return Err(PyValueError::new_err("flat_error= without flat="));
                 }
             };
-            let index = header
-                .and_then(|h| h.get_item("IMAGEIDX").ok().flatten())
-                .and_then(|v| v.extract::<f64>().ok())
-                .filter(|i| *i >= 0.0 && i.fract() == 0.0)
-                .map(|i| i as usize);
+            let index = header.and_then(image_index);
             self.array_input(py, image, header, dq, truth, config, flat)?
                 .with_product_files(engine::io::analysis_input::ProductFiles {
                     reference: refcat.as_deref(),
@@ -454,6 +450,17 @@ impl PySession {
     }
 }
 
+/// The header's IMAGEIDX, the exposure's index in its dataset: an integer ≥ 0, else `None`.
+fn image_index(header: &Bound<'_, PyDict>) -> Option<usize> {
+    header
+        .get_item("IMAGEIDX")
+        .ok()
+        .flatten()
+        .and_then(|v| v.extract::<f64>().ok())
+        .filter(|i| *i >= 0.0 && i.fract() == 0.0)
+        .map(|i| i as usize)
+}
+
 impl PySession {
     fn array_input(
         &self,
@@ -503,15 +510,13 @@ impl PySession {
         let provenance = match config {
             None => None,
             Some(c) => {
-                let i = number("IMAGEIDX").filter(|i| *i >= 0.0 && i.fract() == 0.0).ok_or_else(
-                    || {
-                        PyValueError::new_err(
-                            "config= needs the header's IMAGEIDX (the exposure index, an integer ≥ 0)",
-                        )
-                    },
-                )?;
+                let i = image_index(header).ok_or_else(|| {
+                    PyValueError::new_err(
+                        "config= needs the header's IMAGEIDX (the exposure index, an integer ≥ 0)",
+                    )
+                })?;
                 c.inner.validate().or_py()?;
-                Some((c.inner, i as usize))
+                Some((c.inner, i))
             }
         };
         AnalysisInput::from_parts(

@@ -45,7 +45,9 @@ pub fn records<'a>(
         })
         .collect::<Vec<_>>()
         .join("\n");
-    let bytes = uncommented.clone().into_bytes();
+    // one copy of the text, shared by the reader and the line counter
+    let bytes: std::sync::Arc<[u8]> = uncommented.into_bytes().into();
+    let text_bytes = bytes.clone();
     let newlines: Vec<usize> = (0..bytes.len()).filter(|&i| bytes[i] == b'\n').collect();
     let line_of = move |p: Option<&::csv::Position>| {
         p.map(|p| {
@@ -62,7 +64,7 @@ pub fn records<'a>(
         .has_headers(false)
         .flexible(true)
         .trim(::csv::Trim::All)
-        .from_reader(std::io::Cursor::new(uncommented.into_bytes()))
+        .from_reader(std::io::Cursor::new(text_bytes))
         .into_records()
         .filter_map(move |r| match r {
             Err(e) => Some(Err(CsvError::Syntax {

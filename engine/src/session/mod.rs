@@ -39,8 +39,8 @@ pub struct Session {
     integrators: Mutex<HashMap<Backend, Integrator>>,
     notes: Mutex<Vec<String>>,
     banks: Mutex<Vec<Arc<PsfBank>>>,
-    /// [`MAX_BANK_BYTES`] unless a test lowers it (0: the default).
-    bank_bytes: usize,
+    /// The PSF banks' byte budget: [`MAX_BANK_BYTES`] unless set ([`Session::with_bank_bytes`]).
+    bank_bytes: Option<usize>,
     kernels: Arc<KernelCache>,
     simulators: Mutex<Vec<(String, Arc<Simulator>)>>,
 }
@@ -100,11 +100,7 @@ impl Session {
             v.remove(0);
         }
         // the older banks go first while all of them, the new one's future tables aside, pass the budget
-        let budget = if self.bank_bytes == 0 {
-            MAX_BANK_BYTES
-        } else {
-            self.bank_bytes
-        };
+        let budget = self.bank_bytes.unwrap_or(MAX_BANK_BYTES);
         // (banks sharing their PSFs counted once; the new bank's shared PSFs count)
         let held = |v: &[Arc<PsfBank>]| -> usize {
             let mut distinct: Vec<&Arc<PsfBank>> = Vec::new();
@@ -124,7 +120,7 @@ impl Session {
 
     /// The same session keeping at most `bytes` of PSF banks (the newest always).
     pub fn with_bank_bytes(mut self, bytes: usize) -> Self {
-        self.bank_bytes = bytes.max(1);
+        self.bank_bytes = Some(bytes);
         self
     }
 
