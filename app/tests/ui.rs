@@ -202,6 +202,39 @@ fn controls_rerun_the_engine_with_the_new_parameters() {
     assert_current(&h);
 }
 
+/// The instrument control: "as built" images with the typical deviations (the engine's default), "as designed"
+/// with none (`--instrument design`); each change reruns the frame with the configuration on screen.
+#[test]
+fn the_instrument_control_chooses_the_design_or_the_instrument_as_built() {
+    let mut h = harness(small_app(), false);
+    wait_idle(&mut h, "the first results");
+    assert!(h.state().settings.cfg.as_built.has_no_deviation());
+    h.get_by_label("as built").click();
+    wait_idle(&mut h, "the instrument as built");
+    {
+        let a = &h.state().settings.cfg.as_built;
+        let typical = engine::config::AsBuilt::default();
+        assert_eq!(
+            (a.wavefront_rms_nm, a.distortion_px, a.gain_error),
+            (
+                typical.wavefront_rms_nm,
+                typical.distortion_px,
+                typical.gain_error
+            )
+        );
+    }
+    assert_current(&h);
+    h.get_by_role_and_label(Role::Slider, "wavefront off the design [nm rms]")
+        .set_value_accesskit(50.0);
+    wait_idle(&mut h, "a larger wavefront deviation");
+    assert_eq!(h.state().settings.cfg.as_built.wavefront_rms_nm, 50.0);
+    assert_current(&h);
+    h.get_by_label("as designed").click();
+    wait_idle(&mut h, "the design");
+    assert!(h.state().settings.cfg.as_built.has_no_deviation());
+    assert_current(&h);
+}
+
 #[test]
 fn cancel_stops_the_work_and_drops_its_results() {
     // a curve long enough to be caught running: 4 magnitudes × 12 images

@@ -4,7 +4,9 @@
 use crate::settings::ViewSettings;
 use egui::{DragValue, Slider};
 use engine::analysis::countermeasures::Countermeasure;
-use engine::config::{AceCase, Config, Layout, Mode, ReadoutOrder, RowDirection, SceneKind};
+use engine::config::{
+    AceCase, AsBuilt, Config, InstrumentModel, Layout, Mode, ReadoutOrder, RowDirection, SceneKind,
+};
 
 fn section(ui: &mut egui::Ui, title: &str) {
     ui.add_space(6.0);
@@ -176,6 +178,7 @@ fn scene_ui(ui: &mut egui::Ui, cfg: &mut Config) {
         }
         SceneKind::Grid => {}
     }
+    instrument_ui(ui, cfg);
     ui.horizontal(|ui| {
         ui.label("focal plane");
         ui.radio_value(&mut cfg.focal_plane.layout, Layout::Single, "one array")
@@ -186,6 +189,47 @@ fn scene_ui(ui: &mut egui::Ui, cfg: &mut Config) {
                  in their sky layout (the analysis panels are those of one array)",
             );
     });
+}
+
+/// Which telescope takes the images: the instrument as built (the configuration's `[as_built]` deviations; a
+/// click restores the typical ones) or exactly as designed (every deviation 0: `--instrument design`), and the
+/// as-built wavefront's deviation. The products the analysis reads come from the design either way.
+fn instrument_ui(ui: &mut egui::Ui, cfg: &mut Config) {
+    let designed = cfg.as_built.has_no_deviation();
+    ui.horizontal(|ui| {
+        ui.label("instrument");
+        if ui
+            .radio(!designed, "as built")
+            .on_hover_text(
+                "the telescope as built: its wavefront, distortion, gain, read noise and pointing off the \
+                 design by seeded, typical amounts; every product the analysis reads from the design",
+            )
+            .clicked()
+            && designed
+        {
+            let a = &cfg.as_built;
+            cfg.as_built = AsBuilt {
+                seed: a.seed,
+                knowledge: a.knowledge,
+                breathing_period_s: a.breathing_period_s,
+                ..AsBuilt::default()
+            };
+        }
+        if ui
+            .radio(designed, "as designed")
+            .on_hover_text("every deviation 0: the telescope exactly as designed (the control)")
+            .clicked()
+        {
+            cfg.as_built = cfg.as_built.for_instrument(InstrumentModel::Design);
+        }
+    });
+    if !designed {
+        ui.add(
+            Slider::new(&mut cfg.as_built.wavefront_rms_nm, 0.0..=150.0)
+                .text("wavefront off the design [nm rms]"),
+        )
+        .on_hover_text("the static Z4–Z11 deviation at the field centre (30 nm rms: typical)");
+    }
 }
 
 /// The natural modes of the ACE PSD: centre, half-width and amplitude of each Lorentzian; add and remove.
