@@ -30,14 +30,20 @@ fn spec(dir: &Path) -> PathBuf {
     p
 }
 
-fn run(out: &Path, spec: &Path, extra: &[&str]) -> std::process::Output {
+/// `jsim sequence` of `spec` on the small configuration into `out`.
+fn command(out: &Path, spec: &Path, extra: &[&str]) -> Command {
     let mut c = jsim();
     c.args(["sequence", "--countermeasure", "none", "--spec"])
         .arg(spec);
     for s in SMALL {
         c.args(["--set", s]);
     }
-    c.args(extra).arg("--out").arg(out).output().expect("run")
+    c.args(extra).arg("--out").arg(out);
+    c
+}
+
+fn run(out: &Path, spec: &Path, extra: &[&str]) -> std::process::Output {
+    command(out, spec, extra).output().expect("run")
 }
 
 fn stderr(o: &std::process::Output) -> String {
@@ -655,15 +661,7 @@ fn a_sequence_killed_five_times_resumes_to_the_same_bytes() {
     let killed = dir.join("killed");
     let mut kills = 0;
     for k in 1..=5 {
-        let mut c = jsim();
-        c.args(["sequence", "--countermeasure", "none", "--spec"])
-            .arg(&spec);
-        for s in SMALL {
-            c.args(["--set", s]);
-        }
-        let mut child = c
-            .arg("--out")
-            .arg(&killed)
+        let mut child = command(&killed, &spec, &[])
             .stdout(std::process::Stdio::null())
             .stderr(std::process::Stdio::null())
             .spawn()

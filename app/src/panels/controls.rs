@@ -207,13 +207,7 @@ fn instrument_ui(ui: &mut egui::Ui, cfg: &mut Config) {
             .clicked()
             && designed
         {
-            let a = &cfg.as_built;
-            cfg.as_built = AsBuilt {
-                seed: a.seed,
-                knowledge: a.knowledge,
-                breathing_period_s: a.breathing_period_s,
-                ..AsBuilt::default()
-            };
+            cfg.as_built = cfg.as_built.with_deviations_of(AsBuilt::default());
         }
         if ui
             .radio(designed, "as designed")

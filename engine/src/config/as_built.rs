@@ -39,8 +39,9 @@ impl Knowledge {
 }
 
 /// Which of the two instruments takes the images (`--instrument` on the command line, `instrument` in a sweep
-/// file).
+/// file; the command line's `as-built|design` are the same kebab-case names).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 #[serde(rename_all = "kebab-case")]
 pub enum InstrumentModel {
     /// The configuration's `[as_built]` deviations (by default the typical ones).
@@ -134,6 +135,16 @@ impl AsBuilt {
         }
     }
 
+    /// This instrument (its seed, knowledge and breathing period) with the deviations of `deviations`.
+    pub fn with_deviations_of(&self, deviations: AsBuilt) -> AsBuilt {
+        AsBuilt {
+            seed: self.seed,
+            knowledge: self.knowledge,
+            breathing_period_s: self.breathing_period_s,
+            ..deviations
+        }
+    }
+
     /// These deviations for `instrument`: themselves for the as-built one, none (seed, knowledge and period
     /// kept) for the design.
     pub fn for_instrument(&self, instrument: InstrumentModel) -> AsBuilt {
@@ -163,12 +174,7 @@ impl AsBuilt {
     /// The same knobs with every deviation off (what a realised, as-built configuration carries: its
     /// deviations are already in its optics, distortion and detector).
     pub fn realised(&self) -> AsBuilt {
-        AsBuilt {
-            seed: self.seed,
-            knowledge: self.knowledge,
-            breathing_period_s: self.breathing_period_s,
-            ..AsBuilt::design()
-        }
+        self.with_deviations_of(AsBuilt::design())
     }
 
     /// One line for a run's output: the deviations switched on and what the products come from (`None` for

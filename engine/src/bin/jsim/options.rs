@@ -22,16 +22,7 @@ pub struct BaseArgs {
     /// the typical ones) or design (every deviation 0: the telescope exactly as designed, the control). Applied
     /// after the file and before `--set`.
     #[arg(long, value_enum, value_name = "as-built|design")]
-    pub instrument: Option<InstrumentChoice>,
-}
-
-/// `--instrument`: which of the two instruments takes the images.
-#[derive(clap::ValueEnum, Clone, Copy, Debug, PartialEq, Eq)]
-pub enum InstrumentChoice {
-    /// The configuration's `[as_built]` deviations (the default).
-    AsBuilt,
-    /// Every deviation 0: the design itself.
-    Design,
+    pub instrument: Option<InstrumentModel>,
 }
 
 impl BaseArgs {
@@ -41,11 +32,8 @@ impl BaseArgs {
             Some(p) => Config::load(p)?,
             None => Config::default(),
         };
-        if let Some(choice) = self.instrument {
-            cfg.as_built = cfg.as_built.for_instrument(match choice {
-                InstrumentChoice::AsBuilt => InstrumentModel::AsBuilt,
-                InstrumentChoice::Design => InstrumentModel::Design,
-            });
+        if let Some(instrument) = self.instrument {
+            cfg.as_built = cfg.as_built.for_instrument(instrument);
         }
         Ok(cfg)
     }
