@@ -2,6 +2,8 @@
 //! `jsim analyze`, the deviation vector map, the experiment's `experiment.csv` and `images.csv`, and the PSF
 //! FITS of `jsim psf`. The CLI and the Python module write through these; docs/file-formats.md documents them.
 
+pub mod files;
+
 use super::IoError;
 use super::csv::{self, Cell};
 use super::fits::{self, Card, Hdu, Pixels};
