@@ -121,7 +121,7 @@ pub fn aperture_fluxes(
 }
 
 /// The median of the finite pixels whose centres lie between `r_in_px` and `r_out_px` of (x, y), and how many
-/// there are; `None` when there is none.
+/// there are (`analysis::sky`, the one estimator); `None` when there is none.
 pub fn annulus_sky(
     image: &[f64],
     nx: usize,
@@ -131,19 +131,18 @@ pub fn annulus_sky(
     r_in_px: f64,
     r_out_px: f64,
 ) -> Option<(f64, usize)> {
-    let reach = r_out_px.ceil() as i64 + 1;
-    let (cx, cy) = (x.round() as i64, y.round() as i64);
-    let mut sky = Vec::new();
-    for j in (cy - reach).max(0)..=(cy + reach).min(ny as i64 - 1) {
-        for i in (cx - reach).max(0)..=(cx + reach).min(nx as i64 - 1) {
-            let v = image[j as usize * nx + i as usize];
-            let d = (i as f64 - x).hypot(j as f64 - y);
-            if d >= r_in_px && d <= r_out_px && v.is_finite() {
-                sky.push(v);
-            }
-        }
-    }
-    (!sky.is_empty()).then(|| (crate::numerics::stats::median(&sky), sky.len()))
+    crate::analysis::sky::annulus(
+        nx,
+        ny,
+        x,
+        y,
+        r_in_px,
+        r_out_px,
+        |i| image.get(i).copied().filter(|v| v.is_finite()),
+        crate::analysis::sky::SkyStatistic::Median,
+        1,
+    )
+    .map(|s| (s.value, s.pixels))
 }
 
 /// The signal within radius `r_px` of (x, y), each pixel weighted by the fraction of it the circle covers, and

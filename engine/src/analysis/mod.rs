@@ -16,6 +16,7 @@ pub mod registration;
 pub mod repeat;
 pub mod report;
 pub mod response;
+pub mod sky;
 pub mod solution;
 pub mod stare_photometry;
 

@@ -8,7 +8,7 @@
 //! diagonal is the Cramér–Rao bound of the star under this ePSF and noise model.
 
 use super::Epsf;
-use crate::numerics::{linalg, stats};
+use crate::numerics::linalg;
 
 /// Pixels of an image in electrons, bias removed, with a mask of unusable pixels.
 #[derive(Debug, Clone, Copy)]
@@ -143,36 +143,21 @@ impl StarFit {
     }
 }
 
-/// Sigma-clipped median sky in an annulus [r_in, r_out] around (x, y); `None` with fewer than 8 pixels.
+/// The sky under a star to fit: the 3σ-clipped median of the unmasked pixels in the annulus [r_in, r_out] around
+/// (x, y) (`analysis::sky`, the one estimator); `None` with fewer than 8 of them.
 pub fn annulus_sky(img: &PixelData<'_>, x: f64, y: f64, r_in: f64, r_out: f64) -> Option<f64> {
-    let mut v = Vec::new();
-    let (x0, x1) = (
-        (x - r_out).floor().max(0.0) as usize,
-        ((x + r_out).ceil() as usize).min(img.nx.saturating_sub(1)),
-    );
-    let (y0, y1) = (
-        (y - r_out).floor().max(0.0) as usize,
-        ((y + r_out).ceil() as usize).min(img.ny.saturating_sub(1)),
-    );
-    for py in y0..=y1 {
-        for px in x0..=x1 {
-            let r2 = (px as f64 - x).powi(2) + (py as f64 - y).powi(2);
-            let i = py * img.nx + px;
-            if r2 >= r_in * r_in && r2 <= r_out * r_out && !img.bad[i] {
-                v.push(img.e[i]);
-            }
-        }
-    }
-    if v.len() < 8 {
-        return None;
-    }
-    let med = stats::median(&v);
-    let s = stats::mad_sigma(&v).max(1e-9);
-    let kept: Vec<f64> = v
-        .into_iter()
-        .filter(|p| (p - med).abs() < 3.0 * s)
-        .collect();
-    Some(stats::median(&kept))
+    crate::analysis::sky::annulus(
+        img.nx,
+        img.ny,
+        x,
+        y,
+        r_in,
+        r_out,
+        |i| (!img.bad[i]).then(|| img.e[i]),
+        crate::analysis::sky::SkyStatistic::ClippedMedian { sigmas: 3.0 },
+        8,
+    )
+    .map(|s| s.value)
 }
 
 /// The fit pixels (index, X, Y) around (x, y): the disc of `radius`, grown 1 px at a time (by at most
