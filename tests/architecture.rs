@@ -13,12 +13,12 @@
 //! * inside each top-level module, its files and inline modules use each other without a cycle (code uses
 //!   only; a module and its own submodules count as one), except the elementary cycles listed in
 //!   [`KNOWN_CYCLES`] (the list must match exactly, so it shrinks as they are fixed);
-//! * no file of `analysis` uses `simulate`, `session`, `studies` or `truth`;
+//! * no file of `analysis` or `solution` uses `simulate`, `session`, `studies` or `truth`;
 //! * the truth-carrying and as-built items ([`forbidden`]: `TruthRow` and `crate::truth`, the simulator
 //!   `crate::simulate` with `Simulator` and `FocalPlaneSimulator`, the as-built instrument — any path segment
 //!   `as_built` or type `AsBuilt…`) are named by no file of the analysis (`engine/src/analysis/`: the
-//!   per-image analysis, the astrometric solution `analysis/solution/`, transit photometry
-//!   `analysis/stare_photometry.rs` and `analysis/lightcurve.rs`) and by no product reader, except the uses
+//!   per-image analysis, transit photometry `analysis/stare_photometry.rs` and `analysis/lightcurve.rs`), of
+//!   the astrometric solution (`engine/src/solution/`) and by no product reader, except the uses
 //!   listed in [`KNOWN_FORBIDDEN`] (again exactly). The product readers ([`is_product_reader`]) are the files
 //!   of `engine/src/io/` whose job is reading products back — `analysis_input.rs` (an image and its instrument
 //!   products for the analysis), `readout_header.rs` (the readout timing a header states), `sequence_view.rs`
@@ -555,9 +555,10 @@ fn is_product_reader(rel: &str, u: &Use) -> bool {
             .is_some_and(|f| f.starts_with("read") && !f.starts_with("read_truth"))
 }
 
-/// Whether the forbidden items' rule applies to a use in file `rel`: the analysis and the product readers.
+/// Whether the forbidden items' rule applies to a use in file `rel`: the analysis, the solution and the product
+/// readers.
 fn rule_applies(rel: &str, u: &Use) -> bool {
-    rel.starts_with("analysis/") || is_product_reader(rel, u)
+    rel.starts_with("analysis/") || rel.starts_with("solution/") || is_product_reader(rel, u)
 }
 
 fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
@@ -624,7 +625,8 @@ fn the_engine_follows_its_documented_layers_without_cycles() {
                 ));
             }
             // the analysis sees neither the simulator nor the truth (the scoring, a later layer, reads it)
-            if m == "analysis" && ["simulate", "session", "studies", "truth"].contains(&t.as_str())
+            if (m == "analysis" || m == "solution")
+                && ["simulate", "session", "studies", "truth"].contains(&t.as_str())
             {
                 simulate_users.insert(format!("{rel}:{}: {}", u.line, u.path.join("::")));
             }
@@ -891,7 +893,7 @@ fn the_forbidden_items_rule_covers_the_analysis_and_the_product_readers() {
     };
     for rel in [
         "analysis/pipeline.rs",
-        "analysis/solution/solve.rs",
+        "solution/solve.rs",
         "analysis/stare_photometry.rs",
         "analysis/lightcurve.rs",
         "io/analysis_input.rs",

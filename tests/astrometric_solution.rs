@@ -1,11 +1,11 @@
-//! The astrometric solution (`engine::analysis::solution`) on synthetic sequences (drawn by
+//! The astrometric solution (`engine::solution`) on synthetic sequences (drawn by
 //! `studies::bench_solution::synthetic`, not simulated): sources with known positions, proper motions and
 //! parallaxes, exposures with known attitude errors on a 3 × 3 step pattern over four epochs, a reference
 //! catalogue with a survey's errors. Noise-free it recovers
 //! everything to the solver's tolerance; with noise its own covariance describes its scatter (pulls and χ²
 //! at 4σ of their sampling error); outliers are rejected; bad input is named.
 
-use engine::analysis::solution::{
+use engine::solution::{
     CalibrationModel, Checkpointing, ExposureGeometry, Method, Observation, Options, Params, Ranks,
     Reference, Single, Solution, SolutionError, SourceModel, solve, solve_on, solve_with,
 };

@@ -1,9 +1,7 @@
 //! # JASMINE image simulator and ePSF astrometry engine
 //!
-//! The data flow is one way — configuration → sky → scene, optics, readout, jitter, integrate, detector →
-//! simulate → analysis → scoring → io → session → studies — and each module imports only from the layers
-//! before its own, with no import cycle between modules or inside one. `docs/ARCHITECTURE.md` draws it and
-//! names what each module owns; `tests/architecture.rs` holds the code to it.
+//! The data flow is one way; its layers, what each module owns and where to look are in
+//! `docs/ARCHITECTURE.md`, which `tests/architecture.rs` holds the code to.
 //!
 //! Front ends (the `jsim` CLI in `src/bin/jsim`, the explorer in `app/`, the Python module in `python/`)
 //! parse, call a [`session::Session`] and print; every number, schema and reduction lives here.
@@ -40,6 +38,7 @@ pub mod scoring;
 pub mod session;
 pub mod simulate;
 pub mod sky;
+pub mod solution;
 pub mod studies;
 #[cfg(any(test, feature = "testkit"))]
 pub mod testkit;

@@ -252,7 +252,7 @@ impl ThreadRanks {
     }
 }
 
-impl crate::analysis::solution::Ranks for ThreadRanks {
+impl crate::solution::Ranks for ThreadRanks {
     fn rank(&self) -> usize {
         self.rank
     }

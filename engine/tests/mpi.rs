@@ -2,7 +2,7 @@
 //! distribution's OpenMPI) and solves one synthetic sequence — 1 200 sources × 50 exposures with the
 //! instrument's calibration — with `mpirun -np 1`, `-np 2` and `-np 4`, and with the plain `jsim` on one
 //! process. Every solved number (the sources' parameters and errors, the attitudes) agrees to 10⁻⁹ relative
-//! (the design gives the same bits: engine::analysis::solution::ranks). Bad rank counts and commands that
+//! (the design gives the same bits: engine::solution::ranks). Bad rank counts and commands that
 //! would write from every rank are refused by name.
 //!
 //! Needs `mpirun` and the MPI headers (`apt-get install libopenmpi-dev openmpi-bin libclang-dev`). Outside

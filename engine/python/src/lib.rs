@@ -63,6 +63,7 @@ fn _jsim(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(experiment::experiment, m)?)?;
     m.add_function(wrap_pyfunction!(scoring::score, m)?)?;
     m.add_function(wrap_pyfunction!(solution::solve, m)?)?;
+    m.add_function(wrap_pyfunction!(solution::solve_sequence, m)?)?;
     m.add_function(wrap_pyfunction!(transit::transit_flux, m)?)?;
     m.add_function(wrap_pyfunction!(transit::box_least_squares, m)?)?;
     m.add_function(wrap_pyfunction!(transit::transit, m)?)?;

@@ -1,9 +1,9 @@
-//! `jsim.solve`: the astrometric solution (`engine::analysis::solution::solve`, what `jsim solve` runs after
+//! `jsim.solve`: the astrometric solution (`engine::solution::solve`, what `jsim solve` runs after
 //! reading a sequence's products) on arrays: observations on a tangent plane in, every source's five
 //! parameters and every exposure's attitude out.
 
 use crate::scoring::column;
-use engine::analysis::solution::{
+use engine::solution::{
     ExposureGeometry, Method, Observation, Options, Reference, SourceModel, solve as solve_engine,
 };
 use pyo3::exceptions::PyValueError;
@@ -33,6 +33,17 @@ fn indices(d: &Bound<'_, PyDict>, what: &str, name: &str) -> PyResult<Vec<usize>
             }
         })
         .collect()
+}
+
+/// The iteration named by `method`: "cg" (conjugate gradients) or "block".
+fn method_of(method: &str) -> PyResult<Method> {
+    match method {
+        "cg" => Ok(Method::ConjugateGradient),
+        "block" => Ok(Method::Block),
+        m => Err(PyValueError::new_err(format!(
+            "method = {m:?}: allowed \"cg\" or \"block\""
+        ))),
+    }
 }
 
 /// Columns that must all have `n` values.
@@ -81,15 +92,7 @@ pub fn solve<'py>(
             )));
         }
     };
-    let method = match method {
-        "cg" => Method::ConjugateGradient,
-        "block" => Method::Block,
-        m => {
-            return Err(PyValueError::new_err(format!(
-                "method = {m:?}: allowed \"cg\" or \"block\""
-            )));
-        }
-    };
+    let method = method_of(method)?;
     let o = "observations";
     let (oe, os) = (
         indices(observations, o, "exposure")?,
@@ -218,5 +221,58 @@ pub fn solve<'py>(
     d.set_item("converged", sol.converged)?;
     d.set_item("rejected", sol.rejected)?;
     d.set_item("chi2_per_dof", sol.chi2_per_dof)?;
+    Ok(d)
+}
+
+/// `jsim.solve_sequence(sequence, *, exposures=None, out=None, model="auto", method="cg")`: what `jsim solve`
+/// does (`engine::studies::sequence::solve_study`): the solution of a sequence that has run, from its products,
+/// for the first N exposures of each N in `exposures` (default: all that have run), scored against its truth,
+/// its files written to `out` (default `solution/` in the sequence's directory). Returns `solution.json`'s
+/// summaries (one dict per N) and the output directory. Bad input is a `ValueError` naming it.
+#[pyfunction]
+#[pyo3(signature = (sequence, *, exposures = None, out = None, model = "auto", method = "cg"))]
+pub fn solve_sequence<'py>(
+    py: Python<'py>,
+    sequence: std::path::PathBuf,
+    exposures: Option<Vec<usize>>,
+    out: Option<std::path::PathBuf>,
+    model: &str,
+    method: &str,
+) -> PyResult<Bound<'py, PyDict>> {
+    use engine::studies::sequence::{solution as sq, solve_study as study};
+    let model = match model {
+        "auto" => None,
+        "full" => Some(SourceModel::Full),
+        "position" => Some(SourceModel::Position),
+        m => {
+            return Err(PyValueError::new_err(format!(
+                "model = {m:?}: allowed \"auto\", \"full\" or \"position\""
+            )));
+        }
+    };
+    let method = method_of(method)?;
+    let err = |e: engine::studies::sequence::SequenceError| PyValueError::new_err(e.to_string());
+    let p = sq::read_products(&sequence).map_err(err)?;
+    let req = study::Request {
+        exposures: study::exposures_to_solve(&exposures.unwrap_or_default(), p.exposures_run)
+            .map_err(err)?,
+        spec: sq::SolveSpec {
+            model,
+            method,
+            ..Default::default()
+        },
+        checkpoint: None,
+        out: out.unwrap_or_else(|| sequence.join("solution")),
+    };
+    let truth = sq::read_truth(&sequence, &p).map_err(err)?;
+    let done = study::run(&p, &truth, &req, 1, &mut |_| {}, &mut |_| {}).map_err(err)?;
+    let text = serde_json::to_string(&done.summary)
+        .map_err(|e| PyValueError::new_err(format!("solution.json: {e}")))?;
+    let d = PyDict::new(py);
+    d.set_item(
+        "summary",
+        py.import("json")?.call_method1("loads", (text,))?,
+    )?;
+    d.set_item("out", req.out.to_string_lossy().into_owned())?;
     Ok(d)
 }

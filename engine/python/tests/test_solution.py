@@ -131,3 +131,36 @@ def test_bad_input_is_named():
     missing = {k: v for k, v in exposures.items() if k != "t_yr"}
     with pytest.raises(ValueError, match="t_yr"):
         jsim.solve(observations, missing, references)
+
+
+def test_solve_sequence_writes_what_jsim_solve_writes(jsim_bin, tmp_path):
+    # a small step-stare sequence run by the CLI, then solved twice from its products: by `jsim solve` and by
+    # jsim.solve_sequence (the same engine study) — the same files, byte for byte, and one summary per N
+    import subprocess
+
+    spec = tmp_path / "seq.toml"
+    spec.write_text('[sequence]\nstares_l = 2\nstares_b = 1\nexposures_per_stare = 2\n'
+                    'visits_utc = ["2031-03-21T00:00:00"]\nvisit_dither_px = 0.0\n')
+    sets = []
+    for s in ['ace.case="gaussian"', "instrument.detector_px=256", "instrument.photosensitive_px=240",
+              "readout.channels=2", "readout.channel_width_px=128", "optics.pupil_samples=64",
+              "optics.psf_oversampling=8", "optics.psf_radius_px=8", "band.wavelength_step_um=0.1",
+              "fidelity.subpixels=4", "fidelity.stamp_radius_px=8", 'fidelity.backend="cpu"', "ace.span_s=60.0",
+              "focal_plane.gap_px=40.0", "scene.bulge.density_per_arcmin2=40.0"]:
+        sets += ["--set", s]
+    seq = tmp_path / "seq"
+    subprocess.run([jsim_bin, "sequence", "--countermeasure", "none", "--spec", str(spec), *sets,
+                    "--out", str(seq)], check=True, capture_output=True)
+    subprocess.run([jsim_bin, "solve", "--sequence", str(seq), "--exposures", "2,4", "--out", str(tmp_path / "cli")],
+                   check=True, capture_output=True)
+    r = jsim.solve_sequence(str(seq), exposures=[4, 2], out=str(tmp_path / "py"))
+    assert [s["exposures"] for s in r["summary"]] == [2, 4]
+    assert r["summary"][1]["converged"] is True
+    for f in ["sources.csv", "attitudes.csv", "calibration.csv", "score_sources.csv", "score_attitudes.csv",
+              "calibration_map.csv", "precision_vs_n.csv"]:
+        assert (tmp_path / "py" / f).read_bytes() == (tmp_path / "cli" / f).read_bytes(), f
+    with pytest.raises(ValueError, match="exposures 9: allowed 1 … 4"):
+        jsim.solve_sequence(str(seq), exposures=[9], out=str(tmp_path / "bad"))
+    assert not (tmp_path / "bad").exists()
+    with pytest.raises(ValueError, match="model"):
+        jsim.solve_sequence(str(seq), model="proper")

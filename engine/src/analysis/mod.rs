@@ -17,7 +17,6 @@ pub mod repeat;
 pub mod report;
 pub mod response;
 pub mod sky;
-pub mod solution;
 pub mod stare_photometry;
 
 pub use image::AnalysisImage;

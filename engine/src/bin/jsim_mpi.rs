@@ -1,7 +1,7 @@
 //! `jsim-mpi` (feature `mpi`): the `jsim` command line started on MPI ranks — `mpirun -np 4 jsim-mpi solve
 //! …`, or `srun` in a Slurm job (`jsim solve --emit-slurm`). Every rank runs the same command on the same
 //! input; the astrometric solution's conjugate gradients share the sources out by sky tile and reduce the
-//! rest (engine::analysis::solution::ranks), every rank ends with the same solution, and rank 0 alone writes.
+//! rest (engine::solution::ranks), every rank ends with the same solution, and rank 0 alone writes.
 //! On more than one rank only the commands that solve (solve, solve-synthetic) run: the others would write
 //! the same files from every rank.
 
@@ -10,8 +10,8 @@ mod jsim;
 // the command line's modules where its `crate::` paths look for them
 pub(crate) use jsim::*;
 
-use engine::analysis::solution::mpi::MpiRanks;
-use engine::analysis::solution::ranks::{self, Ranks};
+use engine::solution::mpi::MpiRanks;
+use engine::solution::ranks::{self, Ranks};
 use mpi::Threading;
 
 /// The commands that run on more than one rank.

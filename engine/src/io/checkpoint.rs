@@ -1,7 +1,7 @@
 //! A solution's checkpoint kept in a file (`--checkpoint FILE`): written atomically, so that a run killed
-//! while writing leaves the last whole one ([`crate::analysis::solution::checkpoint`] makes its bytes).
+//! while writing leaves the last whole one ([`crate::solution::checkpoint`] makes its bytes).
 
-use crate::analysis::solution::CheckpointStore;
+use crate::solution::CheckpointStore;
 use std::path::PathBuf;
 
 /// A checkpoint in the file at `path`.

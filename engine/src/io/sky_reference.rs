@@ -1,10 +1,10 @@
 //! A sky reference catalogue with motions (`reference.csv`: a sequence's, or a survey's own file with the
 //! same columns): positions at `ref_epoch`, proper motions, parallaxes, each with its 1σ error — what anchors
-//! an astrometric solution's frame (`analysis::solution::feed`).
+//! an astrometric solution's frame (`solution::feed`).
 
 use super::IoError;
 use super::csv::Cell;
-pub use crate::analysis::solution::feed::SkyReference;
+pub use crate::solution::feed::SkyReference;
 use std::path::{Path, PathBuf};
 
 /// The file name in a sequence's directory.

@@ -3,7 +3,7 @@
 //! beside the errors the solution reports; the solved calibration against the instrument's; and each solved
 //! attitude against what the true stars say it should be.
 
-use crate::analysis::solution::{ExposureGeometry, Observation, Params, Solution, SolvedSource};
+use crate::solution::{ExposureGeometry, Observation, Params, Solution, SolvedSource};
 
 /// A source's true parameters (on the solution's plane) and magnitude.
 #[derive(Debug, Clone, Copy, PartialEq)]

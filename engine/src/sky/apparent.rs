@@ -108,7 +108,7 @@ pub fn plane_to_sky(tangent_deg: (f64, f64), xi_mas: f64, eta_mas: f64) -> (f64,
 /// The parallax factors of a star at (α, δ) seen from `observer_au` (barycentric, ICRS axes, au): the
 /// displacement (Δα*, Δδ) on the tangent plane per mas of parallax, to first order —
 /// `Δα* = X sin α − Y cos α`, `Δδ = X cos α sin δ + Y sin α sin δ − Z cos δ` (the star is seen away from the
-/// observer's position). What an astrometric solution multiplies ϖ by (`analysis::solution`).
+/// observer's position). What an astrometric solution multiplies ϖ by (`solution`).
 pub fn parallax_factors(ra_deg: f64, dec_deg: f64, observer_au: [f64; 3]) -> [f64; 2] {
     let (sa, ca) = ra_deg.to_radians().sin_cos();
     let (sd, cd) = dec_deg.to_radians().sin_cos();

@@ -42,7 +42,7 @@ pub enum BenchError {
     #[error(transparent)]
     Sequence(#[from] crate::studies::sequence::run::SequenceError),
     #[error(transparent)]
-    Solution(#[from] crate::analysis::solution::SolutionError),
+    Solution(#[from] crate::solution::SolutionError),
     /// A benchmark's own setting out of its range.
     #[error("{0}")]
     Invalid(String),

@@ -9,11 +9,11 @@
 //! peak memory so far.
 
 use super::bench::{BenchError, BenchRow};
-use crate::analysis::solution::{
+use crate::rng::{self, Stream};
+use crate::solution::{
     Attitude, Calibration, CalibrationModel, ExposureGeometry, Method, Observation, Options,
     Params, Reference,
 };
-use crate::rng::{self, Stream};
 use rand::RngExt;
 use rand_distr::{Distribution, Normal};
 use std::time::Instant;
@@ -128,11 +128,11 @@ pub fn synthetic(spec: &SyntheticSpec) -> Synthetic {
         .collect();
     let mut calibration = Calibration::zero(
         spec.calibration,
-        crate::analysis::solution::calibration::DEFAULT_FOCAL_NORM_PX,
+        crate::solution::calibration::DEFAULT_FOCAL_NORM_PX,
     );
     for a in &mut calibration.arrays {
         let turn = gauss(&mut r, 0.1f64.to_radians())
-            * crate::analysis::solution::calibration::DEFAULT_FOCAL_NORM_PX;
+            * crate::solution::calibration::DEFAULT_FOCAL_NORM_PX;
         let (bx, by) = (gauss(&mut r, 10.0), gauss(&mut r, 10.0));
         a[0][..3].copy_from_slice(&[bx, 0.0, -turn]);
         a[1][..3].copy_from_slice(&[by, turn, 0.0]);
@@ -170,8 +170,8 @@ pub fn synthetic(spec: &SyntheticSpec) -> Synthetic {
             let focal_px = [-d0 / SYNTHETIC_MAS_PER_PX, d1 / SYNTHETIC_MAS_PER_PX];
             let array = usize::from(focal_px[0] >= 0.0) + 2 * usize::from(focal_px[1] >= 0.0);
             let (u, v) = (
-                focal_px[0] / crate::analysis::solution::calibration::DEFAULT_FOCAL_NORM_PX,
-                focal_px[1] / crate::analysis::solution::calibration::DEFAULT_FOCAL_NORM_PX,
+                focal_px[0] / crate::solution::calibration::DEFAULT_FOCAL_NORM_PX,
+                focal_px[1] / crate::solution::calibration::DEFAULT_FOCAL_NORM_PX,
             );
             let mut dfx = [0.0; 2];
             if let Some(c) = calibration.arrays.get(array) {
@@ -276,14 +276,14 @@ pub fn solution_scaling(
 /// over their rms σ and their rms error (mas) against the draw's truth.
 pub struct SyntheticRun {
     pub syn: Synthetic,
-    pub sol: crate::analysis::solution::Solution,
+    pub sol: crate::solution::Solution,
     pub time_s: f64,
     pub error_over_sigma: f64,
     pub rms_mas: f64,
 }
 
 /// Draw the benchmark's synthetic sequence of `n` sources × `n_exposures` (a multiple of 25) with the
-/// calibration `calibration` and solve it by `method` (on this thread's ranks: [`crate::analysis::solution::ranks::world`]),
+/// calibration `calibration` and solve it by `method` (on this thread's ranks: [`crate::solution::ranks::world`]),
 /// resumed from and checkpointed to `checkpoint` if given.
 pub fn solve_synthetic(
     n: usize,

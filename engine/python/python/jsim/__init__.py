@@ -36,6 +36,7 @@ from ._jsim import (  # noqa: F401, E402
     box_least_squares,
     score,
     solve,
+    solve_sequence,
     transit,
     transit_flux,
 )
@@ -51,6 +52,7 @@ __all__ = [
     "experiment",
     "score",
     "solve",
+    "solve_sequence",
     "transit",
     "transit_flux",
     "__version__",

@@ -167,6 +167,19 @@ def solve(
     offset_xi_mas, offset_eta_mas``; NaN for an exposure left out, listed in ``skipped_exposures``) and
     ``iterations, converged, rejected, chi2_per_dof``."""
 
+def solve_sequence(
+    sequence: str,
+    *,
+    exposures: Optional[List[int]] = None,
+    out: Optional[str] = None,
+    model: str = "auto",
+    method: str = "cg",
+) -> Dict[str, Any]:
+    """``jsim solve`` on a sequence that has run (``jsim sequence --out``): the solution of its first N
+    exposures for each N in ``exposures`` (default: all that have run), from its products, scored against
+    its truth; writes ``jsim solve``'s files to ``out`` (default ``solution/`` in the sequence's directory)
+    and returns ``summary`` (``solution.json``: one dict per N) and ``out``."""
+
 def transit_flux(
     t_days: npt.ArrayLike,
     *,

@@ -70,10 +70,10 @@ pub enum SolutionCalibration {
 
 impl SolutionCalibration {
     /// The engine's calibration model for it.
-    pub fn model(self) -> engine::analysis::solution::CalibrationModel {
+    pub fn model(self) -> engine::solution::CalibrationModel {
         match self {
             SolutionCalibration::Full => engine::studies::bench_solution::CALIBRATED,
-            SolutionCalibration::None => engine::analysis::solution::CalibrationModel::NONE,
+            SolutionCalibration::None => engine::solution::CalibrationModel::NONE,
         }
     }
 }

@@ -40,7 +40,7 @@ pub struct SyntheticArgs {
 }
 
 pub fn solve_synthetic(a: &SyntheticArgs) -> Result<()> {
-    let world = engine::analysis::solution::ranks::world();
+    let world = engine::solution::ranks::world();
     let run = engine::studies::bench_solution::solve_synthetic(
         a.sources,
         a.exposures,

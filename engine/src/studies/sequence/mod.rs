@@ -13,6 +13,7 @@ pub mod reference;
 pub mod run;
 pub mod slurm;
 pub mod solution;
+pub mod solve_study;
 pub mod spec;
 
 /// The field's sky catalogue in a sequence's output directory (what every exposure reads).

@@ -1,6 +1,6 @@
 //! The reference catalogue of a sequence's region (`reference.csv`): what a survey of the bulge gives of
 //! the field's stars — positions at the field's epoch, proper motions and parallaxes, each with its error —
-//! the product that anchors an astrometric solution's frame (`analysis::solution`), as Gaia or VIRAC would.
+//! the product that anchors an astrometric solution's frame (`solution`), as Gaia or VIRAC would.
 //!
 //! Errors per axis scale with magnitude as the single-exposure reference catalogue's do
 //! (`io::instrument::SurveyModel`: a floor, ∝ flux^{−1/2} fainter than the knee), from floors of 2 mas,
@@ -8,10 +8,10 @@
 //! median parallax error of 1.1 mas (Smith et al. 2018); the bulge's per-magnitude figures were not found.
 //! Stars brighter than the survey's limit, each kept with its completeness; every draw seeded per star.
 
-pub use crate::analysis::solution::feed::SkyReference;
 use crate::io::instrument::SurveyModel;
 use crate::rng::{self, Stream};
 use crate::scene::SkyStar;
+pub use crate::solution::feed::SkyReference;
 use rand::RngExt;
 use rand_distr::{Distribution, StandardNormal};
 

@@ -202,7 +202,7 @@ pub fn emit_solve(
     job: &SolveJob,
     solve_args: &[String],
 ) -> Result<Vec<PathBuf>, String> {
-    if crate::analysis::solution::ranks::check(job.ranks).is_err() {
+    if crate::solution::ranks::check(job.ranks).is_err() {
         return Err(format!(
             "--ranks {}: allowed a power of two, 1 … 64 (the solution shares its 64 sky tiles out equally)",
             job.ranks

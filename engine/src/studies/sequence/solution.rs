@@ -1,19 +1,17 @@
 //! The astrometric solution of a sequence that has run (`jsim solve`): its products read back — the
 //! configuration and sequence file it was planned with (for the planned pointings and the design focal
-//! plane), the exposures' catalogues, the reference catalogue — fed to `analysis::solution` and solved; the
+//! plane), the exposures' catalogues, the reference catalogue — fed to `solution` and solved; the
 //! sources, attitudes and calibration written; then, apart, the scoring: the solved sources against the
 //! field's stars, the calibration against the instrument's, the precision against the number of exposures
 //! beside √N from the single-exposure accuracy.
 
 use super::plan::{Plan, design_config, exposure_config, mid_exposure};
 use super::run::SequenceError;
-use crate::analysis::solution::feed::{
-    self, DesignExposure, Detection, Fed, FeedOptions, SkyReference,
-};
-use crate::analysis::solution::{CalibrationModel, Method, Options, Solution, SourceModel};
 use crate::config::Config;
 use crate::io::csv::Cell;
 use crate::scoring::solution::{BinScore, TrueSource};
+use crate::solution::feed::{self, DesignExposure, Detection, Fed, FeedOptions, SkyReference};
+use crate::solution::{CalibrationModel, Method, Options, Solution, SourceModel};
 use std::path::Path;
 
 /// What to solve.
@@ -254,30 +252,28 @@ pub fn solve_first(
     Ok((fed, opt, sol))
 }
 
-/// The solution on this thread's ranks ([`crate::analysis::solution::ranks::world`]), resumed from and
+/// The solution on this thread's ranks ([`crate::solution::ranks::world`]), resumed from and
 /// checkpointed to the file `checkpoint` if given: what `jsim solve` and `jsim solve-synthetic` run.
 pub fn solve_checkpointed(
-    obs: &[crate::analysis::solution::Observation],
-    exposures: &[crate::analysis::solution::ExposureGeometry],
-    refs: &[crate::analysis::solution::Reference],
+    obs: &[crate::solution::Observation],
+    exposures: &[crate::solution::ExposureGeometry],
+    refs: &[crate::solution::Reference],
     n_sources: usize,
     opt: &Options,
     checkpoint: Option<&Path>,
-) -> Result<Solution, crate::analysis::solution::SolutionError> {
+) -> Result<Solution, crate::solution::SolutionError> {
     let store = checkpoint.map(crate::io::checkpoint::FileStore::new);
-    crate::analysis::solution::solve_with(
+    crate::solution::solve_with(
         obs,
         exposures,
         refs,
         n_sources,
         opt,
-        &*crate::analysis::solution::ranks::world(),
-        store
-            .as_ref()
-            .map(|store| crate::analysis::solution::Checkpointing {
-                store,
-                interrupt_after: None,
-            }),
+        &*crate::solution::ranks::world(),
+        store.as_ref().map(|store| crate::solution::Checkpointing {
+            store,
+            interrupt_after: None,
+        }),
     )
 }
 
@@ -298,7 +294,7 @@ pub const SOURCE_COLUMNS: [&str; 12] = [
 ];
 
 /// A solved source's cells under [`SOURCE_COLUMNS`].
-pub fn source_cells(v: &crate::analysis::solution::SolvedSource) -> Vec<Cell> {
+pub fn source_cells(v: &crate::solution::SolvedSource) -> Vec<Cell> {
     let mut row: Vec<Cell> = v
         .params
         .iter()
@@ -478,10 +474,7 @@ pub fn at_mean_epoch(
     fed: &Fed,
     sol: &Solution,
     truths: &[Option<TrueSource>],
-) -> (
-    Vec<crate::analysis::solution::SolvedSource>,
-    Vec<Option<TrueSource>>,
-) {
+) -> (Vec<crate::solution::SolvedSource>, Vec<Option<TrueSource>>) {
     let n = sol.sources.len();
     let (mut t, mut px, mut py, mut k) =
         (vec![0.0; n], vec![0.0; n], vec![0.0; n], vec![0usize; n]);
@@ -492,19 +485,18 @@ pub fn at_mean_epoch(
         py[o.source] += g.parallax_factor[1];
         k[o.source] += 1;
     }
-    let place =
-        |p: &crate::analysis::solution::Params, s: usize| -> crate::analysis::solution::Params {
-            let m = k[s].max(1) as f64;
-            let mut q = *p;
-            q[0] = p[0] + p[2] * t[s] / m + p[4] * px[s] / m;
-            q[1] = p[1] + p[3] * t[s] / m + p[4] * py[s] / m;
-            q
-        };
+    let place = |p: &crate::solution::Params, s: usize| -> crate::solution::Params {
+        let m = k[s].max(1) as f64;
+        let mut q = *p;
+        q[0] = p[0] + p[2] * t[s] / m + p[4] * px[s] / m;
+        q[1] = p[1] + p[3] * t[s] / m + p[4] * py[s] / m;
+        q
+    };
     let solved = sol
         .sources
         .iter()
         .enumerate()
-        .map(|(s, v)| crate::analysis::solution::SolvedSource {
+        .map(|(s, v)| crate::solution::SolvedSource {
             params: place(&v.params, s),
             ..*v
         })
@@ -670,7 +662,7 @@ pub fn needed_corrections(
     };
     let (wd, wt) = (wcs(design)?, wcs(&flown)?);
     let (_, m) = feed::focal_map(&wd[0], &nominal, tangent_deg).map_err(invalid)?;
-    let inv = crate::analysis::solution::calibration::inverse2(&m)
+    let inv = crate::solution::calibration::inverse2(&m)
         .ok_or_else(|| invalid("the design focal-plane map is singular"))?;
     let plane = |s: (f64, f64)| crate::sky::apparent::offset_mas(tangent_deg, s);
     let n = design.instrument.detector_px as f64;

@@ -296,7 +296,7 @@ fn set_cal_values(c: &mut Calibration, values: &[f64]) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::analysis::solution::CalibrationModel;
+    use crate::solution::CalibrationModel;
 
     #[test]
     fn a_checkpoint_reads_back_bit_for_bit_and_refuses_another_input() {

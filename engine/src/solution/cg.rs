@@ -31,7 +31,7 @@ use super::calibration::{Calibration, gauge_rows};
 use super::ranks::{self, LEAVES, Ranks};
 use super::tiles::Tiles;
 use super::{Attitude, Params};
-use crate::analysis::solution::SolutionError;
+use crate::solution::SolutionError;
 use rayon::prelude::*;
 
 /// Relinearisations at most (the attitudes' bilinear term is of order 10⁻⁵: two or three suffice).
@@ -851,7 +851,7 @@ fn add_flat(c: &mut Calibration, dx: &[f64]) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::analysis::solution::calibration::CalibrationModel;
+    use crate::solution::calibration::CalibrationModel;
 
     #[test]
     fn flatten_and_add_flat_keep_one_order() {
