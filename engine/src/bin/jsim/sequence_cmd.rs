@@ -6,7 +6,6 @@ use crate::TelemetryArgs;
 use crate::options::CrowdedConfigArgs;
 use anyhow::{Result, bail};
 use clap::Args;
-use engine::io::csv::Cell;
 use engine::studies::sequence::{self, run};
 use engine::studies::sweep::Shard;
 use std::path::PathBuf;
@@ -93,160 +92,25 @@ pub fn sequence(a: &SequenceArgs) -> Result<()> {
     let coverage_s = t.elapsed().as_secs_f64();
     // the plan's files: made again identically on a rerun (same spec, same seed)
     let mut outputs = crate::outputs::Outputs::in_dir(&a.out)?;
-    // the plan as the pipeline knows it (planned pointings), and the pointings as flown beside it (only
-    // scoring reads those)
-    let (mut plan_rows, mut flown_rows) = (Vec::new(), Vec::new());
-    for e in &plan.exposures {
-        let s = &plan.stares[e.stare];
-        let (ra, dec, pa) = s.planned();
-        plan_rows.push(vec![
-            Cell::I(e.index as i64),
-            Cell::I(e.stare as i64),
-            Cell::I(s.visit as i64),
-            Cell::F(s.l_deg),
-            Cell::F(s.b_deg),
-            Cell::F(ra),
-            Cell::F(dec),
-            Cell::F(pa),
-            Cell::S(e.start.utc_iso()),
-            Cell::F(e.start.tdb_mjd()),
-            Cell::S(e.seed.to_string()), // unsigned: a u64 seed ≥ 2⁶³ is no i64
-            Cell::F(e.orbit_phase_deg),
-        ]);
-        flown_rows.push(vec![
-            Cell::I(e.index as i64),
-            Cell::F(s.ra_deg),
-            Cell::F(s.dec_deg),
-            Cell::F(s.pa_deg),
-        ]);
-    }
-    engine::io::csv::write(
-        &outputs.path("plan.csv"),
-        &[
-            "exposure",
-            "stare",
-            "visit",
-            "l_deg",
-            "b_deg",
-            "ra_deg",
-            "dec_deg",
-            "pa_deg",
-            "date_obs",
-            "mjd_tdb",
-            "seed",
-            "orbit_phase_deg",
-        ],
-        &plan_rows,
-    )?;
-    engine::io::csv::write(
-        &outputs.path("plan_truth.csv"),
-        &["exposure", "ra_deg", "dec_deg", "pa_deg"],
-        &flown_rows,
-    )?;
-    let cov_rows: Vec<Vec<Cell>> = (0..coverage.rows)
-        .flat_map(|j| (0..coverage.columns).map(move |i| (i, j)))
-        .map(|(i, j)| {
-            let (l, b) = coverage.centre(i, j);
-            vec![
-                Cell::F(l),
-                Cell::F(b),
-                Cell::I(i64::from(coverage.counts[j * coverage.columns + i])),
-            ]
-        })
-        .collect();
-    engine::io::csv::write(
-        &outputs.path("coverage.csv"),
-        &["l_deg", "b_deg", "exposures"],
-        &cov_rows,
-    )?;
-    let max = coverage.counts.iter().copied().max().unwrap_or(0);
-    engine::io::plot::count_map(
-        &outputs.path("coverage.png"),
-        &format!(
-            "{} exposures: {} stares × {} per stare × {} visits",
-            plan.exposures.len(),
-            plan.stares.len() / spec.visits_utc.len(),
-            spec.exposures_per_stare,
-            spec.visits_utc.len()
-        ),
-        "Galactic longitude l [deg]",
-        "Galactic latitude b [deg]",
-        engine::io::plot::CountGrid {
-            counts: &coverage.counts,
-            columns: coverage.columns,
-            rows: coverage.rows,
-            x0: coverage.l0_deg,
-            y0: coverage.b0_deg,
-            cell: coverage.cell_deg,
-            x_reversed: true,
-        },
-    )?;
-    let covered: Vec<u32> = coverage.counts.iter().copied().filter(|c| *c > 0).collect();
-    let mut sorted = covered.clone();
-    sorted.sort_unstable();
-    let median = sorted.get(sorted.len() / 2).copied().unwrap_or(0);
-    let area = covered.len() as f64 * a.cell_deg * a.cell_deg;
+    // the plan as the pipeline knows it (planned pointings), the pointings as flown beside it (only scoring
+    // reads those), the coverage and the plan's summary
+    let cov =
+        sequence::plan_files::write(&plan, &spec, &coverage, &a.out, &mut |p| outputs.add(p))?;
     eprintln!(
-        "sequence: {} exposures in {} stares over {:.3} deg²; a covered cell gets {median} exposures \
-         (median), at most {max}; coverage in {coverage_s:.1} s",
+        "sequence: {} exposures in {} stares over {:.3} deg²; a covered cell gets {} exposures \
+         (median), at most {}; coverage in {coverage_s:.1} s",
         plan.exposures.len(),
         plan.stares.len(),
-        area
+        cov.covered_deg2,
+        cov.median,
+        cov.max
     );
-    let summary = serde_json::json!({
-        "spec": spec,
-        "exposures": plan.exposures.len(),
-        "stares": plan.stares.len(),
-        "field_deg": plan.field_deg,
-        "covered_deg2": area,
-        "median_exposures_per_covered_cell": median,
-        "max_exposures_per_cell": max,
-        "coverage_cell_deg": a.cell_deg,
-    });
-    engine::io::write_atomic(
-        &outputs.path("sequence.json"),
-        serde_json::to_string_pretty(&summary)?.as_bytes(),
-    )?;
     if a.plan_only {
         outputs.keep();
         return Ok(());
     }
     if a.emit_slurm {
-        if a.exposures.is_some() || a.shard.is_some() {
-            bail!(
-                "--emit-slurm runs every exposure in --shards tasks: drop --exposures and --shard"
-            );
-        }
-        let dir = std::path::absolute(&a.out)?;
-        let job = sequence::slurm::SlurmJob {
-            shards: a.shards,
-            partition: a.partition.clone(),
-            time: a.time.clone(),
-            cpus_per_task: a.cpus_per_task,
-            jsim: std::env::current_exe()?,
-            keep_images: a.keep_images,
-        };
-        for name in [
-            "config.toml",
-            "sequence.toml",
-            run::FIELD_NAME,
-            engine::io::sky_reference::REFERENCE_NAME,
-        ] {
-            outputs.add(&dir.join(name));
-        }
-        let scripts = sequence::slurm::emit(&plan, &cfg, &dir, &job).map_err(anyhow::Error::msg)?;
-        // the field drawn once here, so that the tasks only read it
-        run::write_field(&plan, &cfg, &a.out)?;
-        for p in &scripts {
-            outputs.add(p);
-        }
-        outputs.keep();
-        eprintln!(
-            "wrote {} (submit with {})",
-            dir.join("slurm").display(),
-            scripts[2].display()
-        );
-        return Ok(());
+        return emit_slurm(a, &plan, &cfg, outputs);
     }
     // what it is planned with, for the solution (`jsim solve`) to read back
     for name in ["config.toml", "sequence.toml"] {
@@ -327,5 +191,47 @@ pub fn sequence(a: &SequenceArgs) -> Result<()> {
             "not every exposure has run yet: rerun (or the other shards) to gather catalogue.fits"
         );
     }
+    Ok(())
+}
+
+/// `jsim sequence --emit-slurm`: the plan's files are written; the field drawn once and the job's scripts.
+fn emit_slurm(
+    a: &SequenceArgs,
+    plan: &sequence::Plan,
+    cfg: &engine::config::Config,
+    mut outputs: crate::outputs::Outputs,
+) -> Result<()> {
+    if a.exposures.is_some() || a.shard.is_some() {
+        bail!("--emit-slurm runs every exposure in --shards tasks: drop --exposures and --shard");
+    }
+    let dir = std::path::absolute(&a.out)?;
+    let job = sequence::slurm::SlurmJob {
+        shards: a.shards,
+        partition: a.partition.clone(),
+        time: a.time.clone(),
+        cpus_per_task: a.cpus_per_task,
+        jsim: std::env::current_exe()?,
+        keep_images: a.keep_images,
+    };
+    for name in [
+        "config.toml",
+        "sequence.toml",
+        run::FIELD_NAME,
+        engine::io::sky_reference::REFERENCE_NAME,
+    ] {
+        outputs.add(&dir.join(name));
+    }
+    let scripts = sequence::slurm::emit(plan, cfg, &dir, &job).map_err(anyhow::Error::msg)?;
+    // the field drawn once here, so that the tasks only read it
+    run::write_field(plan, cfg, &a.out)?;
+    for p in &scripts {
+        outputs.add(p);
+    }
+    outputs.keep();
+    eprintln!(
+        "wrote {} (submit with {})",
+        dir.join("slurm").display(),
+        scripts[2].display()
+    );
     Ok(())
 }

@@ -9,6 +9,7 @@ pub mod budget;
 pub mod coverage;
 pub mod persistence;
 pub mod plan;
+pub mod plan_files;
 pub mod reference;
 pub mod run;
 pub mod slurm;
