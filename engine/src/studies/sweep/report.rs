@@ -85,6 +85,9 @@ fn slug(s: &str) -> String {
         .collect()
 }
 
+/// (point, countermeasure index) → (metric values, crlb, predicted) of every exposure.
+type Groups = BTreeMap<(usize, usize), (Vec<f64>, Vec<f64>, Vec<f64>)>;
+
 /// Fractions meeting the threshold per grid point and countermeasure (95 % Wilson intervals), written to
 /// `dir/report.csv`, with a histogram + CDF per point and countermeasure and the fraction against the swept
 /// parameter in `dir/report/`.
@@ -104,13 +107,43 @@ pub fn report(dir: &Path, opts: &ReportOptions) -> Result<ReportSummary, SweepEr
         )));
     }
     let fields: Vec<String> = rec.grid.iter().map(|p| p.field.clone()).collect();
+    let x_index = x_axis(&rec, &fields, opts)?;
+    let groups = read_groups(dir, &rec, opts)?;
+    let rows = report_rows(&rec, &groups, threshold);
+    let csv = report_csv(&fields, &rows, opts, threshold);
+    let plots = dir.join("report");
+    io::ensure_dir(&plots)?;
+    let mut files = plot_distributions(&plots, &rec, &groups, opts, threshold)?;
+    files.push(plot_fractions(
+        &plots, &rec, &fields, &rows, x_index, opts, threshold,
+    )?);
+    let report_csv = dir.join("report.csv");
+    io::write_atomic(&report_csv, csv.as_bytes())?;
+    files.insert(0, report_csv);
+    Ok(ReportSummary {
+        rows,
+        threshold_mas: threshold,
+        metric: opts.metric.clone(),
+        fields,
+        x_field: x_index.map(|k| rec.grid[k].field.clone()),
+        files,
+    })
+}
+
+/// The grid field on the x axis of the fraction plot: `--x`, which must be a numeric grid field, or the first
+/// numeric one with several values; `None`: the grid point's index.
+fn x_axis(
+    rec: &super::record::Record,
+    fields: &[String],
+    opts: &ReportOptions,
+) -> Result<Option<usize>, SweepError> {
     let numeric = |k: usize| {
         rec.grid[k]
             .values
             .iter()
             .all(|v| v.trim().parse::<f64>().is_ok_and(|x| x.is_finite()))
     };
-    let x_index = match &opts.x {
+    Ok(match &opts.x {
         Some(x) => {
             let k = fields.iter().position(|f| f == x).ok_or_else(|| {
                 SweepError::Invalid(format!(
@@ -127,7 +160,15 @@ pub fn report(dir: &Path, opts: &ReportOptions) -> Result<ReportSummary, SweepEr
             Some(k)
         }
         None => (0..fields.len()).find(|&k| numeric(k) && rec.grid[k].values.len() > 1),
-    };
+    })
+}
+
+/// Every exposure's metric, bound and prediction from `merged.csv`, grouped by point and countermeasure.
+fn read_groups(
+    dir: &Path,
+    rec: &super::record::Record,
+    opts: &ReportOptions,
+) -> Result<Groups, SweepError> {
     let merged = dir.join("merged.csv");
     let text = std::fs::read_to_string(&merged).map_err(|e| {
         SweepError::Invalid(format!(
@@ -151,7 +192,7 @@ pub fn report(dir: &Path, opts: &ReportOptions) -> Result<ReportSummary, SweepEr
     let c_crlb = rec.col("crlb_mas");
     let c_pred = rec.col("predicted_mas");
     // (point, countermeasure index) → (metric values, crlb, predicted)
-    let mut groups: BTreeMap<(usize, usize), (Vec<f64>, Vec<f64>, Vec<f64>)> = BTreeMap::new();
+    let mut groups = Groups::new();
     for (k, l) in lines.enumerate() {
         let cells = parse_line(l)
             .filter(|c| c.len() == header.len())
@@ -174,6 +215,12 @@ pub fn report(dir: &Path, opts: &ReportOptions) -> Result<ReportSummary, SweepEr
         g.1.push(num(c_crlb));
         g.2.push(num(c_pred));
     }
+    Ok(groups)
+}
+
+/// One row per grid point and countermeasure: the fraction meeting `threshold` with its Wilson interval, the
+/// distribution's mean, median and 90th percentile, the bound and the prediction.
+fn report_rows(rec: &super::record::Record, groups: &Groups, threshold: f64) -> Vec<ReportRow> {
     let mut rows = Vec::new();
     for p in 0..rec.points {
         for (ci, cm) in rec.countermeasures.iter().enumerate() {
@@ -209,7 +256,16 @@ pub fn report(dir: &Path, opts: &ReportOptions) -> Result<ReportSummary, SweepEr
         }
     }
 
-    // report.csv
+    rows
+}
+
+/// `report.csv`'s text: the grid's values, the countermeasure, the metric and threshold, then the row's numbers.
+fn report_csv(
+    fields: &[String],
+    rows: &[ReportRow],
+    opts: &ReportOptions,
+    threshold: f64,
+) -> String {
     let mut h: Vec<String> = vec!["point".into()];
     h.extend(fields.iter().cloned());
     for c in [
@@ -233,7 +289,7 @@ pub fn report(dir: &Path, opts: &ReportOptions) -> Result<ReportSummary, SweepEr
     }
     let mut csv = render_line(&h);
     csv.push('\n');
-    for r in &rows {
+    for r in rows {
         let mut c = vec![r.point.to_string()];
         c.extend(r.values.iter().cloned());
         c.push(r.countermeasure.clone());
@@ -258,10 +314,18 @@ pub fn report(dir: &Path, opts: &ReportOptions) -> Result<ReportSummary, SweepEr
         csv.push_str(&render_line(&c));
         csv.push('\n');
     }
+    csv
+}
+
+/// A histogram + CDF of the metric per grid point and countermeasure (`report/dist_p<point>_<countermeasure>.png`).
+fn plot_distributions(
+    plots: &Path,
+    rec: &super::record::Record,
+    groups: &Groups,
+    opts: &ReportOptions,
+    threshold: f64,
+) -> Result<Vec<PathBuf>, SweepError> {
     let mut files = Vec::new();
-    let plots = dir.join("report");
-    io::ensure_dir(&plots)?;
-    // distributions
     for p in 0..rec.points {
         for (ci, cm) in rec.countermeasures.iter().enumerate() {
             let vals = groups
@@ -286,9 +350,22 @@ pub fn report(dir: &Path, opts: &ReportOptions) -> Result<ReportSummary, SweepEr
             files.push(path);
         }
     }
-    // fraction against the swept parameter
+    Ok(files)
+}
+
+/// The fraction meeting the threshold against the swept parameter (`report/fraction.png`), one series per
+/// countermeasure and combination of the other grid fields, side by side where they share an x.
+fn plot_fractions(
+    plots: &Path,
+    rec: &super::record::Record,
+    fields: &[String],
+    rows: &[ReportRow],
+    x_index: Option<usize>,
+    opts: &ReportOptions,
+    threshold: f64,
+) -> Result<PathBuf, SweepError> {
     let mut series_keys: Vec<(Vec<String>, usize)> = Vec::new();
-    for r in &rows {
+    for r in rows {
         let others: Vec<String> = r
             .values
             .iter()
@@ -327,7 +404,7 @@ pub fn report(dir: &Path, opts: &ReportOptions) -> Result<ReportSummary, SweepEr
     };
     let categories = {
         let mut seen: Vec<(usize, String)> = Vec::new();
-        for r in &rows {
+        for r in rows {
             if !seen.iter().any(|(p, _)| *p == r.point) {
                 let what: Vec<String> = r
                     .values
@@ -402,18 +479,7 @@ pub fn report(dir: &Path, opts: &ReportOptions) -> Result<ReportSummary, SweepEr
         plot::Scale::Linear,
         plot::Scale::Linear,
     )?;
-    files.push(frac_path);
-    let report_csv = dir.join("report.csv");
-    io::write_atomic(&report_csv, csv.as_bytes())?;
-    files.insert(0, report_csv);
-    Ok(ReportSummary {
-        rows,
-        threshold_mas: threshold,
-        metric: opts.metric.clone(),
-        fields,
-        x_field: x_index.map(|k| rec.grid[k].field.clone()),
-        files,
-    })
+    Ok(frac_path)
 }
 
 /// The report as a text table (what `jsim report` prints).
