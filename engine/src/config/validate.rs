@@ -40,6 +40,24 @@ impl Config {
     /// Check every field; the error names the field and the allowed range.
     pub fn validate(&self) -> Result<(), ConfigError> {
         self.as_built.validate()?;
+        self.check_instrument()?;
+        self.check_band()?;
+        self.check_optics()?;
+        self.check_detector()?;
+        self.check_readout()?;
+        self.check_ace()?;
+        self.check_detector_effects()?;
+        self.check_sky()?;
+        self.check_observation()?;
+        self.check_focal_plane()?;
+        self.check_scene()?;
+        self.check_fidelity()?;
+        self.check_analysis()?;
+        Ok(())
+    }
+
+    /// `[instrument]`: each field in its range.
+    fn check_instrument(&self) -> Result<(), ConfigError> {
         let i = &self.instrument;
         check_pos("instrument.aperture_diameter_m", i.aperture_diameter_m)?;
         check_nonneg(
@@ -85,7 +103,10 @@ impl Config {
                 &format!("must be in 1..={} (instrument.detector_px)", i.detector_px),
             ));
         }
-
+        Ok(())
+    }
+    /// `[band]`: each field in its range.
+    fn check_band(&self) -> Result<(), ConfigError> {
         let b = &self.band;
         check_pos("band.wavelength_min_um", b.wavelength_min_um)?;
         check_pos("band.wavelength_max_um", b.wavelength_max_um)?;
@@ -122,7 +143,10 @@ impl Config {
                 "the wavelength grid has no point where throughput × QE > 0",
             ));
         }
-
+        Ok(())
+    }
+    /// `[optics]`: each field in its range.
+    fn check_optics(&self) -> Result<(), ConfigError> {
         let o = &self.optics;
         check_range_usize("optics.pupil_samples", o.pupil_samples, 16, 4096)?;
         check_range_usize("optics.psf_oversampling", o.psf_oversampling, 1, 64)?;
@@ -166,7 +190,10 @@ impl Config {
             ));
         }
         check_range_usize("optics.field_zone_px", o.field_zone_px, 0, 100_000)?;
-
+        Ok(())
+    }
+    /// `[detector]`: each field in its range.
+    fn check_detector(&self) -> Result<(), ConfigError> {
         let d = &self.detector;
         check_pos("detector.exposure_s", d.exposure_s)?;
         if d.exposure_s > 3600.0 {
@@ -246,7 +273,11 @@ impl Config {
                 }
             }
         }
-
+        Ok(())
+    }
+    /// `[readout]`: each field in its range.
+    fn check_readout(&self) -> Result<(), ConfigError> {
+        let i = &self.instrument;
         let r = &self.readout;
         check_range_usize("readout.channels", r.channels, 1, 1024)?;
         check_range_usize("readout.channel_width_px", r.channel_width_px, 1, 65_536)?;
@@ -263,7 +294,10 @@ impl Config {
         check_nonneg("readout.pixel_time_us", r.pixel_time_us)?;
         check_nonneg("readout.t_overhead_s", r.t_overhead_s)?;
         check_nonneg("readout.exposure_cadence_s", r.exposure_cadence_s)?;
-
+        Ok(())
+    }
+    /// `[ace]` and `[photometry]`: each field in its range.
+    fn check_ace(&self) -> Result<(), ConfigError> {
         let a = &self.ace;
         check_nonneg("ace.sigma_mas", a.sigma_mas)?;
         // beyond ≈ 20 px rms a star is a streak many times the PSF: no ePSF analysis applies, and the
@@ -319,7 +353,11 @@ impl Config {
             "photometry.zero_point_e_per_s",
             self.photometry.zero_point_e_per_s,
         )?;
-
+        Ok(())
+    }
+    /// `[detector]`'s effects (cosmic rays, inter-pixel capacitance, nonlinearity, persistence): each field in
+    /// its range.
+    fn check_detector_effects(&self) -> Result<(), ConfigError> {
         let d = &self.detector;
         for (field, v, hi) in [
             (
@@ -415,7 +453,10 @@ impl Config {
                 "must be > 0",
             ));
         }
-
+        Ok(())
+    }
+    /// `[sky]`: each field in its range.
+    fn check_sky(&self) -> Result<(), ConfigError> {
         let sky = &self.sky;
         if !(sky.ra_deg >= 0.0 && sky.ra_deg < 360.0) {
             return Err(invalid(
@@ -432,6 +473,10 @@ impl Config {
             ));
         }
         check_finite("sky.pa_deg", sky.pa_deg)?;
+        Ok(())
+    }
+    /// `[observation]`: each field in its range.
+    fn check_observation(&self) -> Result<(), ConfigError> {
         let obs = &self.observation;
         crate::time::Epoch::from_utc_iso(&obs.start_utc)
             .map_err(|why| invalid("observation.start_utc", &obs.start_utc, &why))?;
@@ -457,7 +502,10 @@ impl Config {
             ));
         }
         check_finite("observation.orbit_phase_deg", obs.orbit_phase_deg)?;
-
+        Ok(())
+    }
+    /// `[focal_plane]`: each field in its range.
+    fn check_focal_plane(&self) -> Result<(), ConfigError> {
         let fp = &self.focal_plane;
         check_nonneg("focal_plane.gap_px", fp.gap_px)?;
         if fp.gap_px > 10.0 * self.instrument.detector_px as f64 {
@@ -518,7 +566,10 @@ impl Config {
                 check_finite(&format!("{name}[{k}].value"), t.value)?;
             }
         }
-
+        Ok(())
+    }
+    /// `[scene]`: each field in its range.
+    fn check_scene(&self) -> Result<(), ConfigError> {
         let s = &self.scene;
         check_finite("scene.mag_hw", s.mag_hw)?;
         if !(-5.0..=40.0).contains(&s.mag_hw) {
@@ -615,7 +666,10 @@ impl Config {
                 "a CSV path is needed when scene.kind = \"catalogue\"",
             ));
         }
-
+        Ok(())
+    }
+    /// `[fidelity]`: each field in its range.
+    fn check_fidelity(&self) -> Result<(), ConfigError> {
         let f = &self.fidelity;
         check_range_usize("fidelity.images", f.images, 1, 100_000)?;
         check_range_usize("fidelity.stamp_radius_px", f.stamp_radius_px, 0, 512)?;
@@ -639,7 +693,10 @@ impl Config {
                 "must be in 0..=1e6 e⁻",
             ));
         }
-
+        Ok(())
+    }
+    /// `[analysis]`: each field in its range.
+    fn check_analysis(&self) -> Result<(), ConfigError> {
         let an = &self.analysis;
         check_range_usize("analysis.epsf_oversampling", an.epsf_oversampling, 1, 16)?;
         if let super::FlatField::Calibrated { error } = an.flat_field
