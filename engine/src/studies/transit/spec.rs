@@ -142,6 +142,11 @@ pub const MAX_WINDOW_BYTES: f64 = 4e9;
 /// Most comparison stars.
 pub const MAX_COMPARISONS: usize = 200;
 
+/// A field's error: `transit.field = value: allowed`.
+fn bad(field: &str, value: String, allowed: &str) -> Result<(), String> {
+    Err(format!("transit.{field} = {value}: {allowed}"))
+}
+
 impl Spec {
     /// Read a transit file (`[transit]` with any of [`Spec`]'s fields; the rest keep their defaults).
     pub fn load(path: &Path) -> Result<Spec, String> {
@@ -218,9 +223,14 @@ impl Spec {
     /// Check every field, naming it and its allowed range (the saturation check needs the PSF: the
     /// observation's).
     pub fn validate(&self, cadence_s: f64) -> Result<(), String> {
-        let bad = |field: &str, value: String, allowed: &str| {
-            Err(format!("transit.{field} = {value}: {allowed}"))
-        };
+        self.check_stars()?;
+        self.check_plates(cadence_s)?;
+        self.check_photometry()?;
+        self.check_transit()
+    }
+
+    /// The target, its comparisons and the field they are drawn from.
+    fn check_stars(&self) -> Result<(), String> {
         let finite = [
             ("target_hw", self.target_hw),
             ("target_j_minus_h", self.target_j_minus_h),
@@ -290,6 +300,11 @@ impl Spec {
                 "allowed window_px … 900",
             );
         }
+        Ok(())
+    }
+
+    /// The plates and sub-exposures, the stare's length and its windows (and the memory they take).
+    fn check_plates(&self, cadence_s: f64) -> Result<(), String> {
         if !(self.plate_s > 0.0 && self.plate_s <= 600.0) {
             return bad("plate_s", self.plate_s.to_string(), "allowed (0, 600]");
         }
@@ -342,6 +357,11 @@ impl Spec {
                 ),
             );
         }
+        Ok(())
+    }
+
+    /// The aperture and annulus, the pointing drifts, the telemetry's error and the intra-pixel response.
+    fn check_photometry(&self) -> Result<(), String> {
         let half = (self.window_px / 2) as f64;
         if !(self.aperture_px >= 0.0
             && self.aperture_px <= self.annulus_in_px
@@ -385,6 +405,11 @@ impl Spec {
                 "allowed < 0.5 (negative: the configuration's map; 0: uniform)",
             );
         }
+        Ok(())
+    }
+
+    /// The injected transit: its depth, and, when there is one, its orbit and its place in the stare.
+    fn check_transit(&self) -> Result<(), String> {
         if !(0.0..1.0).contains(&self.depth) {
             return bad("depth", self.depth.to_string(), "allowed 0 (none) … < 1");
         }
