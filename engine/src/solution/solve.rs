@@ -610,6 +610,13 @@ fn validate(
     n_sources: usize,
     opt: &Options,
 ) -> Result<(), SolutionError> {
+    validate_options(exposures, opt)?;
+    validate_observations(obs, exposures, n_sources, opt)?;
+    validate_anchors(exposures, refs, n_sources, opt)
+}
+
+/// The knobs, the calibration model, and whether the exposures' pointings can constrain a distortion.
+fn validate_options(exposures: &[ExposureGeometry], opt: &Options) -> Result<(), SolutionError> {
     let cm = opt.calibration;
     if !(opt.tolerance_sigma > 0.0 && opt.tolerance_sigma < 1.0) {
         return Err(SolutionError::Knob {
@@ -682,6 +689,17 @@ fn validate(
             return Err(SolutionError::DistortionUnconstrained { spread_mas });
         }
     }
+    Ok(())
+}
+
+/// Each observation: finite, with its σ, and naming an exposure and a source that exist.
+fn validate_observations(
+    obs: &[Observation],
+    exposures: &[ExposureGeometry],
+    n_sources: usize,
+    opt: &Options,
+) -> Result<(), SolutionError> {
+    let cm = opt.calibration;
     if obs.len() > u32::MAX as usize {
         return Err(SolutionError::Knob {
             field: "observations (count)",
@@ -745,6 +763,17 @@ fn validate(
             });
         }
     }
+    Ok(())
+}
+
+/// The frame's anchor: at least two reference sources with a usable σ, and, for five parameters, two with their
+/// motions, over exposures that span time.
+fn validate_anchors(
+    exposures: &[ExposureGeometry],
+    refs: &[Reference],
+    n_sources: usize,
+    opt: &Options,
+) -> Result<(), SolutionError> {
     let anchored: Vec<bool> = {
         let mut a = vec![false; n_sources];
         for r in refs {
