@@ -264,8 +264,13 @@ pub fn solve_sequence<'py>(
         checkpoint: None,
         out: out.unwrap_or_else(|| sequence.join("solution")),
     };
-    let truth = sq::read_truth(&sequence, &p).map_err(err)?;
-    let done = study::run(&p, &truth, &req, 1, &mut |_| {}, &mut |_| {}).map_err(err)?;
+    // the solution runs without the GIL
+    let done = py
+        .detach(|| {
+            let truth = sq::read_truth(&sequence, &p)?;
+            study::run(&p, &truth, &req, 1, &mut |_| {}, &mut |_| {})
+        })
+        .map_err(err)?;
     let text = serde_json::to_string(&done.summary)
         .map_err(|e| PyValueError::new_err(format!("solution.json: {e}")))?;
     let d = PyDict::new(py);
