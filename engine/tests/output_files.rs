@@ -63,21 +63,26 @@ fn listing(dir: &Path) -> Vec<String> {
     out
 }
 
+/// `path` (under `dir`) must be declared for one of `by`: its pattern is added to `seen`.
+fn expect_declared(dir: &Path, path: &str, by: &[Cmd], seen: &mut BTreeSet<&'static str>) {
+    let d = by
+        .iter()
+        .find_map(|&c| files::declared(c, path))
+        .unwrap_or_else(|| {
+            panic!(
+                "{}: {path} is not declared for {by:?} in io::products::files",
+                dir.display()
+            )
+        });
+    seen.insert(d.pattern);
+}
+
 /// Each file under `dir` must be declared for one of `by`; the patterns met are added to `seen`.
 fn check(dir: &Path, by: &[Cmd], seen: &mut BTreeSet<&'static str>) {
     let found = listing(dir);
     assert!(!found.is_empty(), "{}: nothing written", dir.display());
     for path in found {
-        let d = by
-            .iter()
-            .find_map(|&c| files::declared(c, &path))
-            .unwrap_or_else(|| {
-                panic!(
-                    "{}: {path} is not declared for {by:?} in io::products::files",
-                    dir.display()
-                )
-            });
-        seen.insert(d.pattern);
+        expect_declared(dir, &path, by, seen);
     }
 }
 
@@ -289,11 +294,7 @@ fn every_file_written_is_declared_and_every_declared_file_is_written() {
         } else {
             &[Cmd::Merge, Cmd::Report]
         };
-        let decl = by
-            .iter()
-            .find_map(|&c| files::declared(c, &path))
-            .unwrap_or_else(|| panic!("sweep: {path} is not declared for {by:?}"));
-        seen.insert(decl.pattern);
+        expect_declared(&d("sweep"), &path, by, &mut seen);
     }
     let mut c = jsim();
     c.arg("sweep")

@@ -5,6 +5,7 @@
 
 use super::{Coverage, Plan, SequenceError, Spec};
 use crate::io::csv::{self, Cell};
+use crate::io::sequence_view::{COVERAGE_NAME, PLAN_NAME};
 use std::path::Path;
 
 /// Columns of `plan.csv`: each exposure's planned stare, pointing (ICRS, degrees), start and seed.
@@ -89,7 +90,7 @@ pub fn write(
             Cell::F(s.pa_deg),
         ]);
     }
-    csv::write(&at("plan.csv"), &PLAN_COLUMNS, &plan_rows)?;
+    csv::write(&at(PLAN_NAME), &PLAN_COLUMNS, &plan_rows)?;
     csv::write(&at("plan_truth.csv"), &PLAN_TRUTH_COLUMNS, &flown_rows)?;
     let cov_rows: Vec<Vec<Cell>> = (0..coverage.rows)
         .flat_map(|j| (0..coverage.columns).map(move |i| (i, j)))
@@ -102,7 +103,7 @@ pub fn write(
             ]
         })
         .collect();
-    csv::write(&at("coverage.csv"), &COVERAGE_COLUMNS, &cov_rows)?;
+    csv::write(&at(COVERAGE_NAME), &COVERAGE_COLUMNS, &cov_rows)?;
     crate::io::plot::count_map(
         &at("coverage.png"),
         &format!(

@@ -170,7 +170,7 @@ pub fn run(
             write_last(p, truth, req, &solved, last, log, will_write)?;
         }
     }
-    let path = req.out.join("precision_vs_n.csv");
+    let path = req.out.join(crate::io::sequence_view::PRECISION_NAME);
     will_write(&path);
     write_precision(&path, &table)?;
     plot_precision(
@@ -250,7 +250,7 @@ fn write_last(
         .map(|r| r.iter().map(|v| Cell::F(*v)).collect())
         .collect();
     csv::write(
-        &at("calibration_map.csv"),
+        &at(crate::io::sequence_view::CALIBRATION_MAP_NAME),
         &crate::io::sequence_view::CALIBRATION_MAP_COLUMNS,
         &rows,
     )?;
