@@ -121,6 +121,15 @@ fn bad_values_are_named_errors_and_write_nothing() {
                 vec!["crowded", "--reference-error-mas", "5"],
                 "--refcat-floor-mas 2 and --reference-error-mas 5",
             ),
+            // the synthetic solution's sizes are named as its own options (not the bench's)
+            (
+                vec!["solve-synthetic", "--exposures", "40"],
+                "--exposures 40: allowed multiples of 25",
+            ),
+            (
+                vec!["solve-synthetic", "--sources", "10"],
+                "--sources 10: allowed 100",
+            ),
         ]);
     for (args, needle) in cases {
         let out = jsim()

@@ -124,6 +124,8 @@ fn the_python_module_passes_its_pytest_suite() {
     run(
         Command::new(&vpython)
             .args(["-m", "pytest", "-q", "-p", "no:cacheprovider"])
+            // each test's time, for whoever looks into the suite's length (target/tmp/pytest.xml)
+            .arg(format!("--junitxml={}", tmp.join("pytest.xml").display()))
             .arg(root.join("engine/python/tests"))
             .env("JSIM_BIN", env!("CARGO_BIN_EXE_jsim"))
             .current_dir(tmp),

@@ -25,7 +25,7 @@ use std::path::{Path, PathBuf};
 #[derive(Debug, thiserror::Error)]
 pub enum IoError {
     /// The reason is part of the message and not a `source` too, so a chain of causes says it once.
-    #[error("{path}: {reason}")]
+    #[error("{path}: {}", reason_text(reason))]
     Io {
         path: PathBuf,
         reason: std::io::Error,
@@ -36,6 +36,18 @@ pub enum IoError {
     Format { path: PathBuf, message: String },
     #[error(transparent)]
     Plot(#[from] plot::PlotError),
+}
+
+/// An I/O error's text; a full disk or quota says what to do about it (the long jobs resume).
+fn reason_text(e: &std::io::Error) -> String {
+    use std::io::ErrorKind::{QuotaExceeded, StorageFull};
+    match e.kind() {
+        StorageFull | QuotaExceeded => format!(
+            "the disk is full ({e}): free space and rerun the same command (a sequence, a sweep, a \
+             solution with a checkpoint and a transit study resume where they stopped)"
+        ),
+        _ => e.to_string(),
+    }
 }
 
 impl IoError {
@@ -65,8 +77,9 @@ pub fn temp_path(path: &Path) -> PathBuf {
 
 /// Write `bytes` to `path` atomically (temporary file [`temp_path`] + rename).
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), IoError> {
+    // a failure names the file meant, not its temporary sibling (which is removed)
     write_via(path, &temp_path(path), |tmp| {
-        std::fs::write(tmp, bytes).map_err(|e| IoError::io(tmp, e))
+        std::fs::write(tmp, bytes).map_err(|e| IoError::io(path, e))
     })
 }
 
@@ -101,6 +114,44 @@ fn write_via<E: From<IoError>>(
     outcome
 }
 
+/// Remove the temporary files ([`temp_path`], [`write_atomic_with`]) that a killed run left in `dir`:
+/// `<name>.<pid>.tmp` and `<name>.<pid>.tmp.<ext>`, of another process than this one, for the names
+/// `owned` accepts. Whoever calls it owns those names (no other live process writes them: a shard owns its
+/// exposures, a study its directory). Returns how many went; a file that cannot be removed stays and is
+/// tried again on the next run.
+pub fn remove_stale_temps(dir: &Path, owned: impl Fn(&str) -> bool) -> usize {
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return 0;
+    };
+    let mine = std::process::id().to_string();
+    let mut removed = 0;
+    for e in entries.flatten() {
+        let name = e.file_name().to_string_lossy().to_string();
+        let Some((head, ext)) = name.rsplit_once(".tmp") else {
+            continue;
+        };
+        let Some((base, pid)) = head.rsplit_once('.') else {
+            continue;
+        };
+        let ext_ok = ext.is_empty()
+            || Path::new(base)
+                .extension()
+                .is_some_and(|x| format!(".{}", x.to_string_lossy()) == ext);
+        let is_pid = !pid.is_empty() && pid.bytes().all(|b| b.is_ascii_digit());
+        if ext_ok && is_pid && pid != mine && owned(base) && std::fs::remove_file(e.path()).is_ok()
+        {
+            removed += 1;
+        }
+    }
+    removed
+}
+
+/// serde: an f64 read back from JSON, where serde_json wrote NaN (and ±∞) as `null`: `null` is NaN.
+pub fn f64_or_nan<'de, D: serde::Deserializer<'de>>(d: D) -> Result<f64, D::Error> {
+    use serde::Deserialize;
+    Ok(Option::<f64>::deserialize(d)?.unwrap_or(f64::NAN))
+}
+
 /// Create a directory (and parents), naming it in the error.
 pub fn ensure_dir(dir: &Path) -> Result<(), IoError> {
     std::fs::create_dir_all(dir).map_err(|e| IoError::io(dir, e))
@@ -125,6 +176,40 @@ mod tests {
         assert_eq!(shell_quote("/data/run"), "'/data/run'");
         assert_eq!(shell_quote(Path::new("/data/my run")), "'/data/my run'");
         assert_eq!(shell_quote("it's $HOME"), r"'it'\''s $HOME'");
+    }
+
+    #[test]
+    fn a_killed_runs_temporary_files_are_removed_and_nothing_else() {
+        let dir = std::env::temp_dir().join(format!("jsim-io-stale-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        ensure_dir(&dir).expect("dir");
+        let me = std::process::id();
+        let names = [
+            "00001.csv.4242.tmp",        // a killed run's CSV: goes
+            "lightcurve.png.77.tmp.png", // a killed image writer's: goes
+            "00002.csv.4242.tmp",        // not owned: stays
+            "00001.csv",                 // a finished file: stays
+            "00001.csv.x42.tmp",         // not a pid: stays
+            "00001.csv.4242.tmp.fits",   // not its writer's extension: stays
+        ];
+        for n in names {
+            std::fs::write(dir.join(n), b"x").expect("write");
+        }
+        let ours = format!("00001.csv.{me}.tmp"); // this process's own, being written: stays
+        std::fs::write(dir.join(&ours), b"x").expect("write");
+        let removed =
+            remove_stale_temps(&dir, |base| base == "00001.csv" || base == "lightcurve.png");
+        assert_eq!(removed, 2);
+        let mut left: Vec<String> = std::fs::read_dir(&dir)
+            .expect("dir")
+            .flatten()
+            .map(|e| e.file_name().to_string_lossy().to_string())
+            .collect();
+        left.sort();
+        let mut expected = vec![names[2], names[3], names[4], names[5], ours.as_str()];
+        expected.sort();
+        assert_eq!(left, expected);
+        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]

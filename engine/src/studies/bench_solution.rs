@@ -260,7 +260,12 @@ pub fn solution_scaling(
     methods: &[Method],
     seed: u64,
 ) -> Result<Vec<BenchRow>, BenchError> {
-    check_sizes(counts, exposures)?;
+    check_sizes(
+        counts,
+        exposures,
+        "--solution-sources",
+        "--solution-exposures",
+    )?;
     let mut rows = Vec::new();
     for &n in counts {
         for &e in exposures {
@@ -293,7 +298,7 @@ pub fn solve_synthetic(
     seed: u64,
     checkpoint: Option<&std::path::Path>,
 ) -> Result<SyntheticRun, BenchError> {
-    check_sizes(&[n], &[n_exposures])?;
+    check_sizes(&[n], &[n_exposures], "--sources", "--exposures")?;
     let syn = synthetic(&SyntheticSpec {
         epochs: n_exposures / 25,
         calibration,
@@ -340,18 +345,24 @@ pub fn solve_synthetic(
     })
 }
 
-fn check_sizes(counts: &[usize], exposures: &[usize]) -> Result<(), BenchError> {
+/// The sizes' ranges; the errors name the options as the command calls them (`sources`, `exposures`).
+fn check_sizes(
+    counts: &[usize],
+    exposures: &[usize],
+    sources_option: &str,
+    exposures_option: &str,
+) -> Result<(), BenchError> {
     if let Some(e) = exposures
         .iter()
         .find(|e| **e == 0 || **e % 25 != 0 || **e > 10_000)
     {
         return Err(BenchError::Invalid(format!(
-            "--solution-exposures {e}: allowed multiples of 25 (the 5 × 5 pattern per epoch) up to 10000"
+            "{exposures_option} {e}: allowed multiples of 25 (the 5 × 5 pattern per epoch) up to 10000"
         )));
     }
     if let Some(n) = counts.iter().find(|n| **n < 100 || **n > 2_000_000) {
         return Err(BenchError::Invalid(format!(
-            "--solution-sources {n}: allowed 100 … 2·10⁶"
+            "{sources_option} {n}: allowed 100 … 2·10⁶"
         )));
     }
     Ok(())

@@ -136,6 +136,11 @@ pub const OUTPUT_FILES: &[OutputFile] = &[
     f("hw_{M}/lightcurve.png", &[Transit], "with --magnitudes: each stare's figure"),
     f("hw_{M}/truth.ecsv", &[Transit], "with --magnitudes: each stare's truth"),
     f("hw_{M}/transit.json", &[Transit], "with --magnitudes: each stare's report"),
+    f(
+        "hw_{M}/row.json",
+        &[Transit],
+        "with --magnitudes: each finished stare's row and fingerprint (a rerun resumes from them)",
+    ),
     // jsim sweep, merge, report
     f("sweep.json", &[Sweep], "the sweep's spec and its points"),
     f("points.csv", &[Sweep], "the grid's points"),

@@ -115,6 +115,11 @@ pub fn exposure_path(dir: &Path, index: usize) -> PathBuf {
     dir.join("exposures").join(format!("{index:05}.csv"))
 }
 
+/// The scoring's match of exposure `index`'s catalogue to the truth.
+pub fn truth_path(dir: &Path, index: usize) -> PathBuf {
+    dir.join("exposures").join(format!("{index:05}_truth.csv"))
+}
+
 /// The image of exposure `index` when the sequence keeps its images (`jsim sequence --keep-images`).
 pub fn image_path(dir: &Path, index: usize) -> PathBuf {
     dir.join("exposures").join(format!("fp_{index:05}.fits"))
@@ -266,6 +271,12 @@ pub fn run_exposure(
         }
     }
     crate::io::ensure_dir(&dir.join("exposures"))?;
+    // what a run killed while writing this exposure left (its files are this shard's alone)
+    let own = [&path, &truth_path(dir, e.index), &image_path(dir, e.index)]
+        .map(|p| p.file_name().map(|n| n.to_os_string()).unwrap_or_default());
+    crate::io::remove_stale_temps(&dir.join("exposures"), |name| {
+        own.iter().any(|o| o.as_os_str() == name)
+    });
     if out.keep_images {
         // before the catalogue, which marks the exposure done
         crate::io::focal_plane::write_focal_plane_exposure_to(
@@ -276,8 +287,7 @@ pub fn run_exposure(
     }
     // the truth first: a catalogue on disk always has its scoring beside it
     crate::io::csv::write(
-        &dir.join("exposures")
-            .join(format!("{:05}_truth.csv", e.index)),
+        &truth_path(dir, e.index),
         &["exposure", "array", "truth_id", "dx_mas", "dy_mas"],
         &truth_rows,
     )?;

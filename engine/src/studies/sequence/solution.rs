@@ -419,9 +419,7 @@ pub fn read_truth(dir: &Path, p: &Products) -> Result<Truth, SequenceError> {
         .collect();
     let (mut star_of_detection, mut single_error_mas) = (Vec::new(), Vec::new());
     for e in &p.plan.exposures[..p.exposures_run] {
-        let path = dir
-            .join("exposures")
-            .join(format!("{:05}_truth.csv", e.index));
+        let path = super::run::truth_path(dir, e.index);
         let (h, rows) = crate::io::csv::read(&path)?;
         let col = |n: &str| crate::io::csv::column_f64(&path, &h, &rows, n);
         let any = |n: &str| crate::io::csv::column_f64_any(&path, &h, &rows, n);

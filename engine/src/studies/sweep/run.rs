@@ -199,24 +199,6 @@ pub fn compute_unit(sweep: &Sweep, unit: usize, session: &Session) -> Result<Uni
     Ok(rows)
 }
 
-/// Remove this shard's temporary files left by a killed run (`shard-….csv.<pid>.tmp`).
-fn remove_stale_temps(dir: &Path, shard: Shard) {
-    let d = dir.join("shards");
-    let stem = shard.stem();
-    let mine = format!(".{}.tmp", std::process::id());
-    if let Ok(entries) = std::fs::read_dir(&d) {
-        for e in entries.flatten() {
-            let name = e.file_name().to_string_lossy().to_string();
-            if name.starts_with(&format!("{stem}."))
-                && name.ends_with(".tmp")
-                && !name.ends_with(&mine)
-            {
-                let _ = std::fs::remove_file(e.path());
-            }
-        }
-    }
-}
-
 /// Run (or resume) one shard of a sweep into `dir`.
 pub fn run_shard(
     session: &Session,
@@ -257,7 +239,9 @@ pub fn run_shard(
         Err(std::fs::TryLockError::Error(e)) => return Err(io_err(&lock_path, e)),
     }
     let lock = Held(lock);
-    remove_stale_temps(dir, shard);
+    // this shard's temporary files left by a killed run (`shard-….csv.<pid>.tmp`)
+    let stem = format!("{}.", shard.stem());
+    crate::io::remove_stale_temps(&dir.join("shards"), |name| name.starts_with(&stem));
     let own = read_shard(&rec, dir, shard)?;
     let mut units: BTreeMap<usize, UnitRows> = own
         .units

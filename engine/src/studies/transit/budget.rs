@@ -27,12 +27,17 @@ use crate::config::FlatField;
 use crate::numerics::stats;
 
 /// One bin's terms, ppm.
-#[derive(Debug, Clone, Copy, PartialEq, Default, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, serde::Serialize, serde::Deserialize)]
 pub struct Terms {
+    #[serde(deserialize_with = "crate::io::f64_or_nan")]
     pub photon_ppm: f64,
+    #[serde(deserialize_with = "crate::io::f64_or_nan")]
     pub read_ppm: f64,
+    #[serde(deserialize_with = "crate::io::f64_or_nan")]
     pub jitter_ppm: f64,
+    #[serde(deserialize_with = "crate::io::f64_or_nan")]
     pub flat_ppm: f64,
+    #[serde(deserialize_with = "crate::io::f64_or_nan")]
     pub drift_ppm: f64,
 }
 
@@ -60,7 +65,7 @@ impl Terms {
 }
 
 /// The budget at one plate, 1 h and 6.5 h.
-#[derive(Debug, Clone, Copy, PartialEq, Default, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, serde::Serialize, serde::Deserialize)]
 pub struct Budget {
     pub plate: Terms,
     pub hour: Terms,

@@ -3,6 +3,12 @@
 //! 0.3 % and 0.1 % transits (`precision.csv`, `precision.png`, `precision.json`; each stare's own outputs in
 //! `hw_<mag>/`). Each magnitude's stare runs with its own seed (the configuration's plus its index), so
 //! that the rows' noise is independent.
+//!
+//! The study resumes: each finished stare leaves its row in `hw_<mag>/row.json`, written last and whole,
+//! with a fingerprint of the configuration and the stare it ran. A rerun into the same directory takes
+//! every row whose fingerprint is the rerun's own and runs the other stares again whole (a stare is not
+//! cut into pieces: it is minutes at most). The gathered files are then the same bytes as an uninterrupted
+//! run's; `precision.json`'s `seconds` keep each stare's first run.
 
 use super::budget::Budget;
 use super::observe::StareError;
@@ -16,16 +22,19 @@ use crate::io::{IoError, write_atomic};
 use std::path::Path;
 
 /// One magnitude's stare.
-#[derive(Debug, Clone, serde::Serialize)]
+#[derive(Debug, Clone, serde::Serialize, serde::Deserialize)]
 pub struct MagRow {
+    #[serde(deserialize_with = "crate::io::f64_or_nan")]
     pub hw: f64,
     /// The stare's seed: the configuration's plus the magnitude's index (independent noise per row).
     pub seed: u64,
     pub sub_exposures: usize,
+    #[serde(deserialize_with = "crate::io::f64_or_nan")]
     pub exposure_s: f64,
     pub measured: Precision,
     pub budget: Budget,
     pub detections: Vec<Detection>,
+    #[serde(deserialize_with = "crate::io::f64_or_nan")]
     pub seconds: f64,
 }
 
@@ -63,10 +72,19 @@ pub fn run(
         let hw = s.target_hw;
         let mut c = cfg.clone();
         c.seed = cfg.seed.wrapping_add(k as u64);
+        let stare_dir = dir.join(format!("hw_{hw}"));
+        let checkpoint = stare_dir.join(ROW_NAME);
+        let print = fingerprint(&c, s);
+        // what a run killed while writing this stare left (the study owns its directory)
+        crate::io::remove_stale_temps(&stare_dir, |_| true);
+        if let Some(row) = finished(&checkpoint, &print) {
+            rows.push(row);
+            continue;
+        }
         let t = std::time::Instant::now();
         let (obs, r) = run::run(&c, s)?;
-        outputs::write(&dir.join(format!("hw_{hw}")), &obs, &r)?;
-        rows.push(MagRow {
+        outputs::write(&stare_dir, &obs, &r)?;
+        let row = MagRow {
             hw,
             seed: c.seed,
             sub_exposures: r.readout.sub_exposures,
@@ -75,10 +93,51 @@ pub fn run(
             budget: r.budget,
             detections: run::detections(spec, r.precision.hour_ppm),
             seconds: t.elapsed().as_secs_f64(),
-        });
+        };
+        let done = Finished {
+            fingerprint: print,
+            row,
+        };
+        write_atomic(
+            &checkpoint,
+            serde_json::to_string_pretty(&done)
+                .unwrap_or_default()
+                .as_bytes(),
+        )?;
+        rows.push(done.row);
     }
+    crate::io::remove_stale_temps(dir, |_| true);
     write(dir, &rows)?;
     Ok(rows)
+}
+
+/// A finished stare's file in its `hw_<mag>/` directory: its row, and what it was run with.
+pub const ROW_NAME: &str = "row.json";
+
+#[derive(serde::Serialize, serde::Deserialize)]
+struct Finished {
+    /// [`fingerprint`] of the configuration and stare it ran.
+    fingerprint: String,
+    row: MagRow,
+}
+
+/// SHA-256 (hex) over the JSON of the stare's configuration (its seed included) and its spec: a rerun
+/// with anything changed runs the stare again.
+fn fingerprint(cfg: &Config, spec: &Spec) -> String {
+    use sha2::{Digest, Sha256};
+    let mut h = Sha256::new();
+    h.update(serde_json::to_vec(cfg).unwrap_or_default());
+    h.update([0u8]);
+    h.update(serde_json::to_vec(spec).unwrap_or_default());
+    h.finalize().iter().map(|b| format!("{b:02x}")).collect()
+}
+
+/// The row a finished stare left at `path`, if it is there, whole and of this `fingerprint` (anything else:
+/// the stare runs again).
+fn finished(path: &Path, fingerprint: &str) -> Option<MagRow> {
+    let bytes = std::fs::read(path).ok()?;
+    let done: Finished = serde_json::from_slice(&bytes).ok()?;
+    (done.fingerprint == fingerprint).then_some(done.row)
 }
 
 fn write(dir: &Path, rows: &[MagRow]) -> Result<(), IoError> {

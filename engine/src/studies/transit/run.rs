@@ -45,13 +45,16 @@ pub struct LightCurve {
 }
 
 /// A light curve's measured scatter, ppm.
-#[derive(Debug, Clone, Copy, PartialEq, Default, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Default, serde::Serialize, serde::Deserialize)]
 pub struct Precision {
+    #[serde(deserialize_with = "crate::io::f64_or_nan")]
     pub plate_ppm: f64,
+    #[serde(deserialize_with = "crate::io::f64_or_nan")]
     pub hour_ppm: f64,
     /// Whether the 1-h figure is measured (≥ 3 bins of 1 h out of the transit) or the plates' scatter over
     /// √(plates per hour).
     pub hour_measured: bool,
+    #[serde(deserialize_with = "crate::io::f64_or_nan")]
     pub six_and_half_hours_ppm: f64,
     /// Whether the 6.5-h figure is measured (≥ 3 bins of 6.5 h) or the 1-h one over √6.5 (white beyond 1 h).
     pub six_and_half_measured: bool,
@@ -59,11 +62,14 @@ pub struct Precision {
 
 /// The *predicted* single-transit significance of a depth at this precision (a forecast for the mission's
 /// required depths, not a measurement: the injected transit's significance is [`Recovery::snr`]).
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Detection {
+    #[serde(deserialize_with = "crate::io::f64_or_nan")]
     pub depth: f64,
+    #[serde(deserialize_with = "crate::io::f64_or_nan")]
     pub duration_h: f64,
     /// depth / (σ_1h √(1 h / duration)).
+    #[serde(deserialize_with = "crate::io::f64_or_nan")]
     pub snr: f64,
     /// At or above [`DETECTION_SNR`].
     pub detected: bool,
