@@ -177,12 +177,16 @@ impl Default for FocalPlaneLayout {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct Bulge {
-    /// Stars per square arcminute with Hw ≤ `hw_max`.
+    /// Stars per square arcminute with `hw_min` ≤ Hw ≤ `density_hw_limit`: the field's density, counted to
+    /// a magnitude of its own so that `hw_max` cuts the same field.
     pub density_per_arcmin2: f64,
-    /// The brightest and faintest Hw drawn. The count is `density_per_arcmin2` × the area whatever they are:
-    /// a lower `hw_max` with the same density draws as many stars, all brighter — not the same field cut at
-    /// `hw_max` (for that, lower the density to the luminosity function's share, ≈ 10^(α·(hw_max − 17)) of the
-    /// default's).
+    /// The magnitude the density is counted to (17: where the default's figure comes from).
+    pub density_hw_limit: f64,
+    /// The brightest and faintest Hw drawn. The field holds the luminosity function's share of the density
+    /// between them: `density_per_arcmin2` × (10^(α·hw_max) − 10^(α·hw_min)) / (10^(α·density_hw_limit) −
+    /// 10^(α·hw_min)) per arcmin² ([`Bulge::drawn_per_arcmin2`]). A lower `hw_max` cuts the faint stars off the
+    /// same field (at 15, a quarter of the default's stars are left); `density_hw_limit = hw_max` makes the
+    /// density the count drawn, whatever the range.
     pub hw_min: f64,
     pub hw_max: f64,
     /// α of dN/dHw ∝ 10^(α·Hw).
@@ -205,10 +209,28 @@ pub struct Bulge {
     pub pm_b_sigma_mas_per_yr: f64,
 }
 
+impl Bulge {
+    /// Stars drawn per arcmin²: the density's share of the luminosity function dN/dHw ∝ 10^(α·Hw) between
+    /// `hw_min` and `hw_max`, the density counted between `hw_min` and `density_hw_limit` (∫ 10^(α·m) dm ∝
+    /// 10^(α·m); uniform in Hw for α = 0). Exactly the density when `density_hw_limit = hw_max`.
+    pub fn drawn_per_arcmin2(&self) -> f64 {
+        let f = |m: f64| {
+            if self.lf_slope.abs() < 1e-12 {
+                m
+            } else {
+                10f64.powf(self.lf_slope * m)
+            }
+        };
+        let share = (f(self.hw_max) - f(self.hw_min)) / (f(self.density_hw_limit) - f(self.hw_min));
+        self.density_per_arcmin2 * share
+    }
+}
+
 impl Default for Bulge {
     fn default() -> Self {
         Self {
             density_per_arcmin2: 100.0,
+            density_hw_limit: 17.0,
             hw_min: 8.0,
             hw_max: 17.0,
             lf_slope: 0.30,

@@ -594,18 +594,21 @@ impl Config {
         for (name, v) in [
             ("scene.bulge.hw_min", b.hw_min),
             ("scene.bulge.hw_max", b.hw_max),
+            ("scene.bulge.density_hw_limit", b.density_hw_limit),
         ] {
             check_finite(name, v)?;
             if !(-5.0..=35.0).contains(&v) {
                 return Err(invalid(name, v, "must be in -5..=35"));
             }
         }
-        if b.hw_min >= b.hw_max {
-            return Err(invalid(
-                "scene.bulge.hw_min",
-                b.hw_min,
-                "must be < scene.bulge.hw_max",
-            ));
+        for (name, v) in [
+            ("scene.bulge.hw_max", b.hw_max),
+            ("scene.bulge.density_hw_limit", b.density_hw_limit),
+        ] {
+            if b.hw_min >= v {
+                let rule = format!("must be < {name} = {v}");
+                return Err(invalid("scene.bulge.hw_min", b.hw_min, &rule));
+            }
         }
         check_finite("scene.bulge.lf_slope", b.lf_slope)?;
         if !(-2.0..=2.0).contains(&b.lf_slope) {
@@ -614,6 +617,16 @@ impl Config {
                 b.lf_slope,
                 "must be in -2..=2",
             ));
+        }
+        // the density extrapolated to hw_max along the luminosity function: bounded as the density is
+        let drawn = b.drawn_per_arcmin2();
+        if drawn > 1.0e4 {
+            let rule = format!(
+                "draws {drawn:.3e} stars per arcmin² (the density {} to Hw {} extrapolated along the \
+                 luminosity function): at most 1e4 are allowed; lower scene.bulge.hw_max or the density",
+                b.density_per_arcmin2, b.density_hw_limit
+            );
+            return Err(invalid("scene.bulge.hw_max", b.hw_max, &rule));
         }
         for (name, v) in [
             ("scene.bulge.jh_mean", b.jh_mean),

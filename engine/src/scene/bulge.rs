@@ -22,10 +22,16 @@ pub fn half_side_px(cfg: &Config) -> f64 {
     }
 }
 
-/// How many stars the field holds: density × area, rounded.
+/// How many stars the field over the focal plane holds ([`count_over`] before rounding).
 pub fn star_count(cfg: &Config) -> f64 {
-    let side_arcmin = 2.0 * half_side_px(cfg) * cfg.instrument.plate_scale_mas() / 6.0e4;
-    cfg.scene.bulge.density_per_arcmin2 * side_arcmin * side_arcmin
+    count_over(cfg, half_side_px(cfg))
+}
+
+/// The stars of a square of ±`h` focal-plane pixels: the stars drawn per arcmin²
+/// ([`crate::config::Bulge::drawn_per_arcmin2`]) × its area.
+fn count_over(cfg: &Config, h: f64) -> f64 {
+    let side_arcmin = 2.0 * h * cfg.instrument.plate_scale_mas() / 6.0e4;
+    cfg.scene.bulge.drawn_per_arcmin2() * side_arcmin * side_arcmin
 }
 
 /// Hw drawn from dN/dHw ∝ 10^(α·Hw) on [lo, hi] by inverting its cumulative distribution (uniform for α = 0).
@@ -83,8 +89,7 @@ pub fn draw_square(cfg: &Config, h: f64) -> Result<Vec<SkyStar>, SceneError> {
             "the bulge field's half side {h} px: must be > 0"
         )));
     }
-    let side_arcmin = 2.0 * h * cfg.instrument.plate_scale_mas() / 6.0e4;
-    let count = (b.density_per_arcmin2 * side_arcmin * side_arcmin).round();
+    let count = count_over(cfg, h).round();
     if count > MAX_CATALOGUE_STARS as f64 {
         return Err(SceneError::Invalid(format!(
             "scene.bulge.density_per_arcmin2 = {} gives {count:.0} stars over the focal plane: at most {} \
@@ -166,6 +171,38 @@ mod tests {
         let m = stats::mean(&jh);
         assert!((m - 2.209).abs() < 4.0 * 0.33 / n.sqrt() + 1e-3, "{m}");
         assert_eq!(draw(&c).expect("again"), s, "same seed, same field");
+    }
+
+    /// `hw_max` cuts the faint stars off the same field: the field drawn to Hw 15 holds as many stars as
+    /// the default field (to Hw 17) has brighter than 15 (a binomial count of its draws, 4σ), none fainter;
+    /// counted to its own limit (`density_hw_limit = hw_max`) the density is the count drawn.
+    #[test]
+    fn hw_max_cuts_the_same_field() {
+        let mut c = bulge_cfg();
+        c.scene.bulge.density_per_arcmin2 = 20.0;
+        let full = draw(&c).expect("draw");
+        let side_arcmin = 2.0 * half_side_px(&c) * c.instrument.plate_scale_mas() / 6.0e4;
+        let area = side_arcmin * side_arcmin;
+        assert_eq!(
+            full.len() as f64,
+            (20.0 * area).round(),
+            "the default counts to its hw_max"
+        );
+        let bright = full.iter().filter(|t| t.mag_hw <= 15.0).count() as f64;
+        c.scene.bulge.hw_max = 15.0;
+        let cut = draw(&c).expect("draw");
+        let n = full.len() as f64;
+        let p = bright / n;
+        let sigma = (n * p * (1.0 - p)).sqrt();
+        assert!(
+            (cut.len() as f64 - bright).abs() < 4.0 * sigma,
+            "{} stars to Hw 15 against {bright} of the full field's (σ {sigma:.0})",
+            cut.len()
+        );
+        assert!(cut.len() < full.len() / 3, "{}", cut.len());
+        assert!(cut.iter().all(|t| t.mag_hw <= 15.0));
+        c.scene.bulge.density_hw_limit = 15.0;
+        assert_eq!(draw(&c).expect("draw").len() as f64, (20.0 * area).round());
     }
 
     #[test]
