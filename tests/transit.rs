@@ -282,3 +282,58 @@ fn bad_stares_are_named_errors() {
         assert!(msg.starts_with(field), "{field}: {msg}");
     }
 }
+
+/// The windows go through the imaging detector's chain: with inter-pixel capacitance switched on, a
+/// noise-free window's peak pixel reads the kernel's share of its own charge and its neighbours' (the
+/// kernel summed by hand from the window without it, to 1e-6: the windows are f32), its total is kept (1e-3: the window's edge
+/// loses a little), and with a nonlinear response the peak reads N − βN².
+#[test]
+fn the_windows_go_through_the_detectors_chain() {
+    let mut c = cfg();
+    c.ace.case = AceCase::None;
+    noise_free(&mut c);
+    let spec = Spec {
+        drift_mas_per_h: 0.0,
+        orbital_drift_mas: 0.0,
+        ..stare(3)
+    };
+    let window = |c: &Config| observe(c, &spec).expect("stare").plates[1].windows_adu[0].clone();
+    let plain = window(&c);
+    let n = (plain.len() as f64).sqrt() as usize;
+    let (peak, _) =
+        plain.iter().enumerate().fold(
+            (0, f32::MIN),
+            |b, (i, v)| if *v > b.1 { (i, *v) } else { b },
+        );
+    let (px, py) = ((peak % n) as isize, (peak / n) as isize);
+    let at =
+        |w: &[f32], dx: isize, dy: isize| f64::from(w[((py + dy) * n as isize + px + dx) as usize]);
+    let (a, ad) = (0.015, 0.002);
+    c.detector.ipc_alpha = a;
+    c.detector.ipc_alpha_diagonal = ad;
+    let coupled = window(&c);
+    let edges = at(&plain, 1, 0) + at(&plain, -1, 0) + at(&plain, 0, 1) + at(&plain, 0, -1);
+    let corners = at(&plain, 1, 1) + at(&plain, -1, 1) + at(&plain, 1, -1) + at(&plain, -1, -1);
+    let expect = (1.0 - 4.0 * a - 4.0 * ad) * at(&plain, 0, 0) + a * edges + ad * corners;
+    let got = at(&coupled, 0, 0);
+    assert!(
+        (got / expect - 1.0).abs() < 1e-6,
+        "peak {got} against {expect}"
+    );
+    assert!(got < at(&plain, 0, 0), "the peak gives charge away");
+    let total = |w: &[f32]| w.iter().map(|v| f64::from(*v)).sum::<f64>();
+    assert!((total(&coupled) / total(&plain) - 1.0).abs() < 1e-3);
+    c.detector.ipc_alpha = 0.0;
+    c.detector.ipc_alpha_diagonal = 0.0;
+    let beta = 2e-7;
+    c.detector.nonlinearity_per_e = beta;
+    let bent = window(&c);
+    let g = c.detector.gain_e_per_adu;
+    let e = at(&plain, 0, 0) * g;
+    let expect = (e - beta * e * e) / g;
+    assert!(
+        (at(&bent, 0, 0) / expect - 1.0).abs() < 1e-6,
+        "{} against {expect}",
+        at(&bent, 0, 0)
+    );
+}

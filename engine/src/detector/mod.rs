@@ -19,6 +19,7 @@
 //! Every stage can be switched off (`shot_noise`, `read_noise`, `digitise`, σ_flat = 0). Noise streams are
 //! per image and per row, so the result does not depend on threading.
 
+pub mod chain;
 pub mod cosmic_rays;
 pub mod ipc;
 pub mod persistence;
@@ -26,7 +27,7 @@ pub mod persistence;
 use crate::config::Config;
 use crate::readout::ReadoutTiming;
 use crate::rng::{self, Stream};
-use rand_distr::{Distribution, Normal, Poisson, StandardNormal};
+use rand_distr::{Distribution, StandardNormal};
 use rayon::prelude::*;
 
 /// Data-quality bits.
@@ -127,8 +128,6 @@ pub fn expose(
 ) -> DetectorImage {
     let n = cfg.instrument.detector_px;
     let d = &cfg.detector;
-    let adc_max = (2f64.powi(d.adc_bits as i32) - 1.0).min(f32::MAX as f64);
-    let read = Normal::new(0.0, d.image_read_noise_e().max(0.0)).ok();
     let cosmic = cosmic_rays::deposits(cfg, image_index);
     let cosmic_flag_e = cosmic_rays::flag_threshold_e(cfg);
     let stream_index = |y: usize| image_index.wrapping_mul(1 << 20) + y as u64;
@@ -152,13 +151,7 @@ pub fn expose(
                     flags |= dq::BORDER;
                     0.0
                 };
-                let mut e = if d.shot_noise && mean_e > 0.0 {
-                    Poisson::new(mean_e)
-                        .map(|p| p.sample(&mut shot_rng))
-                        .unwrap_or(mean_e)
-                } else {
-                    mean_e
-                };
+                let mut e = chain::shot_e(d, mean_e, &mut shot_rng);
                 if let Some(c) = &cosmic {
                     let hit = c[i] as f64;
                     e += hit;
@@ -166,8 +159,8 @@ pub fn expose(
                         flags |= dq::COSMIC_RAY;
                     }
                 }
-                if e >= d.full_well_e {
-                    e = d.full_well_e;
+                let (e, full) = chain::clip_full_well(e, d.full_well_e);
+                if full {
                     flags |= dq::SATURATED;
                 }
                 out[x] = e;
@@ -175,14 +168,9 @@ pub fn expose(
             }
         });
     // what each pixel's node sees of its neighbours' charge, and its response to it
-    if d.ipc_alpha > 0.0 || d.ipc_alpha_diagonal > 0.0 {
-        charge = ipc::couple(&charge, n, d.ipc_alpha, d.ipc_alpha_diagonal);
-    }
-    if d.nonlinearity_per_e > 0.0 {
-        let beta = d.nonlinearity_per_e;
-        charge.par_iter_mut().for_each(|e| *e -= beta * *e * *e);
-    }
+    chain::respond(&mut charge, n, d);
     // read noise, gain, bias, the ADC
+    let readout = chain::Readout::image(d);
     let mut adu = vec![0.0f32; n * n];
     adu.par_chunks_mut(n)
         .zip(dqv.par_chunks_mut(n))
@@ -190,23 +178,9 @@ pub fn expose(
         .for_each(|(y, (out, dq_row))| {
             let mut read_rng = rng::stream(cfg.seed, Stream::ReadNoise, stream_index(y));
             for x in 0..n {
-                let mut e = charge[y * n + x];
-                if let (true, Some(rn)) = (d.read_noise, &read) {
-                    e += rn.sample(&mut read_rng);
-                }
-                let mut v = e / d.gain_e_per_adu + d.bias_adu;
-                if d.digitise {
-                    v = v.round();
-                    if v >= adc_max {
-                        v = adc_max;
-                        dq_row[x] |= dq::ADC_HIGH;
-                    }
-                    if v <= 0.0 {
-                        v = 0.0;
-                        dq_row[x] |= dq::ADC_LOW;
-                    }
-                }
-                out[x] = v as f32;
+                let (v, flags) = readout.adu(charge[y * n + x], &mut read_rng);
+                out[x] = v;
+                dq_row[x] |= flags;
             }
         });
     DetectorImage { n, adu, dq: dqv }

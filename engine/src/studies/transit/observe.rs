@@ -27,6 +27,7 @@ use crate::analysis::countermeasures::TelemetryQuality;
 use crate::analysis::countermeasures::telemetry::TelemetryRecord;
 use crate::analysis::lightcurve::aperture_fluxes;
 use crate::config::{AceCase, Config, IntraPixel, ReadoutOrder};
+use crate::detector::chain;
 use crate::integrate::StarJob;
 use crate::integrate::track::Track;
 use crate::io::instrument::{SurveyModel, reference_catalogue};
@@ -35,7 +36,7 @@ use crate::rng::{self, Stream};
 use crate::scene::Star;
 use crate::simulate::{ArrayPlace, ArraySpec, SimError, Simulator};
 use rand::RngExt;
-use rand_distr::{Distribution, Normal, Poisson};
+use rand_distr::{Distribution, Normal};
 use std::sync::Arc;
 
 /// The chosen readout of the stare.
@@ -388,7 +389,8 @@ pub fn observe(cfg: &Config, spec: &Spec) -> Result<Observation, StareError> {
     let span = c.readout.t_overhead_s + spec.plate_s;
     let d = &c.detector;
     let dark_e = d.dark_e_per_s * spec.plate_s;
-    let bias = d.bias_adu * readout.sub_exposures as f64;
+    let plate_readout = chain::Readout::coadded(d, readout.read_noise_e, readout.sub_exposures);
+    let full_well_e = d.full_well_e * readout.sub_exposures as f64;
     let mut plates = Vec::with_capacity(plates_n);
     let mut truth = Vec::with_capacity(plates_n);
     let mut moments: Vec<(Vec<f64>, Vec<f64>)> = windows
@@ -480,11 +482,12 @@ pub fn observe(cfg: &Config, spec: &Spec) -> Result<Observation, StareError> {
             ));
         }
         let mut r = rng::stream(c.seed, Stream::Transit, p as u64);
-        let read = Normal::new(0.0, readout.read_noise_e.max(1e-300)).ok();
         let mut windows_adu = Vec::with_capacity(windows.len());
         for (k, (wdw, st)) in windows.iter().zip(&stamps).enumerate() {
             let mut out = vec![0.0f32; wdw.n * wdw.n];
             let mut clean = vec![0.0f64; wdw.n * wdw.n];
+            let (mut charge, mut read_e) =
+                (vec![0.0f64; wdw.n * wdw.n], vec![0.0f64; wdw.n * wdw.n]);
             for y in 0..wdw.n {
                 for x in 0..wdw.n {
                     let (gx, gy) = (wdw.x0 + x as i64, wdw.y0 + y as i64);
@@ -498,20 +501,18 @@ pub fn observe(cfg: &Config, spec: &Spec) -> Result<Observation, StareError> {
                     clean[y * wdw.n + x] = star_e;
                     let i = y * wdw.n + x;
                     let mean = star_e.max(0.0) * flat_w[k][i] as f64 + dark_e;
-                    let mut e = if d.shot_noise && mean > 0.0 {
-                        Poisson::new(mean).map(|q| q.sample(&mut r)).unwrap_or(mean)
-                    } else {
-                        mean
-                    };
-                    if let (true, Some(rn)) = (d.read_noise, &read) {
-                        e += rn.sample(&mut r);
-                    }
-                    let mut v = e / d.gain_e_per_adu + bias;
-                    if d.digitise {
-                        v = v.round();
-                    }
-                    out[i] = v as f32;
+                    // the detector's own chain ([`crate::detector::chain`]): shot noise, the full well of
+                    // the co-added sub-exposures, then (after the node's response) the co-added readout;
+                    // each pixel's read noise drawn beside its shot noise, so the stream's order is the
+                    // pixel's
+                    let (e, _) = chain::clip_full_well(chain::shot_e(d, mean, &mut r), full_well_e);
+                    charge[i] = e;
+                    read_e[i] = plate_readout.noise_e(&mut r);
                 }
+            }
+            chain::respond(&mut charge, wdw.n, d);
+            for ((o, e), rn) in out.iter_mut().zip(&charge).zip(&read_e) {
+                *o = plate_readout.digitised(e + rn).0;
             }
             // the aperture at the star's true place in this plate (its nominal place, the drift and the
             // jitter's mean)
