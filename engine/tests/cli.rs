@@ -121,6 +121,10 @@ fn bad_values_are_named_errors_and_write_nothing() {
                 vec!["crowded", "--reference-error-mas", "5"],
                 "--refcat-floor-mas 2 and --reference-error-mas 5",
             ),
+            (
+                vec!["solve", "--sequence", "/nonexistent", "--model", "proper"],
+                "--model \"proper\": allowed auto, position, full",
+            ),
             // the synthetic solution's sizes are named as its own options (not the bench's)
             (
                 vec!["solve-synthetic", "--exposures", "40"],

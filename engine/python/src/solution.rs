@@ -83,15 +83,9 @@ pub fn solve<'py>(
     clip_sigma: f64,
     max_iterations: usize,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let model = match model {
-        "full" => SourceModel::Full,
-        "position" => SourceModel::Position,
-        m => {
-            return Err(PyValueError::new_err(format!(
-                "model = {m:?}: allowed \"full\" or \"position\""
-            )));
-        }
-    };
+    let model = SourceModel::parse(model, false)
+        .map_err(|e| PyValueError::new_err(format!("model = {e}")))?
+        .unwrap_or(SourceModel::Full);
     let method = method_of(method)?;
     let o = "observations";
     let (oe, os) = (
@@ -240,16 +234,8 @@ pub fn solve_sequence<'py>(
     method: &str,
 ) -> PyResult<Bound<'py, PyDict>> {
     use engine::studies::sequence::{solution as sq, solve_study as study};
-    let model = match model {
-        "auto" => None,
-        "full" => Some(SourceModel::Full),
-        "position" => Some(SourceModel::Position),
-        m => {
-            return Err(PyValueError::new_err(format!(
-                "model = {m:?}: allowed \"auto\", \"full\" or \"position\""
-            )));
-        }
-    };
+    let model = SourceModel::parse(model, true)
+        .map_err(|e| PyValueError::new_err(format!("model = {e}")))?;
     let method = method_of(method)?;
     let err = |e: engine::studies::sequence::SequenceError| PyValueError::new_err(e.to_string());
     let p = sq::read_products(&sequence).map_err(err)?;

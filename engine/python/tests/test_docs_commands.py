@@ -16,7 +16,8 @@ reductions below, which make the whole page set run in a few minutes:
 * `jsim solve-synthetic` solves 300 sources × 25 exposures;
 * `jsim transit` stares at most 1.7 h with 3 comparison stars, and its precision study takes two magnitudes of
   0.3 h;
-* the sweep files are copied with the same reduced `[base]` and 4 exposures in stares of 2;
+* the sweep files are copied with the same reduced `[base]`, 2 exposures in one stare, and each grid axis cut
+  to its first and last value;
 * `crowded_image.py` writes a 256-px array of 1500 stars instead of 1968 px and 10⁵ stars,
   `photutils_catalogue.py` cuts 128 px instead of 512, and `simulate_reference.py` runs the reduced configuration
   once (`--config`, `--repeat 1`) with the jsim binary under test;
@@ -207,7 +208,11 @@ def write_toml(path, data, prefix=""):
 def reduced_sweep(src, dst):
     with open(src, "rb") as f:
         s = tomllib.load(f)
-    s["exposures"], s["stare_exposures"] = 4, 2
+    s["exposures"], s["stare_exposures"] = 2, 2
+    # each grid axis at its two ends (a 3 × 3 × 2 grid is 2 × 2 × 2 points)
+    for key, values in s.get("grid", {}).items():
+        if isinstance(values, list) and len(values) > 2:
+            s["grid"][key] = [values[0], values[-1]]
     base = s.setdefault("base", {})
     for key, value in REDUCED.items():
         table, field = key.split(".")

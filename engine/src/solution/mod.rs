@@ -122,6 +122,19 @@ impl SourceModel {
     pub fn is_empty(self) -> bool {
         false
     }
+
+    /// The model a front end names: `position` or `full`, or (with `auto_allowed`) `auto`, which is None:
+    /// chosen from the sequence's span ([`crate::studies::sequence::solution`]). The error says what is
+    /// allowed; each front end puts its own option's name before it.
+    pub fn parse(name: &str, auto_allowed: bool) -> Result<Option<Self>, String> {
+        match name {
+            "position" => Ok(Some(SourceModel::Position)),
+            "full" => Ok(Some(SourceModel::Full)),
+            "auto" if auto_allowed => Ok(None),
+            _ if auto_allowed => Err(format!("{name:?}: allowed auto, position, full")),
+            _ => Err(format!("{name:?}: allowed position, full")),
+        }
+    }
 }
 
 /// How the joint least-squares problem is iterated to its solution.
@@ -345,4 +358,26 @@ pub enum SolutionError {
          checkpoint to resume"
     )]
     Interrupted(usize),
+}
+
+#[cfg(test)]
+mod tests {
+    use super::SourceModel;
+
+    #[test]
+    fn a_source_model_is_parsed_once_for_every_front_end() {
+        assert_eq!(
+            SourceModel::parse("full", false),
+            Ok(Some(SourceModel::Full))
+        );
+        assert_eq!(
+            SourceModel::parse("position", true),
+            Ok(Some(SourceModel::Position))
+        );
+        assert_eq!(SourceModel::parse("auto", true), Ok(None));
+        let e = SourceModel::parse("auto", false).expect_err("no auto here");
+        assert_eq!(e, "\"auto\": allowed position, full");
+        let e = SourceModel::parse("five", true).expect_err("unknown");
+        assert_eq!(e, "\"five\": allowed auto, position, full");
+    }
 }

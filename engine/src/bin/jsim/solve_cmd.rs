@@ -180,12 +180,7 @@ fn emit_slurm(a: &SolveArgs) -> Result<()> {
 }
 
 pub fn solve(a: &SolveArgs) -> Result<()> {
-    let model = match a.model.as_str() {
-        "auto" => None,
-        "position" => Some(SourceModel::Position),
-        "full" => Some(SourceModel::Full),
-        m => bail!("--model {m:?}: allowed auto, position, full"),
-    };
+    let model = SourceModel::parse(&a.model, true).map_err(|e| anyhow::anyhow!("--model {e}"))?;
     let spec = sq::SolveSpec {
         model,
         distortion_order: a.distortion_order,
