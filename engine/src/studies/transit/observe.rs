@@ -320,65 +320,17 @@ pub fn observe(cfg: &Config, spec: &Spec) -> Result<Observation, StareError> {
     let cadence = c.exposure_cadence_s();
     spec.validate(cadence).map_err(StareError::Spec)?;
     let realistic = c.ace.case == AceCase::Realistic;
-    // the simulator sees a still telescope; the stare cuts its own tracks (Gaussian ACE stays a blur)
-    let mut sim_cfg = c.clone();
-    if realistic {
-        sim_cfg.ace.case = AceCase::None;
-    }
-    sim_cfg.scene.j_minus_h = spec.target_j_minus_h;
-    sim_cfg.validate().map_err(|e| StareError::Sim(e.into()))?;
-    let stars = field(&sim_cfg, spec)?;
-    let (integrator, _) = crate::integrate::Integrator::choose(sim_cfg.fidelity.backend);
-    let sim = Simulator::build_array(
-        &sim_cfg,
-        ArraySpec {
-            place: ArrayPlace {
-                index: 0,
-                rotation_deg: 0.0,
-                seed: sim_cfg.seed,
-            },
-            stars: stars.clone(),
-        },
-        None,
-        Arc::new(crate::optics::PsfBank::new(&sim_cfg)),
-        Arc::new(Default::default()),
-        integrator,
-        None,
-    )?;
+    let (stars, sim) = stare_simulator(&c, spec, realistic)?;
     let jobs = sim.jobs()?;
     let readout = choose_readout(&c, spec, &stars, &jobs)?;
     let plates_n = spec.plates(cadence);
     let transit = spec.transit();
     let n = c.instrument.detector_px;
-    let half = (spec.window_px / 2) as i64;
     let catalogue_px = catalogue_places(&sim, &stars);
-    let windows: Vec<Window> = catalogue_px
-        .iter()
-        .map(|(x, y)| Window {
-            x0: x.round() as i64 - half,
-            y0: y.round() as i64 - half,
-            n: spec.window_px,
-        })
-        .collect();
-    if windows
-        .iter()
-        .any(|w| w.x0 < 0 || w.y0 < 0 || w.x0 as usize + w.n > n || w.y0 as usize + w.n > n)
-    {
-        return Err(StareError::Spec(
-            "transit.field_radius_px: a catalogue position puts a window off the detector".into(),
-        ));
-    }
-    let cut = |img: &[f32], w: &Window| -> Vec<f32> {
-        let mut out = Vec::with_capacity(w.n * w.n);
-        for y in 0..w.n {
-            let row = (w.y0 + y as i64) as usize * n + w.x0 as usize;
-            out.extend_from_slice(&img[row..row + w.n]);
-        }
-        out
-    };
-    let flat_w: Vec<Vec<f32>> = windows.iter().map(|w| cut(sim.flat(), w)).collect();
+    let windows = place_windows(&catalogue_px, spec.window_px, n)?;
+    let flat_w: Vec<Vec<f32>> = windows.iter().map(|w| w.cut(sim.flat(), n)).collect();
     let calibration_flat = match sim.calibration_flat() {
-        Some(f) => windows.iter().map(|w| cut(&f, w)).collect(),
+        Some(f) => windows.iter().map(|w| w.cut(&f, n)).collect(),
         None => windows.iter().map(|w| vec![1.0; w.n * w.n]).collect(),
     };
     // the ACE in chunks of whole plates
@@ -389,65 +341,30 @@ pub fn observe(cfg: &Config, spec: &Spec) -> Result<Observation, StareError> {
     let span = c.readout.t_overhead_s + spec.plate_s;
     let d = &c.detector;
     let dark_e = d.dark_e_per_s * spec.plate_s;
-    let plate_readout = chain::Readout::coadded(d, readout.read_noise_e, readout.sub_exposures);
-    let full_well_e = d.full_well_e * readout.sub_exposures as f64;
+    let detector = WindowDetector {
+        d: d.clone(),
+        dark_e,
+        full_well_e: d.full_well_e * readout.sub_exposures as f64,
+        readout: chain::Readout::coadded(d, readout.read_noise_e, readout.sub_exposures),
+    };
     let mut plates = Vec::with_capacity(plates_n);
     let mut truth = Vec::with_capacity(plates_n);
-    let mut moments: Vec<(Vec<f64>, Vec<f64>)> = windows
-        .iter()
-        .map(|w| (vec![0.0; w.n * w.n], vec![0.0; w.n * w.n]))
-        .collect();
     let radii = spec.aperture_radii_px();
-    let mut binned: Vec<BinnedFractions> = [1.0, 6.5]
-        .iter()
-        .map(|&bin_h| BinnedFractions {
-            bin_h,
-            ..Default::default()
-        })
-        .collect();
-    let mut clean_ap: Vec<Vec<Vec<f64>>> =
-        vec![vec![Vec::with_capacity(plates_n); windows.len()]; radii.len()];
-    let mut series: Option<(usize, AceSeries)> = None;
-    let mut next: Option<(usize, AceSeries)> = None;
+    let mut sums = CleanSums::new(&windows, radii.len(), plates_n);
+    let mut ace = AceChunks {
+        per_chunk,
+        plates_n,
+        series: None,
+        next: None,
+    };
     for p in 0..plates_n {
         let t0 = p as f64 * cadence;
         let t_mid = t0 + c.readout.t_overhead_s + 0.5 * spec.plate_s;
         let drift = drift_mas(spec, t_mid);
-        let chunk = p / per_chunk;
-        let mut sigma_mas = 0.0;
-        let mut track = if realistic {
-            if series.as_ref().map(|s| s.0) != Some(chunk) {
-                // two chunks at a time, one per core (each chunk's series is its own stream)
-                series = match next.take() {
-                    Some(s) if s.0 == chunk => Some(s),
-                    _ => {
-                        let more = (chunk + 1) * per_chunk < plates_n;
-                        let (a, b) = rayon::join(
-                            || AceSeries::generate(&c, c.seed, 1 + chunk as u64),
-                            || more.then(|| AceSeries::generate(&c, c.seed, 2 + chunk as u64)),
-                        );
-                        next = b.map(|b| (chunk + 1, b));
-                        Some((chunk, a))
-                    }
-                };
-            }
-            let s = &series.as_ref().expect("generated above").1;
-            let start_s = (p % per_chunk) as f64 * cadence + c.readout.t_overhead_s;
-            sigma_mas = record_sigma_mas(
-                s,
-                start_s,
-                spec.plate_s,
-                crate::rng::derive_seed(c.seed, &[chunk as u64]),
-            )?;
-            Track::from_series(
-                s,
-                (p % per_chunk) as f64 * cadence,
-                span,
-                c.fidelity.time_stride,
-                plate_scale,
-            )
+        let (mut track, sigma_mas) = if realistic {
+            ace.track(&c, spec, p, span)?
         } else {
-            Track::still(span, 1e-3)
+            (Track::still(span, 1e-3), 0.0)
         };
         let w = track.window(c.readout.t_overhead_s, span);
         let jitter_mean = track.window_mean(&w);
@@ -484,67 +401,15 @@ pub fn observe(cfg: &Config, spec: &Spec) -> Result<Observation, StareError> {
         let mut r = rng::stream(c.seed, Stream::Transit, p as u64);
         let mut windows_adu = Vec::with_capacity(windows.len());
         for (k, (wdw, st)) in windows.iter().zip(&stamps).enumerate() {
-            let mut out = vec![0.0f32; wdw.n * wdw.n];
-            let mut clean = vec![0.0f64; wdw.n * wdw.n];
-            let (mut charge, mut read_e) =
-                (vec![0.0f64; wdw.n * wdw.n], vec![0.0f64; wdw.n * wdw.n]);
-            for y in 0..wdw.n {
-                for x in 0..wdw.n {
-                    let (gx, gy) = (wdw.x0 + x as i64, wdw.y0 + y as i64);
-                    let (sx, sy) = (gx - st.x0, gy - st.y0);
-                    let star_e =
-                        if sx >= 0 && sy >= 0 && (sx as usize) < st.nx && (sy as usize) < st.ny {
-                            st.data[sy as usize * st.nx + sx as usize]
-                        } else {
-                            0.0
-                        };
-                    clean[y * wdw.n + x] = star_e;
-                    let i = y * wdw.n + x;
-                    let mean = star_e.max(0.0) * flat_w[k][i] as f64 + dark_e;
-                    // the detector's own chain ([`crate::detector::chain`]): shot noise, the full well of
-                    // the co-added sub-exposures, then (after the node's response) the co-added readout;
-                    // each pixel's read noise drawn beside its shot noise, so the stream's order is the
-                    // pixel's
-                    let (e, _) = chain::clip_full_well(chain::shot_e(d, mean, &mut r), full_well_e);
-                    charge[i] = e;
-                    read_e[i] = plate_readout.noise_e(&mut r);
-                }
-            }
-            chain::respond(&mut charge, wdw.n, d);
-            for ((o, e), rn) in out.iter_mut().zip(&charge).zip(&read_e) {
-                *o = plate_readout.digitised(e + rn).0;
-            }
+            let (out, clean) = expose_window(wdw, st, &flat_w[k], &detector, &mut r);
             // the aperture at the star's true place in this plate (its nominal place, the drift and the
-            // jitter's mean)
-            let (tx, ty) = (
+            // jitter's mean); the target's without its transit (a factor on its rate): the pointing's part
+            let place = (
                 stars[k].x_px + dxp + jitter_mean.0 - wdw.x0 as f64,
                 stars[k].y_px + dyp + jitter_mean.1 - wdw.y0 as f64,
             );
-            // the target's without its transit (a factor on its rate): the pointing's part alone
             let unit = if k == 0 { tf } else { 1.0 };
-            let fluxes = aperture_fluxes(
-                &clean,
-                wdw.n,
-                wdw.n,
-                tx,
-                ty,
-                &radii,
-                spec.annulus_in_px,
-                spec.annulus_out_px,
-            );
-            for (series, a) in clean_ap.iter_mut().zip(&fluxes) {
-                series[k].push(a.map_or(f64::NAN, |a| a.flux / unit));
-            }
-            let total: f64 = clean.iter().sum::<f64>().max(1e-300);
-            let (s1, s2) = &mut moments[k];
-            let q: Vec<f64> = clean.iter().map(|v| v / total).collect();
-            for (i, q) in q.iter().enumerate() {
-                s1[i] += q;
-                s2[i] += q * q;
-            }
-            for b in &mut binned {
-                b.add(k, t_mid / 3600.0, &q);
-            }
+            sums.add(k, &clean, wdw.n, place, unit, &radii, spec, t_mid / 3600.0);
             windows_adu.push(out);
         }
         let tel = Normal::new(0.0, spec.telemetry_error_mas.max(1e-300)).ok();
@@ -569,7 +434,7 @@ pub fn observe(cfg: &Config, spec: &Spec) -> Result<Observation, StareError> {
     let half_psf = (spec.window_px / 2).max(4);
     let model_psf = crate::analysis::epsf::Epsf::from_fn(4, half_psf, |x, y| kernel.eval(x, y));
     Ok(Observation {
-        clean_aperture_e: clean_ap,
+        clean_aperture_e: sums.clean_ap,
         model_psf,
         spec: spec.clone(),
         readout,
@@ -579,12 +444,259 @@ pub fn observe(cfg: &Config, spec: &Spec) -> Result<Observation, StareError> {
         calibration_flat,
         plates,
         truth,
-        pixel_moments: moments,
-        binned_fractions: binned,
+        pixel_moments: sums.moments,
+        binned_fractions: sums.binned,
         simulate_s: t_start.elapsed().as_secs_f64(),
         backend: sim.backend_name(),
         cfg: c,
     })
+}
+
+/// The stare's field and its simulator: it sees a still telescope (the stare cuts its own tracks; a
+/// Gaussian ACE stays a blur), the target's colour.
+fn stare_simulator(
+    c: &Config,
+    spec: &Spec,
+    realistic: bool,
+) -> Result<(Vec<Star>, Simulator), StareError> {
+    let mut sim_cfg = c.clone();
+    if realistic {
+        sim_cfg.ace.case = AceCase::None;
+    }
+    sim_cfg.scene.j_minus_h = spec.target_j_minus_h;
+    sim_cfg.validate().map_err(|e| StareError::Sim(e.into()))?;
+    let stars = field(&sim_cfg, spec)?;
+    let (integrator, _) = crate::integrate::Integrator::choose(sim_cfg.fidelity.backend);
+    let sim = Simulator::build_array(
+        &sim_cfg,
+        ArraySpec {
+            place: ArrayPlace {
+                index: 0,
+                rotation_deg: 0.0,
+                seed: sim_cfg.seed,
+            },
+            stars: stars.clone(),
+        },
+        None,
+        Arc::new(crate::optics::PsfBank::new(&sim_cfg)),
+        Arc::new(Default::default()),
+        integrator,
+        None,
+    )?;
+    Ok((stars, sim))
+}
+
+impl Window {
+    /// `img` (row-major, `detector_px` wide) cut to the window.
+    fn cut(&self, img: &[f32], detector_px: usize) -> Vec<f32> {
+        let mut out = Vec::with_capacity(self.n * self.n);
+        for y in 0..self.n {
+            let row = (self.y0 + y as i64) as usize * detector_px + self.x0 as usize;
+            out.extend_from_slice(&img[row..row + self.n]);
+        }
+        out
+    }
+}
+
+/// A window of `n` pixels around each catalogue place, all on a detector of `detector_px`.
+fn place_windows(
+    catalogue_px: &[(f64, f64)],
+    n: usize,
+    detector_px: usize,
+) -> Result<Vec<Window>, StareError> {
+    let half = (n / 2) as i64;
+    let windows: Vec<Window> = catalogue_px
+        .iter()
+        .map(|(x, y)| Window {
+            x0: x.round() as i64 - half,
+            y0: y.round() as i64 - half,
+            n,
+        })
+        .collect();
+    let off = |w: &Window| {
+        w.x0 < 0
+            || w.y0 < 0
+            || w.x0 as usize + w.n > detector_px
+            || w.y0 as usize + w.n > detector_px
+    };
+    if windows.iter().any(off) {
+        return Err(StareError::Spec(
+            "transit.field_radius_px: a catalogue position puts a window off the detector".into(),
+        ));
+    }
+    Ok(windows)
+}
+
+/// What the noise-free windows give the scoring and the budget (truth), summed plate by plate: each
+/// star's aperture flux at its true place, its pixel fractions' Σp and Σp², and those binned in time.
+struct CleanSums {
+    clean_ap: Vec<Vec<Vec<f64>>>,
+    moments: Vec<(Vec<f64>, Vec<f64>)>,
+    binned: Vec<BinnedFractions>,
+}
+
+impl CleanSums {
+    fn new(windows: &[Window], radii: usize, plates_n: usize) -> Self {
+        Self {
+            clean_ap: vec![vec![Vec::with_capacity(plates_n); windows.len()]; radii],
+            moments: windows
+                .iter()
+                .map(|w| (vec![0.0; w.n * w.n], vec![0.0; w.n * w.n]))
+                .collect(),
+            binned: [1.0, 6.5]
+                .iter()
+                .map(|&bin_h| BinnedFractions {
+                    bin_h,
+                    ..Default::default()
+                })
+                .collect(),
+        }
+    }
+
+    /// Star `k`'s clean window (`n` × `n`, e⁻) of a plate at `t_h` hours: its aperture fluxes at `place`
+    /// (window px) ÷ `unit`, and its pixel fractions.
+    #[allow(clippy::too_many_arguments)]
+    fn add(
+        &mut self,
+        k: usize,
+        clean: &[f64],
+        n: usize,
+        place: (f64, f64),
+        unit: f64,
+        radii: &[f64],
+        spec: &Spec,
+        t_h: f64,
+    ) {
+        let fluxes = aperture_fluxes(
+            clean,
+            n,
+            n,
+            place.0,
+            place.1,
+            radii,
+            spec.annulus_in_px,
+            spec.annulus_out_px,
+        );
+        for (series, a) in self.clean_ap.iter_mut().zip(&fluxes) {
+            series[k].push(a.map_or(f64::NAN, |a| a.flux / unit));
+        }
+        let total: f64 = clean.iter().sum::<f64>().max(1e-300);
+        let (s1, s2) = &mut self.moments[k];
+        let q: Vec<f64> = clean.iter().map(|v| v / total).collect();
+        for (i, q) in q.iter().enumerate() {
+            s1[i] += q;
+            s2[i] += q * q;
+        }
+        for b in &mut self.binned {
+            b.add(k, t_h, &q);
+        }
+    }
+}
+
+/// The detector a plate's windows are read with: the imaging detector's chain ([`crate::detector::chain`])
+/// for n co-added sub-exposures, the plate's dark charge.
+struct WindowDetector {
+    d: crate::config::Detector,
+    dark_e: f64,
+    /// The sum's full well: n sub-exposures' (each kept below its own by the readout's choice).
+    full_well_e: f64,
+    readout: chain::Readout,
+}
+
+/// One window of a plate: the star's noise-free electrons `st` cut to `wdw` (the clean window, e⁻), and
+/// the window as read (ADU): × the flat, + dark, shot noise, the full well, the node's response, the
+/// co-added readout. Each pixel's read noise is drawn beside its shot noise from `r`, so the stream's
+/// order is the pixels'.
+fn expose_window(
+    wdw: &Window,
+    st: &crate::integrate::Stamp,
+    flat: &[f32],
+    det: &WindowDetector,
+    r: &mut impl rand::Rng,
+) -> (Vec<f32>, Vec<f64>) {
+    let n2 = wdw.n * wdw.n;
+    let (mut clean, mut charge, mut read_e) =
+        (vec![0.0f64; n2], vec![0.0f64; n2], vec![0.0f64; n2]);
+    for y in 0..wdw.n {
+        for x in 0..wdw.n {
+            let (sx, sy) = (wdw.x0 + x as i64 - st.x0, wdw.y0 + y as i64 - st.y0);
+            let star_e = if sx >= 0 && sy >= 0 && (sx as usize) < st.nx && (sy as usize) < st.ny {
+                st.data[sy as usize * st.nx + sx as usize]
+            } else {
+                0.0
+            };
+            let i = y * wdw.n + x;
+            clean[i] = star_e;
+            let mean = star_e.max(0.0) * flat[i] as f64 + det.dark_e;
+            let (e, _) = chain::clip_full_well(chain::shot_e(&det.d, mean, r), det.full_well_e);
+            charge[i] = e;
+            read_e[i] = det.readout.noise_e(r);
+        }
+    }
+    chain::respond(&mut charge, wdw.n, &det.d);
+    let out = charge
+        .iter()
+        .zip(&read_e)
+        .map(|(e, rn)| det.readout.digitised(e + rn).0)
+        .collect();
+    (out, clean)
+}
+
+/// The realistic ACE of a stare, generated in chunks of whole plates (two at a time, one per core; each
+/// chunk's series is its own stream), and each plate's track cut from its chunk.
+struct AceChunks {
+    per_chunk: usize,
+    plates_n: usize,
+    series: Option<(usize, AceSeries)>,
+    next: Option<(usize, AceSeries)>,
+}
+
+impl AceChunks {
+    /// Plate `p`'s track over `span` seconds and its attitude record's jitter σ (mas).
+    fn track(
+        &mut self,
+        c: &Config,
+        spec: &Spec,
+        p: usize,
+        span: f64,
+    ) -> Result<(Track, f64), StareError> {
+        let cadence = c.exposure_cadence_s();
+        let chunk = p / self.per_chunk;
+        if self.series.as_ref().map(|s| s.0) != Some(chunk) {
+            self.series = match self.next.take() {
+                Some(s) if s.0 == chunk => Some(s),
+                _ => {
+                    let more = (chunk + 1) * self.per_chunk < self.plates_n;
+                    let (a, b) = rayon::join(
+                        || AceSeries::generate(c, c.seed, 1 + chunk as u64),
+                        || more.then(|| AceSeries::generate(c, c.seed, 2 + chunk as u64)),
+                    );
+                    self.next = b.map(|b| (chunk + 1, b));
+                    Some((chunk, a))
+                }
+            };
+        }
+        let Some((_, s)) = self.series.as_ref() else {
+            return Err(StareError::Spec(
+                "the ACE series of a chunk was not generated".into(),
+            ));
+        };
+        let start_s = (p % self.per_chunk) as f64 * cadence + c.readout.t_overhead_s;
+        let sigma_mas = record_sigma_mas(
+            s,
+            start_s,
+            spec.plate_s,
+            crate::rng::derive_seed(c.seed, &[chunk as u64]),
+        )?;
+        let track = Track::from_series(
+            s,
+            (p % self.per_chunk) as f64 * cadence,
+            span,
+            c.fidelity.time_stride,
+            c.instrument.plate_scale_mas(),
+        );
+        Ok((track, sigma_mas))
+    }
 }
 
 /// Each star's place on the array from the reference catalogue (every star of the stare is in it: the
