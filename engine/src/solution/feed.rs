@@ -223,87 +223,8 @@ pub fn feed(
         .first()
         .map(|r| r.ref_epoch_jyear)
         .ok_or(FeedError::Reference(0))?;
-    let plane = |ra: f64, dec: f64| -> [f64; 2] {
-        let (x, y) = apparent::offset_mas(tangent_deg, (ra, dec));
-        [x, y]
-    };
-    // each exposure's arrays' design WCS and focal plane, its geometry and the aberration its design model
-    // leaves at the tangent point
-    struct Design {
-        wcs: Vec<crate::sky::wcs::ArrayWcs>,
-        fp: crate::sky::focal_plane::FocalPlane,
-        shift_mas: [f64; 2],
-    }
-    let mut models = Vec::with_capacity(designs.len());
-    let mut exposures = Vec::with_capacity(designs.len());
-    for (e, d) in designs.iter().enumerate() {
-        let err = |m: String| FeedError::Design(e, m);
-        let wcs = (0..4)
-            .map(|k| crate::sky::array_wcs(&d.cfg, k))
-            .collect::<Result<Vec<_>, _>>()
-            .map_err(err)?;
-        let fp = crate::sky::focal_plane(&d.cfg).nominal();
-        let (c, to_plane) = focal_map(&wcs[0], &fp, tangent_deg).map_err(err)?;
-        let observer = crate::sky::orbit(&d.cfg).map_err(err)?.observer(&d.mid);
-        let place = apparent::Place {
-            years: d.mid.julian_year_tdb() - ref_epoch,
-            observer,
-            apparent: true,
-        };
-        let (ra_a, dec_a) = apparent::direction(
-            tangent_deg.0,
-            tangent_deg.1,
-            &apparent::Motion::default(),
-            &place,
-        );
-        let shift = plane(ra_a, dec_a);
-        exposures.push(ExposureGeometry {
-            t_yr: d.mid.julian_year_tdb() - ref_epoch,
-            parallax_factor: apparent::parallax_factors(
-                tangent_deg.0,
-                tangent_deg.1,
-                observer.position_au,
-            ),
-            centre_mas: c,
-            to_plane,
-        });
-        models.push(Design {
-            wcs,
-            fp,
-            shift_mas: shift,
-        });
-    }
-    // every detection on the plane, through its design model
-    let mut places = Vec::with_capacity(detections.len());
-    for (index, d) in detections.iter().enumerate() {
-        let bad = |what: String| FeedError::Detection { index, what };
-        if d.exposure >= designs.len() {
-            return Err(bad(format!(
-                "exposure {} (the plan has {})",
-                d.exposure,
-                designs.len()
-            )));
-        }
-        if d.array >= 4 {
-            return Err(bad(format!("array {} (allowed 0 … 3)", d.array)));
-        }
-        // a flagged detection is left out: only its position must be a number
-        let bound_ok = d.flags != 0 || (d.crlb_px.is_finite() && d.crlb_px >= 0.0);
-        if !(d.x_px.is_finite() && d.y_px.is_finite() && bound_ok) {
-            return Err(bad(format!(
-                "x_px {}, y_px {}, crlb {}: a position must be finite, an unflagged detection's bound \
-                 finite and ≥ 0",
-                d.x_px, d.y_px, d.crlb_px
-            )));
-        }
-        let m = &models[d.exposure];
-        let p = m.wcs[d.array]
-            .pixel_to_sky(d.x_px, d.y_px)
-            .map(|(ra, dec)| plane(ra, dec))
-            .ok_or_else(|| bad("its pixel has no sky through the design WCS".into()))?;
-        let (fx, fy) = m.fp.to_focal_plane(d.array, d.x_px, d.y_px);
-        places.push((p, [fx, fy]));
-    }
+    let (models, exposures) = design_models(designs, tangent_deg, ref_epoch)?;
+    let places = detections_on_plane(detections, &models, tangent_deg)?;
     // the references on the plane, their parameters and a grid of them
     let mut refs = Vec::with_capacity(references.len());
     let mut ref_grid = Grid::new(opt.search_radius_mas.max(1000.0));
@@ -340,7 +261,157 @@ pub fn feed(
     if maps.is_empty() {
         return Err(FeedError::NothingAligned);
     }
-    // identification, exposure by exposure
+    let ids = identify(detections, designs.len(), &places, &maps, &refs, opt);
+    let (obs, detection, kept_ref, n_sources, left_out) =
+        observations(detections, &places, &exposures, ids, opt);
+    let solved_refs = kept_ref
+        .iter()
+        .enumerate()
+        .filter_map(|(s, r)| {
+            r.map(|r| Reference {
+                source: s,
+                params: refs[r],
+                sigma: references[r].sigma,
+            })
+        })
+        .collect();
+    Ok(Fed {
+        obs,
+        exposures,
+        refs: solved_refs,
+        n_sources,
+        detection,
+        reference: kept_ref,
+        tangent_deg,
+        ref_epoch_jyear: ref_epoch,
+        unaligned,
+        left_out,
+    })
+}
+
+/// A sky position (ICRS degrees) on the tangent plane at `tangent_deg`, mas.
+fn on_plane(tangent_deg: (f64, f64), ra_deg: f64, dec_deg: f64) -> [f64; 2] {
+    let (x, y) = apparent::offset_mas(tangent_deg, (ra_deg, dec_deg));
+    [x, y]
+}
+
+/// An exposure's design model: its arrays' design WCS and focal plane, and the aberration the design
+/// leaves at the tangent point.
+struct Design {
+    wcs: Vec<crate::sky::wcs::ArrayWcs>,
+    fp: crate::sky::focal_plane::FocalPlane,
+    shift_mas: [f64; 2],
+}
+
+/// Each exposure's design model and its geometry (epoch, parallax factors, the map of its arrays onto
+/// the plane).
+fn design_models(
+    designs: &[DesignExposure],
+    tangent_deg: (f64, f64),
+    ref_epoch: f64,
+) -> Result<(Vec<Design>, Vec<ExposureGeometry>), FeedError> {
+    let mut models = Vec::with_capacity(designs.len());
+    let mut exposures = Vec::with_capacity(designs.len());
+    for (e, d) in designs.iter().enumerate() {
+        let err = |m: String| FeedError::Design(e, m);
+        let wcs = (0..4)
+            .map(|k| crate::sky::array_wcs(&d.cfg, k))
+            .collect::<Result<Vec<_>, _>>()
+            .map_err(err)?;
+        let fp = crate::sky::focal_plane(&d.cfg).nominal();
+        let (c, to_plane) = focal_map(&wcs[0], &fp, tangent_deg).map_err(err)?;
+        let observer = crate::sky::orbit(&d.cfg).map_err(err)?.observer(&d.mid);
+        let place = apparent::Place {
+            years: d.mid.julian_year_tdb() - ref_epoch,
+            observer,
+            apparent: true,
+        };
+        let (ra_a, dec_a) = apparent::direction(
+            tangent_deg.0,
+            tangent_deg.1,
+            &apparent::Motion::default(),
+            &place,
+        );
+        exposures.push(ExposureGeometry {
+            t_yr: d.mid.julian_year_tdb() - ref_epoch,
+            parallax_factor: apparent::parallax_factors(
+                tangent_deg.0,
+                tangent_deg.1,
+                observer.position_au,
+            ),
+            centre_mas: c,
+            to_plane,
+        });
+        models.push(Design {
+            wcs,
+            fp,
+            shift_mas: on_plane(tangent_deg, ra_a, dec_a),
+        });
+    }
+    Ok((models, exposures))
+}
+
+/// Every detection on the plane through its exposure's design model (mas), with its focal-plane place
+/// (px); a detection of no exposure or array, or with a position or bound that is not a number, is named.
+fn detections_on_plane(
+    detections: &[Detection],
+    models: &[Design],
+    tangent_deg: (f64, f64),
+) -> Result<Vec<([f64; 2], [f64; 2])>, FeedError> {
+    let mut places = Vec::with_capacity(detections.len());
+    for (index, d) in detections.iter().enumerate() {
+        let bad = |what: String| FeedError::Detection { index, what };
+        if d.exposure >= models.len() {
+            return Err(bad(format!(
+                "exposure {} (the plan has {})",
+                d.exposure,
+                models.len()
+            )));
+        }
+        if d.array >= 4 {
+            return Err(bad(format!("array {} (allowed 0 … 3)", d.array)));
+        }
+        // a flagged detection is left out: only its position must be a number
+        let bound_ok = d.flags != 0 || (d.crlb_px.is_finite() && d.crlb_px >= 0.0);
+        if !(d.x_px.is_finite() && d.y_px.is_finite() && bound_ok) {
+            return Err(bad(format!(
+                "x_px {}, y_px {}, crlb {}: a position must be finite, an unflagged detection's bound \
+                 finite and ≥ 0",
+                d.x_px, d.y_px, d.crlb_px
+            )));
+        }
+        let m = &models[d.exposure];
+        let p = m.wcs[d.array]
+            .pixel_to_sky(d.x_px, d.y_px)
+            .map(|(ra, dec)| on_plane(tangent_deg, ra, dec))
+            .ok_or_else(|| bad("its pixel has no sky through the design WCS".into()))?;
+        let (fx, fy) = m.fp.to_focal_plane(d.array, d.x_px, d.y_px);
+        places.push((p, [fx, fy]));
+    }
+    Ok(places)
+}
+
+/// The identification: each detection's source (the references first, then sources found along the way),
+/// and how many detections were left out.
+struct Identified {
+    source_pos: Vec<[f64; 2]>,
+    /// Each source's reference, if it is one.
+    reference: Vec<Option<usize>>,
+    assigned: Vec<Option<usize>>,
+    left_out: usize,
+}
+
+/// Identify the detections exposure by exposure: each aligned, unflagged detection's nearest source
+/// within the match radius (a source keeps its nearest detection; the farther is left out), and a new
+/// source where none is near.
+fn identify(
+    detections: &[Detection],
+    n_exposures: usize,
+    places: &[([f64; 2], [f64; 2])],
+    maps: &HashMap<(usize, usize), [f64; 6]>,
+    refs: &[[f64; 5]],
+    opt: &FeedOptions,
+) -> Identified {
     let mut source_pos: Vec<[f64; 2]> = refs.iter().map(|r| [r[0], r[1]]).collect();
     let mut reference: Vec<Option<usize>> = (0..refs.len()).map(Some).collect();
     let mut grid = Grid::new(opt.match_radius_mas);
@@ -349,7 +420,7 @@ pub fn feed(
     }
     let mut assigned: Vec<Option<usize>> = vec![None; detections.len()];
     let mut left_out = 0usize;
-    let mut by_exposure: Vec<Vec<usize>> = vec![Vec::new(); designs.len()];
+    let mut by_exposure: Vec<Vec<usize>> = vec![Vec::new(); n_exposures];
     for (i, d) in detections.iter().enumerate() {
         by_exposure[d.exposure].push(i);
     }
@@ -403,7 +474,37 @@ pub fn feed(
             assigned[i] = Some(s);
         }
     }
-    // sources with enough observations, renumbered
+    Identified {
+        source_pos,
+        reference,
+        assigned,
+        left_out,
+    }
+}
+
+/// The observations of the sources seen often enough (renumbered), each with its detection's index, and
+/// the kept sources' references: (observations, detection of each, reference of each source, sources,
+/// detections left out).
+#[allow(clippy::type_complexity)]
+fn observations(
+    detections: &[Detection],
+    places: &[([f64; 2], [f64; 2])],
+    exposures: &[ExposureGeometry],
+    ids: Identified,
+    opt: &FeedOptions,
+) -> (
+    Vec<Observation>,
+    Vec<usize>,
+    Vec<Option<usize>>,
+    usize,
+    usize,
+) {
+    let Identified {
+        source_pos,
+        reference,
+        assigned,
+        mut left_out,
+    } = ids;
     let mut count = vec![0usize; source_pos.len()];
     for s in assigned.iter().flatten() {
         count[*s] += 1;
@@ -447,29 +548,7 @@ pub fn feed(
         });
         detection.push(i);
     }
-    let solved_refs = kept_ref
-        .iter()
-        .enumerate()
-        .filter_map(|(s, r)| {
-            r.map(|r| Reference {
-                source: s,
-                params: refs[r],
-                sigma: references[r].sigma,
-            })
-        })
-        .collect();
-    Ok(Fed {
-        obs,
-        exposures,
-        refs: solved_refs,
-        n_sources,
-        detection,
-        reference: kept_ref,
-        tangent_deg,
-        ref_epoch_jyear: ref_epoch,
-        unaligned,
-        left_out,
-    })
+    (obs, detection, kept_ref, n_sources, left_out)
 }
 
 /// A star's parameters on the plane at `tangent_deg`: its place (ICRS degrees) projected, its proper motion
