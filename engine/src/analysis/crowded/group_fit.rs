@@ -145,15 +145,17 @@ pub fn fit_group_with<P: Profile>(
         return Vec::new();
     }
     // the pixels: the union of the members' discs, with each member's own disc remembered for its χ²
-    let mut own: Vec<Vec<usize>> = Vec::with_capacity(n);
-    let mut edge = vec![false; n];
-    let mut bad = vec![false; n];
+    let mut discs = Discs {
+        own: Vec::with_capacity(n),
+        edge: vec![false; n],
+        bad: vec![false; n],
+    };
     let mut all: Vec<(usize, f64, f64)> = Vec::new();
     for (k, m) in members.iter().enumerate() {
         let (p, e, b) = select(img, m.x, m.y, opt.radius_px);
-        edge[k] = e;
-        bad[k] = b;
-        own.push(p.iter().map(|q| q.0).collect());
+        discs.edge[k] = e;
+        discs.bad[k] = b;
+        discs.own.push(p.iter().map(|q| q.0).collect());
         all.extend(p);
     }
     all.sort_unstable_by_key(|p| p.0);
@@ -162,50 +164,6 @@ pub fn fit_group_with<P: Profile>(
         .iter()
         .map(|&(_, px, py)| outsiders.at(epsf, node_error, px, py))
         .unzip();
-    let saturated: Vec<bool> = (0..n).map(|k| members[k].saturated || bad[k]).collect();
-    let np = 3 * n + usize::from(opt.fit_sky);
-    let mut p: Vec<f64> = members
-        .iter()
-        .flat_map(|m| [m.x, m.y, m.flux.max(1.0)])
-        .collect();
-    if opt.fit_sky {
-        p.push(sky);
-    }
-    let sky_of = |p: &[f64]| if opt.fit_sky { p[3 * n] } else { sky };
-    let h = epsf.half_px();
-    // model of pixel (px, py): (Σ f ψ, its saturated members' model error; the nonzero Jacobian entries)
-    let eval = |p: &[f64], i: usize, px: f64, py: f64, jac: &mut Vec<(usize, f64)>| -> (f64, f64) {
-        jac.clear();
-        let (mut star, mut sat) = (0.0, 0.0);
-        for k in 0..n {
-            let (dx, dy) = (px - p[3 * k], py - p[3 * k + 1]);
-            if dx.abs() >= h || dy.abs() >= h {
-                continue;
-            }
-            let (psi, gx, gy) = match profiles {
-                Some(pr) => pr[k].eval_at(i, px, py, p[3 * k], p[3 * k + 1]),
-                None => epsf.eval(dx, dy),
-            };
-            let f = p[3 * k + 2];
-            star += f * psi;
-            if saturated[k] {
-                sat += SATURATED_MODEL_ERROR * (f * psi).abs() + f.abs() * node_error;
-            }
-            if !members[k].forced {
-                jac.push((3 * k, -f * gx));
-                jac.push((3 * k + 1, -f * gy));
-            }
-            jac.push((3 * k + 2, psi));
-        }
-        if opt.fit_sky {
-            jac.push((3 * n, 1.0));
-        }
-        (star, sat)
-    };
-    // σᵢ²: the single-star fit's, plus the saturated stars' model error
-    let variance = |mu: f64, star: f64, model_e: f64| {
-        pixel_variance(mu, star, img.var_floor_e2, img.flat_sigma) + model_e * model_e
-    };
     // the members' flux priors: (parameter index, mean, 1/σ²)
     let priors: Vec<(usize, f64, f64)> = members
         .iter()
@@ -216,37 +174,166 @@ pub fn fit_group_with<P: Profile>(
                 .map(|q| (3 * k + 2, q.mean_e, 1.0 / (q.sigma_e * q.sigma_e)))
         })
         .collect();
-    let prior_chi2 = |p: &[f64]| -> f64 {
-        priors
+    let problem = Problem {
+        img,
+        epsf,
+        profiles,
+        members,
+        saturated: (0..n)
+            .map(|k| members[k].saturated || discs.bad[k])
+            .collect(),
+        all,
+        other,
+        other_sat,
+        priors,
+        n,
+        np: 3 * n + usize::from(opt.fit_sky),
+        fit_sky: opt.fit_sky,
+        sky,
+        node_error,
+        h: epsf.half_px(),
+    };
+    let mut p: Vec<f64> = members
+        .iter()
+        .flat_map(|m| [m.x, m.y, m.flux.max(1.0)])
+        .collect();
+    if opt.fit_sky {
+        p.push(sky);
+    }
+    let run = problem.iterate(&mut p, opt.max_iter);
+    problem.report(&p, &discs, &run)
+}
+
+/// Each member's own disc of pixels (indices into the image), and whether it touches the edge or a bad
+/// pixel.
+struct Discs {
+    own: Vec<Vec<usize>>,
+    edge: Vec<bool>,
+    bad: Vec<bool>,
+}
+
+/// How the iterations went.
+struct Run {
+    iterations: usize,
+    converged: bool,
+    /// Whether each member's last accepted step was negligible (a member still moving when the
+    /// iterations run out is flagged, not its settled neighbours).
+    settled: Vec<bool>,
+    /// Fewer pixels than parameters + 2: no fit was tried.
+    few: bool,
+}
+
+/// A group's least-squares problem: the pixels (the union of the members' discs) with the outsiders'
+/// light on them, and the parameters (x, y, flux of each member, then the sky if it is fitted).
+struct Problem<'a, P: Profile> {
+    img: &'a PixelData<'a>,
+    epsf: &'a Epsf,
+    profiles: Option<&'a [P]>,
+    members: &'a [Member],
+    saturated: Vec<bool>,
+    /// (image index, x, y) of each pixel.
+    all: Vec<(usize, f64, f64)>,
+    /// The outsiders' model on each pixel and its model error.
+    other: Vec<f64>,
+    other_sat: Vec<f64>,
+    priors: Vec<(usize, f64, f64)>,
+    n: usize,
+    np: usize,
+    fit_sky: bool,
+    sky: f64,
+    node_error: f64,
+    h: f64,
+}
+
+impl<P: Profile> Problem<'_, P> {
+    fn sky_of(&self, p: &[f64]) -> f64 {
+        if self.fit_sky {
+            p[3 * self.n]
+        } else {
+            self.sky
+        }
+    }
+
+    /// The model of pixel (px, py): (Σ f ψ, its saturated members' model error; the nonzero Jacobian
+    /// entries in `jac`).
+    fn eval(
+        &self,
+        p: &[f64],
+        i: usize,
+        px: f64,
+        py: f64,
+        jac: &mut Vec<(usize, f64)>,
+    ) -> (f64, f64) {
+        jac.clear();
+        let (mut star, mut sat) = (0.0, 0.0);
+        for k in 0..self.n {
+            let (dx, dy) = (px - p[3 * k], py - p[3 * k + 1]);
+            if dx.abs() >= self.h || dy.abs() >= self.h {
+                continue;
+            }
+            let (psi, gx, gy) = match self.profiles {
+                Some(pr) => pr[k].eval_at(i, px, py, p[3 * k], p[3 * k + 1]),
+                None => self.epsf.eval(dx, dy),
+            };
+            let f = p[3 * k + 2];
+            star += f * psi;
+            if self.saturated[k] {
+                sat += SATURATED_MODEL_ERROR * (f * psi).abs() + f.abs() * self.node_error;
+            }
+            if !self.members[k].forced {
+                jac.push((3 * k, -f * gx));
+                jac.push((3 * k + 1, -f * gy));
+            }
+            jac.push((3 * k + 2, psi));
+        }
+        if self.fit_sky {
+            jac.push((3 * self.n, 1.0));
+        }
+        (star, sat)
+    }
+
+    /// σᵢ²: the single-star fit's, plus the saturated stars' model error.
+    fn variance(&self, mu: f64, star: f64, model_e: f64) -> f64 {
+        pixel_variance(mu, star, self.img.var_floor_e2, self.img.flat_sigma) + model_e * model_e
+    }
+
+    fn prior_chi2(&self, p: &[f64]) -> f64 {
+        self.priors
             .iter()
             .map(|&(i, mean, w)| w * (p[i] - mean).powi(2))
             .sum()
-    };
-    let chi2_of = |p: &[f64]| -> f64 {
-        let s = sky_of(p);
+    }
+
+    /// (residual)²/σ² of pixel `q` of [`Self::all`] under `p`.
+    fn pixel_chi2(&self, p: &[f64], q: usize, s: f64, jac: &mut Vec<(usize, f64)>) -> f64 {
+        let (i, px, py) = self.all[q];
+        let (star, sat) = self.eval(p, i, px, py, jac);
+        let mu = star + s + self.other[q];
+        (self.img.e[i] - mu).powi(2) / self.variance(mu, star, sat + self.other_sat[q])
+    }
+
+    fn chi2_of(&self, p: &[f64]) -> f64 {
+        let s = self.sky_of(p);
         let mut j = Vec::new();
-        all.iter()
-            .zip(other.iter().zip(&other_sat))
-            .map(|(&(i, px, py), (o, os))| {
-                let (star, sat) = eval(p, i, px, py, &mut j);
-                let mu = star + s + o;
-                (img.e[i] - mu).powi(2) / variance(mu, star, sat + os)
-            })
+        (0..self.all.len())
+            .map(|q| self.pixel_chi2(p, q, s, &mut j))
             .sum::<f64>()
-            + prior_chi2(p)
-    };
-    // normal equations at p: (JᵀWJ, JᵀW r, χ²)
-    let normal = |p: &[f64]| -> (Vec<f64>, Vec<f64>, f64) {
-        let s = sky_of(p);
+            + self.prior_chi2(p)
+    }
+
+    /// The normal equations at p: (JᵀWJ, JᵀW r, χ²).
+    fn normal(&self, p: &[f64]) -> (Vec<f64>, Vec<f64>, f64) {
+        let (n, np) = (self.n, self.np);
+        let s = self.sky_of(p);
         let mut a = vec![0.0; np * np];
         let mut b = vec![0.0; np];
         let mut chi2 = 0.0;
         let mut jac = Vec::with_capacity(3 * n + 1);
-        for (&(i, px, py), (o, os)) in all.iter().zip(other.iter().zip(&other_sat)) {
-            let (star, sat) = eval(p, i, px, py, &mut jac);
+        for (&(i, px, py), (o, os)) in self.all.iter().zip(self.other.iter().zip(&self.other_sat)) {
+            let (star, sat) = self.eval(p, i, px, py, &mut jac);
             let mu = star + s + o;
-            let w = 1.0 / variance(mu, star, sat + os);
-            let r = img.e[i] - mu;
+            let w = 1.0 / self.variance(mu, star, sat + os);
+            let r = self.img.e[i] - mu;
             chi2 += w * r * r;
             for &(ia, ja) in &jac {
                 b[ia] += w * ja * r;
@@ -256,176 +343,188 @@ pub fn fit_group_with<P: Profile>(
             }
         }
         // a prior is one more residual, (mean − f)/σ, of Jacobian 1/σ in its flux
-        for &(i, mean, w) in &priors {
+        for &(i, mean, w) in &self.priors {
             a[i * np + i] += w;
             b[i] += w * (mean - p[i]);
             chi2 += w * (mean - p[i]).powi(2);
         }
         (a, b, chi2)
-    };
-    let mut lambda = 1e-3;
-    let mut converged = false;
-    // whether each member's last accepted step was negligible (a member still moving when the iterations
-    // run out is flagged, not its settled neighbours)
-    let mut settled = vec![false; n];
-    let mut iter = 0;
-    let few = all.len() < np + 2;
-    while !few && iter < opt.max_iter {
-        iter += 1;
-        let (jtj, jtr, chi2) = normal(&p);
-        let mut accepted = false;
-        for _ in 0..12 {
-            let mut a = jtj.clone();
-            for k in 0..np {
-                // a parameter no pixel constrains (a member whose disc is all masked) stays put
-                a[k * np + k] = if a[k * np + k] > 0.0 {
-                    a[k * np + k] * (1.0 + lambda)
-                } else {
-                    1.0
+    }
+
+    /// Levenberg–Marquardt from `p` (moved to the solution), at most `max_iter` iterations; a position
+    /// step is capped at 0.5 px.
+    fn iterate(&self, p: &mut Vec<f64>, max_iter: usize) -> Run {
+        let (n, np) = (self.n, self.np);
+        let mut lambda = 1e-3;
+        let mut run = Run {
+            iterations: 0,
+            converged: false,
+            settled: vec![false; n],
+            few: self.all.len() < np + 2,
+        };
+        while !run.few && run.iterations < max_iter {
+            run.iterations += 1;
+            let (jtj, jtr, chi2) = self.normal(p);
+            let mut accepted = false;
+            for _ in 0..12 {
+                let mut a = jtj.clone();
+                for k in 0..np {
+                    // a parameter no pixel constrains (a member whose disc is all masked) stays put
+                    a[k * np + k] = if a[k * np + k] > 0.0 {
+                        a[k * np + k] * (1.0 + lambda)
+                    } else {
+                        1.0
+                    };
+                }
+                let Some(d) = linalg::solve(&a, &jtr, np) else {
+                    lambda *= 10.0;
+                    continue;
                 };
-            }
-            let Some(d) = linalg::solve(&a, &jtr, np) else {
+                let mut q = p.clone();
+                let mut step_small = vec![false; n];
+                for k in 0..n {
+                    let (dx, dy) = (d[3 * k], d[3 * k + 1]);
+                    let jump = dx.hypot(dy);
+                    let s = if jump > 0.5 { 0.5 / jump } else { 1.0 };
+                    q[3 * k] += dx * s;
+                    q[3 * k + 1] += dy * s;
+                    q[3 * k + 2] += d[3 * k + 2];
+                    step_small[k] = dx.abs() < 1e-4
+                        && dy.abs() < 1e-4
+                        && d[3 * k + 2].abs() < 1e-5 * p[3 * k + 2].abs().max(1.0);
+                }
+                let small = step_small.iter().all(|b| *b);
+                if self.fit_sky {
+                    q[3 * n] += d[3 * n];
+                }
+                let c2 = self.chi2_of(&q);
+                if c2.is_finite() && c2 <= chi2 * (1.0 + 1e-12) {
+                    *p = q;
+                    run.settled = step_small;
+                    lambda = (lambda * 0.3).max(1e-9);
+                    accepted = true;
+                    // converged: the steps are negligible (1e-4 px: a hundredth of the brightest stars'
+                    // bounds), or χ² no longer moves (the weights follow the model, so a many-star problem
+                    // can creep along a valley for ever)
+                    run.converged = small || chi2 - c2 < 1e-8 * chi2;
+                    break;
+                }
                 lambda *= 10.0;
-                continue;
-            };
-            let mut q = p.clone();
-            let mut step_small = vec![false; n];
-            for k in 0..n {
-                let (dx, dy) = (d[3 * k], d[3 * k + 1]);
-                let jump = dx.hypot(dy);
-                let s = if jump > 0.5 { 0.5 / jump } else { 1.0 };
-                q[3 * k] += dx * s;
-                q[3 * k + 1] += dy * s;
-                q[3 * k + 2] += d[3 * k + 2];
-                step_small[k] = dx.abs() < 1e-4
-                    && dy.abs() < 1e-4
-                    && d[3 * k + 2].abs() < 1e-5 * p[3 * k + 2].abs().max(1.0);
             }
-            let small = step_small.iter().all(|b| *b);
-            if opt.fit_sky {
-                q[3 * n] += d[3 * n];
+            if !accepted {
+                run.converged = true;
             }
-            let c2 = chi2_of(&q);
-            if c2.is_finite() && c2 <= chi2 * (1.0 + 1e-12) {
-                p = q;
-                settled = step_small;
-                lambda = (lambda * 0.3).max(1e-9);
-                accepted = true;
-                // converged: the steps are negligible (1e-4 px: a hundredth of the brightest stars'
-                // bounds), or χ² no longer moves (the weights follow the model, so a many-star problem
-                // can creep along a valley for ever)
-                converged = small || chi2 - c2 < 1e-8 * chi2;
+            if run.converged {
                 break;
             }
-            lambda *= 10.0;
         }
-        if !accepted {
-            converged = true;
-        }
-        if converged {
-            break;
-        }
+        run
     }
-    // the bound: the inverse Fisher matrix at the solution (JᵀWJ without damping)
-    let (mut fisher, _, _) = normal(&p);
-    // a parameter no pixel constrains (a member whose pixels are all masked) would make the whole matrix
-    // singular: pin it, and flag only that member
-    let mut unconstrained = vec![false; n];
-    for k in 0..np {
-        if !(fisher[k * np + k] > 0.0) {
-            for j in 0..np {
-                fisher[k * np + j] = 0.0;
-                fisher[j * np + k] = 0.0;
-            }
-            fisher[k * np + k] = 1.0;
-            // a forced star's position is held, not unconstrained
-            if k < 3 * n && !(members[k / 3].forced && k % 3 < 2) {
-                unconstrained[k / 3] = true;
+
+    /// The bound: the inverse Fisher matrix at `p` (JᵀWJ without damping), and which members no pixel
+    /// constrains (their parameters pinned, so the others still get a bound).
+    fn bounds(&self, p: &[f64]) -> (Option<Vec<f64>>, Vec<bool>) {
+        let (n, np) = (self.n, self.np);
+        let (mut fisher, _, _) = self.normal(p);
+        let mut unconstrained = vec![false; n];
+        for k in 0..np {
+            if !(fisher[k * np + k] > 0.0) {
+                for j in 0..np {
+                    fisher[k * np + j] = 0.0;
+                    fisher[j * np + k] = 0.0;
+                }
+                fisher[k * np + k] = 1.0;
+                // a forced star's position is held, not unconstrained
+                if k < 3 * n && !(self.members[k / 3].forced && k % 3 < 2) {
+                    unconstrained[k / 3] = true;
+                }
             }
         }
+        (scaled_inverse(&fisher, np), unconstrained)
     }
-    let inv = scaled_inverse(&fisher, np);
-    let s = sky_of(&p);
-    let mut jac = Vec::new();
-    let index_of: std::collections::HashMap<usize, usize> =
-        all.iter().enumerate().map(|(k, q)| (q.0, k)).collect();
-    (0..n)
-        .map(|k| {
-            let m = members[k];
-            let mut f = StarFit {
-                x: p[3 * k],
-                y: p[3 * k + 1],
-                flux: p[3 * k + 2],
-                sky: s,
-                iterations: iter,
-                n_pix: own[k].len(),
-                ..Default::default()
-            };
-            if members.iter().filter(|m| !m.forced).count() > 1 {
-                f.flags |= flags::GROUPED;
-            }
-            if few || own[k].len() < 5 {
-                f.flags |= flags::FEW_PIXELS;
-            }
-            if edge[k] {
-                f.flags |= flags::EDGE;
-            }
-            if bad[k] {
-                f.flags |= flags::SATURATED;
-            }
-            if !converged && !few && !settled[k] {
-                f.flags |= flags::NOT_CONVERGED;
-            }
-            if (f.x - m.x).hypot(f.y - m.y) > 1.5 {
-                f.flags |= flags::MOVED;
-            }
-            if !(f.flux > 0.0) {
-                f.flags |= flags::NONPOSITIVE_FLUX;
-            }
-            match &inv {
-                // a forced star: its flux's bound only (its position is the catalogue's)
-                Some(v) if m.forced && !unconstrained[k] => {
-                    f.crlb_x = f64::INFINITY;
-                    f.crlb_y = f64::INFINITY;
-                    f.crlb_flux = v[(3 * k + 2) * np + 3 * k + 2].max(0.0).sqrt();
+
+    /// Each member's fit at `p`: its place, flux, bounds, flags and the χ² of its own disc under the
+    /// whole group's model.
+    fn report(&self, p: &[f64], discs: &Discs, run: &Run) -> Vec<StarFit> {
+        let np = self.np;
+        let (inv, unconstrained) = self.bounds(p);
+        let s = self.sky_of(p);
+        let mut jac = Vec::new();
+        let index_of: std::collections::HashMap<usize, usize> =
+            self.all.iter().enumerate().map(|(k, q)| (q.0, k)).collect();
+        let grouped = self.members.iter().filter(|m| !m.forced).count() > 1;
+        (0..self.n)
+            .map(|k| {
+                let m = self.members[k];
+                let own = &discs.own[k];
+                let mut f = StarFit {
+                    x: p[3 * k],
+                    y: p[3 * k + 1],
+                    flux: p[3 * k + 2],
+                    sky: s,
+                    iterations: run.iterations,
+                    n_pix: own.len(),
+                    ..Default::default()
+                };
+                if grouped {
+                    f.flags |= flags::GROUPED;
                 }
-                Some(v)
-                    if !unconstrained[k]
-                        && v[(3 * k) * np + 3 * k] > 0.0
-                        && v[(3 * k + 1) * np + 3 * k + 1] > 0.0 =>
-                {
-                    f.crlb_x = v[(3 * k) * np + 3 * k].sqrt();
-                    f.crlb_y = v[(3 * k + 1) * np + 3 * k + 1].sqrt();
-                    f.crlb_flux = v[(3 * k + 2) * np + 3 * k + 2].max(0.0).sqrt();
+                if run.few || own.len() < 5 {
+                    f.flags |= flags::FEW_PIXELS;
                 }
-                _ => {
+                if discs.edge[k] {
+                    f.flags |= flags::EDGE;
+                }
+                if discs.bad[k] {
+                    f.flags |= flags::SATURATED;
+                }
+                if !run.converged && !run.few && !run.settled[k] {
+                    f.flags |= flags::NOT_CONVERGED;
+                }
+                if (f.x - m.x).hypot(f.y - m.y) > 1.5 {
+                    f.flags |= flags::MOVED;
+                }
+                if !(f.flux > 0.0) {
+                    f.flags |= flags::NONPOSITIVE_FLUX;
+                }
+                match &inv {
+                    // a forced star: its flux's bound only (its position is the catalogue's)
+                    Some(v) if m.forced && !unconstrained[k] => {
+                        f.crlb_x = f64::INFINITY;
+                        f.crlb_y = f64::INFINITY;
+                        f.crlb_flux = v[(3 * k + 2) * np + 3 * k + 2].max(0.0).sqrt();
+                    }
+                    Some(v)
+                        if !unconstrained[k]
+                            && v[(3 * k) * np + 3 * k] > 0.0
+                            && v[(3 * k + 1) * np + 3 * k + 1] > 0.0 =>
+                    {
+                        f.crlb_x = v[(3 * k) * np + 3 * k].sqrt();
+                        f.crlb_y = v[(3 * k + 1) * np + 3 * k + 1].sqrt();
+                        f.crlb_flux = v[(3 * k + 2) * np + 3 * k + 2].max(0.0).sqrt();
+                    }
+                    _ => {
+                        f.flags |= flags::SINGULAR;
+                        f.crlb_x = f64::INFINITY;
+                        f.crlb_y = f64::INFINITY;
+                        f.crlb_flux = f64::INFINITY;
+                    }
+                }
+                let c2: f64 = own
+                    .iter()
+                    .map(|i| self.pixel_chi2(p, index_of[i], s, &mut jac))
+                    .sum();
+                f.chi2_red = c2 / own.len().saturating_sub(3).max(1) as f64;
+                if !f.x.is_finite() || !f.y.is_finite() || !f.flux.is_finite() {
+                    f.x = m.x;
+                    f.y = m.y;
+                    f.flux = m.flux;
                     f.flags |= flags::SINGULAR;
-                    f.crlb_x = f64::INFINITY;
-                    f.crlb_y = f64::INFINITY;
-                    f.crlb_flux = f64::INFINITY;
                 }
-            }
-            // χ² of the member's own disc under the whole group's model, per degree of freedom
-            let c2: f64 = own[k]
-                .iter()
-                .map(|i| {
-                    let q = index_of[i];
-                    let (_, px, py) = all[q];
-                    let (star, sat) = eval(&p, *i, px, py, &mut jac);
-                    let mu = star + s + other[q];
-                    (img.e[*i] - mu).powi(2) / variance(mu, star, sat + other_sat[q])
-                })
-                .sum();
-            f.chi2_red = c2 / own[k].len().saturating_sub(3).max(1) as f64;
-            if !f.x.is_finite() || !f.y.is_finite() || !f.flux.is_finite() {
-                f.x = m.x;
-                f.y = m.y;
-                f.flux = m.flux;
-                f.flags |= flags::SINGULAR;
-            }
-            f
-        })
-        .collect()
+                f
+            })
+            .collect()
+    }
 }
 
 #[cfg(test)]
