@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 
 mod support;
-use support::{SMALL_SEQUENCE, in_ci};
+use support::{SMALL_SEQUENCE, files_under, in_ci};
 
 fn jsim() -> Command {
     Command::new(env!("CARGO_BIN_EXE_jsim"))
@@ -100,29 +100,6 @@ fn run_ok(args: &[String], out: &Path) -> f64 {
         String::from_utf8_lossy(&o.stderr)
     );
     t.elapsed().as_secs_f64()
-}
-
-/// Every file under `dir`, by its path relative to it.
-fn files_under(dir: &Path) -> Vec<String> {
-    let mut out = Vec::new();
-    let mut todo = vec![dir.to_path_buf()];
-    while let Some(d) = todo.pop() {
-        for e in std::fs::read_dir(&d).expect("read_dir").flatten() {
-            let p = e.path();
-            if p.is_dir() {
-                todo.push(p);
-            } else {
-                out.push(
-                    p.strip_prefix(dir)
-                        .expect("under")
-                        .to_string_lossy()
-                        .to_string(),
-                );
-            }
-        }
-    }
-    out.sort();
-    out
 }
 
 /// The same files in `a` and `b`, none temporary, and those `compared` accepts equal byte for byte.

@@ -7,6 +7,7 @@ use std::process::Command;
 
 mod support;
 use support::SMALL_SEQUENCE as SMALL;
+use support::files_under;
 
 fn jsim() -> Command {
     Command::new(env!("CARGO_BIN_EXE_jsim"))
@@ -627,24 +628,6 @@ fn plan_csv_seeds_parse_back_as_the_exposures_u64_seeds() {
     assert_eq!(seeds, expected);
 }
 
-/// Every file under `dir` (recursively), by its path relative to `dir`.
-fn files_under(dir: &Path) -> Vec<PathBuf> {
-    let mut out = Vec::new();
-    let mut todo = vec![dir.to_path_buf()];
-    while let Some(d) = todo.pop() {
-        for entry in std::fs::read_dir(&d).expect("read_dir").flatten() {
-            let p = entry.path();
-            if p.is_dir() {
-                todo.push(p);
-            } else {
-                out.push(p.strip_prefix(dir).expect("under").to_path_buf());
-            }
-        }
-    }
-    out.sort();
-    out
-}
-
 /// A sequence killed outright (SIGKILL: no handler runs) at five moments of its run, each rerun resuming the
 /// last, then run to its end, gives what one uninterrupted run gives — every exposure's catalogue and the
 /// gathered `catalogue.fits` byte for byte — and leaves no temporary file behind. The kills land at fractions
@@ -682,7 +665,7 @@ fn a_sequence_killed_five_times_resumes_to_the_same_bytes() {
     let (a, b) = (files_under(&whole), files_under(&killed));
     assert_eq!(a, b, "the same files");
     for f in &a {
-        let name = f.to_string_lossy();
+        let name = f.as_str();
         assert!(!name.contains(".tmp"), "a temporary file is left: {name}");
         // the catalogues and the gathered table are the run's results: byte for byte (the timing reports
         // and figures may differ)

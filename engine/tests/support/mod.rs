@@ -107,3 +107,26 @@ pub fn max_relative(a: &[f64], b: &[f64]) -> f64 {
         .map(|(x, y)| (x - y).abs() / x.abs().max(y.abs()).max(1e-300))
         .fold(0.0, f64::max)
 }
+
+/// Every file under `dir`, by its path relative to it.
+pub fn files_under(dir: &Path) -> Vec<String> {
+    let mut out = Vec::new();
+    let mut todo = vec![dir.to_path_buf()];
+    while let Some(d) = todo.pop() {
+        for e in std::fs::read_dir(&d).expect("read_dir").flatten() {
+            let p = e.path();
+            if p.is_dir() {
+                todo.push(p);
+            } else {
+                out.push(
+                    p.strip_prefix(dir)
+                        .expect("under")
+                        .to_string_lossy()
+                        .to_string(),
+                );
+            }
+        }
+    }
+    out.sort();
+    out
+}
