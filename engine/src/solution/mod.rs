@@ -124,7 +124,7 @@ impl SourceModel {
     }
 
     /// The model a front end names: `position` or `full`, or (with `auto_allowed`) `auto`, which is None:
-    /// chosen from the sequence's span ([`crate::studies::sequence::solution`]). The error says what is
+    /// chosen from the sequence's span (by the sequence's solution study). The error says what is
     /// allowed; each front end puts its own option's name before it.
     pub fn parse(name: &str, auto_allowed: bool) -> Result<Option<Self>, String> {
         match name {
