@@ -89,17 +89,45 @@ pub fn observation_cards(cfg: &crate::config::Config, t_start_s: f64) -> Vec<Car
 /// The provenance headers of an exposure.
 pub fn headers(sim: &Simulator, exp: &Exposure) -> Vec<Card> {
     let c = &sim.cfg;
+    let mut cards = detector_cards(c);
+    cards.extend(identity_cards(sim, exp));
+    cards.extend(observation_cards(c, exp.t_start_s));
+    cards.extend(readout_cards(sim));
+    cards.extend(ace_cards(c, exp));
+    cards.extend(model_cards(c, exp));
+    if c.scene.kind == crate::config::SceneKind::Grid {
+        // the grid's one magnitude and colour (a bulge or catalogue scene has many: see the truth)
+        cards.push(Card::f(
+            "MAGHW",
+            c.scene.mag_hw,
+            "scene Hw magnitude (grid)",
+        ));
+        cards.push(Card::f(
+            "JMINUSH",
+            c.scene.j_minus_h,
+            "scene J-H colour (grid)",
+        ));
+    }
+    cards.extend(provenance_cards(c));
+    cards.push(Card::s(
+        "COORDS",
+        "0-based, integer = pixel centre",
+        "TRUTH x,y convention (ds9: +1)",
+    ));
+    if let Some(counts) = &sim.counts {
+        cards.extend(counts_cards(counts));
+    }
+    // the world coordinate system as the products know it: the design's (config validated: it always exists)
+    if let Some(w) = sim.design_wcs() {
+        cards.extend(wcs_cards(w));
+    }
+    cards
+}
+
+/// The detector's figures: unit, exposure, gain, linearity, read noise, dark, well, ADC, flat.
+fn detector_cards(c: &Config) -> Vec<Card> {
     let d = &c.detector;
-    let ace_sigma = match c.ace.case {
-        AceCase::None => 0.0,
-        _ => c.ace.sigma_mas,
-    };
-    let modelled = exp
-        .truth
-        .first()
-        .map(|t| t.modelled_fraction)
-        .unwrap_or(1.0);
-    let mut cards = vec![
+    vec![
         Card::s(
             "BUNIT",
             if d.digitise { "ADU" } else { "ADU (float)" },
@@ -149,6 +177,13 @@ pub fn headers(sim: &Simulator, exp: &Exposure) -> Vec<Card> {
             d.inter_pixel_flat_sigma,
             "inter-pixel flat 1-sigma",
         ),
+    ]
+}
+
+/// Who and what: plate scale, seed, image, telescope, instrument, array, band.
+fn identity_cards(sim: &Simulator, exp: &Exposure) -> Vec<Card> {
+    let c = &sim.cfg;
+    vec![
         Card::f(
             "PLTSCALE",
             c.instrument.plate_scale_mas(),
@@ -177,9 +212,13 @@ pub fn headers(sim: &Simulator, exp: &Exposure) -> Vec<Card> {
             ),
         ),
         Card::s("FILTER", "Hw", "band: 1.0-1.6 um (the Hw magnitude system)"),
-    ];
-    cards.extend(observation_cards(c, exp.t_start_s));
-    cards.extend([
+    ]
+}
+
+/// The readout: order, channels, timing, row direction, the array's turn.
+fn readout_cards(sim: &Simulator) -> Vec<Card> {
+    let c = &sim.cfg;
+    vec![
         Card::s("READOUT", c.readout.order.name(), "readout order"),
         Card::i("NCHAN", c.readout.channels as i64, "readout channels"),
         Card::f("PIXTIME", c.readout.pixel_time_us, "[us] pixel read time"),
@@ -206,6 +245,16 @@ pub fn headers(sim: &Simulator, exp: &Exposure) -> Vec<Card> {
             sim.array.rotation_deg,
             "[deg] array turn on the sky",
         ),
+    ]
+}
+
+/// The attitude control error asked for and met over this exposure.
+fn ace_cards(c: &Config, exp: &Exposure) -> Vec<Card> {
+    let ace_sigma = match c.ace.case {
+        AceCase::None => 0.0,
+        _ => c.ace.sigma_mas,
+    };
+    vec![
         Card::s("ACECASE", c.ace.case.name(), "attitude control error model"),
         Card::f("ACESIGMA", ace_sigma, "[mas] requested ACE sigma per axis"),
         Card::s(
@@ -228,6 +277,17 @@ pub fn headers(sim: &Simulator, exp: &Exposure) -> Vec<Card> {
             exp.ace.drift_mas,
             "[mas] ACE drift over this exposure",
         ),
+    ]
+}
+
+/// How the image was modelled: stars, zero point, PSF table, integration.
+fn model_cards(c: &Config, exp: &Exposure) -> Vec<Card> {
+    let modelled = exp
+        .truth
+        .first()
+        .map(|t| t.modelled_fraction)
+        .unwrap_or(1.0);
+    vec![
         Card::i(
             "NSTARS",
             exp.truth.len() as i64,
@@ -261,34 +321,7 @@ pub fn headers(sim: &Simulator, exp: &Exposure) -> Vec<Card> {
         ),
         Card::s("METHOD", c.fidelity.method.name(), "integration method"),
         Card::s("BACKEND", exp.backend.clone(), "integration device"),
-    ]);
-    if c.scene.kind == crate::config::SceneKind::Grid {
-        // the grid's one magnitude and colour (a bulge or catalogue scene has many: see the truth)
-        cards.push(Card::f(
-            "MAGHW",
-            c.scene.mag_hw,
-            "scene Hw magnitude (grid)",
-        ));
-        cards.push(Card::f(
-            "JMINUSH",
-            c.scene.j_minus_h,
-            "scene J-H colour (grid)",
-        ));
-    }
-    cards.extend(provenance_cards(c));
-    cards.push(Card::s(
-        "COORDS",
-        "0-based, integer = pixel centre",
-        "TRUTH x,y convention (ds9: +1)",
-    ));
-    if let Some(counts) = &sim.counts {
-        cards.extend(counts_cards(counts));
-    }
-    // the world coordinate system as the products know it: the design's (config validated: it always exists)
-    if let Some(w) = sim.design_wcs() {
-        cards.extend(wcs_cards(w));
-    }
-    cards
+    ]
 }
 
 /// Which configuration and which engine made a file: `CONFHASH`, `ENGINE`.
