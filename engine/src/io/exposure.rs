@@ -92,7 +92,7 @@ pub fn headers(sim: &Simulator, exp: &Exposure) -> Vec<Card> {
     let mut cards = detector_cards(c);
     cards.extend(identity_cards(sim, exp));
     cards.extend(observation_cards(c, exp.t_start_s));
-    cards.extend(readout_cards(sim));
+    cards.extend(timing_cards(sim));
     cards.extend(ace_cards(c, exp));
     cards.extend(model_cards(c, exp));
     if c.scene.kind == crate::config::SceneKind::Grid {
@@ -216,7 +216,7 @@ fn identity_cards(sim: &Simulator, exp: &Exposure) -> Vec<Card> {
 }
 
 /// The readout: order, channels, timing, row direction, the array's turn.
-fn readout_cards(sim: &Simulator) -> Vec<Card> {
+fn timing_cards(sim: &Simulator) -> Vec<Card> {
     let c = &sim.cfg;
     vec![
         Card::s("READOUT", c.readout.order.name(), "readout order"),
