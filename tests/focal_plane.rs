@@ -238,6 +238,7 @@ fn a_field_where_every_star_saturates_is_clipped_and_flagged() {
     c.scene.bulge.density_per_arcmin2 = 0.5;
     c.scene.bulge.hw_min = 6.0;
     c.scene.bulge.hw_max = 9.0; // Hw ≲ 9.7 fills the 150 000-e⁻ well in 12.5 s
+    c.scene.bulge.density_hw_limit = 9.0; // the density counts these stars alone
     let fps = FocalPlaneSimulator::new(&c).expect("focal plane");
     let exp = fps.exposure(0).expect("exposure");
     let n = c.instrument.detector_px;
