@@ -4,7 +4,7 @@
 //! response it adds what the budget predicts; an injected transit's depth is recovered within its error;
 //! bad input names the field and what is allowed.
 
-use engine::config::{AceCase, Config, FlatField};
+use engine::config::{AceCase, AsBuilt, Config, FlatField, Knowledge};
 use engine::studies::transit::observe::{StareError, observe};
 use engine::studies::transit::run::{self, analyse};
 use engine::studies::transit::spec::Spec;
@@ -281,6 +281,37 @@ fn bad_stares_are_named_errors() {
             .unwrap_or_default();
         assert!(msg.starts_with(field), "{field}: {msg}");
     }
+}
+
+/// The stare's readout is chosen from the design, as a mission would choose it before the instrument is
+/// built: a Hw 6 target's automatic sub-exposure is the same whether the instrument as built is the design or
+/// 80 nm rms off it. Only the oracle control, which hands over the as-built optics, moves it — the deviation
+/// does change the brightest pixel, so the equality is not for want of a change to see.
+#[test]
+fn the_readout_is_chosen_from_the_design_not_the_instrument_as_built() {
+    let spec = Spec {
+        target_hw: 6.0,
+        ..stare(2)
+    };
+    let readout = |wavefront_rms_nm: f64, knowledge: Knowledge| {
+        let mut c = cfg();
+        c.as_built = AsBuilt {
+            seed: 5,
+            wavefront_rms_nm,
+            knowledge,
+            ..AsBuilt::design()
+        };
+        c.validate().expect("valid");
+        observe(&c, &spec).expect("stare").readout
+    };
+    let design = readout(0.0, Knowledge::Design);
+    let built = readout(80.0, Knowledge::Design);
+    let oracle = readout(80.0, Knowledge::AsBuilt);
+    assert_eq!(built, design);
+    assert!(
+        (oracle.longest_safe_s / design.longest_safe_s - 1.0).abs() > 0.01,
+        "oracle {oracle:?}, design {design:?}"
+    );
 }
 
 /// The windows go through the imaging detector's chain: with inter-pixel capacitance switched on, a

@@ -6,7 +6,7 @@
 //! the stars' windows, summed on board. The signal integrates the whole plate (a window of 23² pixels reads
 //! in 2.6 ms at 5 µs per pixel: the gaps are neglected), the read noise enters n times
 //! (σ = σ_image √n), and saturation is each sub-exposure's: `n` is the smallest whose sub-exposure keeps
-//! every star's peak pixel (centred on a pixel, no jitter) below the full well. Every pixel of a window
+//! every star's peak pixel (centred on a pixel, no jitter, the design's PSF) below the full well. Every pixel of a window
 //! shares the plate's window (sample-and-hold timing), the cadence is `plate_s + readout.t_overhead_s`. The
 //! choice is ours: JASMINE's readout for targets brighter than Hw ≈ 9.5 was not found; co-adding keeps the
 //! cadence and the jitter averaging of a 12.5-s plate for every magnitude.
@@ -250,25 +250,43 @@ pub fn field(cfg: &Config, spec: &Spec) -> Result<Vec<Star>, StareError> {
     Ok(stars)
 }
 
+/// Each star's peak pixel rate as the design predicts it, e⁻/s: its rate times the share of a still star's
+/// light the brightest pixel takes — the star's design pixel kernel ([`Simulator::design_psf_for`], the
+/// as-built optics only under the oracle control) at the pixel's centre, the intra-pixel response
+/// included. A mission chooses its readout from the design, before it knows the instrument as built.
+pub fn design_peak_rates_e_per_s(
+    sim: &Simulator,
+    stars: &[Star],
+    jobs: &[StarJob],
+) -> Result<Vec<f64>, SimError> {
+    stars
+        .iter()
+        .zip(jobs)
+        .map(|(s, j)| {
+            let kernel = sim.kernel_for(&sim.design_psf_for(s))?;
+            Ok(j.star.rate_e_per_s * kernel.eval(0.0, 0.0))
+        })
+        .collect()
+}
+
 /// Choose the sub-exposure: the spec's, checked, or the longest `plate_s / n` that keeps every star's peak
-/// pixel below the full well (and the ADC's range).
+/// pixel (`peak_e_per_s`, from [`design_peak_rates_e_per_s`]) below the full well (and the ADC's range).
 pub fn choose_readout(
     cfg: &Config,
     spec: &Spec,
     stars: &[Star],
-    jobs: &[StarJob],
+    peak_e_per_s: &[f64],
 ) -> Result<StareReadout, StareError> {
     let d = &cfg.detector;
     let well = d
         .full_well_e
         .min((2f64.powi(d.adc_bits as i32) - 1.0 - d.bias_adu) * d.gain_e_per_adu);
     let flat_max = 1.0 + 4.0 * d.inter_pixel_flat_sigma;
-    // the peak pixel's rate: the brightest share of a still star's light one pixel takes (the kernel at
-    // the pixel's centre: the intra-pixel response included), through a pixel 4σ more sensitive than most
+    // the peak pixel's rate through a pixel 4σ more sensitive than most
     let (worst, peak_rate) = stars
         .iter()
-        .zip(jobs)
-        .map(|(s, j)| (s, j.star.rate_e_per_s * j.kernel.eval(0.0, 0.0) * flat_max))
+        .zip(peak_e_per_s)
+        .map(|(s, p)| (s, p * flat_max))
         .fold((&stars[0], 0.0), |a, b| if b.1 > a.1 { b } else { a });
     let longest = well / (peak_rate + d.dark_e_per_s);
     let exposure = if spec.exposure_s > 0.0 {
@@ -322,7 +340,8 @@ pub fn observe(cfg: &Config, spec: &Spec) -> Result<Observation, StareError> {
     let realistic = c.ace.case == AceCase::Realistic;
     let (stars, sim) = stare_simulator(&c, spec, realistic)?;
     let jobs = sim.jobs()?;
-    let readout = choose_readout(&c, spec, &stars, &jobs)?;
+    let peaks = design_peak_rates_e_per_s(&sim, &stars, &jobs)?;
+    let readout = choose_readout(&c, spec, &stars, &peaks)?;
     let plates_n = spec.plates(cadence);
     let transit = spec.transit();
     let n = c.instrument.detector_px;
