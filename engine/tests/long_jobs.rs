@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 
 mod support;
-use support::{SMALL_SEQUENCE, files_under, in_ci};
+use support::{SMALL_SEQUENCE, files_under, in_ci, kill_five_times};
 
 fn jsim() -> Command {
     Command::new(env!("CARGO_BIN_EXE_jsim"))
@@ -37,24 +37,17 @@ fn transit_args() -> Vec<String> {
     ]
     .map(String::from)
     .to_vec();
-    for s in [
-        "ace.case=\"gaussian\"",
+    // the small sequence's instrument on a 512-px array of four channels, a 200-s ACE, three comparisons
+    for s in SMALL_SEQUENCE.iter().chain(&[
         "instrument.detector_px=512",
         "instrument.photosensitive_px=496",
         "readout.channels=4",
-        "readout.channel_width_px=128",
-        "optics.pupil_samples=64",
-        "optics.psf_oversampling=8",
-        "optics.psf_radius_px=8",
-        "band.wavelength_step_um=0.1",
-        "fidelity.subpixels=4",
-        "fidelity.backend=\"cpu\"",
         "ace.span_s=200.0",
         "transit.comparisons=3",
         "transit.field_radius_px=150.0",
-    ] {
+    ]) {
         a.push("--set".into());
-        a.push(s.into());
+        a.push(s.to_string());
     }
     a
 }
@@ -122,36 +115,11 @@ fn same_results(a: &Path, b: &Path, compared: impl Fn(&str) -> bool) -> usize {
     n
 }
 
-/// `jsim ARGS --out OUT` (and `extra`) started five times and killed outright at k/7 of `whole_s`
-/// (k = 1 … 5), each start resuming the last, `after` called after each; returns how many were still
-/// running when killed.
-fn kill_five_times(
-    args: &[String],
-    extra: &[String],
-    out: &Path,
-    whole_s: f64,
-    mut after: impl FnMut(),
-) -> usize {
-    let mut kills = 0;
-    for k in 1..=5 {
-        let mut child = jsim()
-            .args(args)
-            .args(extra)
-            .arg("--out")
-            .arg(out)
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .spawn()
-            .expect("spawn");
-        std::thread::sleep(std::time::Duration::from_secs_f64(whole_s * k as f64 / 7.0));
-        if child.try_wait().expect("wait").is_none() {
-            child.kill().expect("SIGKILL");
-            kills += 1;
-        }
-        let _ = child.wait();
-        after();
-    }
-    kills
+/// `jsim ARGS EXTRA --out OUT`.
+fn jsim_into(args: &[String], extra: &[String], out: &Path) -> Command {
+    let mut c = jsim();
+    c.args(args).args(extra).arg("--out").arg(out);
+    c
 }
 
 /// The precision study killed five times resumes from its finished stares (`hw_M/row.json`, kept as
@@ -164,7 +132,7 @@ fn a_transit_study_killed_five_times_resumes_to_the_same_bytes() {
     let whole = dir.join("whole");
     let whole_s = run_ok(&args, &whole);
     let killed = dir.join("killed");
-    let kills = kill_five_times(&args, &[], &killed, whole_s, || {});
+    let kills = kill_five_times(|| jsim_into(&args, &[], &killed), whole_s, || {});
     assert!(kills >= 3, "only {kills} of the 5 runs were killed running");
     // the stares finished before the last kill, as they were left
     let rows = |d: &Path| -> Vec<(String, Vec<u8>)> {
@@ -227,9 +195,11 @@ fn a_solution_killed_five_times_resumes_from_its_checkpoint_to_the_same_bytes() 
     let ck = dir.join("solution.checkpoint");
     let with_ck = ["--checkpoint".to_string(), ck.display().to_string()];
     let mut checkpointed = 0;
-    let kills = kill_five_times(&args, &with_ck, &killed, whole_s, || {
-        checkpointed += usize::from(ck.exists())
-    });
+    let kills = kill_five_times(
+        || jsim_into(&args, &with_ck, &killed),
+        whole_s,
+        || checkpointed += usize::from(ck.exists()),
+    );
     assert!(kills >= 3, "only {kills} runs were killed running");
     assert!(
         checkpointed >= 1,

@@ -114,6 +114,37 @@ fn a_sequence_runs_resumes_and_shards_to_the_same_catalogue() {
         std::fs::read_to_string(out.join("exposures/00002.csv")).expect("redone"),
         kept
     );
+    // a rerun resumes only this sequence: another seed, or files of another jsim, are refused and nothing
+    // is written (the kept exposures would otherwise mix two sequences)
+    let plan_bytes = std::fs::read(out.join("plan.csv")).expect("plan");
+    let o = run(&out, &spec, &["--set", "seed=7"]);
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("holds another sequence (its config.toml is another configuration's)"),
+        "{}",
+        stderr(&o)
+    );
+    let json = out.join("sequence.json");
+    let text = std::fs::read_to_string(&json).expect("sequence.json");
+    let version = format!("\"jsim_version\": \"{}\"", engine::VERSION);
+    assert!(text.contains(&version), "{text}");
+    std::fs::write(&json, text.replace(&version, "\"jsim_version\": \"0.0.0\"")).expect("write");
+    let o = run(&out, &spec, &[]);
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("it was written by jsim 0.0.0"),
+        "{}",
+        stderr(&o)
+    );
+    std::fs::write(&json, text).expect("write");
+    assert_eq!(
+        std::fs::read(out.join("plan.csv")).expect("plan"),
+        plan_bytes
+    );
+    assert_eq!(
+        std::fs::read_to_string(out.join("exposures/00002.csv")).expect("kept"),
+        kept
+    );
     // two shards (two Slurm array tasks) into one directory: the same table
     let sharded = dir.join("sharded");
     let o = run(&sharded, &spec, &["--shard", "0/2"]);
@@ -642,20 +673,7 @@ fn a_sequence_killed_five_times_resumes_to_the_same_bytes() {
     assert!(o.status.success(), "{}", stderr(&o));
     let whole_s = t.elapsed().as_secs_f64();
     let killed = dir.join("killed");
-    let mut kills = 0;
-    for k in 1..=5 {
-        let mut child = command(&killed, &spec, &[])
-            .stdout(std::process::Stdio::null())
-            .stderr(std::process::Stdio::null())
-            .spawn()
-            .expect("spawn");
-        std::thread::sleep(std::time::Duration::from_secs_f64(whole_s * k as f64 / 7.0));
-        if child.try_wait().expect("wait").is_none() {
-            child.kill().expect("SIGKILL");
-            kills += 1;
-        }
-        let _ = child.wait();
-    }
+    let kills = support::kill_five_times(|| command(&killed, &spec, &[]), whole_s, || {});
     assert!(
         kills >= 3,
         "only {kills} of the 5 runs were still running when killed"

@@ -83,9 +83,8 @@ pub fn solve<'py>(
     clip_sigma: f64,
     max_iterations: usize,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let model = SourceModel::parse(model, false)
-        .map_err(|e| PyValueError::new_err(format!("model = {e}")))?
-        .unwrap_or(SourceModel::Full);
+    let model =
+        SourceModel::parse(model).map_err(|e| PyValueError::new_err(format!("model = {e}")))?;
     let method = method_of(method)?;
     let o = "observations";
     let (oe, os) = (
@@ -234,7 +233,7 @@ pub fn solve_sequence<'py>(
     method: &str,
 ) -> PyResult<Bound<'py, PyDict>> {
     use engine::studies::sequence::{solution as sq, solve_study as study};
-    let model = SourceModel::parse(model, true)
+    let model = SourceModel::parse_or_auto(model)
         .map_err(|e| PyValueError::new_err(format!("model = {e}")))?;
     let method = method_of(method)?;
     let err = |e: engine::studies::sequence::SequenceError| PyValueError::new_err(e.to_string());

@@ -123,16 +123,24 @@ impl SourceModel {
         false
     }
 
-    /// The model a front end names: `position` or `full`, or (with `auto_allowed`) `auto`, which is None:
-    /// chosen from the sequence's span (by the sequence's solution study). The error says what is
-    /// allowed; each front end puts its own option's name before it.
-    pub fn parse(name: &str, auto_allowed: bool) -> Result<Option<Self>, String> {
+    /// The model a front end names: `position` or `full`. The error says what is allowed; each front end
+    /// puts its own option's name before it.
+    pub fn parse(name: &str) -> Result<Self, String> {
         match name {
-            "position" => Ok(Some(SourceModel::Position)),
-            "full" => Ok(Some(SourceModel::Full)),
-            "auto" if auto_allowed => Ok(None),
-            _ if auto_allowed => Err(format!("{name:?}: allowed auto, position, full")),
+            "position" => Ok(SourceModel::Position),
+            "full" => Ok(SourceModel::Full),
             _ => Err(format!("{name:?}: allowed position, full")),
+        }
+    }
+
+    /// [`SourceModel::parse`], or `auto` as None: chosen from the sequence's span (by the sequence's
+    /// solution study).
+    pub fn parse_or_auto(name: &str) -> Result<Option<Self>, String> {
+        match name {
+            "auto" => Ok(None),
+            _ => Self::parse(name)
+                .map(Some)
+                .map_err(|_| format!("{name:?}: allowed auto, position, full")),
         }
     }
 }
@@ -366,18 +374,15 @@ mod tests {
 
     #[test]
     fn a_source_model_is_parsed_once_for_every_front_end() {
+        assert_eq!(SourceModel::parse("full"), Ok(SourceModel::Full));
         assert_eq!(
-            SourceModel::parse("full", false),
-            Ok(Some(SourceModel::Full))
-        );
-        assert_eq!(
-            SourceModel::parse("position", true),
+            SourceModel::parse_or_auto("position"),
             Ok(Some(SourceModel::Position))
         );
-        assert_eq!(SourceModel::parse("auto", true), Ok(None));
-        let e = SourceModel::parse("auto", false).expect_err("no auto here");
+        assert_eq!(SourceModel::parse_or_auto("auto"), Ok(None));
+        let e = SourceModel::parse("auto").expect_err("no auto here");
         assert_eq!(e, "\"auto\": allowed position, full");
-        let e = SourceModel::parse("five", true).expect_err("unknown");
+        let e = SourceModel::parse_or_auto("five").expect_err("unknown");
         assert_eq!(e, "\"five\": allowed auto, position, full");
     }
 }

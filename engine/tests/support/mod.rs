@@ -1,5 +1,6 @@
-//! What the tests share (engine/tests/mpi.rs, slurm.rs, sequence.rs): the CI rule, `mpirun`, the `jsim-mpi`
-//! binary built beside the tests' `jsim`, the small sequence's configuration and the solutions' comparison.
+//! What the tests share (engine/tests/mpi.rs, slurm.rs, sequence.rs, long_jobs.rs): the CI rule, `mpirun`,
+//! the `jsim-mpi` binary built beside the tests' `jsim`, the small sequence's configuration, the solutions'
+//! comparison and the kill loop of the resumable jobs.
 #![allow(dead_code)] // each test file uses its share
 
 use std::path::{Path, PathBuf};
@@ -129,4 +130,30 @@ pub fn files_under(dir: &Path) -> Vec<String> {
     }
     out.sort();
     out
+}
+
+/// Start the job `command` builds five times, killing each start outright (SIGKILL: no handler runs) at
+/// 1/7 … 5/7 of `whole_s` (an uninterrupted run's time), each start resuming what the last left; `after`
+/// runs after each. Returns how many starts were still running when their kill came.
+pub fn kill_five_times(
+    mut command: impl FnMut() -> Command,
+    whole_s: f64,
+    mut after: impl FnMut(),
+) -> usize {
+    let mut kills = 0;
+    for k in 1..=5 {
+        let mut child = command()
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::null())
+            .spawn()
+            .expect("spawn");
+        std::thread::sleep(std::time::Duration::from_secs_f64(whole_s * k as f64 / 7.0));
+        if child.try_wait().expect("wait").is_none() {
+            child.kill().expect("SIGKILL");
+            kills += 1;
+        }
+        let _ = child.wait();
+        after();
+    }
+    kills
 }

@@ -180,7 +180,7 @@ fn emit_slurm(a: &SolveArgs) -> Result<()> {
 }
 
 pub fn solve(a: &SolveArgs) -> Result<()> {
-    let model = SourceModel::parse(&a.model, true).map_err(|e| anyhow::anyhow!("--model {e}"))?;
+    let model = SourceModel::parse_or_auto(&a.model).map_err(|e| anyhow::anyhow!("--model {e}"))?;
     let spec = sq::SolveSpec {
         model,
         distortion_order: a.distortion_order,

@@ -136,6 +136,7 @@ pub fn write(
         "median_exposures_per_covered_cell": summary.median,
         "max_exposures_per_cell": summary.max,
         "coverage_cell_deg": coverage.cell_deg,
+        "jsim_version": crate::VERSION,
     });
     let text = serde_json::to_string_pretty(&json)
         .map_err(|e| SequenceError::Invalid(format!("sequence.json: {e}")))?;

@@ -57,12 +57,48 @@ pub fn write_setup(plan: &Plan, cfg: &Config, dir: &Path) -> Result<(PathBuf, Pa
     crate::io::write_atomic(&config, cfg.to_toml().as_bytes()).map_err(|e| e.to_string())?;
     crate::io::write_atomic(&dir.join(DESIGN_NAME), design_of(cfg).to_toml().as_bytes())
         .map_err(|e| e.to_string())?;
-    let spec_text = toml::to_string(&super::spec::SequenceFile {
+    crate::io::write_atomic(&spec, spec_text(plan)?.as_bytes()).map_err(|e| e.to_string())?;
+    Ok((config, spec))
+}
+
+/// `sequence.toml`'s text.
+fn spec_text(plan: &Plan) -> Result<String, String> {
+    toml::to_string(&super::spec::SequenceFile {
         sequence: plan.spec.clone(),
     })
-    .map_err(|e| e.to_string())?;
-    crate::io::write_atomic(&spec, spec_text.as_bytes()).map_err(|e| e.to_string())?;
-    Ok((config, spec))
+    .map_err(|e| e.to_string())
+}
+
+/// Refuse a directory that holds another sequence: a rerun keeps the field and the exposures already
+/// written, so a `config.toml` or `sequence.toml` other than this run's, or a `sequence.json` written by
+/// another jsim version, would mix two sequences. A new directory, or one of this very sequence, passes.
+pub fn check_resumable(plan: &Plan, cfg: &Config, dir: &Path) -> Result<(), SequenceError> {
+    let differs =
+        |name: &str, now: &str| std::fs::read_to_string(dir.join(name)).is_ok_and(|was| was != now);
+    let spec = spec_text(plan).map_err(SequenceError::Invalid)?;
+    let version = std::fs::read_to_string(dir.join("sequence.json"))
+        .ok()
+        .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
+        .map(|v| {
+            v["jsim_version"]
+                .as_str()
+                .unwrap_or("before 0.1")
+                .to_string()
+        });
+    let why = if differs("config.toml", &cfg.to_toml()) {
+        "its config.toml is another configuration's".to_string()
+    } else if differs("sequence.toml", &spec) {
+        "its sequence.toml is another sequence's".to_string()
+    } else if let Some(v) = version.filter(|v| v != crate::VERSION) {
+        format!("it was written by jsim {v}, this is {}", crate::VERSION)
+    } else {
+        return Ok(());
+    };
+    Err(SequenceError::Invalid(format!(
+        "{}: holds another sequence ({why}); a rerun resumes only the same sequence: choose another --out, \
+         or remove the directory to start again",
+        dir.display()
+    )))
 }
 
 /// The sequence's identity, written in every row of its catalogues (`sequence_id`): the first 48 bits of

@@ -5,7 +5,7 @@
 //! that the rows' noise is independent.
 //!
 //! The study resumes: each finished stare leaves its row in `hw_<mag>/row.json`, written last and whole,
-//! with a fingerprint of the configuration and the stare it ran. A rerun into the same directory takes
+//! with a fingerprint of jsim's version, the configuration and the stare it ran. A rerun into the same directory takes
 //! every row whose fingerprint is the rerun's own and runs the other stares again whole (a stare is not
 //! cut into pieces: it is minutes at most). The gathered files are then the same bytes as an uninterrupted
 //! run's; `precision.json`'s `seconds` keep each stare's first run.
@@ -121,15 +121,15 @@ struct Finished {
     row: MagRow,
 }
 
-/// SHA-256 (hex) over the JSON of the stare's configuration (its seed included) and its spec: a rerun
-/// with anything changed runs the stare again.
+/// SHA-256 (hex) over jsim's version and the JSON of the stare's configuration (its seed included) and its
+/// spec: a rerun with anything changed, or by another jsim, runs the stare again.
 fn fingerprint(cfg: &Config, spec: &Spec) -> String {
-    use sha2::{Digest, Sha256};
-    let mut h = Sha256::new();
-    h.update(serde_json::to_vec(cfg).unwrap_or_default());
-    h.update([0u8]);
-    h.update(serde_json::to_vec(spec).unwrap_or_default());
-    h.finalize().iter().map(|b| format!("{b:02x}")).collect()
+    let mut bytes = crate::VERSION.as_bytes().to_vec();
+    bytes.push(0);
+    bytes.extend(serde_json::to_vec(cfg).unwrap_or_default());
+    bytes.push(0);
+    bytes.extend(serde_json::to_vec(spec).unwrap_or_default());
+    crate::digest::sha256_hex(&bytes)
 }
 
 /// The row a finished stare left at `path`, if it is there, whole and of this `fingerprint` (anything else:
