@@ -87,6 +87,203 @@ pub struct Sweep {
     pub hash: String,
 }
 
+impl SweepFile {
+    /// Exposures per point, exposures per stare and the threshold, checked.
+    fn sizes(&self) -> Result<(usize, usize, f64), String> {
+        if self.exposures < 1 {
+            return Err(format!(
+                "`exposures` = {}: must be ≥ 1 (exposures per grid point)",
+                self.exposures
+            ));
+        }
+        let exposures = self.exposures as usize;
+        if exposures > 100_000_000 {
+            return Err(format!("`exposures` = {exposures}: must be ≤ 1e8"));
+        }
+        let stare_exposures = self.stare_exposures.unwrap_or(1);
+        if !(1..=1000).contains(&stare_exposures)
+            || !exposures.is_multiple_of(stare_exposures as usize)
+        {
+            return Err(format!(
+                "`stare_exposures` = {stare_exposures}: must be in 1..=1000 and divide `exposures` = \
+                 {exposures}"
+            ));
+        }
+        let threshold_mas = self.threshold_mas.unwrap_or(4.0);
+        if !(threshold_mas > 0.0) || !threshold_mas.is_finite() {
+            return Err(format!(
+                "`threshold_mas` = {threshold_mas}: must be a finite number > 0"
+            ));
+        }
+        Ok((exposures, stare_exposures as usize, threshold_mas))
+    }
+
+    /// The countermeasures: one plan, validated where every plan is, with its telemetry quality and the
+    /// catalogue's error.
+    fn plan(&self, stare_exposures: usize) -> Result<(Plan, TelemetryQuality, f64), String> {
+        let names = self
+            .countermeasures
+            .clone()
+            .unwrap_or_else(|| vec!["none".into()]);
+        let t = self.telemetry.as_ref();
+        let d = TelemetryQuality::DEFAULT;
+        let or = |v: Option<f64>, default: f64| v.unwrap_or(default);
+        let telemetry = TelemetryQuality {
+            noise_mas: or(t.and_then(|t| t.noise_mas), d.noise_mas),
+            rate_hz: or(t.and_then(|t| t.rate_hz), d.rate_hz),
+            latency_s: or(t.and_then(|t| t.latency_s), d.latency_s),
+            correlated_mas: or(t.and_then(|t| t.correlated_mas), d.correlated_mas),
+            correlation_time_s: or(t.and_then(|t| t.correlation_time_s), d.correlation_time_s),
+        };
+        let reference_error_mas = or(
+            t.and_then(|t| t.reference_error_mas),
+            DEFAULT_CATALOGUE_ERROR_MAS,
+        );
+        let plan = Plan::parse(&names, telemetry, reference_error_mas)
+            .map_err(|e| format!("`countermeasures`/`[telemetry]`: {e}"))?;
+        if plan.needs_stare() && stare_exposures < 2 {
+            return Err(format!(
+                "`countermeasures` reference a plate model to the stare's stack: `stare_exposures` = \
+                 {stare_exposures} must be ≥ 2 (or name the reference: @catalogue, @oracle)"
+            ));
+        }
+        Ok((plan, telemetry, reference_error_mas))
+    }
+
+    /// The base configuration (a file beside the sweep file, a `[base]` table, or the default), with the
+    /// instrument (as built by default; "design" zeroes every deviation) and then `[set]` applied.
+    fn base_config(&self, base_dir: &Path) -> Result<Config, String> {
+        let mut base = match &self.base {
+            None => Config::default(),
+            Some(toml::Value::String(p)) => {
+                let p = Path::new(p);
+                let full = if p.is_absolute() {
+                    p.to_path_buf()
+                } else {
+                    base_dir.join(p)
+                };
+                Config::load(&full).map_err(|e| format!("base config: {e}"))?
+            }
+            Some(toml::Value::Table(t)) => {
+                let text = toml::to_string(t).map_err(|e| format!("[base]: {e}"))?;
+                Config::from_toml_str(&text)
+                    .map_err(|e| format!("[base]: {}", config_error_text(&e)))?
+            }
+            Some(_) => {
+                return Err("`base` must be a config file path (string) or a [base] table".into());
+            }
+        };
+        if let Some(instrument) = self.instrument {
+            base.as_built = base.as_built.for_instrument(instrument);
+        }
+        if let Some(set) = &self.set {
+            let mut leaves = Vec::new();
+            flatten("", set, &mut leaves);
+            for (field, v) in leaves {
+                base = base
+                    .with_override(&field, &v.to_string())
+                    .map_err(|e| format!("[set] `{field}`: {}", config_error_text(&e)))?;
+            }
+        }
+        Ok(base)
+    }
+}
+
+/// The grid's parameters, sorted by field: each a non-empty list of distinct values, never the seed or the
+/// images per unit (every unit sets those).
+fn grid_params(grid: Option<&toml::Table>) -> Result<Vec<Param>, String> {
+    let mut leaves = Vec::new();
+    flatten("", grid.unwrap_or(&toml::Table::new()), &mut leaves);
+    if leaves.is_empty() {
+        return Err(
+            "the grid is empty: give at least one parameter, e.g. [grid] \"ace.sigma_mas\" = [150, 300]"
+                .into(),
+        );
+    }
+    leaves.sort_by(|a, b| a.0.cmp(&b.0));
+    let mut params = Vec::new();
+    for (field, v) in leaves {
+        let toml::Value::Array(values) = v else {
+            return Err(format!(
+                "grid parameter `{field}` must be a list of values, e.g. `{field} = [a, b]`"
+            ));
+        };
+        if values.is_empty() {
+            return Err(format!("grid parameter `{field}` has no values"));
+        }
+        if field == "seed" || field == "fidelity.images" {
+            return Err(format!(
+                "grid parameter `{field}` cannot be swept: every unit sets it (the seed from the sweep seed and the unit index, one image per unit); use `exposures` and `seed`"
+            ));
+        }
+        let display: Vec<String> = values.iter().map(display_value).collect();
+        for (k, d) in display.iter().enumerate() {
+            if display[..k].contains(d) {
+                return Err(format!(
+                    "grid parameter `{field}` lists the value {d} twice"
+                ));
+            }
+        }
+        params.push(Param {
+            field,
+            toml: values.iter().map(|v| v.to_string()).collect(),
+            display,
+        });
+    }
+    Ok(params)
+}
+
+/// Every point of the grid (the first parameter slowest), its configuration `base` with the point's values
+/// and `stare_exposures` images, validated.
+fn grid_points(
+    base: &Config,
+    params: &[Param],
+    stare_exposures: usize,
+    source: &Path,
+) -> Result<Vec<Point>, SweepError> {
+    let n_points: usize = params.iter().map(|p| p.toml.len()).product();
+    if n_points > 1_000_000 {
+        return Err(SweepError::File {
+            path: source.to_path_buf(),
+            message: format!("the grid has {n_points} points: at most 1e6"),
+        });
+    }
+    let mut points = Vec::with_capacity(n_points);
+    for index in 0..n_points {
+        let mut rem = index;
+        let mut idx = vec![0; params.len()];
+        for (k, p) in params.iter().enumerate().rev() {
+            idx[k] = rem % p.toml.len();
+            rem /= p.toml.len();
+        }
+        let mut cfg = base.clone();
+        for (k, p) in params.iter().enumerate() {
+            cfg = cfg
+                .with_override(&p.field, &p.toml[idx[k]])
+                .map_err(|e| SweepError::Grid {
+                    path: source.to_path_buf(),
+                    field: p.field.clone(),
+                    message: config_error_text(&e).replace('\n', " ").trim().to_string(),
+                })?;
+        }
+        cfg.fidelity.images = stare_exposures;
+        cfg.validate().map_err(|e| SweepError::File {
+            path: source.to_path_buf(),
+            message: format!("grid point {index} ({}): {e}", describe(params, &idx)),
+        })?;
+        points.push(Point {
+            index,
+            values: params
+                .iter()
+                .zip(&idx)
+                .map(|(p, &i)| p.display[i].clone())
+                .collect(),
+            config: cfg,
+        });
+    }
+    Ok(points)
+}
+
 /// Flatten nested TOML tables into dotted paths; `leaf` decides where to stop.
 fn flatten(prefix: &str, t: &toml::Table, out: &mut Vec<(String, toml::Value)>) {
     for (k, v) in t {
@@ -142,173 +339,12 @@ impl Sweep {
         };
         let f: SweepFile =
             toml::from_str(text).map_err(|e| ferr(e.to_string().trim().to_string()))?;
-        if f.exposures < 1 {
-            return Err(ferr(format!(
-                "`exposures` = {}: must be ≥ 1 (exposures per grid point)",
-                f.exposures
-            )));
-        }
-        let exposures = f.exposures as usize;
-        if exposures > 100_000_000 {
-            return Err(ferr(format!("`exposures` = {exposures}: must be ≤ 1e8")));
-        }
-        let stare_exposures = f.stare_exposures.unwrap_or(1);
-        if !(1..=1000).contains(&stare_exposures)
-            || !exposures.is_multiple_of(stare_exposures as usize)
-        {
-            return Err(ferr(format!(
-                "`stare_exposures` = {stare_exposures}: must be in 1..=1000 and divide `exposures` = \
-                 {exposures}"
-            )));
-        }
-        let stare_exposures = stare_exposures as usize;
-        let threshold_mas = f.threshold_mas.unwrap_or(4.0);
-        if !(threshold_mas > 0.0) || !threshold_mas.is_finite() {
-            return Err(ferr(format!(
-                "`threshold_mas` = {threshold_mas}: must be a finite number > 0"
-            )));
-        }
-
-        // countermeasures: one plan, validated where every plan is
-        let names = f.countermeasures.unwrap_or_else(|| vec!["none".into()]);
-        let t = f.telemetry.unwrap_or_default();
-        let d = TelemetryQuality::DEFAULT;
-        let telemetry = TelemetryQuality {
-            noise_mas: t.noise_mas.unwrap_or(d.noise_mas),
-            rate_hz: t.rate_hz.unwrap_or(d.rate_hz),
-            latency_s: t.latency_s.unwrap_or(d.latency_s),
-            correlated_mas: t.correlated_mas.unwrap_or(d.correlated_mas),
-            correlation_time_s: t.correlation_time_s.unwrap_or(d.correlation_time_s),
-        };
-        let reference_error_mas = t.reference_error_mas.unwrap_or(DEFAULT_CATALOGUE_ERROR_MAS);
-        let plan = Plan::parse(&names, telemetry, reference_error_mas)
-            .map_err(|e| ferr(format!("`countermeasures`/`[telemetry]`: {e}")))?;
-        if plan.needs_stare() && stare_exposures < 2 {
-            return Err(ferr(format!(
-                "`countermeasures` reference a plate model to the stare's stack: `stare_exposures` = \
-                 {stare_exposures} must be ≥ 2 (or name the reference: @catalogue, @oracle)"
-            )));
-        }
+        let (exposures, stare_exposures, threshold_mas) = f.sizes().map_err(ferr)?;
+        let (plan, telemetry, reference_error_mas) = f.plan(stare_exposures).map_err(ferr)?;
         let countermeasures = plan.names();
-
-        // base configuration
-        let mut base = match &f.base {
-            None => Config::default(),
-            Some(toml::Value::String(p)) => {
-                let p = Path::new(p);
-                let full = if p.is_absolute() {
-                    p.to_path_buf()
-                } else {
-                    base_dir.join(p)
-                };
-                Config::load(&full).map_err(|e| ferr(format!("base config: {e}")))?
-            }
-            Some(toml::Value::Table(t)) => {
-                let text = toml::to_string(t).map_err(|e| ferr(format!("[base]: {e}")))?;
-                Config::from_toml_str(&text)
-                    .map_err(|e| ferr(format!("[base]: {}", config_error_text(&e))))?
-            }
-            Some(_) => {
-                return Err(ferr(
-                    "`base` must be a config file path (string) or a [base] table".into(),
-                ));
-            }
-        };
-        // the instrument (as built by default; "design" zeroes every deviation), before [set] and the grid
-        if let Some(instrument) = f.instrument {
-            base.as_built = base.as_built.for_instrument(instrument);
-        }
-        if let Some(set) = &f.set {
-            let mut leaves = Vec::new();
-            flatten("", set, &mut leaves);
-            for (field, v) in leaves {
-                base = base
-                    .with_override(&field, &v.to_string())
-                    .map_err(|e| ferr(format!("[set] `{field}`: {}", config_error_text(&e))))?;
-            }
-        }
-
-        // grid
-        let grid = f.grid.unwrap_or_default();
-        let mut leaves = Vec::new();
-        flatten("", &grid, &mut leaves);
-        if leaves.is_empty() {
-            return Err(ferr(
-                "the grid is empty: give at least one parameter, e.g. [grid] \"ace.sigma_mas\" = [150, 300]"
-                    .into(),
-            ));
-        }
-        leaves.sort_by(|a, b| a.0.cmp(&b.0));
-        let mut params = Vec::new();
-        for (field, v) in leaves {
-            let toml::Value::Array(values) = v else {
-                return Err(ferr(format!(
-                    "grid parameter `{field}` must be a list of values, e.g. `{field} = [a, b]`"
-                )));
-            };
-            if values.is_empty() {
-                return Err(ferr(format!("grid parameter `{field}` has no values")));
-            }
-            if field == "seed" || field == "fidelity.images" {
-                return Err(ferr(format!(
-                    "grid parameter `{field}` cannot be swept: every unit sets it (the seed from the sweep seed and the unit index, one image per unit); use `exposures` and `seed`"
-                )));
-            }
-            let display: Vec<String> = values.iter().map(display_value).collect();
-            for (k, d) in display.iter().enumerate() {
-                if display[..k].contains(d) {
-                    return Err(ferr(format!(
-                        "grid parameter `{field}` lists the value {d} twice"
-                    )));
-                }
-            }
-            params.push(Param {
-                field,
-                toml: values.iter().map(|v| v.to_string()).collect(),
-                display,
-            });
-        }
-        let n_points: usize = params.iter().map(|p| p.toml.len()).product();
-        if n_points > 1_000_000 {
-            return Err(ferr(format!("the grid has {n_points} points: at most 1e6")));
-        }
-        let mut points = Vec::with_capacity(n_points);
-        for index in 0..n_points {
-            // first parameter slowest
-            let mut rem = index;
-            let mut idx = vec![0; params.len()];
-            for (k, p) in params.iter().enumerate().rev() {
-                idx[k] = rem % p.toml.len();
-                rem /= p.toml.len();
-            }
-            let mut cfg = base.clone();
-            for (k, p) in params.iter().enumerate() {
-                cfg =
-                    cfg.with_override(&p.field, &p.toml[idx[k]])
-                        .map_err(|e| SweepError::Grid {
-                            path: source.to_path_buf(),
-                            field: p.field.clone(),
-                            message: config_error_text(&e).replace('\n', " ").trim().to_string(),
-                        })?;
-            }
-            cfg.fidelity.images = stare_exposures;
-            cfg.validate().map_err(|e| {
-                ferr(format!(
-                    "grid point {index} ({}): {e}",
-                    describe(&params, &idx)
-                ))
-            })?;
-            points.push(Point {
-                index,
-                values: params
-                    .iter()
-                    .zip(&idx)
-                    .map(|(p, &i)| p.display[i].clone())
-                    .collect(),
-                config: cfg,
-            });
-        }
-
+        let base = f.base_config(base_dir).map_err(ferr)?;
+        let params = grid_params(f.grid.as_ref()).map_err(ferr)?;
+        let points = grid_points(&base, &params, stare_exposures, source)?;
         let common_random_numbers = f.common_random_numbers.unwrap_or(false);
         let mut canon = String::new();
         let _ = writeln!(canon, "{FORMAT}");
