@@ -354,98 +354,154 @@ pub(super) fn fit_with_attitudes(
     active: &[bool],
 ) -> Option<(Calibration, Vec<Option<super::Attitude>>)> {
     use rayon::prelude::*;
-    let mono = model.monomials();
-    let terms = model.array_terms();
     let n = model.per_axis();
     let n2 = 2 * n;
-    let inv: Vec<Option<[f64; 4]>> = exposures.iter().map(|g| inverse2(&g.to_plane)).collect();
-    // per exposure: A (4 × 4), B (4 × 2n), its right-hand side (4), and its share of C (2n × 2n) and of the
-    // calibration's right-hand side (2n)
-    struct Block {
-        a: [f64; 16],
-        b: Vec<f64>,
-        ra: [f64; 4],
-        c: Vec<f64>,
-        rc: Vec<f64>,
-        count: usize,
-    }
     let blocks: Vec<Option<Block>> = (0..exposures.len())
         .into_par_iter()
         .map(|e| {
-            let mine = by_exposure.get(e);
-            let g = &exposures[e];
-            let m = inv[e]?;
-            let det = (g.to_plane[0] * g.to_plane[3] - g.to_plane[1] * g.to_plane[2]).abs();
-            let mut blk = Block {
-                a: [0.0; 16],
-                b: vec![0.0; 4 * n2],
-                ra: [0.0; 4],
-                c: vec![0.0; n2 * n2],
-                rc: vec![0.0; n2],
-                count: 0,
-            };
-            let to_focal = |p: [f64; 2]| {
-                let d = [p[0] - g.centre_mas[0], p[1] - g.centre_mas[1]];
-                [m[0] * d[0] + m[1] * d[1], m[2] * d[0] + m[3] * d[1]]
-            };
-            let mut phi: Vec<(usize, f64)> = Vec::with_capacity(terms.len() + mono.len());
-            // C's x block (the y block is the same: one φ, one weight per observation), upper triangle
-            let mut cx = vec![0.0; n * n];
-            for i in mine.iter().map(|i| *i as usize).filter(|i| active[*i]) {
-                let o = &obs[i];
-                let Some(place) = place(i) else { continue };
-                blk.count += 1;
-                // σ in px: the plane's mas per px is √|det M|
-                let w = det / (o.sigma_mas * o.sigma_mas);
-                let (y, sp) = (to_focal([o.xi_mas, o.eta_mas]), to_focal(place));
-                model.terms_at(o.array, o.focal_px, norm_px, &mut phi);
-                // x: p′ s′x − q′ s′y + a′x + Σ cx φ;  y: q′ s′x + p′ s′y + a′y + Σ cy φ
-                for axis in 0..2 {
-                    let att = if axis == 0 {
-                        [sp[0], -sp[1], 1.0, 0.0]
-                    } else {
-                        [sp[1], sp[0], 0.0, 1.0]
-                    };
-                    let off = axis * n;
-                    for r in 0..4 {
-                        let wa = w * att[r];
-                        blk.ra[r] += wa * y[axis];
-                        for c in 0..4 {
-                            blk.a[r * 4 + c] += wa * att[c];
-                        }
-                        for &(j, x) in &phi {
-                            blk.b[r * n2 + off + j] += wa * x;
-                        }
-                    }
-                    for &(i1, x1) in &phi {
-                        blk.rc[off + i1] += w * x1 * y[axis];
-                    }
-                }
-                // φ's indices rise (an array's terms, then the distortion's): the upper triangle is i1 ≤ j1
-                for (a, &(i1, x1)) in phi.iter().enumerate() {
-                    let wx = w * x1;
-                    for &(j1, x2) in &phi[a..] {
-                        cx[i1 * n + j1] += wx * x2;
-                    }
-                }
-            }
-            for i1 in 0..n {
-                for j1 in i1..n {
-                    let v = cx[i1 * n + j1];
-                    for off in [0, n] {
-                        blk.c[(off + i1) * n2 + off + j1] = v;
-                        blk.c[(off + j1) * n2 + off + i1] = v;
-                    }
-                }
-            }
-            Some(blk)
+            let mine = by_exposure.get(e).iter().map(|i| *i as usize);
+            Block::of_exposure(model, norm_px, obs, &exposures[e], mine, &place, active)
         })
         .collect();
-    // the reduced system for the calibration: C − Σ Bᵀ A⁻¹ B, r − Σ Bᵀ A⁻¹ rₐ
+    let (mut sys, rhs, a_inv) = reduced_system(&blocks, n2);
+    let t = model.array_terms().len();
+    // the gauge, held at zero by penalty rows as heavy as the heaviest term
+    let heavy = (0..n2)
+        .map(|i| sys[i * n2 + i])
+        .fold(0.0f64, f64::max)
+        .max(1e-300);
+    for row in gauge_rows(model) {
+        for &(i, a) in &row {
+            for &(j, b) in &row {
+                sys[i * n2 + j] += heavy * a * b;
+            }
+        }
+    }
+    let x = solve_scaled(&sys, &rhs, n2)?;
+    let mut cal = Calibration::zero(model, norm_px);
+    for (k, a) in cal.arrays.iter_mut().enumerate() {
+        *a = [
+            x[t * k..t * (k + 1)].to_vec(),
+            x[n + t * k..n + t * (k + 1)].to_vec(),
+        ];
+    }
+    let base = t * model.arrays;
+    cal.distortion = [x[base..n].to_vec(), x[n + base..].to_vec()];
+    let attitudes = blocks
+        .iter()
+        .zip(&a_inv)
+        .zip(exposures)
+        .map(|((blk, ai), g)| attitude_of(blk.as_ref()?, ai.as_ref()?, g, &x))
+        .collect();
+    Some((cal, attitudes))
+}
+
+/// One exposure's share of the instrument block's normal equations: A (4 × 4, its attitude), B (4 × 2n,
+/// attitude × calibration), its right-hand side rₐ (4), and its share of C (2n × 2n) and of the
+/// calibration's right-hand side (2n).
+struct Block {
+    a: [f64; 16],
+    b: Vec<f64>,
+    ra: [f64; 4],
+    c: Vec<f64>,
+    rc: Vec<f64>,
+    count: usize,
+}
+
+impl Block {
+    /// The block of exposure `g` from its observations `mine` (the active ones with a place); None when its
+    /// plane's matrix is singular.
+    fn of_exposure(
+        model: CalibrationModel,
+        norm_px: f64,
+        obs: &[Observation],
+        g: &ExposureGeometry,
+        mine: impl Iterator<Item = usize>,
+        place: &(impl Fn(usize) -> Option<[f64; 2]> + Sync),
+        active: &[bool],
+    ) -> Option<Block> {
+        let n = model.per_axis();
+        let n2 = 2 * n;
+        let m = inverse2(&g.to_plane)?;
+        let det = (g.to_plane[0] * g.to_plane[3] - g.to_plane[1] * g.to_plane[2]).abs();
+        let mut blk = Block {
+            a: [0.0; 16],
+            b: vec![0.0; 4 * n2],
+            ra: [0.0; 4],
+            c: vec![0.0; n2 * n2],
+            rc: vec![0.0; n2],
+            count: 0,
+        };
+        let to_focal = |p: [f64; 2]| {
+            let d = [p[0] - g.centre_mas[0], p[1] - g.centre_mas[1]];
+            [m[0] * d[0] + m[1] * d[1], m[2] * d[0] + m[3] * d[1]]
+        };
+        let mut phi: Vec<(usize, f64)> =
+            Vec::with_capacity(model.array_terms().len() + model.monomials().len());
+        // C's x block (the y block is the same: one φ, one weight per observation), upper triangle
+        let mut cx = vec![0.0; n * n];
+        for i in mine.filter(|i| active[*i]) {
+            let o = &obs[i];
+            let Some(place) = place(i) else { continue };
+            blk.count += 1;
+            // σ in px: the plane's mas per px is √|det M|
+            let w = det / (o.sigma_mas * o.sigma_mas);
+            let (y, sp) = (to_focal([o.xi_mas, o.eta_mas]), to_focal(place));
+            model.terms_at(o.array, o.focal_px, norm_px, &mut phi);
+            // x: p′ s′x − q′ s′y + a′x + Σ cx φ;  y: q′ s′x + p′ s′y + a′y + Σ cy φ
+            for axis in 0..2 {
+                let att = if axis == 0 {
+                    [sp[0], -sp[1], 1.0, 0.0]
+                } else {
+                    [sp[1], sp[0], 0.0, 1.0]
+                };
+                let off = axis * n;
+                for r in 0..4 {
+                    let wa = w * att[r];
+                    blk.ra[r] += wa * y[axis];
+                    for c in 0..4 {
+                        blk.a[r * 4 + c] += wa * att[c];
+                    }
+                    for &(j, x) in &phi {
+                        blk.b[r * n2 + off + j] += wa * x;
+                    }
+                }
+                for &(i1, x1) in &phi {
+                    blk.rc[off + i1] += w * x1 * y[axis];
+                }
+            }
+            // φ's indices rise (an array's terms, then the distortion's): the upper triangle is i1 ≤ j1
+            for (a, &(i1, x1)) in phi.iter().enumerate() {
+                let wx = w * x1;
+                for &(j1, x2) in &phi[a..] {
+                    cx[i1 * n + j1] += wx * x2;
+                }
+            }
+        }
+        for i1 in 0..n {
+            for j1 in i1..n {
+                let v = cx[i1 * n + j1];
+                for off in [0, n] {
+                    blk.c[(off + i1) * n2 + off + j1] = v;
+                    blk.c[(off + j1) * n2 + off + i1] = v;
+                }
+            }
+        }
+        Some(blk)
+    }
+}
+
+/// The reduced system for the calibration (2n unknowns), the attitudes eliminated: `C − Σ Bᵀ A⁻¹ B`,
+/// `r − Σ Bᵀ A⁻¹ rₐ`, and each exposure's A⁻¹ (None where it sees fewer than two placed sources).
+#[allow(clippy::type_complexity)]
+fn reduced_system(
+    blocks: &[Option<Block>],
+    n2: usize,
+) -> (Vec<f64>, Vec<f64>, Vec<Option<Vec<f64>>>) {
     let mut sys = vec![0.0; n2 * n2];
     let mut rhs = vec![0.0; n2];
     let mut a_inv: Vec<Option<Vec<f64>>> = Vec::with_capacity(blocks.len());
-    for blk in &blocks {
+    for blk in blocks {
         let Some(blk) = blk else {
             a_inv.push(None);
             continue;
@@ -489,64 +545,42 @@ pub(super) fn fit_with_attitudes(
         }
         a_inv.push(Some(ai));
     }
-    let t = terms.len();
-    // the gauge, held at zero by penalty rows as heavy as the heaviest term
-    let heavy = (0..n2)
-        .map(|i| sys[i * n2 + i])
-        .fold(0.0f64, f64::max)
-        .max(1e-300);
-    for row in gauge_rows(model) {
-        for &(i, a) in &row {
-            for &(j, b) in &row {
-                sys[i * n2 + j] += heavy * a * b;
-            }
-        }
+    (sys, rhs, a_inv)
+}
+
+/// An exposure's attitude from the solved calibration `x`: `A⁻¹ (rₐ − B x)`, turned back onto the plane.
+fn attitude_of(
+    blk: &Block,
+    ai: &[f64],
+    g: &ExposureGeometry,
+    x: &[f64],
+) -> Option<super::Attitude> {
+    let n2 = x.len();
+    let mut r = blk.ra;
+    for (k, rk) in r.iter_mut().enumerate() {
+        *rk -= (0..n2).map(|j| blk.b[k * n2 + j] * x[j]).sum::<f64>();
     }
-    let x = solve_scaled(&sys, &rhs, n2)?;
-    let mut cal = Calibration::zero(model, norm_px);
-    for (k, a) in cal.arrays.iter_mut().enumerate() {
-        *a = [
-            x[t * k..t * (k + 1)].to_vec(),
-            x[n + t * k..n + t * (k + 1)].to_vec(),
-        ];
-    }
-    let base = t * model.arrays;
-    cal.distortion = [x[base..n].to_vec(), x[n + base..].to_vec()];
-    // each exposure's attitude: A⁻¹ (rₐ − B x), turned back onto the plane
-    let attitudes = blocks
-        .iter()
-        .zip(&a_inv)
-        .zip(exposures)
-        .map(|((blk, ai), g)| {
-            let (blk, ai) = (blk.as_ref()?, ai.as_ref()?);
-            let mut r = blk.ra;
-            for (k, rk) in r.iter_mut().enumerate() {
-                *rk -= (0..n2).map(|j| blk.b[k * n2 + j] * x[j]).sum::<f64>();
-            }
-            let th: Vec<f64> = (0..4)
-                .map(|i| (0..4).map(|k| ai[i * 4 + k] * r[k]).sum())
-                .collect();
-            let m = g.to_plane;
-            let mi = inverse2(&m)?;
-            // A = M A′ M⁻¹ (a similarity, with the sky's handedness), a = M a′
-            let ap = [th[0], -th[1], th[1], th[0]];
-            let mul = |a: &[f64; 4], b: &[f64; 4]| {
-                [
-                    a[0] * b[0] + a[1] * b[2],
-                    a[0] * b[1] + a[1] * b[3],
-                    a[2] * b[0] + a[3] * b[2],
-                    a[2] * b[1] + a[3] * b[3],
-                ]
-            };
-            let full = mul(&mul(&m, &ap), &mi);
-            Some(super::Attitude {
-                p: (full[0] + full[3]) / 2.0,
-                q: (full[2] - full[1]) / 2.0,
-                offset_mas: [m[0] * th[2] + m[1] * th[3], m[2] * th[2] + m[3] * th[3]],
-            })
-        })
+    let th: Vec<f64> = (0..4)
+        .map(|i| (0..4).map(|k| ai[i * 4 + k] * r[k]).sum())
         .collect();
-    Some((cal, attitudes))
+    let m = g.to_plane;
+    let mi = inverse2(&m)?;
+    // A = M A′ M⁻¹ (a similarity, with the sky's handedness), a = M a′
+    let ap = [th[0], -th[1], th[1], th[0]];
+    let mul = |a: &[f64; 4], b: &[f64; 4]| {
+        [
+            a[0] * b[0] + a[1] * b[2],
+            a[0] * b[1] + a[1] * b[3],
+            a[2] * b[0] + a[3] * b[2],
+            a[2] * b[1] + a[3] * b[3],
+        ]
+    };
+    let full = mul(&mul(&m, &ap), &mi);
+    Some(super::Attitude {
+        p: (full[0] + full[3]) / 2.0,
+        q: (full[2] - full[1]) / 2.0,
+        offset_mas: [m[0] * th[2] + m[1] * th[3], m[2] * th[2] + m[3] * th[3]],
+    })
 }
 
 #[cfg(test)]
