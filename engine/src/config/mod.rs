@@ -722,6 +722,9 @@ pub enum TelemetryFilter {
     Auto,
     /// The samples as recorded (every sample's noise blurs the model: for comparison).
     Off,
+    /// The Wiener smoother: each frequency kept in the proportion of the record's spectrum above its white
+    /// noise (`analysis::countermeasures::wiener`).
+    Wiener,
 }
 
 /// How the analysis pipeline treats crowding (`analysis::crowding`: the automatic choice from the measured

@@ -34,6 +34,7 @@ pub mod plate;
 pub mod stack;
 pub mod telemetry;
 pub mod wavefront;
+pub mod wiener;
 pub mod zones;
 
 pub use plate::PlateModel;

@@ -142,13 +142,33 @@ impl TelemetryRecord {
     }
 
     /// The record the forward model sees under `filter`: low-pass filtered by the boxcar [`Smoothing::choose`]
-    /// picks; `None` where that is the record itself (`off`, or a boxcar of one sample).
+    /// picks (`auto`), or Wiener-smoothed against its white noise ([`super::wiener`]); `None` where that is
+    /// the record itself (`off`, a boxcar of one sample, no noise).
     pub fn model_record(&self, filter: TelemetryFilter) -> Option<Self> {
-        if filter == TelemetryFilter::Off {
-            return None;
+        match filter {
+            TelemetryFilter::Off => None,
+            TelemetryFilter::Auto => {
+                let smoothing = Smoothing::choose(self);
+                (smoothing.half_width > 0).then(|| self.smoothed(&smoothing))
+            }
+            TelemetryFilter::Wiener => {
+                let noise = self.noise_mas();
+                (noise > 0.0).then(|| Self {
+                    x_mas: super::wiener::smooth(&self.x_mas, noise),
+                    y_mas: super::wiener::smooth(&self.y_mas, noise),
+                    ..self.clone()
+                })
+            }
         }
-        let smoothing = Smoothing::choose(self);
-        (smoothing.half_width > 0).then(|| self.smoothed(&smoothing))
+    }
+
+    /// The white noise per sample: as the record states it, else estimated from its second differences
+    /// ([`white_noise_mas`], both axes in quadrature over √2).
+    pub fn noise_mas(&self) -> f64 {
+        self.stated_noise_mas.unwrap_or_else(|| {
+            (white_noise_mas(&self.x_mas).powi(2) + white_noise_mas(&self.y_mas).powi(2)).sqrt()
+                / 2f64.sqrt()
+        })
     }
 }
 
@@ -175,10 +195,7 @@ pub struct Smoothing {
 impl Smoothing {
     /// The boxcar that minimises the estimated blur error of `rec` ([`Smoothing`]).
     pub fn choose(rec: &TelemetryRecord) -> Self {
-        let sigma = rec.stated_noise_mas.unwrap_or_else(|| {
-            (white_noise_mas(&rec.x_mas).powi(2) + white_noise_mas(&rec.y_mas).powi(2)).sqrt()
-                / 2f64.sqrt()
-        });
+        let sigma = rec.noise_mas();
         let s2 = sigma * sigma;
         let n = rec.x_mas.len();
         let mut best = Self {
