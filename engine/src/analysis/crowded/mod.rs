@@ -157,7 +157,6 @@ pub fn analyse(
     model_epsf: Option<&Epsf>,
     catalogue: Option<&[forced::CatalogueStar]>,
 ) -> Crowded {
-    let opts = build_options(cfg);
     let pd = img.pixels();
     let (sky, noise) = sky_and_noise(img);
     let det = detect::detect_smoothed(img, cfg.crowded_detect_sigma, sky, noise);
@@ -173,118 +172,41 @@ pub fn analyse(
             ..Member::new(s.x, s.y, s.flux)
         })
         .collect();
-    let candidates = epsf_candidates(img, &stars, cfg, noise);
-    let n_cand = candidates.iter().filter(|c| **c).count();
-    // the ePSF's node error (the saturated stars' model term): from its stars, or none for a stand-in
-    let fluxes: Vec<f64> = stars
-        .iter()
-        .zip(&candidates)
-        .filter(|(_, c)| **c)
-        .map(|(s, _)| s.flux)
-        .collect();
-    let node_error = if n_cand >= MIN_EPSF_STARS {
-        group_fit::node_error(noise, stats::median(&fluxes), n_cand, opts.oversampling)
-    } else {
-        0.0
-    };
-    let (epsf, epsf_stars, epsf_iterations, fallback) = if stars.is_empty() {
-        let e = model_epsf
-            .cloned()
-            .unwrap_or_else(|| build::gaussian_seed(&pd, &[], opts.oversampling, opts.half_px));
-        (
-            e,
-            0,
-            0,
-            format!("no star detected above {} σ", cfg.crowded_detect_sigma),
-        )
-    } else if n_cand < MIN_EPSF_STARS {
-        let (e, what) = match model_epsf {
-            Some(m) => (m.clone(), "the instrument's model PSF"),
-            None => (
-                build::gaussian_seed(&pd, &starts, opts.oversampling, opts.half_px),
-                "a Gaussian of the stars' mean second moment",
-            ),
-        };
-        let why = format!(
-            "{n_cand} unsaturated star(s) clear of brighter neighbours, fewer than {MIN_EPSF_STARS}: no \
-             ePSF built; fitted with {what}"
-        );
-        (e, 0, 0, why)
-    } else {
-        let chosen: Vec<StarStart> = starts
-            .iter()
-            .zip(&candidates)
-            .filter(|(_, c)| **c)
-            .map(|(s, _)| *s)
-            .collect();
-        let seed = build::gaussian_seed(&pd, &chosen, opts.oversampling, opts.half_px);
-        let (e, used, it) = build_epsf(img, &mut stars, &candidates, seed, node_error, cfg);
-        (e, used, it, String::new())
-    };
-    if stars.is_empty() {
-        return Crowded {
-            fits: Vec::new(),
-            epsf,
-            epsf_stars,
-            epsf_iterations,
-            fallback,
-            n_first: 0,
-            n_residual: 0,
-            n_groups: 0,
-            largest_group: 0,
-            model: Vec::new(),
-            reported: Vec::new(),
+    let built = first_epsf(img, cfg, model_epsf, &starts, &mut stars, noise);
+    let (epsf, node_error) = (built.epsf, built.node_error);
+    let crowded =
+        |fits: Vec<StarFit>,
+         n_residual: usize,
+         groups: GroupStats,
+         model: Vec<Member>,
+         reported: Vec<usize>,
+         registration: Option<crate::analysis::registration::Registration>| Crowded {
+            n_first: fits.len() - n_residual,
+            n_residual,
+            fits,
+            epsf: epsf.clone(),
+            epsf_stars: built.stars,
+            epsf_iterations: built.iterations,
+            fallback: built.fallback.clone(),
+            n_groups: groups.groups,
+            largest_group: groups.largest,
+            model,
+            reported,
             node_error,
-            registration: None,
+            registration,
         };
+    if stars.is_empty() {
+        let none = GroupStats {
+            groups: 0,
+            largest: 0,
+        };
+        return crowded(Vec::new(), 0, none, Vec::new(), Vec::new(), None);
     }
     // fit, look for what the model misses, fit again with the companions
     let (fits, _) = fit_pass(img, &epsf, &stars, node_error, cfg);
     stars = members_of(&fits, &stars, img.nx, img.ny);
-    let model = model_image(&epsf, &stars, img.nx, img.ny);
-    let pos: Vec<(f64, f64)> = stars.iter().map(|s| (s.x, s.y)).collect();
-    let extra = detect::detect_residual(
-        img,
-        &model,
-        sky,
-        noise,
-        cfg.crowded_detect_sigma,
-        &Neighbours::new(&pos),
-        RESIDUAL_MIN_SEP_PX,
-    );
     let mut from_residual = vec![false; stars.len()];
-    let resid = residual(img, &model);
-    let rd = PixelData { e: &resid, ..pd };
-    // each new star's flux from a fit of it alone in the residual (every star found so far subtracted), as
-    // photutils' IterativePSFPhotometry does, so that the joint fit starts it with its own flux, not with
-    // its neighbour's light (with which it could swap places)
-    let new: Vec<Member> = extra
-        .par_iter()
-        .map(|&(x, y)| {
-            let s = initial_start(&rd, x, y, ann);
-            let f = fit_group(
-                &rd,
-                &epsf,
-                &[Member::new(x, y, s.flux)],
-                &Outsiders { stars: &[] },
-                s.sky,
-                node_error,
-                &opts.fit,
-            )[0];
-            // the peak's position (a lone star fitted to the quadrupole a close pair leaves behind would
-            // wander off it), the lone fit's flux when it found one
-            Member::new(
-                x,
-                y,
-                if f.usable() && f.flux > 0.0 {
-                    f.flux
-                } else {
-                    s.flux
-                },
-            )
-        })
-        .collect();
-    for m in new {
+    for m in residual_stars(img, &epsf, &stars, (sky, noise), node_error, cfg) {
         stars.push(m);
         from_residual.push(true);
     }
@@ -292,7 +214,7 @@ pub fn analyse(
     stars = members_of(&fits, &stars, img.nx, img.ny);
     let keep = prune(&fits, &stars, &from_residual);
     let stars: Vec<Member> = keep.iter().map(|&k| stars[k]).collect();
-    let from_residual: Vec<bool> = keep.iter().map(|&k| from_residual[k]).collect();
+    let mut from_residual: Vec<bool> = keep.iter().map(|&k| from_residual[k]).collect();
     // a bright star's wing, judged on these fits, is held in the last pass: it models light the table
     // leaves out without sharing a real neighbour's (which it could otherwise take over or keep from
     // settling), and is never reported
@@ -311,15 +233,8 @@ pub fn analyse(
         stars.extend(forced);
         registration = Some(reg);
     }
-    let mut from_residual = from_residual;
     from_residual.resize(stars.len(), false);
     wing.resize(stars.len(), false);
-    // not a reported star nor a neighbour: a wing or a forced star
-    let held: Vec<bool> = wing
-        .iter()
-        .zip(&stars)
-        .map(|(w, s)| *w || s.forced)
-        .collect();
     let (mut fits, groups) = fit_pass(img, &epsf, &stars, node_error, cfg);
     for (f, r) in fits.iter_mut().zip(&from_residual) {
         if *r {
@@ -333,8 +248,169 @@ pub fn analyse(
         .zip(&wing)
         .map(|(m, w)| Member { fixed: *w, ..m })
         .collect();
-    // a neighbour is a neighbour whether or not its own fit is reported — but a bright star's wing is not,
-    // nor a forced catalogue star (not a detection)
+    // not a reported star nor a neighbour: a wing or a forced star
+    let held: Vec<bool> = wing
+        .iter()
+        .zip(&stars)
+        .map(|(w, s)| *w || s.forced)
+        .collect();
+    let reported = confirmed_stars(&mut fits, &stars, &held, cfg);
+    let n_residual = reported.iter().filter(|&&k| from_residual[k]).count();
+    let mut fits: Vec<StarFit> = reported.iter().map(|&k| fits[k]).collect();
+    flags::mark_poor_fits(&mut fits);
+    crowded(fits, n_residual, groups, model, reported, registration)
+}
+
+/// The image's ePSF as the crowded analysis builds it, and what it says of itself.
+struct FirstEpsf {
+    epsf: Epsf,
+    stars: usize,
+    iterations: usize,
+    fallback: String,
+    /// The ePSF's node error (the saturated stars' model term): from its stars, or none for a stand-in.
+    node_error: f64,
+}
+
+/// The ePSF of the detected `stars` (their positions refined as it is built), or its stand-in (`model_epsf`,
+/// else a Gaussian of the stars' second moment) with fewer than [`MIN_EPSF_STARS`] candidates or no star.
+fn first_epsf(
+    img: &AnalysisImage,
+    cfg: &AnalysisCfg,
+    model_epsf: Option<&Epsf>,
+    starts: &[StarStart],
+    stars: &mut Vec<Member>,
+    noise: f64,
+) -> FirstEpsf {
+    let opts = build_options(cfg);
+    let pd = img.pixels();
+    let candidates = epsf_candidates(img, stars, cfg, noise);
+    let n_cand = candidates.iter().filter(|c| **c).count();
+    let fluxes: Vec<f64> = stars
+        .iter()
+        .zip(&candidates)
+        .filter(|(_, c)| **c)
+        .map(|(s, _)| s.flux)
+        .collect();
+    let node_error = if n_cand >= MIN_EPSF_STARS {
+        group_fit::node_error(noise, stats::median(&fluxes), n_cand, opts.oversampling)
+    } else {
+        0.0
+    };
+    let stand_in = |epsf: Epsf, fallback: String| FirstEpsf {
+        epsf,
+        stars: 0,
+        iterations: 0,
+        fallback,
+        node_error,
+    };
+    if stars.is_empty() {
+        let e = model_epsf
+            .cloned()
+            .unwrap_or_else(|| build::gaussian_seed(&pd, &[], opts.oversampling, opts.half_px));
+        return stand_in(
+            e,
+            format!("no star detected above {} σ", cfg.crowded_detect_sigma),
+        );
+    }
+    if n_cand < MIN_EPSF_STARS {
+        let (e, what) = match model_epsf {
+            Some(m) => (m.clone(), "the instrument's model PSF"),
+            None => (
+                build::gaussian_seed(&pd, starts, opts.oversampling, opts.half_px),
+                "a Gaussian of the stars' mean second moment",
+            ),
+        };
+        let why = format!(
+            "{n_cand} unsaturated star(s) clear of brighter neighbours, fewer than {MIN_EPSF_STARS}: no \
+             ePSF built; fitted with {what}"
+        );
+        return stand_in(e, why);
+    }
+    let chosen: Vec<StarStart> = starts
+        .iter()
+        .zip(&candidates)
+        .filter(|(_, c)| **c)
+        .map(|(s, _)| *s)
+        .collect();
+    let seed = build::gaussian_seed(&pd, &chosen, opts.oversampling, opts.half_px);
+    let (epsf, stars, iterations) = build_epsf(img, stars, &candidates, seed, node_error, cfg);
+    FirstEpsf {
+        epsf,
+        stars,
+        iterations,
+        fallback: String::new(),
+        node_error,
+    }
+}
+
+/// The stars the model of `stars` misses: detected in the residual (image − model), each started with the
+/// flux of a fit of it alone in the residual (every star found so far subtracted), as photutils'
+/// IterativePSFPhotometry does, so that the joint fit starts it with its own flux, not with its neighbour's
+/// light (with which it could swap places).
+fn residual_stars(
+    img: &AnalysisImage,
+    epsf: &Epsf,
+    stars: &[Member],
+    (sky, noise): (f64, f64),
+    node_error: f64,
+    cfg: &AnalysisCfg,
+) -> Vec<Member> {
+    let opts = build_options(cfg);
+    let model = model_image(epsf, stars, img.nx, img.ny);
+    let pos: Vec<(f64, f64)> = stars.iter().map(|s| (s.x, s.y)).collect();
+    let extra = detect::detect_residual(
+        img,
+        &model,
+        sky,
+        noise,
+        cfg.crowded_detect_sigma,
+        &Neighbours::new(&pos),
+        RESIDUAL_MIN_SEP_PX,
+    );
+    let resid = residual(img, &model);
+    let rd = PixelData {
+        e: &resid,
+        ..img.pixels()
+    };
+    let ann = crate::analysis::detection::sky_annulus(cfg);
+    extra
+        .par_iter()
+        .map(|&(x, y)| {
+            let s = initial_start(&rd, x, y, ann);
+            let f = fit_group(
+                &rd,
+                epsf,
+                &[Member::new(x, y, s.flux)],
+                &Outsiders { stars: &[] },
+                s.sky,
+                node_error,
+                &opts.fit,
+            )[0];
+            // the peak's position (a lone star fitted to the quadrupole a close pair leaves behind would
+            // wander off it), the lone fit's flux when it found one
+            Member::new(
+                x,
+                y,
+                if f.usable() && f.flux > 0.0 {
+                    f.flux
+                } else {
+                    s.flux
+                },
+            )
+        })
+        .collect()
+}
+
+/// Flag the blends among the fits that are stars (a neighbour is a neighbour whether or not its own fit is
+/// reported — but a bright star's wing is not, nor a forced catalogue star: `held`), and return the stars
+/// the fits confirm (see [`MIN_REPORT_SNR`]; a star detected on a saturated core always is), never a held
+/// one.
+fn confirmed_stars(
+    fits: &mut [StarFit],
+    stars: &[Member],
+    held: &[bool],
+    cfg: &AnalysisCfg,
+) -> Vec<usize> {
     let mut stars_only: Vec<StarFit> = (0..fits.len())
         .filter(|&k| !held[k])
         .map(|k| fits[k])
@@ -343,36 +419,14 @@ pub fn analyse(
     for (k, f) in (0..fits.len()).filter(|&k| !held[k]).zip(stars_only) {
         fits[k] = f;
     }
-    // report what the fits confirm (see MIN_REPORT_SNR; a star detected on a saturated core always is),
-    // never a bright star's wing (WING_VETO_RATIO) nor a forced star
-    let confirmed: Vec<bool> = fits
-        .iter()
-        .zip(&stars)
-        .zip(&held)
-        .map(|((f, s), w)| {
-            !w && (s.saturated
-                || (f.crlb_flux.is_finite() && f.flux >= MIN_REPORT_SNR * f.crlb_flux))
+    (0..fits.len())
+        .filter(|&k| {
+            let (f, s) = (&fits[k], &stars[k]);
+            !held[k]
+                && (s.saturated
+                    || (f.crlb_flux.is_finite() && f.flux >= MIN_REPORT_SNR * f.crlb_flux))
         })
-        .collect();
-    let reported: Vec<usize> = (0..fits.len()).filter(|&k| confirmed[k]).collect();
-    let from_residual: Vec<bool> = reported.iter().map(|&k| from_residual[k]).collect();
-    let mut fits: Vec<StarFit> = reported.iter().map(|&k| fits[k]).collect();
-    flags::mark_poor_fits(&mut fits);
-    Crowded {
-        n_first: fits.len() - from_residual.iter().filter(|r| **r).count(),
-        n_residual: from_residual.iter().filter(|r| **r).count(),
-        fits,
-        epsf,
-        epsf_stars,
-        epsf_iterations,
-        fallback,
-        n_groups: groups.groups,
-        largest_group: groups.largest,
-        model,
-        reported,
-        node_error,
-        registration,
-    }
+        .collect()
 }
 
 /// Whether the pixel under (x, y) is masked (a detection on a saturated core).
