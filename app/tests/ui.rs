@@ -489,7 +489,8 @@ fn main_window_snapshot() {
 }
 
 /// A tiny sequence directory as `jsim sequence` and `jsim solve` write it (their exact headers): 4 × 3
-/// coverage cells, the precision of 2 magnitude bins at N = 1, 2, 4, and array 1's 9 × 9 calibration map whose
+/// coverage cells, the precision of 2 magnitude bins at N = 1, 2, 4 (a parallax at 2 and 4), and array 1's
+/// 9 × 9 calibration map whose
 /// residual is ±0.01 px in x and ±0.005 px in y (rms 0.01 / 0.005 px); config.toml empty (the default
 /// instrument's plate scale).
 fn write_sequence(dir: &std::path::Path) {
@@ -510,8 +511,14 @@ fn write_sequence(dir: &std::path::Path) {
     for n in [1, 2, 4] {
         for (lo, single) in [(10, 2.0), (12, 6.0)] {
             let s = single / (n as f64).sqrt();
+            // a parallax from N = 2 on (one exposure spans no time)
+            let parallax = if n > 1 {
+                format!("{},{}", 1.5 * s, 1.4 * s)
+            } else {
+                "NaN,NaN".into()
+            };
             precision.push_str(&format!(
-                "{n},{lo},{},40,{n},{},{},0,{},{single},{s},NaN,NaN,NaN,NaN\n",
+                "{n},{lo},{},40,{n},{},{},0,{},{single},{s},NaN,NaN,{parallax}\n",
                 lo + 1,
                 1.2 * s,
                 1.1 * s,
@@ -564,6 +571,7 @@ fn the_sequence_view_shows_a_solved_sequence() {
     h.get_by_label_contains("Precision against the number of exposures N");
     h.get_by_label_contains("Hw 10–11");
     h.get_by_label_contains("Hw 12–13");
+    h.get_by_label_contains("Parallax error against N and against magnitude");
     let scale = Config::default().instrument.plate_scale_mas();
     h.get_by_label_contains(&format!(
         "Distortion residual: solved − true, gauge removed — rms {:.3} / {:.3} mas",
@@ -585,7 +593,7 @@ fn the_sequence_view_shows_a_solved_sequence() {
     assert_eq!(
         h.get_all_by_label_contains("not solved yet: jsim solve --sequence")
             .count(),
-        2
+        3
     );
     drop(h);
     std::fs::remove_dir_all(&dir).ok();

@@ -1,7 +1,8 @@
 //! The sequence view: a step-stare sequence's products as the engine reads them from its directory
 //! ([`engine::io::sequence_view`]) — the coverage map (exposures per (l, b) cell), the solved position error
 //! against the number of exposures per magnitude bin beside the solution's σ and the single-exposure error
-//! over √(observations), and the solved distortion's residual against the instrument's per array. Nothing is
+//! over √(observations), the parallax error against N and against magnitude beside its σ, and the solved
+//! distortion's residual against the instrument's per array. Nothing is
 //! computed here but the drawing.
 
 use super::axes::{count_colour_bar, decade_label_125, decade_marks, nice};
@@ -93,12 +94,16 @@ pub fn central_ui(ui: &mut egui::Ui, loaded: &Loaded) {
         }
         Some(Ok(v)) => {
             let gap = 4.0;
-            let top_h = (r.height() * 0.58).max(240.0);
+            let top_h = (r.height() * 0.5).max(240.0);
             let half = (r.width() - gap) / 2.0;
             let top_left = Rect::from_min_size(r.min, vec2(half, top_h));
             let top_right =
                 Rect::from_min_size(pos2(r.min.x + half + gap, r.min.y), vec2(half, top_h));
             let bottom = Rect::from_min_max(pos2(r.min.x, r.min.y + top_h + gap), r.max);
+            let left_w = (bottom.width() - gap) * 0.55;
+            let bottom_left = Rect::from_min_size(bottom.min, vec2(left_w, bottom.height()));
+            let bottom_right =
+                Rect::from_min_max(pos2(bottom.min.x + left_w + gap, bottom.min.y), bottom.max);
             let unsolved = format!(
                 "not solved yet: jsim solve --sequence {}",
                 engine::io::shell_quote(&v.dir)
@@ -108,9 +113,13 @@ pub fn central_ui(ui: &mut egui::Ui, loaded: &Loaded) {
                 Some(s) => calibration_ui(ui, s),
                 None => waiting(ui, "Distortion residual", &unsolved),
             });
-            cell(ui, bottom, |ui| match &v.solution {
+            cell(ui, bottom_left, |ui| match &v.solution {
                 Some(s) => precision_ui(ui, s),
                 None => waiting(ui, "Precision against the number of exposures", &unsolved),
+            });
+            cell(ui, bottom_right, |ui| match &v.solution {
+                Some(s) => parallax_ui(ui, s),
+                None => waiting(ui, "Parallax", &unsolved),
             });
         }
     }
@@ -293,6 +302,101 @@ fn precision_ui(ui: &mut egui::Ui, s: &SolutionView) {
                         .color(colour),
                 );
             }
+        });
+}
+
+/// The parallax error against the truth (solid, dots) and the solution's σ (dotted) per magnitude bin
+/// against N (log–log), and against magnitude in the solution of the most exposures (log).
+fn parallax_ui(ui: &mut egui::Ui, s: &SolutionView) {
+    title(ui, "Parallax error against N and against magnitude", false);
+    let Some((n_max, by_mag)) = s.parallax_by_magnitude() else {
+        ui.weak(
+            "no parallax solved: the position model, or a span too short (jsim solve --model full)",
+        );
+        return;
+    };
+    // the bins' colours as in the precision plot beside
+    let curves = s.precision_curves();
+    ui.small("solid with dots: against the truth (rms) · dotted: solution σ · colours as beside");
+    let log = |x: f64| (x > 0.0 && x.is_finite()).then(|| x.log10());
+    let h = (ui.available_height() - 8.0) / 2.0;
+    Plot::new("sequence_parallax_n")
+        .height(h)
+        .x_axis_label("exposures N")
+        .y_axis_label("parallax error [mas]")
+        .x_grid_spacer(decade_marks)
+        .x_axis_formatter(|m, _| decade_label_125(m))
+        .include_y(0.0)
+        .label_formatter(|pos| {
+            let (name, p) = super::axes::hovered(pos);
+            Some(format!(
+                "{name}\nN = {:.1}\n{:.3} mas",
+                10f64.powf(p.x),
+                p.y
+            ))
+        })
+        .show(ui, |pui| {
+            for (k, c) in curves.iter().enumerate() {
+                let colour = bin_colour(k, curves.len());
+                let bin = format!("Hw {:.0}–{:.0}", c.hw_lo, c.hw_hi);
+                let pts = |f: &dyn Fn(&engine::io::sequence_view::PrecisionRow) -> Option<f64>| {
+                    c.points
+                        .iter()
+                        .filter_map(|p| Some([log(p.exposures as f64)?, f(p)?]))
+                        .collect::<Vec<[f64; 2]>>()
+                };
+                let error = pts(&|p| p.parallax_rms_mas);
+                if error.is_empty() {
+                    continue;
+                }
+                pui.line(
+                    Line::new(format!("{bin}: σ"), pts(&|p| p.parallax_sigma_mas))
+                        .color(colour)
+                        .style(LineStyle::dotted_dense()),
+                );
+                pui.line(
+                    Line::new(format!("{bin}: error"), error.clone())
+                        .color(colour)
+                        .width(2.0),
+                );
+                pui.points(
+                    Points::new(format!("{bin}: error"), error)
+                        .filled(true)
+                        .radius(3.0)
+                        .color(colour),
+                );
+            }
+        });
+    let mags = |f: &dyn Fn(&engine::io::sequence_view::PrecisionRow) -> Option<f64>| {
+        by_mag
+            .iter()
+            .filter_map(|p| Some([(p.hw_lo + p.hw_hi) / 2.0, f(p)?]))
+            .collect::<Vec<[f64; 2]>>()
+    };
+    let error = mags(&|p| p.parallax_rms_mas);
+    let colour = ui.visuals().text_color();
+    Plot::new("sequence_parallax_mag")
+        .height(h)
+        .x_axis_label(format!("Hw (bin centre), in the solution of N = {n_max}"))
+        .y_axis_label("parallax error [mas]")
+        .include_y(0.0)
+        .label_formatter(|pos| {
+            let (name, p) = super::axes::hovered(pos);
+            Some(format!("{name}\nHw {:.2}\n{:.3} mas", p.x, p.y))
+        })
+        .show(ui, |pui| {
+            pui.line(
+                Line::new("solution σ", mags(&|p| p.parallax_sigma_mas))
+                    .color(colour)
+                    .style(LineStyle::dotted_dense()),
+            );
+            pui.line(Line::new("error", error.clone()).color(colour).width(2.0));
+            pui.points(
+                Points::new("error", error)
+                    .filled(true)
+                    .radius(3.0)
+                    .color(colour),
+            );
         });
 }
 

@@ -120,6 +120,10 @@ pub struct PrecisionRow {
     /// (no single-exposure errors in the bin).
     pub single_exposure_mas: Option<f64>,
     pub sqrt_n_mas: Option<f64>,
+    /// The parallax error against the truth (rms) and the solution's own σ (rms over the sources), mas;
+    /// None where the file says NaN (the position model, or a span too short for a parallax).
+    pub parallax_rms_mas: Option<f64>,
+    pub parallax_sigma_mas: Option<f64>,
 }
 
 /// A magnitude bin's precision against N, N ascending.
@@ -179,6 +183,29 @@ impl SolutionView {
             c.points.sort_by_key(|p| p.exposures);
         }
         curves
+    }
+
+    /// The parallax error per magnitude bin in the solution of the most exposures that solved a parallax:
+    /// that N and its bins (Hw ascending) with a parallax error and at least [`MIN_SOURCES_PER_POINT`]
+    /// sources; None where no parallax was solved.
+    pub fn parallax_by_magnitude(&self) -> Option<(usize, Vec<PrecisionRow>)> {
+        let with =
+            |r: &&PrecisionRow| r.parallax_rms_mas.is_some() && r.sources >= MIN_SOURCES_PER_POINT;
+        let n = self
+            .precision
+            .iter()
+            .filter(with)
+            .map(|r| r.exposures)
+            .max()?;
+        let mut rows: Vec<PrecisionRow> = self
+            .precision
+            .iter()
+            .filter(with)
+            .filter(|r| r.exposures == n)
+            .copied()
+            .collect();
+        rows.sort_by(|a, b| a.hw_lo.total_cmp(&b.hw_lo));
+        Some((n, rows))
     }
 
     /// The arrays of the calibration map, ascending.
@@ -418,6 +445,8 @@ pub fn read_precision(path: &Path) -> Result<Vec<PrecisionRow>, IoError> {
     let (hw_lo, hw_hi) = (t.finite("hw_lo")?, t.finite("hw_hi")?);
     let single = t.finite_or_nan("single_exposure_mas")?;
     let sqrt_n = t.finite_or_nan("sqrt_n_mas")?;
+    let parallax = t.finite_or_nan("parallax_rms_mas")?;
+    let parallax_sigma = t.finite_or_nan("parallax_sigma_mas")?;
     // finite where the bin has sources
     let scored = |name: &str| -> Result<Vec<f64>, IoError> {
         let v = super::csv::column_f64_any(path, &t.header, &t.rows, name)?;
@@ -447,6 +476,8 @@ pub fn read_precision(path: &Path) -> Result<Vec<PrecisionRow>, IoError> {
             position_sigma_mas: sigma[k],
             single_exposure_mas: single[k],
             sqrt_n_mas: sqrt_n[k],
+            parallax_rms_mas: parallax[k],
+            parallax_sigma_mas: parallax_sigma[k],
         })
         .collect())
 }
@@ -525,7 +556,7 @@ mod tests {
         position_robust_mas,outlier_fraction,position_sigma_mas,single_exposure_mas,sqrt_n_mas,\
         pm_rms_mas_per_yr,pm_sigma_mas_per_yr,parallax_rms_mas,parallax_sigma_mas\n\
         1,8,9,0,NaN,NaN,NaN,NaN,NaN,NaN,NaN,NaN,NaN,NaN,NaN\n\
-        2,10,11,20,2,1.4,1.05,0,1.01,2.12,1.5,NaN,NaN,NaN,NaN\n\
+        2,10,11,20,2,1.4,1.05,0,1.01,2.12,1.5,NaN,NaN,0.9,0.8\n\
         1,10,11,19,1,1.3,1.1,0,1.25,2.16,2.16,NaN,NaN,NaN,NaN\n\
         1,11,12,3,1,1.8,1.7,0.01,1.5,NaN,NaN,NaN,NaN,NaN,NaN\n";
 
@@ -573,6 +604,17 @@ mod tests {
         assert_eq!(s.precision[0].position_robust_mas, 1.05);
         assert_eq!(s.precision[0].sqrt_n_mas, Some(1.5));
         assert_eq!(s.precision[2].single_exposure_mas, None);
+        // the parallax: solved at N = 2 only, in the bin with enough sources
+        assert_eq!(
+            (
+                s.precision[0].parallax_rms_mas,
+                s.precision[0].parallax_sigma_mas
+            ),
+            (Some(0.9), Some(0.8))
+        );
+        assert_eq!(s.precision[1].parallax_rms_mas, None);
+        let (n, rows) = s.parallax_by_magnitude().expect("a parallax");
+        assert_eq!((n, rows.len(), rows[0].hw_lo), (2, 1, 10.0));
         // the curves: bin 11–12 has 3 sources only, below the figure's 5
         let curves = s.precision_curves();
         assert_eq!(curves.len(), 1);
