@@ -211,34 +211,7 @@ pub fn run_shard(
     let shard = opts.shard;
     prepare_dir(sweep, dir)?;
     let rec = sweep.record();
-    // one process per shard: an advisory lock, released by the OS when the process ends however it ends
-    let lock_path = dir.join("shards").join(format!("{}.lock", shard.stem()));
-    let lock = std::fs::OpenOptions::new()
-        .create(true)
-        .truncate(false)
-        .write(true)
-        .open(&lock_path)
-        .map_err(|e| io_err(&lock_path, e))?;
-    /// Unlocks explicitly: a child forked meanwhile by another thread may hold a copy of the descriptor
-    /// until it execs, and closing ours alone would not release the lock until then.
-    struct Held(std::fs::File);
-    impl Drop for Held {
-        fn drop(&mut self) {
-            let _ = self.0.unlock();
-        }
-    }
-    match lock.try_lock() {
-        Ok(()) => {}
-        Err(std::fs::TryLockError::WouldBlock) => {
-            return Err(SweepError::Invalid(format!(
-                "shard {shard} of {} is being run by another process (it holds {}); wait for it or stop it",
-                dir.display(),
-                lock_path.display()
-            )));
-        }
-        Err(std::fs::TryLockError::Error(e)) => return Err(io_err(&lock_path, e)),
-    }
-    let lock = Held(lock);
+    let lock = ShardLock::take(dir, shard)?;
     // this shard's temporary files left by a killed run (`shard-….csv.<pid>.tmp`)
     let stem = format!("{}.", shard.stem());
     crate::io::remove_stale_temps(&dir.join("shards"), |name| name.starts_with(&stem));
@@ -284,6 +257,67 @@ pub fn run_shard(
     if own_dirty {
         write_shard(&rec, dir, shard, &units)?;
     }
+    let computed = compute_units(session, sweep, dir, opts, &todo, &mut units, on_event);
+    drop(lock);
+    let computed = computed?;
+    Ok(RunSummary {
+        shard,
+        shard_units: mine.len(),
+        done_before,
+        elsewhere,
+        computed,
+        remaining: todo.len() - computed,
+        seconds: t0.elapsed().as_secs_f64(),
+        file: csv_path,
+    })
+}
+
+/// One process per shard: an advisory lock on `shards/<shard>.lock`, released by the OS when the process
+/// ends however it ends, and explicitly when dropped: a child forked meanwhile by another thread may hold a
+/// copy of the descriptor until it execs, and closing ours alone would not release the lock until then.
+struct ShardLock(std::fs::File);
+
+impl ShardLock {
+    /// The shard's lock, or a named error when another process holds it.
+    fn take(dir: &Path, shard: Shard) -> Result<Self, SweepError> {
+        let lock_path = dir.join("shards").join(format!("{}.lock", shard.stem()));
+        let lock = std::fs::OpenOptions::new()
+            .create(true)
+            .truncate(false)
+            .write(true)
+            .open(&lock_path)
+            .map_err(|e| io_err(&lock_path, e))?;
+        match lock.try_lock() {
+            Ok(()) => Ok(Self(lock)),
+            Err(std::fs::TryLockError::WouldBlock) => Err(SweepError::Invalid(format!(
+                "shard {shard} of {} is being run by another process (it holds {}); wait for it or stop it",
+                dir.display(),
+                lock_path.display()
+            ))),
+            Err(std::fs::TryLockError::Error(e)) => Err(io_err(&lock_path, e)),
+        }
+    }
+}
+
+impl Drop for ShardLock {
+    fn drop(&mut self) {
+        let _ = self.0.unlock();
+    }
+}
+
+/// Compute the units `todo` (at most `opts.max_units`) on `opts.jobs` threads, each written into the
+/// shard's file as it finishes (the file rewritten whole: an interrupted run loses only the units in
+/// flight); returns how many were computed, or the first error (the other threads stop).
+fn compute_units(
+    session: &Session,
+    sweep: &Sweep,
+    dir: &Path,
+    opts: &RunOptions,
+    todo: &[usize],
+    units: &mut BTreeMap<usize, UnitRows>,
+    on_event: &mut dyn FnMut(Event),
+) -> Result<usize, SweepError> {
+    let (shard, rec) = (opts.shard, sweep.record());
     let limit = opts.max_units.unwrap_or(usize::MAX).min(todo.len());
     let jobs = opts.jobs.clamp(1, 256).min(limit.max(1));
     let next = AtomicUsize::new(0);
@@ -294,7 +328,7 @@ pub fn run_shard(
         let (tx, rx) = std::sync::mpsc::channel::<(usize, f64, Result<UnitRows, SweepError>)>();
         for _ in 0..jobs {
             let tx = tx.clone();
-            let (next, stop, todo) = (&next, &stop, &todo);
+            let (next, stop) = (&next, &stop);
             s.spawn(move || {
                 loop {
                     if stop.load(Ordering::SeqCst) {
@@ -323,7 +357,7 @@ pub fn run_shard(
                         .and_then(|v| v.parse().ok())
                         .unwrap_or(f64::NAN);
                     units.insert(u, rows);
-                    if let Err(e) = write_shard(&rec, dir, shard, &units) {
+                    if let Err(e) = write_shard(&rec, dir, shard, units) {
                         stop.store(true, Ordering::SeqCst);
                         first_err.get_or_insert(e);
                         break;
@@ -345,18 +379,8 @@ pub fn run_shard(
             }
         }
     });
-    drop(lock);
-    if let Some(e) = first_err {
-        return Err(e);
+    match first_err {
+        Some(e) => Err(e),
+        None => Ok(computed),
     }
-    Ok(RunSummary {
-        shard,
-        shard_units: mine.len(),
-        done_before,
-        elsewhere,
-        computed,
-        remaining: todo.len() - computed,
-        seconds: t0.elapsed().as_secs_f64(),
-        file: csv_path,
-    })
 }
