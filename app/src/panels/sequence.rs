@@ -14,7 +14,9 @@ use egui::{Color32, Rect, UiBuilder, pos2, vec2};
 use egui_plot::{
     Arrows, Heatmap, Line, LineStyle, MarkerShape, Plot, PlotPoint, PlotPoints, Points,
 };
-use engine::io::sequence_view::{CoverageGrid, SequenceView, SolutionView};
+use engine::io::sequence_view::{
+    CoverageGrid, PrecisionCurve, PrecisionRow, SequenceView, SolutionView,
+};
 
 /// What Open sequence read: the sequence, or why it could not be read; None before the first.
 pub type Loaded = Option<Result<SequenceView, String>>;
@@ -260,12 +262,8 @@ fn precision_ui(ui: &mut egui::Ui, s: &SolutionView) {
             for (k, c) in curves.iter().enumerate() {
                 let colour = bin_colour(k, curves.len());
                 let bin = format!("Hw {:.0}–{:.0}", c.hw_lo, c.hw_hi);
-                let pts = |f: &dyn Fn(&engine::io::sequence_view::PrecisionRow) -> Option<f64>| {
-                    c.points
-                        .iter()
-                        .filter_map(|p| Some([log(p.exposures as f64)?, log(f(p)?)?]))
-                        .collect::<Vec<[f64; 2]>>()
-                };
+                let pts =
+                    |f: &dyn Fn(&PrecisionRow) -> Option<f64>| against_log_n(c, &|p| log(f(p)?));
                 let solved = pts(&|p| Some(p.position_robust_mas));
                 // a bin solved at one N only: its σ and √obs points as hollow markers
                 for (name, v, style, shape) in [
@@ -305,6 +303,19 @@ fn precision_ui(ui: &mut egui::Ui, s: &SolutionView) {
         });
 }
 
+/// A curve's points `[log₁₀ N, y]`, the points without a y (or N) left out.
+fn against_log_n(c: &PrecisionCurve, y: &dyn Fn(&PrecisionRow) -> Option<f64>) -> Vec<[f64; 2]> {
+    c.points
+        .iter()
+        .filter_map(|p| {
+            Some([
+                (p.exposures > 0).then(|| (p.exposures as f64).log10())?,
+                y(p)?,
+            ])
+        })
+        .collect()
+}
+
 /// The parallax error against the truth (solid, dots) and the solution's σ (dotted) per magnitude bin
 /// against N (log–log), and against magnitude in the solution of the most exposures (log).
 fn parallax_ui(ui: &mut egui::Ui, s: &SolutionView) {
@@ -318,7 +329,6 @@ fn parallax_ui(ui: &mut egui::Ui, s: &SolutionView) {
     // the bins' colours as in the precision plot beside
     let curves = s.precision_curves();
     ui.small("solid with dots: against the truth (rms) · dotted: solution σ · colours as beside");
-    let log = |x: f64| (x > 0.0 && x.is_finite()).then(|| x.log10());
     let h = (ui.available_height() - 8.0) / 2.0;
     Plot::new("sequence_parallax_n")
         .height(h)
@@ -339,12 +349,7 @@ fn parallax_ui(ui: &mut egui::Ui, s: &SolutionView) {
             for (k, c) in curves.iter().enumerate() {
                 let colour = bin_colour(k, curves.len());
                 let bin = format!("Hw {:.0}–{:.0}", c.hw_lo, c.hw_hi);
-                let pts = |f: &dyn Fn(&engine::io::sequence_view::PrecisionRow) -> Option<f64>| {
-                    c.points
-                        .iter()
-                        .filter_map(|p| Some([log(p.exposures as f64)?, f(p)?]))
-                        .collect::<Vec<[f64; 2]>>()
-                };
+                let pts = |f: &dyn Fn(&PrecisionRow) -> Option<f64>| against_log_n(c, f);
                 let error = pts(&|p| p.parallax_rms_mas);
                 if error.is_empty() {
                     continue;
@@ -367,7 +372,7 @@ fn parallax_ui(ui: &mut egui::Ui, s: &SolutionView) {
                 );
             }
         });
-    let mags = |f: &dyn Fn(&engine::io::sequence_view::PrecisionRow) -> Option<f64>| {
+    let mags = |f: &dyn Fn(&PrecisionRow) -> Option<f64>| {
         by_mag
             .iter()
             .filter_map(|p| Some([(p.hw_lo + p.hw_hi) / 2.0, f(p)?]))

@@ -570,6 +570,13 @@ mod tests {
         img
     }
 
+    /// The blends' options: a fitted sky, iterations to spare.
+    const BLEND: FitOptions = FitOptions {
+        radius_px: 2.5,
+        max_iter: 100,
+        fit_sky: true,
+    };
+
     /// The one-star fits' options.
     const ONE_STAR: FitOptions = FitOptions {
         radius_px: 2.5,
@@ -611,11 +618,7 @@ mod tests {
         let img = image(&e, n, &truth, 300.0);
         let bad = vec![false; n * n];
         let pd = pixels(&img, &bad, n, 0.0);
-        let opt = FitOptions {
-            radius_px: 2.5,
-            max_iter: 100,
-            fit_sky: true,
-        };
+        let opt = BLEND;
         let members = [
             Member::new(18.0, 20.4, 4.0e4),
             Member::new(19.7, 20.7, 3.0e4),
@@ -722,11 +725,7 @@ mod tests {
         let img = image(&e, n, &truth, 300.0);
         let bad = vec![false; n * n];
         let pd = pixels(&img, &bad, n, 0.0);
-        let opt = FitOptions {
-            radius_px: 2.5,
-            max_iter: 100,
-            fit_sky: true,
-        };
+        let opt = BLEND;
         let members = [
             Member::new(18.0, 20.3, 4.0e4),
             Member::new(19.4, 19.9, 3.6e4),
