@@ -82,7 +82,7 @@ pub fn check_resumable(plan: &Plan, cfg: &Config, dir: &Path) -> Result<(), Sequ
         .map(|v| {
             v["jsim_version"]
                 .as_str()
-                .unwrap_or("before 0.1")
+                .unwrap_or("that did not record its version")
                 .to_string()
         });
     let why = if differs("config.toml", &cfg.to_toml()) {
