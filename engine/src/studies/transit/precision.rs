@@ -7,8 +7,8 @@
 //! The study resumes: each finished stare leaves its row in `hw_<mag>/row.json`, written last and whole,
 //! with a fingerprint of jsim's version, the configuration and the stare it ran. A rerun into the same
 //! directory takes every row whose fingerprint is the rerun's own and runs the other stares again whole (a
-//! stare is not cut into pieces: it is minutes at most). The gathered files are then the same bytes as an uninterrupted
-//! run's; `precision.json`'s `seconds` keep each stare's first run.
+//! stare is not cut into pieces: it is minutes at most). The gathered files are then the same bytes as an
+//! uninterrupted run's; `precision.json`'s `seconds` keep each stare's first run.
 
 use super::budget::Budget;
 use super::observe::StareError;
