@@ -114,8 +114,16 @@ fn a_sequence_runs_resumes_and_shards_to_the_same_catalogue() {
         std::fs::read_to_string(out.join("exposures/00002.csv")).expect("redone"),
         kept
     );
-    // a rerun resumes only what this jsim version wrote: files of another are refused and nothing is written
+    // a rerun resumes only this sequence: another seed, or files of another jsim, are refused and nothing
+    // is written (the kept exposures would otherwise mix two sequences)
     let plan_bytes = std::fs::read(out.join("plan.csv")).expect("plan");
+    let o = run(&out, &spec, &["--set", "seed=7"]);
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("holds another sequence (its config.toml is another configuration's)"),
+        "{}",
+        stderr(&o)
+    );
     let json = out.join("sequence.json");
     let text = std::fs::read_to_string(&json).expect("sequence.json");
     let version = format!("\"jsim_version\": \"{}\"", engine::VERSION);
@@ -124,7 +132,7 @@ fn a_sequence_runs_resumes_and_shards_to_the_same_catalogue() {
     let o = run(&out, &spec, &[]);
     assert!(!o.status.success());
     assert!(
-        stderr(&o).contains("holds a sequence written by jsim 0.0.0"),
+        stderr(&o).contains("it was written by jsim 0.0.0"),
         "{}",
         stderr(&o)
     );

@@ -87,7 +87,7 @@ pub fn sequence(a: &SequenceArgs) -> Result<()> {
     };
     let cm = a.tel.plan(&[a.countermeasure.as_str()])?;
     engine::studies::crowded::check_plan(&cm)?;
-    run::check_resumable(&a.out)?;
+    run::check_resumable(&plan, &cfg, &a.out)?;
     let t = Instant::now();
     let coverage = sequence::coverage(&plan, &cfg, a.cell_deg).map_err(anyhow::Error::msg)?;
     let coverage_s = t.elapsed().as_secs_f64();

@@ -69,11 +69,14 @@ fn spec_text(plan: &Plan) -> Result<String, String> {
     .map_err(|e| e.to_string())
 }
 
-/// Refuse a directory whose `sequence.json` another jsim version wrote: a rerun keeps the field and the
-/// exposures already written, which that version may have made otherwise. A new directory, or one this
-/// version wrote, passes. (A directory of another configuration or sequence file is not refused yet: the
-/// docs' own commands reuse `out/sequence` across configurations, and their exposures are kept.)
-pub fn check_resumable(dir: &Path) -> Result<(), SequenceError> {
+/// Refuse a directory that holds another sequence: a rerun keeps the field and the exposures already
+/// written, so a `config.toml` or `sequence.toml` other than this run's, or a `sequence.json` written by
+/// another jsim version, would mix two sequences. A new directory, one holding only a plan
+/// (`--plan-only` writes neither file), or one of this very sequence passes.
+pub fn check_resumable(plan: &Plan, cfg: &Config, dir: &Path) -> Result<(), SequenceError> {
+    let differs =
+        |name: &str, now: &str| std::fs::read_to_string(dir.join(name)).is_ok_and(|was| was != now);
+    let spec = spec_text(plan).map_err(SequenceError::Invalid)?;
     let version = std::fs::read_to_string(dir.join("sequence.json"))
         .ok()
         .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
@@ -83,15 +86,20 @@ pub fn check_resumable(dir: &Path) -> Result<(), SequenceError> {
                 .unwrap_or("that did not record its version")
                 .to_string()
         });
-    match version.filter(|v| v != crate::VERSION) {
-        None => Ok(()),
-        Some(v) => Err(SequenceError::Invalid(format!(
-            "{}: holds a sequence written by jsim {v}, this is {}; a rerun resumes only what this version \
-             wrote: choose another --out, or remove the directory to start again",
-            dir.display(),
-            crate::VERSION
-        ))),
-    }
+    let why = if differs("config.toml", &cfg.to_toml()) {
+        "its config.toml is another configuration's".to_string()
+    } else if differs("sequence.toml", &spec) {
+        "its sequence.toml is another sequence's".to_string()
+    } else if let Some(v) = version.filter(|v| v != crate::VERSION) {
+        format!("it was written by jsim {v}, this is {}", crate::VERSION)
+    } else {
+        return Ok(());
+    };
+    Err(SequenceError::Invalid(format!(
+        "{}: holds another sequence ({why}); a rerun resumes only the same sequence: choose another --out, \
+         or remove the directory to start again",
+        dir.display()
+    )))
 }
 
 /// The sequence's identity, written in every row of its catalogues (`sequence_id`): the first 48 bits of
