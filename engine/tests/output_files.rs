@@ -116,7 +116,8 @@ fn every_file_written_is_declared_and_every_declared_file_is_written() {
     ok(c);
     check(&d("fp"), &[Cmd::Simulate], &mut seen);
 
-    // analyze: one array, the focal plane, a CR-split HST file and a waivered one; then score
+    // analyze: one array, the focal plane, a CR-split HST file, a waivered one and a tile-compressed raw frame;
+    // then score
     for (image, out, extra) in [
         (d("sim/img_000.fits"), "an", &[][..]),
         (d("fp/fp_000.fits"), "fpan", &[][..]),
@@ -129,6 +130,18 @@ fn every_file_written_is_declared_and_every_declared_file_is_written() {
             root().join("tests/data/hst_wfpc2_omegacen/u40x010hm_cutout_c0f.fits"),
             "wfpc2",
             &["--read-noise-e", "5.3"][..],
+        ),
+        (
+            root().join("tests/data/panoptes_pan001_kic8462852/solved.fits.fz"),
+            "panoptes",
+            &[
+                "--electrons-per-unit",
+                "0.84",
+                "--read-noise-e",
+                "5.3",
+                "--bias-units",
+                "2048",
+            ][..],
         ),
     ] {
         let mut c = jsim();

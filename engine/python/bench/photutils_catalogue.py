@@ -54,12 +54,19 @@ def gain_of(h, hdr):
     sys.exit(f"no GAIN, and BUNIT {unit!r} is not ELECTRONS or COUNTS with ATODGAIN")
 
 
-def load(path, ext, flat, flat_ext):
+def load(path, ext, flat, flat_ext, gain=None, bias=None, saturate=None):
+    """The image in electrons, its mask and plate scale; gain (e- per data unit), bias and saturation (data
+    units) as given, else from the header (a raw frame's, as jsim's --electrons-per-unit, --bias-units and
+    --saturate-units)."""
     with fits.open(path) as h:
-        hdu = h[ext] if ext else h[0]
+        hdu = h[int(ext) if ext and ext.isdigit() else ext] if ext else h[0]
         hdr = hdu.header
-        e = (hdu.data.astype(float) - hdr.get("BIASADU", 0.0)) * gain_of(h, hdr)
+        raw = hdu.data.astype(float)
+        b = bias if bias is not None else hdr.get("BIASADU", 0.0)
+        e = (raw - b) * (gain if gain is not None else gain_of(h, hdr))
         bad = ~np.isfinite(e)
+        if saturate is not None:
+            bad |= raw >= saturate
         # a focal plane's ARRAYk has DQk; a calibrated file's SCI chip (HST, JWST) its DQ
         dq_name = "DQ" + ext[len("ARRAY"):] if ext and ext.startswith("ARRAY") else "DQ"
         if dq_name in h:
@@ -92,7 +99,11 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--image", required=True)
     ap.add_argument("--ext", default=None,
-                    help="ARRAYk of a focal-plane file, or sci (SCI) of a calibrated HST/JWST file (default: the primary HDU)")
+                    help="ARRAYk of a focal-plane file, sci (SCI) of a calibrated HST/JWST file, or an extension's "
+                         "number (default: the primary HDU)")
+    ap.add_argument("--gain", type=float, default=None, help="e- per data unit (default: the header's)")
+    ap.add_argument("--bias", type=float, default=None, help="a raw frame's bias, data units")
+    ap.add_argument("--saturate", type=float, default=None, help="a raw frame's saturation level, data units")
     ap.add_argument("--flat", default=None, help="the calibration flat product (flat_cal.fits)")
     ap.add_argument("--size", type=int, default=512, help="centred cut, px (0: the whole image)")
     ap.add_argument("--nsigma", type=float, default=5.0)
@@ -104,7 +115,7 @@ def main(argv=None):
     a.ext = a.ext.upper() if a.ext else None  # extension names are read without regard to case
 
     flat_ext = "FLAT" + a.ext[len("ARRAY"):] if a.ext and a.ext.startswith("ARRAY") else None
-    e, bad, scale = load(a.image, a.ext, a.flat, flat_ext)
+    e, bad, scale = load(a.image, a.ext, a.flat, flat_ext, a.gain, a.bias, a.saturate)
     n = e.shape[0]
     size = n if a.size <= 0 else min(a.size, n)
     x0 = (n - size) // 2

@@ -334,9 +334,10 @@ impl PySession {
     /// for bit. A focal-plane file (`fp_NNN.fits`) is analysed array by array by `jsim analyze`: here it is
     /// refused by name. A calibrated file of another observatory (HST, JWST: docs/real-images.md) is read
     /// chip by chip: `chip=` its SCI EXTVER (needed when it has several), with `electrons_per_unit=`,
-    /// `read_noise_e=` and `dq_ignore=` (bits, as `--dq-ignore`) where its header is silent or wrong — the
+    /// `read_noise_e=`, `dq_ignore=` (bits, as `--dq-ignore`), `bias_units=` and `saturate_units=` (a raw
+    /// frame's, as `--bias-units` and `--saturate-units`) where its header is silent or wrong — the
     /// CLI's result for that chip when the chips are not exposures of one pointing compared with each other.
-    #[pyo3(signature = (path, *, truth = None, flat = None, refcat = None, telemetry = None, countermeasure = "none", epsf_zones = None, crowding = None, chip = None, electrons_per_unit = None, read_noise_e = None, dq_ignore = None))]
+    #[pyo3(signature = (path, *, truth = None, flat = None, refcat = None, telemetry = None, countermeasure = "none", epsf_zones = None, crowding = None, chip = None, electrons_per_unit = None, read_noise_e = None, dq_ignore = None, bias_units = None, saturate_units = None))]
     #[allow(clippy::too_many_arguments)]
     fn analyze_file(
         &self,
@@ -353,6 +354,8 @@ impl PySession {
         electrons_per_unit: Option<f64>,
         read_noise_e: Option<f64>,
         dq_ignore: Option<&str>,
+        bias_units: Option<f64>,
+        saturate_units: Option<f64>,
     ) -> PyResult<PyAnalysis> {
         let cm: Countermeasure = countermeasure.parse().or_py()?;
         let mut cfg = self.cfg.clone();
@@ -390,6 +393,15 @@ impl PySession {
                     .map(engine::io::calibrated::parse_dq_bits)
                     .transpose()
                     .map_err(PyValueError::new_err)?,
+                bias_units: match bias_units {
+                    Some(b) if !b.is_finite() => {
+                        return Err(PyValueError::new_err(format!(
+                            "bias_units={b}: must be a finite number"
+                        )));
+                    }
+                    b => b,
+                },
+                saturate_units: positive("saturate_units", saturate_units)?,
             };
             let input = AnalysisInput::read_chip(&path, set, &opts, &cfg).or_py()?;
             let analysis = py

@@ -6,6 +6,9 @@ against astropy and photutils, which read the same files on their own:
   noise, RA/Dec through its SIP WCS, and the fitted positions against photutils' 2-D Gaussian centroids;
 - a JWST-style file that astropy writes here: two chips in MJy/sr with VAR_POISSON, VAR_RNOISE and a 32-bit
   DQ, its stars known, so the accuracy against the Cramér–Rao bound tests the units end to end;
+- a raw ground-based frame: PANOPTES PAN001's DSLR frame of a Cygnus field, tile-compressed, as the
+  panoptes-utils 0.5.3 source distribution ships it (tests/data/panoptes_pan001_kic8462852, MIT): its bias and
+  saturation, its RA/Dec through the astrometry.net SIP WCS, and its Bayer mosaic seen by the pixel phases;
 - bad input: a unit jsim cannot read, a file with no image, a bad --dq-ignore, each a named error.
 """
 
@@ -182,7 +185,8 @@ def test_bad_calibrated_input_is_a_named_error(jsim_bin, tmp_path):
     r = subprocess.run([jsim_bin, "analyze", "--image", str(tmp_path / "jy.fits"), "--electrons-per-unit", "10",
                         "--out", str(tmp_path / "b")], capture_output=True, text=True)
     assert r.returncode == 0, r.stderr
-    fits.HDUList([fits.PrimaryHDU(), fits.ImageHDU(np.zeros((8, 8)), name="OTHER")]).writeto(tmp_path / "none.fits")
+    table = fits.BinTableHDU.from_columns([fits.Column(name="x", format="E", array=np.zeros(3))], name="OTHER")
+    fits.HDUList([fits.PrimaryHDU(), table]).writeto(tmp_path / "none.fits")
     r = subprocess.run([jsim_bin, "analyze", "--image", str(tmp_path / "none.fits"), "--out", str(tmp_path / "c")],
                        capture_output=True, text=True)
     assert r.returncode != 0 and "SCI" in r.stderr and "ARRAYn" in r.stderr, r.stderr
@@ -338,6 +342,17 @@ def test_python_reads_a_calibrated_chip_as_the_cli_does(jsim_bin, tmp_path):
     assert session.analyze_file(STIS, chip=2).summary["n_detected"] > 100
     with pytest.raises(ValueError, match="read_noise_e=-1: must be a finite number ≥ 0"):
         session.analyze_file(HST, read_noise_e=-1.0)
+    # a raw frame in a tile-compressed extension, its bias and saturation given as the CLI's options
+    raw = session.analyze_file(PANOPTES, electrons_per_unit=0.84, read_noise_e=5.3, bias_units=2048.0,
+                               saturate_units=13583.0)
+    out = tmp_path / "raw"
+    subprocess.run([jsim_bin, "analyze", "--image", PANOPTES, *RAW, "--out", str(out)], check=True,
+                   capture_output=True)
+    cli = read_catalogue(out / "COMPRESSED_IMAGE1" / "catalogue.csv")
+    for name in raw.catalogue:
+        np.testing.assert_array_equal(raw.catalogue[name], cli[name], err_msg=name)
+    with pytest.raises(ValueError, match="bias_units=NaN: must be a finite number"):
+        session.analyze_file(PANOPTES, electrons_per_unit=1.0, bias_units=float("nan"))
 
 
 WFPC2 = os.path.join(ROOT, "tests", "data", "hst_wfpc2_omegacen", "u40x010hm_cutout_c0f.fits")
@@ -377,3 +392,117 @@ def test_a_real_four_chip_wfpc2_file_in_the_waivered_layout(jsim_bin, tmp_path):
             assert d_arcsec.max() < 1e-6, (k, d_arcsec.max())
     combined = read_catalogue(out / "catalogue.csv")
     assert set(combined["array"]) == {1.0, 2.0, 3.0, 4.0}
+
+
+PANOPTES = os.path.join(ROOT, "tests", "data", "panoptes_pan001_kic8462852", "solved.fits.fz")
+# the camera's figures: the bias the package states, the level its saturated pixels read, and the gain and
+# read noise of a photon-transfer fit on the sky of this frame and the one before it
+# (engine/python/examples/photon_transfer.py, docs/real-images.md)
+RAW = ["--electrons-per-unit", "0.84", "--read-noise-e", "5.3", "--bias-units", "2048", "--saturate-units", "13583"]
+
+
+def test_a_raw_ground_based_frame_is_read_and_its_bayer_mosaic_shows_in_the_pixel_phases(jsim_bin, tmp_path):
+    # its header states no unit or gain: a named error that writes nothing
+    r = subprocess.run([jsim_bin, "analyze", "--image", PANOPTES, "--out", str(tmp_path / "a")],
+                       capture_output=True, text=True)
+    assert r.returncode == 1 and "--electrons-per-unit" in r.stderr and "COMPRESSED_IMAGE,1" in r.stderr, r.stderr
+    assert not (tmp_path / "a").exists()
+    out = tmp_path / "b"
+    r = subprocess.run([jsim_bin, "analyze", "--image", PANOPTES, *RAW, "--out", str(out)],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    with fits.open(PANOPTES) as h:
+        assert isinstance(h[1], fits.CompImageHDU)
+        raw = h[1].data.astype(float)
+        w = WCS(h[1].header)
+    n_sat = int((raw >= 13583).sum())
+    assert n_sat > 100
+    assert f"{n_sat} pixel(s) at or above the saturation level 13583" in r.stderr, r.stderr
+    assert "bias 2048 data units subtracted" in r.stderr and "a raw frame" in r.stderr
+    chip = out / "COMPRESSED_IMAGE1"
+    report = json.loads((chip / "summary.json").read_text())["report"]
+    cal = json.loads((out / "summary.json").read_text())["arrays"][0]["calibration"]
+    assert cal["n_saturated"] == n_sat and cal["electrons_per_unit"] == 0.84
+    assert report["n_detected"] > 1000
+    cat = read_catalogue(chip / "catalogue.csv")
+    # the stars' local sky is the frame's, bias off and gain on, as astropy reads its pixels (the four
+    # colours' skies differ by 2x: the median of the annuli and of the frame agree to 10 %)
+    sky_e = 0.84 * (np.median(raw) - 2048)
+    assert abs(np.median(cat["sky_e"]) / sky_e - 1) < 0.1, (np.median(cat["sky_e"]), sky_e)
+    # RA/Dec through the header's TAN-SIP, as astropy's all_pix2world has them
+    ra, dec = w.all_pix2world(cat["x"], cat["y"], 0)
+    d = np.hypot((cat["ra_deg"] - ra) * np.cos(np.radians(dec)), cat["dec_deg"] - dec) * 3600
+    assert d.max() < 1e-6, d.max()
+    # a raw colour frame: each pixel sees its own colour, so no one ePSF fits every star, and the fitted
+    # positions pile up at phases of the mosaic; the check without truth says so
+    phase = report["pixel_phase"]
+    assert phase["n"] > 1000
+    assert min(phase["p_uniform_x"], phase["p_uniform_y"]) < 1e-6, phase
+
+
+def with_lookup_tables(path, transpose_cpdis2=False):
+    """The HRC cutout with HST's lookup-table distortions added, as astropy writes them: a detector
+    correction along x (D2IMARR, 51 nodes 4 px apart) and a residual table per axis (WCSDVARR, 11 x 9 nodes
+    25 px apart), smooth and up to 0.15 px. With transpose_cpdis2 the second table is stored transposed and
+    its DP2.AXIS.2 says so (astropy's convention)."""
+    from astropy.wcs import DistortionLookupTable
+
+    rng = np.random.default_rng(5)
+
+    def table(shape, amp):
+        yy, xx = np.mgrid[0 : shape[0], 0 : shape[1]]
+        return (amp * np.sin(xx / 3.0 + rng.uniform(0, 6)) * np.cos(yy / 4.0 + rng.uniform(0, 6))).astype(np.float32)
+
+    with fits.open(HST) as h:
+        hdus = fits.HDUList([x.copy() for x in h])
+    w = WCS(hdus["SCI"].header, hdus)
+    w.cpdis1 = DistortionLookupTable(table((9, 11), 0.15), (1.0, 1.0), (1.0, 1.0), (25.0, 25.0))
+    w.cpdis2 = DistortionLookupTable(table((9, 11), 0.15), (1.0, 1.0), (1.0, 1.0), (25.0, 25.0))
+    w.det2im1 = DistortionLookupTable(table((2, 51), 0.1), (1.0, 1.0), (1.0, 1.0), (4.0, 200.0))
+    written = w.to_fits(relax=True)
+    sci = hdus["SCI"].header
+    for card in written[0].header.cards:
+        if card.keyword.split(".")[0] in ("CPDIS1", "CPDIS2", "D2IMDIS1", "DP1", "DP2", "D2IM1"):
+            sci.append(card, end=True)
+    tables = [x for x in written[1:]]
+    if transpose_cpdis2:
+        sci["DP2.AXIS.2"] = 1
+        sci["DP2.AXIS.1"] = 2
+        for t in tables:
+            if t.name == "WCSDVARR" and t.ver == 2:
+                t.data = np.ascontiguousarray(t.data.T)
+    fits.HDUList([hdus[0], hdus["SCI"], hdus["ERR"], hdus["DQ"], *tables]).writeto(path)
+
+
+@pytest.mark.parametrize("transposed", [False, True])
+def test_hst_lookup_table_distortions_reach_ra_dec_as_astropy_applies_them(jsim_bin, tmp_path, transposed):
+    path = tmp_path / "lut_flt.fits"
+    with_lookup_tables(path, transposed)
+    out = tmp_path / "out"
+    r = subprocess.run([jsim_bin, "analyze", "--image", str(path), "--out", str(out)], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert "lookup-table distortions (D2IMDIS1, CPDIS1, CPDIS2)" in r.stderr, r.stderr
+    cat = read_catalogue(out / "SCI1" / "catalogue.csv")
+    with fits.open(path) as h:
+        w = WCS(h["SCI"].header, h)
+        assert w.det2im1 is not None and w.cpdis2 is not None
+    ra, dec = w.all_pix2world(cat["x"], cat["y"], 0)
+    d = np.hypot((cat["ra_deg"] - ra) * np.cos(np.radians(dec)), cat["dec_deg"] - dec) * 3600
+    assert d.max() < 1e-6, d.max()
+    # the tables matter: the SIP-only reading of the same pixels is milliarcseconds away
+    with fits.open(HST) as h:
+        ra0, dec0 = WCS(h["SCI"].header, h).all_pix2world(cat["x"], cat["y"], 0)
+    moved = np.hypot((ra0 - ra) * np.cos(np.radians(dec)), dec0 - dec) * 3600
+    assert moved.max() > 2e-3, moved.max()
+
+
+def test_a_lookup_table_the_file_lacks_is_a_named_error(jsim_bin, tmp_path):
+    path = tmp_path / "lut_flt.fits"
+    with_lookup_tables(path)
+    with fits.open(path) as h:
+        kept = [x for x in h if not (x.name == "WCSDVARR" and x.ver == 2)]
+        fits.HDUList([x.copy() for x in kept]).writeto(tmp_path / "missing.fits")
+    r = subprocess.run([jsim_bin, "analyze", "--image", str(tmp_path / "missing.fits"), "--out", str(tmp_path / "o")],
+                       capture_output=True, text=True)
+    assert r.returncode == 1 and "CPDIS2 names the table WCSDVARR,2, which the file does not hold" in r.stderr, r.stderr
+    assert not (tmp_path / "o").exists()

@@ -402,11 +402,15 @@ impl AnalysisInput {
             ));
             s
         });
-        assumptions.push(
+        assumptions.push(if opts.bias_units.is_some() {
+            "a raw frame (its bias given): not flat-fielded, as no flat is read with it; no model PSF, so \
+             the ePSF is built from the stars alone"
+                .to_string()
+        } else {
             "a calibrated image: flat-fielded by its own pipeline, not again here; no model PSF, so the \
              ePSF is built from the stars alone"
-                .to_string(),
-        );
+                .to_string()
+        });
         let img = AnalysisImage {
             nx: chip.nx,
             ny: chip.ny,

@@ -209,6 +209,42 @@ fn drop_primary_extname(f: &mut FitsFile) -> Result<(), String> {
     }
 }
 
+/// Every card of HDU `index` (0: the primary) as its text. Record-valued keywords (`DP1 = 'EXTVER: 1'`,
+/// `DP1 = 'AXIS.1: 1'`) repeat one keyword, which the safe reader, keyword by keyword, cannot tell apart.
+#[allow(unsafe_code)] // two CFITSIO calls (ffghsp, ffgrec) the safe wrapper does not offer; `f` is a live, open file
+pub fn header_cards(f: &mut FitsFile, index: usize) -> Result<Vec<String>, String> {
+    let hdu = std::os::raw::c_int::try_from(index + 1).map_err(|e| e.to_string())?;
+    let (mut status, mut n, mut more) = (0, 0, 0);
+    // SAFETY: `as_raw` is the open file's CFITSIO handle, valid for the calls
+    unsafe {
+        fitsio::sys::ffmahd(f.as_raw(), hdu, std::ptr::null_mut(), &mut status);
+        fitsio::sys::ffghsp(f.as_raw(), &mut n, &mut more, &mut status);
+    }
+    if status != 0 {
+        return Err(format!(
+            "reading HDU {index}'s header: CFITSIO status {status}"
+        ));
+    }
+    let mut cards = Vec::new();
+    for k in 1..=n {
+        // a card is 80 characters; CFITSIO writes it NUL-terminated
+        let mut buf = [0 as std::os::raw::c_char; 81];
+        // SAFETY: `buf` holds the 81 bytes ffgrec may write; the handle is as above
+        unsafe {
+            fitsio::sys::ffgrec(f.as_raw(), k, buf.as_mut_ptr(), &mut status);
+        }
+        if status != 0 {
+            return Err(format!(
+                "reading card {k} of HDU {index}: CFITSIO status {status}"
+            ));
+        }
+        // SAFETY: ffgrec NUL-terminated `buf` within its 81 bytes
+        let text = unsafe { std::ffi::CStr::from_ptr(buf.as_ptr()) };
+        cards.push(text.to_string_lossy().into_owned());
+    }
+    Ok(cards)
+}
+
 fn write_inner(path: &Path, hdus: &[Hdu<'_>]) -> Result<(), IoError> {
     let fe = |e: fitsio::errors::Error| IoError::fits(path, e);
     let mut f = match hdus.first() {

@@ -12,6 +12,7 @@
 
 pub mod apparent;
 pub mod focal_plane;
+pub mod lookup_distortion;
 pub mod orbit;
 pub mod wcs;
 

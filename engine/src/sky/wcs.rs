@@ -140,6 +140,8 @@ pub struct ArrayWcs {
     pub sip: Option<(Sip, Sip)>,
     sip_inverse_error_px: f64,
     tan: wcs::WCS,
+    /// A header's lookup-table distortions (HST's `D2IMDIS`, `CPDIS`), when it states any.
+    pub lookup: Option<super::lookup_distortion::LookupDistortion>,
 }
 
 impl std::fmt::Debug for ArrayWcs {
@@ -150,6 +152,7 @@ impl std::fmt::Debug for ArrayWcs {
             .field("cd_deg", &self.cd_deg)
             .field("naxis", &self.naxis)
             .field("sip", &self.sip)
+            .field("lookup", &self.lookup.is_some())
             .finish()
     }
 }
@@ -260,7 +263,36 @@ impl ArrayWcs {
             sip: None,
             sip_inverse_error_px: 0.0,
             tan,
+            lookup: None,
         })
+    }
+
+    /// This WCS with a header's lookup-table distortions (none when `lookup` holds no table).
+    pub fn with_lookup(mut self, lookup: super::lookup_distortion::LookupDistortion) -> Self {
+        self.lookup = (!lookup.is_empty()).then_some(lookup);
+        self
+    }
+
+    /// The focal-plane offset from the reference pixel (pixels, before the CD matrix) of the engine's pixel
+    /// position: the detector correction first, then SIP and the residual table at the corrected pixel
+    /// (astropy's `pipeline_pix2foc`).
+    fn pixel_to_focal(&self, x_px: f64, y_px: f64) -> (f64, f64) {
+        let mut t = [x_px + 1.0, y_px + 1.0];
+        if let Some(l) = &self.lookup {
+            t = l.detector_to_image(t);
+        }
+        let (mut u, mut v) = (t[0] - self.crpix[0], t[1] - self.crpix[1]);
+        if let Some((f, _)) = &self.sip {
+            let (du, dv) = (f.a.eval(u, v), f.b.eval(u, v));
+            u += du;
+            v += dv;
+        }
+        if let Some(l) = &self.lookup {
+            let r = l.residual(t);
+            u += r[0];
+            v += r[1];
+        }
+        (u, v)
     }
 
     /// The worst error of the fitted inverse distortion over the array, pixels (0 without SIP).
@@ -329,12 +361,7 @@ impl ArrayWcs {
     /// The sky position (RA, Dec in degrees) of the engine's pixel position (x, y), or `None` where the
     /// projection has none.
     pub fn pixel_to_sky(&self, x_px: f64, y_px: f64) -> Option<(f64, f64)> {
-        let (mut u, mut v) = (x_px + 1.0 - self.crpix[0], y_px + 1.0 - self.crpix[1]);
-        if let Some((f, _)) = &self.sip {
-            let (du, dv) = (f.a.eval(u, v), f.b.eval(u, v));
-            u += du;
-            v += dv;
-        }
+        let (u, v) = self.pixel_to_focal(x_px, y_px);
         let s = self
             .tan
             .unproj(&wcs::ImgXY::new(self.crpix[0] + u, self.crpix[1] + v))?;
@@ -364,7 +391,21 @@ impl ArrayWcs {
                 }
             }
         }
-        (u.is_finite() && v.is_finite()).then(|| (self.crpix[0] + u - 1.0, self.crpix[1] + v - 1.0))
+        let (mut x, mut y) = (self.crpix[0] + u - 1.0, self.crpix[1] + v - 1.0);
+        if self.lookup.is_some() {
+            // the tables have no inverse: solve pixel_to_focal(x, y) = (U, V) by fixed-point iteration from
+            // the SIP-only pixel (the tables' offsets are a fraction of a pixel and vary slowly)
+            for _ in 0..50 {
+                let (fu, fv) = self.pixel_to_focal(x, y);
+                let (dx, dy) = (uu - fu, vv - fv);
+                x += dx;
+                y += dy;
+                if dx.hypot(dy) < 1e-12 {
+                    break;
+                }
+            }
+        }
+        (x.is_finite() && y.is_finite()).then_some((x, y))
     }
 
     /// The FITS keywords of this WCS (`RA---TAN` or `RA---TAN-SIP` with A/B/AP/BP).
@@ -523,6 +564,59 @@ mod tests {
                 terms: vec![(0, 3, -2.0e-9), (2, 1, -2.0e-9), (1, 1, -5.0e-8)],
             },
         }
+    }
+
+    /// Lookup tables (a detector correction along x, a residual table per axis) on top of SIP: sky → pixel
+    /// inverts pixel → sky to 1e-8 px, and the distorted pixel lands where the SIP-only WCS puts it moved
+    /// by the tables' offsets.
+    #[test]
+    fn lookup_tables_round_trip_and_add_their_offsets() {
+        use crate::sky::lookup_distortion::{LookupDistortion, LookupTable};
+        let p = Pointing::GALACTIC_CENTRE;
+        let wave = |n: usize, m: usize, amp: f32| -> Vec<f32> {
+            (0..n * m)
+                .map(|k| amp * ((k % n) as f32 * 0.7).sin() * ((k / n) as f32 * 0.5).cos())
+                .collect()
+        };
+        let table = |n: usize, m: usize, step: f64, amp: f32| {
+            LookupTable::new(
+                [n, m],
+                [1.0, 1.0],
+                [1.0, 1.0],
+                [step, step],
+                wave(n, m, amp),
+            )
+            .expect("table")
+        };
+        let lookup = LookupDistortion {
+            det2im: [Some(table(200, 1, 10.0, 0.1)), None],
+            cpdis: [
+                Some(table(21, 21, 100.0, 0.2)),
+                Some(table(21, 21, 100.0, 0.15)),
+            ],
+        };
+        let w = centred(p, Some(demo_sip())).with_lookup(lookup.clone());
+        let sip_only = centred(p, Some(demo_sip()));
+        let mut largest = 0.0f64;
+        for (x, y) in [(0.0, 0.0), (1967.0, 3.0), (500.0, 1500.0), (983.5, 983.5)] {
+            let (ra, dec) = w.pixel_to_sky(x, y).expect("sky");
+            let (x2, y2) = w.sky_to_pixel(ra, dec).expect("pixel");
+            assert!((x2 - x).hypot(y2 - y) < 1e-8, "({x}, {y}) → ({x2}, {y2})");
+            // the detector correction moves the pixel, then SIP and the residual table act there
+            let t = lookup.detector_to_image([x + 1.0, y + 1.0]);
+            let r = lookup.residual(t);
+            let (xs, ys) = sip_only.pixel_to_focal(t[0] - 1.0, t[1] - 1.0);
+            let (xl, yl) = w.pixel_to_focal(x, y);
+            assert!((xl - xs - r[0]).abs() < 1e-12 && (yl - ys - r[1]).abs() < 1e-12);
+            largest = largest.max(r[0].abs()).max(r[1].abs());
+        }
+        assert!(
+            largest > 0.05,
+            "the tables moved the pixels by {largest} px at most"
+        );
+        // no table: nothing attached
+        let none = centred(p, None).with_lookup(LookupDistortion::default());
+        assert!(none.lookup.is_none());
     }
 
     #[test]

@@ -369,6 +369,14 @@ pub struct CalibratedArgs {
     /// NON_SCIENCE).
     #[arg(long, value_name = "BITS")]
     dq_ignore: Option<String>,
+    /// A raw frame's bias (pedestal), in its data units, subtracted before the gain is applied (default:
+    /// none; a calibrated file's bias is removed by its pipeline).
+    #[arg(long, value_name = "UNITS")]
+    bias_units: Option<f64>,
+    /// The level, in data units as stored, at and above which a pixel is saturated and masked (default: the
+    /// header's SATURATE; none without it).
+    #[arg(long, value_name = "UNITS")]
+    saturate_units: Option<f64>,
     /// Exposures of one pointing in a calibrated file (a CR-split pair): a pixel more than this many σ above
     /// the others' is a cosmic ray, masked with its neighbours (0: off).
     #[arg(long, value_name = "SIGMA", default_value_t = 5.0)]
@@ -393,6 +401,16 @@ impl CalibratedArgs {
         {
             bail!("--read-noise-e {r}: must be a finite number ≥ 0 [e-]");
         }
+        if let Some(b) = self.bias_units
+            && !b.is_finite()
+        {
+            bail!("--bias-units {b}: must be a finite number");
+        }
+        if let Some(l) = self.saturate_units
+            && !(l > 0.0 && l.is_finite())
+        {
+            bail!("--saturate-units {l}: must be a finite number > 0");
+        }
         let dq_ignore = match &self.dq_ignore {
             Some(s) => Some(engine::io::calibrated::parse_dq_bits(s).map_err(anyhow::Error::msg)?),
             None => None,
@@ -401,6 +419,8 @@ impl CalibratedArgs {
             electrons_per_unit: self.electrons_per_unit,
             read_noise_e: self.read_noise_e,
             dq_ignore,
+            bias_units: self.bias_units,
+            saturate_units: self.saturate_units,
         })
     }
 }

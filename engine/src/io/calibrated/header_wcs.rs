@@ -2,8 +2,8 @@
 
 use super::Keys;
 
-/// A chip's celestial WCS as its header states it: TAN, with SIP distortion when `CTYPE` ends in `-SIP`.
-/// Lookup-table distortions (HST's `CPDIS`/`D2IMDIS`) are not applied; the report says so when present.
+/// A chip's celestial WCS as its header states it: TAN, with SIP distortion when `CTYPE` ends in `-SIP`,
+/// and HST's lookup-table distortions (`D2IMDIS`, `CPDIS`) when the file holds them ([`super::lookup_tables`]).
 #[derive(Debug, Clone, PartialEq)]
 pub struct ChipWcs {
     pub crpix: [f64; 2],
@@ -11,18 +11,23 @@ pub struct ChipWcs {
     pub cd_deg: [[f64; 2]; 2],
     pub naxis: [usize; 2],
     pub sip: Option<crate::sky::wcs::Sip>,
+    pub lookup: Option<crate::sky::lookup_distortion::LookupDistortion>,
 }
 
 impl ChipWcs {
     /// The projection, ready to turn pixels into RA/Dec.
     pub fn projection(&self) -> Result<crate::sky::wcs::ArrayWcs, String> {
-        crate::sky::wcs::ArrayWcs::from_header_with_sip(
+        let w = crate::sky::wcs::ArrayWcs::from_header_with_sip(
             self.crpix,
             self.crval_deg,
             self.cd_deg,
             self.naxis,
             self.sip.clone(),
-        )
+        )?;
+        Ok(match &self.lookup {
+            Some(l) => w.with_lookup(l.clone()),
+            None => w,
+        })
     }
 }
 
@@ -89,6 +94,7 @@ pub fn chip_wcs(keys: &dyn Keys, naxis: [usize; 2]) -> Result<ChipWcs, String> {
         cd_deg,
         naxis,
         sip,
+        lookup: None,
     })
 }
 

@@ -23,8 +23,13 @@
 //! - **Plate scale**: `PLTSCALE`; else √|det CD| (or of `CDELT`·`PC`) of the chip's WCS.
 //!
 //! HST's older waivered layout (WFPC2's `_c0f.fits`: the chips as planes of one cube) is read by [`waivered`].
+//! A file without `SCI` extensions has each image extension as a chip (a tile-compressed `.fz` frame, a
+//! ground-based mosaic's amplifiers); a raw frame's bias (`--bias-units`) comes off first, and its pixels at
+//! the saturation level (`--saturate-units`, else `SATURATE`) are masked. The header's lookup-table
+//! distortions are read by [`lookup_tables`].
 
 mod header_wcs;
+mod lookup_tables;
 mod units;
 pub mod waivered;
 
@@ -48,6 +53,9 @@ pub struct Imset {
     pub var_rnoise: Option<usize>,
     /// The plane of the primary cube, for a waivered file ([`waivered`]); `None` for an imset.
     pub group: Option<usize>,
+    /// The chip's `EXTNAME`: `SCI` for an imset; a file without `SCI` extensions has each image extension
+    /// as a chip, named as it is (empty when unnamed, as in a tile-compressed `.fz` file's image).
+    pub extname: String,
 }
 
 impl Imset {
@@ -55,14 +63,23 @@ impl Imset {
     pub fn name(&self) -> String {
         match self.group {
             Some(_) => self.dir_name(),
-            None => format!("SCI,{}", self.extver),
+            None if self.extname.is_empty() => self.dir_name(),
+            None => format!("{},{}", self.extname, self.extver),
         }
     }
-    /// `SCI1` (`GROUP1`): the chip's name as a directory name.
+    /// `SCI1` (`GROUP1`; `HDU1` for an unnamed extension): the chip's name as a directory name.
     pub fn dir_name(&self) -> String {
         match self.group {
             Some(_) => format!("GROUP{}", self.extver),
-            None => format!("SCI{}", self.extver),
+            None if self.extname.is_empty() => format!("HDU{}", self.sci),
+            None => {
+                let name: String = self
+                    .extname
+                    .chars()
+                    .filter(|c| c.is_ascii_alphanumeric() || *c == '_')
+                    .collect();
+                format!("{name}{}", self.extver)
+            }
         }
     }
 }
@@ -76,6 +93,11 @@ pub struct ReadOptions {
     pub read_noise_e: Option<f64>,
     /// DQ bits that do not mask a pixel (replaces the pipeline's default).
     pub dq_ignore: Option<u64>,
+    /// A raw frame's bias, data units, subtracted before anything else (a calibrated file has none left).
+    pub bias_units: Option<f64>,
+    /// The level, data units (before the bias is taken off), at and above which a pixel is saturated and
+    /// masked (overrides the header's `SATURATE`).
+    pub saturate_units: Option<f64>,
 }
 
 /// A header's values as the reader looks them up (the chip's header, then the primary).
@@ -164,8 +186,7 @@ pub(super) fn wanted_keys() -> Vec<String> {
         "BUNIT", "TELESCOP", "INSTRUME", "GAIN", "ATODGAIN", "CCDGAIN", "CCDAMP", "RDNOISE",
         "READNSE", "EXPTIME", "XPOSURE", "EFFEXPTM", "PHOTMJSR", "PLTSCALE", "CD1_1", "CD1_2",
         "CD2_1", "CD2_2", "CDELT1", "CDELT2", "PC1_1", "PC1_2", "PC2_1", "PC2_2", "CTYPE1",
-        "CTYPE2", "CRPIX1", "CRPIX2", "CRVAL1", "CRVAL2", "A_ORDER", "B_ORDER", "CPDIS1",
-        "D2IMDIS1",
+        "CTYPE2", "CRPIX1", "CRPIX2", "CRVAL1", "CRVAL2", "A_ORDER", "B_ORDER", "SATURATE",
     ]
     .iter()
     .map(|s| s.to_string())
@@ -226,6 +247,24 @@ fn sci_imsets(path: &Path) -> Result<Vec<Imset>, IoError> {
             .find(|(m, w, _)| m == n && *w == v)
             .map(|x| x.2)
     };
+    if !found.iter().any(|(n, _, _)| n == "SCI") {
+        // no imset: each image extension that is not a known companion plane is a chip of its own (a
+        // tile-compressed `.fz` image, a ground-based mosaic's amplifiers), with no ERR or DQ
+        return Ok(found
+            .iter()
+            .filter(|(n, _, _)| !COMPANION_PLANES.contains(&n.as_str()))
+            .map(|(n, v, i)| Imset {
+                extver: *v,
+                sci: *i,
+                err: None,
+                dq: None,
+                var_poisson: None,
+                var_rnoise: None,
+                group: None,
+                extname: n.clone(),
+            })
+            .collect());
+    }
     Ok(found
         .iter()
         .filter(|(n, _, _)| n == "SCI")
@@ -237,9 +276,24 @@ fn sci_imsets(path: &Path) -> Result<Vec<Imset>, IoError> {
             var_poisson: at("VAR_POISSON", *v),
             var_rnoise: at("VAR_RNOISE", *v),
             group: None,
+            extname: "SCI".into(),
         })
         .collect())
 }
+
+/// Extensions that are planes of a chip, never a chip: the imsets' and common weight, mask and context maps.
+const COMPANION_PLANES: [&str; 10] = [
+    "ERR",
+    "DQ",
+    "VAR_POISSON",
+    "VAR_RNOISE",
+    "VAR_FLAT",
+    "WHT",
+    "CTX",
+    "CON",
+    "MASK",
+    "BPM",
+];
 
 /// Whether the primary HDU holds a 2-D image (jsim's single-array files and any plain image).
 pub fn primary_is_image(path: &Path) -> Result<bool, IoError> {
@@ -304,7 +358,7 @@ pub fn read_chip(path: &Path, set: &Imset, opts: &ReadOptions) -> Result<Calibra
         }
         None => None,
     };
-    calibrate(
+    let mut chip = calibrate(
         &keys,
         ChipPlanes {
             nx,
@@ -320,5 +374,12 @@ pub fn read_chip(path: &Path, set: &Imset, opts: &ReadOptions) -> Result<Calibra
     .map_err(|message| IoError::Format {
         path: path.to_path_buf(),
         message: format!("{}: {message}", set.name()),
-    })
+    })?;
+    if let Some(w) = chip.wcs.as_mut()
+        && let Some((lookup, note)) = lookup_tables::read(&mut f, path, set.sci)?
+    {
+        w.lookup = Some(lookup);
+        chip.notes.push(note);
+    }
+    Ok(chip)
 }

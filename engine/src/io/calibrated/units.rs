@@ -353,6 +353,16 @@ pub fn calibrate(
     let ignore = opts.dq_ignore.unwrap_or(obs.default_dq_ignore());
     let mut notes = Vec::new();
     let (mut n_flagged, mut n_saturated, mut n_non_finite) = (0, 0, 0);
+    // a raw frame's saturation level (data units, before the bias is taken off): ground-based files state
+    // it as SATURATE
+    let saturate = match opts.saturate_units {
+        Some(v) => Some((v, "--saturate-units")),
+        None => keys
+            .number("SATURATE")
+            .filter(|v| *v > 0.0 && v.is_finite())
+            .map(|v| (v, "SATURATE")),
+    };
+    let mut n_at_level = 0;
     let mut bad = vec![false; n];
     for (i, b) in bad.iter_mut().enumerate() {
         if !planes.sci[i].is_finite() {
@@ -367,6 +377,14 @@ pub fn calibrate(
             if dq[i] & saturated_bits != 0 {
                 n_saturated += 1;
             }
+        }
+        // counted once: a pixel the DQ plane flags already is not counted again
+        if let Some((level, _)) = saturate
+            && planes.sci[i] as f64 >= level
+            && !*b
+        {
+            *b = true;
+            n_at_level += 1;
         }
     }
     let good: Vec<bool> = bad.iter().map(|b| !b).collect();
@@ -390,6 +408,13 @@ pub fn calibrate(
             i / planes.nx
         ));
     }
+    let mut planes = planes;
+    if let Some(bias) = opts.bias_units {
+        for v in planes.sci.iter_mut() {
+            *v -= bias as f32;
+        }
+        notes.push(format!("bias {bias} data units subtracted (--bias-units)"));
+    }
     let (k, k_note) = electrons_per_unit(keys, &planes, &good, opts)?;
     if !(k > 0.0 && k.is_finite()) {
         return Err(format!("{k} e⁻ per data unit: must be a finite number > 0"));
@@ -399,10 +424,11 @@ pub fn calibrate(
     if !(rn >= 0.0 && rn.is_finite()) {
         return Err(format!("read noise {rn} e⁻: must be a finite number ≥ 0"));
     }
+    let rn_from_err = rn_note.contains("ERR plane");
     notes.push(rn_note);
     // the ERR plane as a check on a read noise taken from elsewhere
     if let Some(e) = &planes.err
-        && !notes[1].contains("ERR plane")
+        && !rn_from_err
         && let Some(r) = read_noise_from_err(&planes.sci, e, &good, k)
     {
         notes.push(format!(
@@ -422,6 +448,13 @@ pub fn calibrate(
             "{n_non_finite} non-finite (NaN or infinite) pixel(s) masked"
         ));
     }
+    if let Some((level, from)) = saturate {
+        n_saturated += n_at_level;
+        notes.push(format!(
+            "{n_at_level} pixel(s) at or above the saturation level {level} data units ({from}) masked \
+             as saturated"
+        ));
+    }
     let plate = plate_scale_mas(keys);
     if let Some((s, from)) = plate {
         notes.push(format!("plate scale {s:.4} mas/px from {from}"));
@@ -436,11 +469,6 @@ pub fn calibrate(
                     ""
                 }
             ));
-            if keys.text("CPDIS1").is_some() || keys.text("D2IMDIS1").is_some() {
-                notes.push(
-                    "the header's lookup-table distortions (CPDIS, D2IMDIS) are not applied to RA/Dec".into(),
-                );
-            }
             Some(w)
         }
         Err(why) => {
@@ -679,5 +707,60 @@ mod tests {
         );
         assert!(c.bad[0] && !c.bad[1]);
         assert_eq!(c.n_flagged, 1);
+    }
+
+    /// A raw frame: its bias (given) comes off before the gain, its pixels at the saturation level (given, or
+    /// the header's SATURATE) are masked and counted once, a DQ-flagged one not again.
+    #[test]
+    fn a_raw_frames_bias_comes_off_and_its_saturated_pixels_are_masked() {
+        let (nx, ny) = (4, 4);
+        let mut sci = vec![2148.0f32; nx * ny];
+        sci[3] = 13583.0;
+        sci[7] = 13600.0;
+        sci[9] = 13583.0;
+        let mut dq = vec![0u64; nx * ny];
+        dq[9] = 2;
+        let keys = MapKeys(HashMap::from([("SATURATE", "13583")]));
+        let planes = ChipPlanes {
+            nx,
+            ny,
+            sci,
+            dq: Some(dq),
+            ..Default::default()
+        };
+        let opts = ReadOptions {
+            electrons_per_unit: Some(0.5),
+            read_noise_e: Some(5.0),
+            bias_units: Some(2048.0),
+            ..Default::default()
+        };
+        let c = calibrate(&keys, planes.clone(), &opts).expect("ok");
+        assert_eq!(c.electrons[0], 50.0, "(2148 − 2048) × 0.5");
+        assert!(c.bad[3] && c.bad[7] && c.bad[9] && !c.bad[0]);
+        // pixel 9 is DQ-flagged: masked once, counted as flagged, not again at the level
+        assert_eq!((c.n_flagged, c.n_saturated), (1, 2));
+        assert!(
+            c.notes.iter().any(|n| n.contains("bias 2048")),
+            "{:?}",
+            c.notes
+        );
+        assert!(
+            c.notes.iter().any(|n| n.contains(
+                "2 pixel(s) at or above the saturation level 13583 data units (SATURATE)"
+            )),
+            "{:?}",
+            c.notes
+        );
+        // the option replaces the header's level
+        let c = calibrate(
+            &keys,
+            planes,
+            &ReadOptions {
+                saturate_units: Some(13590.0),
+                ..opts
+            },
+        )
+        .expect("ok");
+        assert!(!c.bad[3] && c.bad[7]);
     }
 }

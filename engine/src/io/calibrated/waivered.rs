@@ -52,6 +52,7 @@ pub fn groups(path: &Path) -> Result<Vec<Imset>, IoError> {
             var_poisson: None,
             var_rnoise: None,
             group: Some(k),
+            extname: String::new(),
         })
         .collect())
 }

@@ -71,6 +71,11 @@ pub const OUTPUT_FILES: &[OutputFile] = &[
     f("GROUP{k}/epsf.fits", &[Analyze], "one chip's ePSF (a waivered file)"),
     f("GROUP{k}/summary.json", &[Analyze], "one chip's report (a waivered file)"),
     f("GROUP{k}/cosmic_rays.fits", &[Analyze], "one chip's cosmic-ray mask (a waivered file)"),
+    // after SCI and GROUP: a name matches the first pattern that fits it
+    f("{EXTNAME}{k}/catalogue.csv", &[Analyze], "one chip's fitted stars (a file of image extensions)"),
+    f("{EXTNAME}{k}/epsf.fits", &[Analyze], "one chip's ePSF (a file of image extensions)"),
+    f("{EXTNAME}{k}/summary.json", &[Analyze], "one chip's report (a file of image extensions)"),
+    f("{EXTNAME}{k}/cosmic_rays.fits", &[Analyze], "one chip's cosmic-ray mask (a file of image extensions)"),
     f("repeatability.csv", &[Analyze], "repeatability against the bound, exposures of one pointing"),
     // jsim score
     f("score.csv", &[Score], "completeness and accuracy per bin of true magnitude"),
