@@ -54,10 +54,20 @@ def gain_of(h, hdr):
     sys.exit(f"no GAIN, and BUNIT {unit!r} is not ELECTRONS or COUNTS with ATODGAIN")
 
 
-def load(path, ext, flat, flat_ext, gain=None, bias=None, saturate=None):
+def load(path, ext, flat, flat_ext, gain=None, bias=None, saturate=None, group=None):
     """The image in electrons, its mask and plate scale; gain (e- per data unit), bias and saturation (data
     units) as given, else from the header (a raw frame's, as jsim's --electrons-per-unit, --bias-units and
-    --saturate-units)."""
+    --saturate-units). `group` k: the k-th plane (1-based) of a waivered file's primary cube (WFPC2's
+    `_c0f`), its DQ the companion `_c1f`'s plane."""
+    if group is not None:
+        with fits.open(path) as h, fits.open(path.replace("_c0f", "_c1f")) as d:
+            raw = h[0].data[group - 1].astype(float)
+            e = (raw - (bias or 0.0)) * (gain if gain is not None else h[0].header["ATODGAIN"])
+            bad = ~np.isfinite(e) | (d[0].data[group - 1] != 0)
+            row = h[1].data[group - 1]
+            scale = float(np.sqrt(abs(row["CD1_1"] * row["CD2_2"] - row["CD1_2"] * row["CD2_1"])) * 3.6e6)
+        e[bad] = 0.0
+        return e, bad, scale
     with fits.open(path) as h:
         hdu = h[int(ext) if ext and ext.isdigit() else ext] if ext else h[0]
         hdr = hdu.header
@@ -104,6 +114,8 @@ def main(argv=None):
     ap.add_argument("--gain", type=float, default=None, help="e- per data unit (default: the header's)")
     ap.add_argument("--bias", type=float, default=None, help="a raw frame's bias, data units")
     ap.add_argument("--saturate", type=float, default=None, help="a raw frame's saturation level, data units")
+    ap.add_argument("--group", type=int, default=None,
+                    help="the k-th chip (1-based) of a waivered file's primary cube (WFPC2's _c0f; DQ from _c1f)")
     ap.add_argument("--flat", default=None, help="the calibration flat product (flat_cal.fits)")
     ap.add_argument("--size", type=int, default=512, help="centred cut, px (0: the whole image)")
     ap.add_argument("--nsigma", type=float, default=5.0)
@@ -115,7 +127,7 @@ def main(argv=None):
     a.ext = a.ext.upper() if a.ext else None  # extension names are read without regard to case
 
     flat_ext = "FLAT" + a.ext[len("ARRAY"):] if a.ext and a.ext.startswith("ARRAY") else None
-    e, bad, scale = load(a.image, a.ext, a.flat, flat_ext, a.gain, a.bias, a.saturate)
+    e, bad, scale = load(a.image, a.ext, a.flat, flat_ext, a.gain, a.bias, a.saturate, a.group)
     n = e.shape[0]
     size = n if a.size <= 0 else min(a.size, n)
     x0 = (n - size) // 2
@@ -137,8 +149,23 @@ def main(argv=None):
         [not mask[int(y) - 6 : int(y) + 7, int(x) - 6 : int(x) + 7].any() if ok else False for x, y, ok in zip(px, py, edge)]
     )
     pick = np.where((nn == 1) & edge & clean)[0]
+    star_img = img
+    if len(pick) < 10:
+        # a detector whose flagged pixels leave few clean boxes (STIS's): stars with a clean core (no flagged
+        # pixel within 2 px), as jsim loosens its own choice; their flagged wing pixels interpolated from
+        # their neighbours (photutils' ePSF fit takes no NaN)
+        from astropy.convolution import Gaussian2DKernel, interpolate_replace_nans
+
+        core = np.array(
+            [not mask[int(y) - 2 : int(y) + 3, int(x) - 2 : int(x) + 3].any() if ok else False
+             for x, y, ok in zip(px, py, edge)]
+        )
+        pick = np.where((nn == 1) & edge & core)[0]
+        star_img = interpolate_replace_nans(np.where(mask, np.nan, img), Gaussian2DKernel(1.0))
+        star_img = np.nan_to_num(star_img)
+        print(f"photutils: {len(pick)} ePSF stars with a clean core (too few clean boxes)")
     pick = pick[np.argsort(-pf[pick])][:200]
-    stars = extract_stars(NDData(img), Table({"x": px[pick], "y": py[pick]}), size=25)
+    stars = extract_stars(NDData(star_img), Table({"x": px[pick], "y": py[pick]}), size=25)
     epsf = EPSFBuilder(oversampling=4, smoothing_kernel="quadratic", maxiters=10, progress_bar=False)(stars)
     epsf = getattr(epsf, "epsf", epsf[0] if isinstance(epsf, tuple) else epsf)
     phot = IterativePSFPhotometry(

@@ -374,18 +374,13 @@ def test_a_real_four_chip_wfpc2_file_in_the_waivered_layout(jsim_bin, tmp_path):
     summary = json.loads((out / "summary.json").read_text())
     assert [a["array"] for a in summary["arrays"]] == ["GROUP1", "GROUP2", "GROUP3", "GROUP4"]
     with fits.open(WFPC2) as h, fits.open(WFPC2.replace("_c0f", "_c1f")) as d:
-        rows = h[1].data
         for k, a in enumerate(summary["arrays"]):
             cal = a["calibration"]
             assert cal["electrons_per_unit"] == h[0].header["ATODGAIN"]
             assert cal["n_flagged"] == int((d[0].data[k] != 0).sum())
             assert cal["n_saturated"] == int(((d[0].data[k] & 8) != 0).sum())
             assert a["report"]["n_detected"] > 100
-            w = WCS(naxis=2)
-            w.wcs.ctype = [rows["CTYPE1"][k], rows["CTYPE2"][k]]
-            w.wcs.crval = [rows["CRVAL1"][k], rows["CRVAL2"][k]]
-            w.wcs.crpix = [rows["CRPIX1"][k], rows["CRPIX2"][k]]
-            w.wcs.cd = [[rows["CD1_1"][k], rows["CD1_2"][k]], [rows["CD2_1"][k], rows["CD2_2"][k]]]
+            w = CHECK.group_wcs(h, k + 1)
             cat = read_catalogue(out / f"GROUP{k + 1}" / "catalogue.csv")
             ra, dec = w.all_pix2world(cat["x"], cat["y"], 0)
             d_arcsec = np.hypot((cat["ra_deg"] - ra) * np.cos(np.radians(dec)), cat["dec_deg"] - dec) * 3600

@@ -125,20 +125,17 @@ impl SweepFile {
             .countermeasures
             .clone()
             .unwrap_or_else(|| vec!["none".into()]);
-        let t = self.telemetry.as_ref();
+        let none = TelemetryFile::default();
+        let t = self.telemetry.as_ref().unwrap_or(&none);
         let d = TelemetryQuality::DEFAULT;
-        let or = |v: Option<f64>, default: f64| v.unwrap_or(default);
         let telemetry = TelemetryQuality {
-            noise_mas: or(t.and_then(|t| t.noise_mas), d.noise_mas),
-            rate_hz: or(t.and_then(|t| t.rate_hz), d.rate_hz),
-            latency_s: or(t.and_then(|t| t.latency_s), d.latency_s),
-            correlated_mas: or(t.and_then(|t| t.correlated_mas), d.correlated_mas),
-            correlation_time_s: or(t.and_then(|t| t.correlation_time_s), d.correlation_time_s),
+            noise_mas: t.noise_mas.unwrap_or(d.noise_mas),
+            rate_hz: t.rate_hz.unwrap_or(d.rate_hz),
+            latency_s: t.latency_s.unwrap_or(d.latency_s),
+            correlated_mas: t.correlated_mas.unwrap_or(d.correlated_mas),
+            correlation_time_s: t.correlation_time_s.unwrap_or(d.correlation_time_s),
         };
-        let reference_error_mas = or(
-            t.and_then(|t| t.reference_error_mas),
-            DEFAULT_CATALOGUE_ERROR_MAS,
-        );
+        let reference_error_mas = t.reference_error_mas.unwrap_or(DEFAULT_CATALOGUE_ERROR_MAS);
         let plan = Plan::parse(&names, telemetry, reference_error_mas)
             .map_err(|e| format!("`countermeasures`/`[telemetry]`: {e}"))?;
         if plan.needs_stare() && stare_exposures < 2 {
