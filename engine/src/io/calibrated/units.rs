@@ -338,6 +338,65 @@ pub fn read_noise_from_err(sci: &[f32], err: &[f32], good: &[bool], k: f64) -> O
     Some(median(v).max(0.0).sqrt())
 }
 
+/// A raw frame's saturation level (data units, before the bias is taken off) and where it came from:
+/// `--saturate-units`, else the header's `SATURATE` (the ground-based convention).
+fn saturation_level(keys: &dyn Keys, opts: &ReadOptions) -> Option<(f64, &'static str)> {
+    match opts.saturate_units {
+        Some(v) => Some((v, "--saturate-units")),
+        None => keys
+            .number("SATURATE")
+            .filter(|v| *v > 0.0 && v.is_finite())
+            .map(|v| (v, "SATURATE")),
+    }
+}
+
+/// The pixels masked and why, each counted once.
+struct Mask {
+    bad: Vec<bool>,
+    /// Flagged by a DQ bit outside the ignored ones, of which with a saturation bit.
+    n_flagged: usize,
+    n_saturated: usize,
+    n_non_finite: usize,
+    /// At or above the saturation level and not flagged otherwise.
+    n_at_level: usize,
+}
+
+/// Mask the non-finite pixels, those whose DQ has a bit outside `ignore`, and those at or above `level`.
+fn mask_pixels(planes: &ChipPlanes, ignore: u64, saturated_bits: u64, level: Option<f64>) -> Mask {
+    let n = planes.nx * planes.ny;
+    let mut m = Mask {
+        bad: vec![false; n],
+        n_flagged: 0,
+        n_saturated: 0,
+        n_non_finite: 0,
+        n_at_level: 0,
+    };
+    for i in 0..n {
+        if !planes.sci[i].is_finite() {
+            m.bad[i] = true;
+            m.n_non_finite += 1;
+        }
+        if let Some(dq) = &planes.dq
+            && dq[i] & !ignore != 0
+        {
+            m.bad[i] = true;
+            m.n_flagged += 1;
+            if dq[i] & saturated_bits != 0 {
+                m.n_saturated += 1;
+            }
+        }
+        // counted once: a pixel masked already is not counted again
+        if let Some(level) = level
+            && planes.sci[i] as f64 >= level
+            && !m.bad[i]
+        {
+            m.bad[i] = true;
+            m.n_at_level += 1;
+        }
+    }
+    m
+}
+
 /// A chip's planes turned into electrons, a mask, a read noise and a plate scale, with every choice stated.
 pub fn calibrate(
     keys: &dyn Keys,
@@ -352,41 +411,14 @@ pub fn calibrate(
     let saturated_bits = obs.saturated_bits();
     let ignore = opts.dq_ignore.unwrap_or(obs.default_dq_ignore());
     let mut notes = Vec::new();
-    let (mut n_flagged, mut n_saturated, mut n_non_finite) = (0, 0, 0);
-    // a raw frame's saturation level (data units, before the bias is taken off): ground-based files state
-    // it as SATURATE
-    let saturate = match opts.saturate_units {
-        Some(v) => Some((v, "--saturate-units")),
-        None => keys
-            .number("SATURATE")
-            .filter(|v| *v > 0.0 && v.is_finite())
-            .map(|v| (v, "SATURATE")),
-    };
-    let mut n_at_level = 0;
-    let mut bad = vec![false; n];
-    for (i, b) in bad.iter_mut().enumerate() {
-        if !planes.sci[i].is_finite() {
-            *b = true;
-            n_non_finite += 1;
-        }
-        if let Some(dq) = &planes.dq
-            && dq[i] & !ignore != 0
-        {
-            *b = true;
-            n_flagged += 1;
-            if dq[i] & saturated_bits != 0 {
-                n_saturated += 1;
-            }
-        }
-        // counted once: a pixel the DQ plane flags already is not counted again
-        if let Some((level, _)) = saturate
-            && planes.sci[i] as f64 >= level
-            && !*b
-        {
-            *b = true;
-            n_at_level += 1;
-        }
-    }
+    let saturate = saturation_level(keys, opts);
+    let Mask {
+        bad,
+        n_flagged,
+        mut n_saturated,
+        n_non_finite,
+        n_at_level,
+    } = mask_pixels(&planes, ignore, saturated_bits, saturate.map(|s| s.0));
     let good: Vec<bool> = bad.iter().map(|b| !b).collect();
     if n > 0 && good.iter().all(|g| !g) {
         return Err(format!(
