@@ -333,9 +333,10 @@ impl PySession {
     /// image) and the truth (`truth=`, else the image's TRUTH extension) — so the result is the CLI's, bit
     /// for bit. A focal-plane file (`fp_NNN.fits`) is analysed array by array by `jsim analyze`: here it is
     /// refused by name. A calibrated file of another observatory (HST, JWST: docs/real-images.md) is read
-    /// chip by chip: `chip=` its SCI EXTVER (needed when it has several), with `electrons_per_unit=`,
-    /// `read_noise_e=`, `dq_ignore=` (bits, as `--dq-ignore`), `bias_units=` and `saturate_units=` (a raw
-    /// frame's, as `--bias-units` and `--saturate-units`) where its header is silent or wrong — the
+    /// chip by chip: `chip=` its SCI EXTVER, or an image extension's HDU index (needed when it has
+    /// several), with `electrons_per_unit=`, `read_noise_e=`, `dq_ignore=` (bits, as `--dq-ignore`),
+    /// `bias_units=` and `saturate_units=` (a raw frame's, as `--bias-units` and `--saturate-units`) where
+    /// its header is silent or wrong — the
     /// CLI's result for that chip when the chips are not exposures of one pointing compared with each other.
     #[pyo3(signature = (path, *, truth = None, flat = None, refcat = None, telemetry = None, countermeasure = "none", epsf_zones = None, crowding = None, chip = None, electrons_per_unit = None, read_noise_e = None, dq_ignore = None, bias_units = None, saturate_units = None))]
     #[allow(clippy::too_many_arguments)]
@@ -374,14 +375,15 @@ impl PySession {
         if !engine::io::calibrated::primary_is_image(&path).or_py()? {
             let sets = engine::io::calibrated::imsets(&path).or_py()?;
             let set = match chip {
-                Some(v) => sets.iter().find(|s| s.extver == v),
+                Some(v) => sets.iter().find(|s| s.number() == v),
                 None if sets.len() == 1 => sets.first(),
                 None => None,
             }
             .ok_or_else(|| {
                 let names: Vec<String> = sets.iter().map(|s| s.name()).collect();
                 PyValueError::new_err(format!(
-                    "{}: chip={chip:?}: the file's SCI chips are [{}] (give chip= one's EXTVER)",
+                    "{}: chip={chip:?}: the file's chips are [{}] (give chip= one's number: a SCI chip's \
+                     EXTVER, an image extension's HDU index)",
                     path.display(),
                     names.join("; ")
                 ))

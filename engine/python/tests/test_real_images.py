@@ -337,7 +337,7 @@ def test_python_reads_a_calibrated_chip_as_the_cli_does(jsim_bin, tmp_path):
     for name in py.catalogue:
         np.testing.assert_array_equal(py.catalogue[name], cli[name], err_msg=name)
     assert py.assumptions == summary["assumptions"]
-    with pytest.raises(ValueError, match=r"chip=None: the file's SCI chips are \[SCI,1; SCI,2\]"):
+    with pytest.raises(ValueError, match=r"chip=None: the file's chips are \[SCI,1; SCI,2\]"):
         session.analyze_file(STIS)
     assert session.analyze_file(STIS, chip=2).summary["n_detected"] > 100
     with pytest.raises(ValueError, match="read_noise_e=-1: must be a finite number ≥ 0"):
@@ -501,3 +501,36 @@ def test_a_lookup_table_the_file_lacks_is_a_named_error(jsim_bin, tmp_path):
                        capture_output=True, text=True)
     assert r.returncode == 1 and "CPDIS2 names the table WCSDVARR,2, which the file does not hold" in r.stderr, r.stderr
     assert not (tmp_path / "o").exists()
+
+
+def test_a_mosaic_of_image_extensions_is_read_chip_by_chip(jsim_bin, tmp_path):
+    """Two amplifiers' halves of the raw frame as image extensions sharing EXTVER 1 (a ground-based mosaic's
+    layout), and a distortion table beside them: two chips, numbered by their HDU, the table no chip."""
+    import jsim
+
+    with fits.open(PANOPTES) as h:
+        raw, hdr = h[1].data.astype(np.float32), h[1].header
+    halves = [raw[:, :350], raw[:, 350:]]
+    hdus = [fits.PrimaryHDU()]
+    for k, half in enumerate(halves):
+        head = fits.Header()
+        head["EXTNAME"] = f"AMP{k + 1}"
+        hdus.append(fits.ImageHDU(half, head))
+    hdus.append(fits.ImageHDU(np.zeros((3, 3), np.float32), name="WCSDVARR", ver=1))
+    path = tmp_path / "mosaic.fits"
+    fits.HDUList(hdus).writeto(path)
+    out = tmp_path / "out"
+    r = subprocess.run([jsim_bin, "analyze", "--image", str(path), *RAW, "--out", str(out)],
+                       capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    summary = json.loads((out / "summary.json").read_text())
+    assert [a["array"] for a in summary["arrays"]] == ["AMP1,1", "AMP2,1"]
+    assert (out / "AMP11" / "catalogue.csv").exists() and (out / "AMP21" / "catalogue.csv").exists()
+    combined = read_catalogue(out / "catalogue.csv")
+    assert set(combined["array"]) == {1.0, 2.0}
+    session = jsim.Session(jsim.Config.default(), backend="cpu")
+    with pytest.raises(ValueError, match=r"the file's chips are \[AMP1,1; AMP2,1\]"):
+        session.analyze_file(str(path), electrons_per_unit=0.84, read_noise_e=5.3, bias_units=2048.0)
+    second = session.analyze_file(str(path), chip=2, electrons_per_unit=0.84, read_noise_e=5.3, bias_units=2048.0,
+                                  saturate_units=13583.0)
+    np.testing.assert_array_equal(second.catalogue["x"], read_catalogue(out / "AMP21" / "catalogue.csv")["x"])

@@ -49,7 +49,7 @@ pub fn analyze_calibrated(session: &Session, cfg: &Config, a: &AnalyzeArgs) -> R
         .map(|s| Part {
             label: s.name(),
             dir: s.dir_name(),
-            number: s.extver,
+            number: s.number(),
         })
         .collect();
     let mut inputs = sets

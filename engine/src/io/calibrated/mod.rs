@@ -67,6 +67,16 @@ impl Imset {
             None => format!("{},{}", self.extname, self.extver),
         }
     }
+    /// The chip's number (the combined catalogue's `array` column, Python's `chip=`): its `EXTVER` (the
+    /// group's for a waivered file); for a file of image extensions, which may share one `EXTVER`, the
+    /// HDU's index (0: the primary).
+    pub fn number(&self) -> i64 {
+        if self.group.is_none() && self.extname != "SCI" {
+            self.sci as i64
+        } else {
+            self.extver
+        }
+    }
     /// `SCI1` (`GROUP1`; `HDU1` for an unnamed extension): the chip's name as a directory name.
     pub fn dir_name(&self) -> String {
         match self.group {
@@ -281,8 +291,9 @@ fn sci_imsets(path: &Path) -> Result<Vec<Imset>, IoError> {
         .collect())
 }
 
-/// Extensions that are planes of a chip, never a chip: the imsets' and common weight, mask and context maps.
-const COMPANION_PLANES: [&str; 10] = [
+/// Extensions that are planes of a chip, never a chip: the imsets', common weight, mask and context maps,
+/// and distortion tables.
+const COMPANION_PLANES: [&str; 12] = [
     "ERR",
     "DQ",
     "VAR_POISSON",
@@ -293,6 +304,9 @@ const COMPANION_PLANES: [&str; 10] = [
     "CON",
     "MASK",
     "BPM",
+    // HST's lookup-table distortions (lookup_tables)
+    "D2IMARR",
+    "WCSDVARR",
 ];
 
 /// Whether the primary HDU holds a 2-D image (jsim's single-array files and any plain image).
