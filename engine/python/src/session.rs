@@ -389,22 +389,18 @@ impl PySession {
                 ))
             })?;
             let opts = engine::io::calibrated::ReadOptions {
-                electrons_per_unit: positive("electrons_per_unit", electrons_per_unit)?,
-                read_noise_e: non_negative("read_noise_e", read_noise_e)?,
+                electrons_per_unit,
+                read_noise_e,
                 dq_ignore: dq_ignore
                     .map(engine::io::calibrated::parse_dq_bits)
                     .transpose()
                     .map_err(PyValueError::new_err)?,
-                bias_units: match bias_units {
-                    Some(b) if !b.is_finite() => {
-                        return Err(PyValueError::new_err(format!(
-                            "bias_units={b}: must be a finite number"
-                        )));
-                    }
-                    b => b,
-                },
-                saturate_units: positive("saturate_units", saturate_units)?,
+                bias_units,
+                saturate_units,
             };
+            opts.validate().map_err(|e| {
+                PyValueError::new_err(format!("{}={}: {}", e.field, e.value, e.rule))
+            })?;
             let input = AnalysisInput::read_chip(&path, set, &opts, &cfg).or_py()?;
             let analysis = py
                 .detach(|| self.session.analyze_input(&cfg, &input, epsf_zones, cm))
@@ -614,25 +610,5 @@ impl PyAnalysis {
             "jsim.Analysis({}, accuracy {acc:.2} mas)",
             self.countermeasure
         )
-    }
-}
-
-/// `value`, when given, a finite number > 0 (else an error naming `what`).
-fn positive(what: &str, value: Option<f64>) -> PyResult<Option<f64>> {
-    match value {
-        Some(v) if !(v > 0.0 && v.is_finite()) => Err(PyValueError::new_err(format!(
-            "{what}={v}: must be a finite number > 0"
-        ))),
-        v => Ok(v),
-    }
-}
-
-/// `value`, when given, a finite number ≥ 0 (else an error naming `what`).
-fn non_negative(what: &str, value: Option<f64>) -> PyResult<Option<f64>> {
-    match value {
-        Some(v) if !(v >= 0.0 && v.is_finite()) => Err(PyValueError::new_err(format!(
-            "{what}={v}: must be a finite number ≥ 0"
-        ))),
-        v => Ok(v),
     }
 }

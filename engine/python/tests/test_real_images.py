@@ -503,6 +503,23 @@ def test_a_lookup_table_the_file_lacks_is_a_named_error(jsim_bin, tmp_path):
     assert not (tmp_path / "o").exists()
 
 
+def test_a_distortion_other_than_a_lookup_table_leaves_ra_dec_out(jsim_bin, tmp_path):
+    """astropy warns on a CPDISj that is not 'Lookup' and goes on without it; jsim goes on too, but leaves
+    RA/Dec out of the catalogue rather than give positions off by the distortion it cannot apply."""
+    path = tmp_path / "lut_flt.fits"
+    with_lookup_tables(path)
+    with fits.open(path, mode="update") as h:
+        h["SCI"].header["CPDIS2"] = "Polynomial"
+    out = tmp_path / "out"
+    r = subprocess.run([jsim_bin, "analyze", "--image", str(path), "--out", str(out)], capture_output=True, text=True)
+    assert r.returncode == 0, r.stderr
+    assert "RA/Dec left out" in r.stderr and "CPDIS2 = 'Polynomial'" in r.stderr, r.stderr
+    assert "RA/Dec through the header's WCS" not in r.stderr, r.stderr
+    cat = read_catalogue(out / "SCI1" / "catalogue.csv")
+    assert len(cat["x"]) > 50
+    assert "ra_deg" not in cat and "dec_deg" not in cat
+
+
 def test_a_mosaic_of_image_extensions_is_read_chip_by_chip(jsim_bin, tmp_path):
     """Two amplifiers' halves of the raw frame as image extensions sharing EXTVER 1 (a ground-based mosaic's
     layout), and a distortion table beside them: two chips, numbered by their HDU, the table no chip."""

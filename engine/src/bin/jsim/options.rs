@@ -391,36 +391,20 @@ pub struct CalibratedArgs {
 impl CalibratedArgs {
     /// The options, checked: an impossible value is an error naming the option and its range.
     pub fn options(&self) -> Result<engine::io::calibrated::ReadOptions> {
-        if let Some(k) = self.electrons_per_unit
-            && !(k > 0.0 && k.is_finite())
-        {
-            bail!("--electrons-per-unit {k}: must be a finite number > 0");
-        }
-        if let Some(r) = self.read_noise_e
-            && !(r >= 0.0 && r.is_finite())
-        {
-            bail!("--read-noise-e {r}: must be a finite number ≥ 0 [e-]");
-        }
-        if let Some(b) = self.bias_units
-            && !b.is_finite()
-        {
-            bail!("--bias-units {b}: must be a finite number");
-        }
-        if let Some(l) = self.saturate_units
-            && !(l > 0.0 && l.is_finite())
-        {
-            bail!("--saturate-units {l}: must be a finite number > 0");
-        }
         let dq_ignore = match &self.dq_ignore {
             Some(s) => Some(engine::io::calibrated::parse_dq_bits(s).map_err(anyhow::Error::msg)?),
             None => None,
         };
-        Ok(engine::io::calibrated::ReadOptions {
+        let opts = engine::io::calibrated::ReadOptions {
             electrons_per_unit: self.electrons_per_unit,
             read_noise_e: self.read_noise_e,
             dq_ignore,
             bias_units: self.bias_units,
             saturate_units: self.saturate_units,
-        })
+        };
+        opts.validate().map_err(|e| {
+            anyhow::anyhow!("--{} {}: {}", e.field.replace('_', "-"), e.value, e.rule)
+        })?;
+        Ok(opts)
     }
 }

@@ -10,16 +10,38 @@ use fitsio::FitsFile;
 use fitsio::hdu::HduInfo;
 use std::path::Path;
 
+/// A card's keyword and value: a quoted string without its quotes (`''` read as `'`, a `/` inside it
+/// kept), or otherwise the text before the comment's `/`, trimmed.
+fn card_value(card: &str) -> Option<(&str, String)> {
+    let (key, rest) = card.split_once('=')?;
+    let rest = rest.trim_start();
+    let value = match rest.strip_prefix('\'') {
+        Some(quoted) => {
+            let mut out = String::new();
+            let mut chars = quoted.chars().peekable();
+            while let Some(c) = chars.next() {
+                match (c, chars.peek()) {
+                    ('\'', Some('\'')) => {
+                        out.push('\'');
+                        chars.next();
+                    }
+                    ('\'', _) => break,
+                    _ => out.push(c),
+                }
+            }
+            out.trim().to_string()
+        }
+        None => rest.split('/').next().unwrap_or("").trim().to_string(),
+    };
+    Some((key.trim(), value))
+}
+
 /// A record-valued card's field (`DP1 = 'AXIS.1: 1'`: keyword `DP1`, field `AXIS.1`) as a number.
 fn record_field(cards: &[String], keyword: &str, field: &str) -> Option<f64> {
     cards.iter().find_map(|c| {
-        let (key, rest) = c.split_once('=')?;
-        if key.trim() != keyword {
-            return None;
-        }
-        let value = rest.split('/').next()?.trim().trim_matches('\'');
+        let (key, value) = card_value(c)?;
         let (f, v) = value.split_once(':')?;
-        (f.trim().eq_ignore_ascii_case(field))
+        (key == keyword && f.trim().eq_ignore_ascii_case(field))
             .then(|| v.trim().parse().ok())
             .flatten()
     })
@@ -28,31 +50,21 @@ fn record_field(cards: &[String], keyword: &str, field: &str) -> Option<f64> {
 /// A plain card's text value (`CPDIS1 = 'Lookup'`), without its quotes.
 fn text_value(cards: &[String], keyword: &str) -> Option<String> {
     cards.iter().find_map(|c| {
-        let (key, rest) = c.split_once('=')?;
-        (key.trim() == keyword).then(|| {
-            rest.split('/')
-                .next()
-                .unwrap_or("")
-                .trim()
-                .trim_matches('\'')
-                .trim()
-                .to_string()
-        })
+        let (key, value) = card_value(c)?;
+        (key == keyword).then_some(value)
     })
 }
 
 /// The index of the image extension `name` of version `extver`.
 fn find_extension(f: &mut FitsFile, name: &str, extver: i64) -> Option<usize> {
-    for i in 1.. {
-        let h = f.hdu(i).ok()?;
-        let n = h.read_key::<String>(f, "EXTNAME").unwrap_or_default();
-        let v = h.read_key::<i64>(f, "EXTVER").unwrap_or(1);
-        if n.trim().eq_ignore_ascii_case(name) && v == extver {
-            return Some(i);
-        }
-    }
-    None
+    super::image_extensions(f)
+        .into_iter()
+        .find(|(n, v, _, _)| n.eq_ignore_ascii_case(name) && *v == extver)
+        .map(|e| e.2)
 }
+
+/// A distortion kind other than `'Lookup'` (astropy warns and leaves it out; jsim leaves RA/Dec out).
+struct Unsupported(String);
 
 /// One axis's table: the extension `array_name` that `kind{j}` (with its record cards `record{j}`) names.
 fn read_table(
@@ -61,7 +73,7 @@ fn read_table(
     cards: &[String],
     (kind, record, array_name): (&str, &str, &str),
     j: usize,
-) -> Result<Option<LookupTable>, IoError> {
+) -> Result<Result<Option<LookupTable>, Unsupported>, IoError> {
     let bad = |m: String| IoError::Format {
         path: path.to_path_buf(),
         message: m,
@@ -69,12 +81,8 @@ fn read_table(
     let key = format!("{kind}{j}");
     match text_value(cards, &key) {
         Some(v) if v.eq_ignore_ascii_case("lookup") => {}
-        Some(v) => {
-            return Err(bad(format!(
-                "{key} = '{v}': only 'Lookup' distortions are read"
-            )));
-        }
-        None => return Ok(None),
+        Some(v) => return Ok(Err(Unsupported(format!("{key} = '{v}'")))),
+        None => return Ok(Ok(None)),
     }
     let rec = format!("{record}{j}");
     let extver = record_field(cards, &rec, "EXTVER").unwrap_or(1.0) as i64;
@@ -107,36 +115,55 @@ fn read_table(
         size = [ny, nx];
     }
     LookupTable::new(size, crpix, crval, cdelt, data)
-        .map(Some)
+        .map(|t| Ok(Some(t)))
         .map_err(|m| bad(format!("{array_name},{extver}: {m}")))
 }
 
-/// The lookup-table distortions of HDU `sci` (none when its header states none), and a sentence naming
-/// the tables read.
-pub fn read(
-    f: &mut FitsFile,
-    path: &Path,
-    sci: usize,
-) -> Result<Option<(LookupDistortion, String)>, IoError> {
+/// What a chip's header says of lookup-table distortions.
+pub enum Tables {
+    /// The tables, and a sentence naming them.
+    Read(Box<LookupDistortion>, String),
+    /// A distortion jsim does not read: the chip's RA/Dec are left out, for the sentence says why.
+    Unsupported(String),
+}
+
+/// The lookup-table distortions of HDU `sci` (`None` when its header states none).
+pub fn read(f: &mut FitsFile, path: &Path, sci: usize) -> Result<Option<Tables>, IoError> {
     let cards = super::super::fits::header_cards(f, sci).map_err(|m| IoError::fits(path, m))?;
     let mut l = LookupDistortion::default();
     let mut named = Vec::new();
+    let mut unsupported = Vec::new();
     for j in 1..=2 {
-        l.det2im[j - 1] = read_table(f, path, &cards, ("D2IMDIS", "D2IM", "D2IMARR"), j)?;
-        l.cpdis[j - 1] = read_table(f, path, &cards, ("CPDIS", "DP", "WCSDVARR"), j)?;
-        if l.det2im[j - 1].is_some() {
-            named.push(format!("D2IMDIS{j}"));
-        }
-        if l.cpdis[j - 1].is_some() {
-            named.push(format!("CPDIS{j}"));
-        }
+        let mut take = |r: Result<Option<LookupTable>, Unsupported>, name: String| match r {
+            Ok(t) => {
+                if t.is_some() {
+                    named.push(name);
+                }
+                t
+            }
+            Err(Unsupported(card)) => {
+                unsupported.push(card);
+                None
+            }
+        };
+        let d2im = read_table(f, path, &cards, ("D2IMDIS", "D2IM", "D2IMARR"), j)?;
+        l.det2im[j - 1] = take(d2im, format!("D2IMDIS{j}"));
+        let cpdis = read_table(f, path, &cards, ("CPDIS", "DP", "WCSDVARR"), j)?;
+        l.cpdis[j - 1] = take(cpdis, format!("CPDIS{j}"));
+    }
+    if !unsupported.is_empty() {
+        return Ok(Some(Tables::Unsupported(format!(
+            "RA/Dec left out: the header states a distortion jsim does not read ({}; only 'Lookup' tables \
+             are read), and without it RA/Dec would be off by that distortion",
+            unsupported.join(", ")
+        ))));
     }
     Ok((!l.is_empty()).then(|| {
         let note = format!(
             "RA/Dec with the header's lookup-table distortions ({}), as astropy's all_pix2world applies them",
             named.join(", ")
         );
-        (l, note)
+        Tables::Read(Box::new(l), note)
     }))
 }
 
@@ -162,5 +189,18 @@ mod tests {
         assert_eq!(record_field(&cards, "DP2", "AXIS.2"), Some(1.0));
         assert_eq!(record_field(&cards, "DP1", "AXIS.2"), None);
         assert_eq!(text_value(&cards, "CPDIS2"), None);
+    }
+
+    #[test]
+    fn a_quoted_value_keeps_its_slashes_and_quotes() {
+        let cards = vec![
+            "OBJECT  = 'M 13 / north''s edge' / a comment".to_string(),
+            "EXPTIME =                 30.0 / seconds".to_string(),
+        ];
+        assert_eq!(
+            text_value(&cards, "OBJECT").as_deref(),
+            Some("M 13 / north's edge")
+        );
+        assert_eq!(text_value(&cards, "EXPTIME").as_deref(), Some("30.0"));
     }
 }

@@ -110,6 +110,59 @@ pub struct ReadOptions {
     pub saturate_units: Option<f64>,
 }
 
+/// A [`ReadOptions`] value out of its range: the field (as the struct names it), the value and the rule.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ReadOptionError {
+    pub field: &'static str,
+    pub value: f64,
+    pub rule: &'static str,
+}
+
+impl ReadOptions {
+    /// Each value given within its range: the gain and the saturation level finite and > 0, the read noise
+    /// finite and ≥ 0 e⁻, the bias finite. The CLI and Python name the field in their own spelling.
+    pub fn validate(&self) -> Result<(), ReadOptionError> {
+        let checks: [(&'static str, Option<f64>, fn(f64) -> bool, &'static str); 4] = [
+            (
+                "electrons_per_unit",
+                self.electrons_per_unit,
+                |v| v > 0.0,
+                "must be a finite number > 0",
+            ),
+            (
+                "read_noise_e",
+                self.read_noise_e,
+                |v| v >= 0.0,
+                "must be a finite number ≥ 0 [e-]",
+            ),
+            (
+                "bias_units",
+                self.bias_units,
+                |_| true,
+                "must be a finite number",
+            ),
+            (
+                "saturate_units",
+                self.saturate_units,
+                |v| v > 0.0,
+                "must be a finite number > 0",
+            ),
+        ];
+        for (field, value, ok, rule) in checks {
+            if let Some(v) = value
+                && !(v.is_finite() && ok(v))
+            {
+                return Err(ReadOptionError {
+                    field,
+                    value: v,
+                    rule,
+                });
+            }
+        }
+        Ok(())
+    }
+}
+
 /// A header's values as the reader looks them up (the chip's header, then the primary).
 pub trait Keys {
     fn number(&self, key: &str) -> Option<f64>;
@@ -197,6 +250,8 @@ pub(super) fn wanted_keys() -> Vec<String> {
         "READNSE", "EXPTIME", "XPOSURE", "EFFEXPTM", "PHOTMJSR", "PLTSCALE", "CD1_1", "CD1_2",
         "CD2_1", "CD2_2", "CDELT1", "CDELT2", "PC1_1", "PC1_2", "PC2_1", "PC2_2", "CTYPE1",
         "CTYPE2", "CRPIX1", "CRPIX2", "CRVAL1", "CRVAL2", "A_ORDER", "B_ORDER", "SATURATE",
+        // which lookup-table distortions the header states (lookup_tables reads their record cards)
+        "CPDIS1", "CPDIS2", "D2IMDIS1", "D2IMDIS2",
     ]
     .iter()
     .map(|s| s.to_string())
@@ -238,19 +293,12 @@ pub fn imsets(path: &Path) -> Result<Vec<Imset>, IoError> {
 /// The `SCI` extensions of a file with their planes.
 fn sci_imsets(path: &Path) -> Result<Vec<Imset>, IoError> {
     let mut f = super::fits::open(path)?;
-    let mut found: Vec<(String, i64, usize)> = Vec::new();
-    for i in 1.. {
-        let Ok(h) = f.hdu(i) else { break };
-        let name = h
-            .read_key::<String>(&mut f, "EXTNAME")
-            .unwrap_or_default()
-            .trim()
-            .to_ascii_uppercase();
-        let ver = h.read_key::<i64>(&mut f, "EXTVER").unwrap_or(1);
-        if image_shape(&h.info).is_some() {
-            found.push((name, ver, i));
-        }
-    }
+    // a chip and its planes are 2-D; 1-D images (distortion tables) are never one
+    let found: Vec<(String, i64, usize)> = image_extensions(&mut f)
+        .into_iter()
+        .filter(|e| e.3 == 2)
+        .map(|(n, v, i, _)| (n, v, i))
+        .collect();
     let at = |n: &str, v: i64| {
         found
             .iter()
@@ -289,6 +337,27 @@ fn sci_imsets(path: &Path) -> Result<Vec<Imset>, IoError> {
             extname: "SCI".into(),
         })
         .collect())
+}
+
+/// Every image extension of `f` as (EXTNAME in capitals, EXTVER (1 when absent), HDU index, number of
+/// axes).
+pub(super) fn image_extensions(f: &mut fitsio::FitsFile) -> Vec<(String, i64, usize, usize)> {
+    let mut found = Vec::new();
+    for i in 1.. {
+        let Ok(h) = f.hdu(i) else { break };
+        let HduInfo::ImageInfo { shape, .. } = &h.info else {
+            continue;
+        };
+        let axes = shape.len();
+        let name = h
+            .read_key::<String>(f, "EXTNAME")
+            .unwrap_or_default()
+            .trim()
+            .to_ascii_uppercase();
+        let ver = h.read_key::<i64>(f, "EXTVER").unwrap_or(1);
+        found.push((name, ver, i, axes));
+    }
+    found
 }
 
 /// Extensions that are planes of a chip, never a chip: the imsets', common weight, mask and context maps,
@@ -389,11 +458,27 @@ pub fn read_chip(path: &Path, set: &Imset, opts: &ReadOptions) -> Result<Calibra
         path: path.to_path_buf(),
         message: format!("{}: {message}", set.name()),
     })?;
-    if let Some(w) = chip.wcs.as_mut()
-        && let Some((lookup, note)) = lookup_tables::read(&mut f, path, set.sci)?
-    {
-        w.lookup = Some(lookup);
-        chip.notes.push(note);
+    // the card-by-card read only where the header states a lookup-table distortion
+    let states_tables = ["CPDIS1", "CPDIS2", "D2IMDIS1", "D2IMDIS2"]
+        .iter()
+        .any(|k| keys.text(k).is_some());
+    if states_tables && chip.wcs.is_some() {
+        match lookup_tables::read(&mut f, path, set.sci)? {
+            Some(lookup_tables::Tables::Read(lookup, note)) => {
+                if let Some(w) = chip.wcs.as_mut() {
+                    w.lookup = Some(*lookup);
+                }
+                chip.notes.push(note);
+            }
+            Some(lookup_tables::Tables::Unsupported(note)) => {
+                if let Some(w) = chip.wcs.take() {
+                    let said = units::wcs_note(&w);
+                    chip.notes.retain(|n| *n != said);
+                }
+                chip.notes.push(note);
+            }
+            None => {}
+        }
     }
     Ok(chip)
 }

@@ -4,6 +4,18 @@
 use super::header_wcs::{chip_wcs, plate_scale_mas};
 use super::{CalibratedChip, ChipPlanes, Keys, ReadOptions};
 
+/// The report's sentence on a chip's RA/Dec.
+pub(super) fn wcs_note(w: &super::ChipWcs) -> String {
+    format!(
+        "RA/Dec through the header's WCS (TAN{})",
+        if w.sip.is_some() {
+            " with SIP distortion"
+        } else {
+            ""
+        }
+    )
+}
+
 /// The observatory (and, where its DQ bits differ, the instrument) whose conventions a file follows
 /// (`TELESCOP`, `INSTRUME`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -253,20 +265,43 @@ fn electrons_per_unit(
     })
 }
 
-/// The read noise, e⁻, and how it was found.
+/// Where a chip's read noise came from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum ReadNoiseSource {
+    /// `--read-noise-e` (Python's `read_noise_e=`).
+    Option,
+    /// `RDNOISE` or `READNSE`.
+    Header,
+    /// `READNSE[A-D]` of the amplifiers `CCDAMP` names.
+    Amplifiers,
+    /// The `VAR_RNOISE` plane.
+    VarRnoise,
+    /// The `ERR` plane over the sky.
+    ErrPlane,
+}
+
+/// The read noise, e⁻, where it came from, and the report's sentence.
 fn read_noise_e(
     keys: &dyn Keys,
     planes: &ChipPlanes,
     good: &[bool],
     k: f64,
     opts: &ReadOptions,
-) -> Result<(f64, String), String> {
+) -> Result<(f64, ReadNoiseSource, String), String> {
     if let Some(r) = opts.read_noise_e {
-        return Ok((r, format!("read noise {r} e⁻ (--read-noise-e)")));
+        return Ok((
+            r,
+            ReadNoiseSource::Option,
+            format!("read noise {r} e⁻ (--read-noise-e)"),
+        ));
     }
     for key in ["RDNOISE", "READNSE"] {
         if let Some(r) = keys.number(key).filter(|v| *v >= 0.0 && v.is_finite()) {
-            return Ok((r, format!("read noise {r} e⁻ from {key}")));
+            return Ok((
+                r,
+                ReadNoiseSource::Header,
+                format!("read noise {r} e⁻ from {key}"),
+            ));
         }
     }
     let (amps, per_amp) = per_amplifier(keys, "READNSE");
@@ -278,6 +313,7 @@ fn read_noise_e(
             .collect();
         return Ok((
             rms,
+            ReadNoiseSource::Amplifiers,
             format!(
                 "read noise {rms:.3} e⁻: rms of {} (amplifiers {} of CCDAMP)",
                 names.join(", "),
@@ -297,6 +333,7 @@ fn read_noise_e(
             let r = m.sqrt() * k;
             return Ok((
                 r,
+                ReadNoiseSource::VarRnoise,
                 format!("read noise {r:.3} e⁻ from VAR_RNOISE (√median × e⁻ per unit)"),
             ));
         }
@@ -306,6 +343,7 @@ fn read_noise_e(
     {
         return Ok((
             r,
+            ReadNoiseSource::ErrPlane,
             format!(
                 "read noise {r:.3} e⁻ from the ERR plane: √median((k·ERR)² − k·data) over the sky pixels"
             ),
@@ -452,15 +490,14 @@ pub fn calibrate(
         return Err(format!("{k} e⁻ per data unit: must be a finite number > 0"));
     }
     notes.push(k_note);
-    let (rn, rn_note) = read_noise_e(keys, &planes, &good, k, opts)?;
+    let (rn, rn_source, rn_note) = read_noise_e(keys, &planes, &good, k, opts)?;
     if !(rn >= 0.0 && rn.is_finite()) {
         return Err(format!("read noise {rn} e⁻: must be a finite number ≥ 0"));
     }
-    let rn_from_err = rn_note.contains("ERR plane");
     notes.push(rn_note);
     // the ERR plane as a check on a read noise taken from elsewhere
     if let Some(e) = &planes.err
-        && !rn_from_err
+        && rn_source != ReadNoiseSource::ErrPlane
         && let Some(r) = read_noise_from_err(&planes.sci, e, &good, k)
     {
         notes.push(format!(
@@ -493,14 +530,7 @@ pub fn calibrate(
     }
     let wcs = match chip_wcs(keys, [planes.nx, planes.ny]) {
         Ok(w) => {
-            notes.push(format!(
-                "RA/Dec through the header's WCS (TAN{})",
-                if w.sip.is_some() {
-                    " with SIP distortion"
-                } else {
-                    ""
-                }
-            ));
+            notes.push(wcs_note(&w));
             Some(w)
         }
         Err(why) => {
