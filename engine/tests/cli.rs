@@ -751,7 +751,7 @@ fn a_real_hst_exposure_is_analysed_chip_by_chip_with_its_choices_stated() {
     assert!(out.status.success(), "{err}");
     for said in [
         "[SCI,1]: BUNIT ELECTRONS: 1 e⁻ per data unit",
-        "READNSEC = 4.71 (amplifiers C of CCDAMP)",
+        "read noise 4.71 e⁻ from READNSEC (the amplifier that read the chip)",
         "DQ: 117 flagged pixel(s) masked (44 saturated)",
         "TAN with SIP distortion",
     ] {

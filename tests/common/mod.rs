@@ -68,6 +68,7 @@ pub fn gaussian_image(
         e,
         bad: vec![false; n * n],
         var_floor_e2: 225.0,
+        var_floor_px_e2: None,
         flat_sigma: 0.0,
         plate_scale_mas: 472.0,
     };

@@ -170,6 +170,70 @@ def test_a_jwst_style_file_reaches_its_bound_in_electrons_chip_by_chip(jsim_bin,
     assert abs(rms - 1) < 3 / np.sqrt(2 * len(ratios)) + 0.1, rms
 
 
+def write_wfc_subarray(path, rng, rn_left, rn_right, nx=400, ny=200, stars=300):
+    """An ACS/WFC-style chip 2 subarray, nx x ny, whose amplifiers C and D meet at its middle column
+    (LTV1 = nx/2 - 2048: the physical column 2048 is the image's nx/2): Gaussian stars (σ 1.1 px, 3e3–3e4 e⁻)
+    on 20 e⁻ of sky, each half with its amplifier's read noise. Returns the true positions and fluxes."""
+    primary = fits.PrimaryHDU()
+    for kw, v in [("TELESCOP", "HST"), ("INSTRUME", "ACS"), ("DETECTOR", "WFC"), ("CCDAMP", "CD"),
+                  ("READNSEC", rn_left), ("READNSED", rn_right)]:
+        primary.header[kw] = v
+    gx, gy = np.meshgrid(np.arange(10, nx - 10, 16.0), np.arange(10, ny - 10, 16.0))
+    xs = gx.ravel()[:stars] + rng.uniform(-3, 3, gx.size)[:stars]
+    ys = gy.ravel()[:stars] + rng.uniform(-3, 3, gx.size)[:stars]
+    fl = 10 ** rng.uniform(np.log10(3e3), np.log10(3e4), xs.size)
+    yy, xx = np.mgrid[0:ny, 0:nx]
+    model = np.full((ny, nx), 20.0)
+    for xi, yi, fi in zip(xs, ys, fl):
+        model += fi * np.exp(-((xx - xi) ** 2 + (yy - yi) ** 2) / (2 * 1.1**2)) / (2 * np.pi * 1.1**2)
+    rn = np.where(xx < nx // 2, rn_left, rn_right)
+    e = rng.poisson(model) + rng.normal(0, 1, (ny, nx)) * rn
+    hdr = fits.Header()
+    for kw, v in [("BUNIT", "ELECTRONS"), ("CCDCHIP", 2), ("LTV1", nx / 2 - 2048.0), ("LTV2", 0.0)]:
+        hdr[kw] = v
+    fits.HDUList([primary, fits.ImageHDU(e.astype(np.float32), hdr, name="SCI", ver=1),
+                  fits.ImageHDU(np.sqrt(np.maximum(e, 0) + rn**2).astype(np.float32), name="ERR", ver=1),
+                  fits.ImageHDU(np.zeros((ny, nx), np.int16), name="DQ", ver=1)]).writeto(path)
+    return xs, ys, fl
+
+
+def test_each_wfc_amplifier_reads_its_half_with_its_own_read_noise(jsim_bin, tmp_path):
+    """READNSEC = 2 e⁻ on the left half, READNSED = 60 e⁻ on the right: each half's stars are detected against
+    its own noise and their bound counts their own amplifier's, so each half's errors against the truth have
+    rms 1 in units of the bound. The control (one read noise, the two amplifiers' rms, for every pixel)
+    misses on the quiet half: the test can tell."""
+    rng = np.random.default_rng(31)
+    path = tmp_path / "wfc_flt.fits"
+    xs, ys, fl = write_wfc_subarray(path, rng, 2.0, 60.0)
+
+    def rms_per_half(extra):
+        out = tmp_path / ("an" + str(len(extra)))
+        r = subprocess.run([jsim_bin, "analyze", "--image", str(path), "--out", str(out), *extra],
+                           capture_output=True, text=True)
+        assert r.returncode == 0, r.stderr
+        cat = read_catalogue(out / "SCI1" / "catalogue.csv")
+        d = np.hypot(cat["x"][:, None] - xs[None], cat["y"][:, None] - ys[None])
+        j = d.argmin(1)
+        ok = (d.min(1) < 0.5) & (cat["flags"] == 0)
+        scale = json.loads((out / "summary.json").read_text())["plate_scale_mas"]
+        halves = []
+        for half in (xs[j] < 200, xs[j] >= 200):
+            m = ok & half
+            err = np.r_[cat["x"][m] - xs[j[m]], cat["y"][m] - ys[j[m]]] * scale
+            ratios = err / np.r_[cat["crlb_x_mas"][m], cat["crlb_y_mas"][m]]
+            halves.append((np.sqrt(np.mean(ratios**2)), len(ratios)))
+        return halves, r.stderr
+
+    halves, said = rms_per_half([])
+    assert "READNSEC = 2 on columns 0–199, READNSED = 60 on columns 200–399" in said, said
+    for rms, n in halves:
+        # ≥ 150 normalised errors (75 stars) a half: their rms is 1 within 3/√(2N) + 0.1 (the ePSF's error)
+        assert n >= 150 and abs(rms - 1) < 3 / np.sqrt(2 * n) + 0.1, halves
+    control, _ = rms_per_half(["--read-noise-e", f"{np.sqrt((2.0**2 + 60.0**2) / 2):.4f}"])
+    left, nl = control[0]
+    assert nl >= 200 and left < 1 - 3 / np.sqrt(2 * nl) - 0.1, control
+
+
 def test_bad_calibrated_input_is_a_named_error(jsim_bin, tmp_path):
     rng = np.random.default_rng(1)
     write_jwst_like(tmp_path / "jy.fits", rng, 10.0, 5.0, n=64, stars=3, bunit="Jy")

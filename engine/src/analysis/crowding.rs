@@ -15,7 +15,7 @@
 //! in a noise-free image (a test's) every ripple of a star's wings stands above the threshold, so set the
 //! crowding explicitly there.
 
-use crate::analysis::detection::{SAME_STAR_PX, drop_close, keep_first, sky_and_noise};
+use crate::analysis::detection::{SAME_STAR_PX, SkyNoise, drop_close, keep_first};
 use crate::analysis::image::AnalysisImage;
 use crate::config::Analysis as AnalysisCfg;
 use crate::numerics::neighbours::Neighbours;
@@ -44,9 +44,10 @@ pub struct Density {
 /// Measure the source density of an image and the fraction of its peaks with another peak within the link
 /// radius: O(pixels + peaks log peaks), whatever the number of stars.
 pub fn density(img: &AnalysisImage, cfg: &AnalysisCfg) -> Density {
-    let (sky, noise) = sky_and_noise(img);
-    let thr = sky + cfg.detect_sigma * noise;
+    let sn = SkyNoise::of(img);
+    let sky = sn.sky;
     let (nx, ny) = (img.nx, img.ny);
+    let sn = &sn;
     let mut peaks: Vec<(f64, f64, f64)> = (1..ny.saturating_sub(1))
         .into_par_iter()
         .flat_map_iter(|y| {
@@ -54,7 +55,7 @@ pub fn density(img: &AnalysisImage, cfg: &AnalysisCfg) -> Density {
                 .filter(move |&x| {
                     let i = y * nx + x;
                     let p = img.e[i];
-                    p > thr
+                    p > sky + cfg.detect_sigma * sn.at(img, i)
                         && !img.bad[i]
                         && (-1i64..=1).all(|dy| {
                             (-1i64..=1).all(|dx| {
@@ -156,6 +157,7 @@ mod tests {
             e,
             bad: vec![false; n * n],
             var_floor_e2: 1.0,
+            var_floor_px_e2: None,
             flat_sigma: 0.0,
             plate_scale_mas: 471.0,
         }
@@ -244,11 +246,12 @@ mod tests {
             e: e.clone(),
             bad: vec![false; n * n],
             var_floor_e2: 1.0,
+            var_floor_px_e2: None,
             flat_sigma: 0.0,
             plate_scale_mas: 471.0,
         };
         // each streak has two local maxima, further apart than SAME_STAR_PX
-        let (sky, noise) = sky_and_noise(&img);
+        let (sky, noise) = crate::analysis::detection::sky_and_noise(&img);
         let maxima = (1..n - 1)
             .flat_map(|y| (1..n - 1).map(move |x| (x, y)))
             .filter(|&(x, y)| {

@@ -48,8 +48,8 @@ pub fn keep_first(
 /// Local maxima (5 × 5) above `nsigma` × the image's robust noise over its median; brightest first, closer
 /// than [`SAME_STAR_PX`] to a brighter one dropped.
 pub fn detect(img: &AnalysisImage, nsigma: f64) -> Vec<(f64, f64)> {
-    let (sky, noise) = sky_and_noise(img);
-    let thr = sky + nsigma * noise;
+    let sn = SkyNoise::of(img);
+    let thr_at = |i: usize| sn.sky + nsigma * sn.at(img, i);
     let (nx, ny) = (img.nx, img.ny);
     let rows: Vec<Vec<(f64, f64, f64)>> = (0..ny)
         .into_par_iter()
@@ -58,6 +58,7 @@ pub fn detect(img: &AnalysisImage, nsigma: f64) -> Vec<(f64, f64)> {
             for x in 0..nx {
                 let i = y * nx + x;
                 let p = img.e[i];
+                let thr = thr_at(i);
                 // saturated pixels count as peaks (their value is clipped, not low)
                 if !(p > thr || img.bad[i] && p > thr * 0.5) {
                     continue;
@@ -110,6 +111,67 @@ pub fn sky_and_noise(img: &AnalysisImage) -> (f64, f64) {
         .collect();
     (stats::median(&good), stats::mad_sigma(&good).max(1e-9))
 }
+
+/// The sky level and each pixel's noise. Where the read-noise floor is one value, the noise is
+/// [`sky_and_noise`]'s; where it varies (amplifiers of different read noise), the MAD-σ of the pixels of
+/// each floor apart, so that a noisy amplifier's half neither floods the detection with its noise peaks
+/// nor raises the quiet half's threshold.
+#[derive(Debug, Clone)]
+pub struct SkyNoise {
+    pub sky: f64,
+    /// The image's noise over every pixel (the typical value).
+    pub noise: f64,
+    /// (floor e⁻², noise) of each floor's pixels, where the floor varies.
+    by_floor: Vec<(f64, f64)>,
+}
+
+impl SkyNoise {
+    pub fn of(img: &AnalysisImage) -> Self {
+        let (sky, noise) = sky_and_noise(img);
+        let mut by_floor = Vec::new();
+        if let Some(map) = &img.var_floor_px_e2 {
+            let mut floors: Vec<f64> = Vec::new();
+            for f in map {
+                // a floor per amplifier: a handful of values
+                if !floors.contains(f) && floors.len() < MAX_FLOORS {
+                    floors.push(*f);
+                }
+            }
+            for f in floors {
+                let good: Vec<f64> = (0..img.e.len())
+                    .filter(|&i| !img.bad[i] && map[i] == f)
+                    .step_by(7)
+                    .map(|i| img.e[i])
+                    .collect();
+                if good.len() >= 16 {
+                    by_floor.push((f, stats::mad_sigma(&good).max(1e-9)));
+                }
+            }
+        }
+        Self {
+            sky,
+            noise,
+            by_floor,
+        }
+    }
+
+    /// The noise of pixel `i`.
+    #[inline]
+    pub fn at(&self, img: &AnalysisImage, i: usize) -> f64 {
+        if self.by_floor.is_empty() {
+            return self.noise;
+        }
+        let f = img.floor_e2(i);
+        self.by_floor
+            .iter()
+            .find(|b| b.0 == f)
+            .map_or(self.noise, |b| b.1)
+    }
+}
+
+/// The most distinct read-noise floors [`SkyNoise`] measures apart (one per amplifier: 4 at most on the
+/// instruments read).
+const MAX_FLOORS: usize = 8;
 
 /// Centroid (unweighted) of the 4-connected region of masked pixels containing (x, y), within 40 px: the
 /// centre of a saturated core.

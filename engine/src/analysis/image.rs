@@ -12,8 +12,11 @@ pub struct AnalysisImage {
     pub ny: usize,
     pub e: Vec<f64>,
     pub bad: Vec<bool>,
-    /// RN² + g²/12 (e⁻²).
+    /// RN² + g²/12 (e⁻²): the typical floor (the rms over the pixels where it varies).
     pub var_floor_e2: f64,
+    /// Each pixel's floor, e⁻², where it varies across the image (amplifiers of different read noise);
+    /// `None`: every pixel's is `var_floor_e2`.
+    pub var_floor_px_e2: Option<Vec<f64>>,
     /// Relative flat-field error counted as noise in the fit (0 when the flat is ignored: uncalibrated).
     pub flat_sigma: f64,
     pub plate_scale_mas: f64,
@@ -44,6 +47,7 @@ impl AnalysisImage {
                 .collect(),
             bad: img.dq.iter().map(|d| d & bad_bits != 0).collect(),
             var_floor_e2: cfg.detector.noise_floor_e2(),
+            var_floor_px_e2: None,
             flat_sigma: 0.0,
             plate_scale_mas: cfg.instrument.plate_scale_mas(),
         }
@@ -70,6 +74,14 @@ impl AnalysisImage {
         self.flat_sigma = error;
     }
 
+    /// The read/quantisation floor of pixel `i`, e⁻².
+    #[inline]
+    pub fn floor_e2(&self, i: usize) -> f64 {
+        self.var_floor_px_e2
+            .as_ref()
+            .map_or(self.var_floor_e2, |m| m[i])
+    }
+
     pub fn pixels(&self) -> PixelData<'_> {
         PixelData {
             nx: self.nx,
@@ -77,6 +89,7 @@ impl AnalysisImage {
             e: &self.e,
             bad: &self.bad,
             var_floor_e2: self.var_floor_e2,
+            var_floor_px_e2: self.var_floor_px_e2.as_deref(),
             flat_sigma: self.flat_sigma,
         }
     }

@@ -127,7 +127,7 @@ pub fn detect(img: &AnalysisImage, p: &LaCosmic) -> Vec<bool> {
         let lplus = laplacian_plus(&work, nx, ny);
         let med5 = median_filter(&work, nx, ny, 2, None);
         let s: Vec<f64> = (0..n)
-            .map(|i| lplus[i] / (2.0 * (med5[i].max(1e-5) + img.var_floor_e2).sqrt()))
+            .map(|i| lplus[i] / (2.0 * (med5[i].max(1e-5) + img.floor_e2(i)).sqrt()))
             .collect();
         let s_med = median_filter(&s, nx, ny, 2, None);
         let sp: Vec<f64> = (0..n).map(|i| s[i] - s_med[i]).collect();
@@ -136,7 +136,7 @@ pub fn detect(img: &AnalysisImage, p: &LaCosmic) -> Vec<bool> {
         let cand: Vec<bool> = (0..n)
             .map(|i| {
                 // as lacos_im.cl and astroscrappy: S′ / (F / N), F / N at least 0.01
-                let noise = (med5[i].max(1e-5) + img.var_floor_e2).sqrt();
+                let noise = (med5[i].max(1e-5) + img.floor_e2(i)).sqrt();
                 let f = ((med3[i] - med7[i]) / noise).max(0.01);
                 good[i] && sp[i] > p.sigma_clip && sp[i] / f > p.objlim
             })
@@ -237,6 +237,7 @@ mod tests {
             e,
             bad: vec![false; n * n],
             var_floor_e2: 25.0,
+            var_floor_px_e2: None,
             flat_sigma: 0.0,
             plate_scale_mas: 1.0,
         };

@@ -73,7 +73,7 @@ pub fn reject_by_comparison(images: &mut [AnalysisImage], r: &Rejection) -> Vec<
     let excess = |img: &AnalysisImage, p: usize| {
         let m = clean[p];
         // the noise of a difference of two exposures (the estimate is one of them, or their median)
-        let var = 2.0 * (img.var_floor_e2 + m.max(0.0)) + (r.scale_noise * m).powi(2);
+        let var = 2.0 * (img.floor_e2(p) + m.max(0.0)) + (r.scale_noise * m).powi(2);
         (img.e[p] - m) / var.sqrt()
     };
     let mut counts = Vec::with_capacity(k);
@@ -227,6 +227,7 @@ mod tests {
             e: vec![value; n * n],
             bad: vec![false; n * n],
             var_floor_e2: 25.0,
+            var_floor_px_e2: None,
             flat_sigma: 0.0,
             plate_scale_mas: 1.0,
         }

@@ -126,6 +126,7 @@ pub fn measure_window(
         e: &e,
         bad: &bad,
         var_floor_e2: setup.read_noise_e * setup.read_noise_e,
+        var_floor_px_e2: None,
         flat_sigma: 0.0,
     };
     let f0 = e.iter().map(|v| v - sky).sum::<f64>().max(1.0);

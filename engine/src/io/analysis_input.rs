@@ -76,6 +76,7 @@ pub fn analysis_image(
             .collect(),
         bad,
         var_floor_e2: crate::config::noise_floor_e2(facts.read_noise_e, g),
+        var_floor_px_e2: None,
         flat_sigma: 0.0,
         plate_scale_mas,
     })
@@ -394,6 +395,7 @@ impl AnalysisInput {
     ) -> Result<Self, IoError> {
         let chip = super::calibrated::read_chip(path, set, opts)?;
         let facts = chip.facts();
+        let floor_map = chip.read_noise_map_e2();
         let mut assumptions = chip.notes;
         let plate_scale_mas = chip.plate_scale_mas.unwrap_or_else(|| {
             let s = fallback.instrument.plate_scale_mas();
@@ -418,6 +420,7 @@ impl AnalysisInput {
             bad: chip.bad,
             // the data are electrons: no ADC quantisation to add
             var_floor_e2: chip.read_noise_e.powi(2),
+            var_floor_px_e2: floor_map,
             flat_sigma: 0.0,
             plate_scale_mas,
         };

@@ -173,6 +173,7 @@ mod tests {
             e: &img,
             bad: &bad,
             var_floor_e2: floor,
+            var_floor_px_e2: None,
             flat_sigma: 0.0,
         };
         let opt = FitOptions {

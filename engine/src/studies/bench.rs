@@ -230,6 +230,7 @@ fn positions_of_image(
         e: star_e.into_iter().map(|v| v + sky).collect(),
         bad: vec![false; n * n],
         var_floor_e2: d.noise_floor_e2(),
+        var_floor_px_e2: None,
         flat_sigma: 0.0,
         plate_scale_mas: sim.cfg.instrument.plate_scale_mas(),
     };

@@ -192,6 +192,7 @@ pub fn fitted_displacements(
         e: &e,
         bad: &bad,
         var_floor_e2: noise.floor_e2,
+        var_floor_px_e2: None,
         flat_sigma: 0.0,
     };
     // started as the pipeline starts them (a centroid, the annulus sky, the flux in 3 px): with a few

@@ -233,7 +233,7 @@ fn star_blocks(
             }
             let (v, gx, gy) = p.eval_at(i, fx, fy, st.x, st.y);
             let mu = st.s + st.f * v;
-            let w = 1.0 / pixel_variance(mu, st.f * v, pd.var_floor_e2, pd.flat_sigma);
+            let w = 1.0 / pixel_variance(mu, st.f * v, pd.floor_e2(i), pd.flat_sigma);
             let res = pd.e[i] - mu;
             let jn = [-st.f * gx, -st.f * gy, v];
             for (j, t) in terms.iter().enumerate() {

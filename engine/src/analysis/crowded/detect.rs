@@ -3,7 +3,7 @@
 //! residual image (image − model of the stars found), the companions the first pass merged into a brighter
 //! star (the iterative scheme of DAOPHOT's FIND/ALLSTAR and photutils' `IterativePSFPhotometry`).
 
-use crate::analysis::detection::plateau_centre;
+use crate::analysis::detection::{SkyNoise, plateau_centre};
 use crate::analysis::image::AnalysisImage;
 use rayon::prelude::*;
 
@@ -165,12 +165,15 @@ fn position(img: &AnalysisImage, x: usize, y: usize) -> (f64, f64) {
 }
 
 /// First detection: peaks of the smoothed image above `sky + nsigma · 0.375 · noise` (a peak of S/N
-/// `nsigma` in the matched-filtered image), deblended. Positions in pixels, brightest first.
-pub fn detect_smoothed(img: &AnalysisImage, nsigma: f64, sky: f64, noise: f64) -> Vec<(f64, f64)> {
+/// `nsigma` in the matched-filtered image; each pixel's noise), deblended. Positions in pixels, brightest
+/// first.
+pub fn detect_smoothed(img: &AnalysisImage, nsigma: f64, sn: &SkyNoise) -> Vec<(f64, f64)> {
     let s = smooth3(&img.e, img.nx, img.ny);
-    let thr = sky + nsigma * SMOOTHED_NOISE * noise;
-    let peaks = local_maxima(&s, img.nx, img.ny, &|_| thr);
-    let var0 = noise * noise;
+    let sky = sn.sky;
+    let peaks = local_maxima(&s, img.nx, img.ny, &|i| {
+        sky + nsigma * SMOOTHED_NOISE * sn.at(img, i)
+    });
+    let var0 = sn.noise * sn.noise;
     let sigma = |p: f64| SMOOTHED_NOISE * (var0 + (p - sky).max(0.0)).sqrt();
     deblend(&s, img.nx, img.ny, &peaks, &sigma)
         .into_iter()
@@ -185,13 +188,13 @@ pub fn detect_smoothed(img: &AnalysisImage, nsigma: f64, sky: f64, noise: f64) -
 pub fn detect_residual(
     img: &AnalysisImage,
     model: &[f64],
-    sky: f64,
-    noise: f64,
+    sn: &SkyNoise,
     nsigma: f64,
     found: &crate::numerics::neighbours::Neighbours,
     min_sep_px: f64,
 ) -> Vec<(f64, f64)> {
     let (nx, ny) = (img.nx, img.ny);
+    let sky = sn.sky;
     let resid: Vec<f64> = img
         .e
         .iter()
@@ -201,9 +204,10 @@ pub fn detect_residual(
         .collect();
     let s = smooth3(&resid, nx, ny);
     let ms = smooth3(model, nx, ny);
-    let var0 = noise * noise;
     let local = |i: usize| {
         let m = ms[i].max(0.0);
+        let n0 = sn.at(img, i);
+        let var0 = n0 * n0;
         (SMOOTHED_NOISE * SMOOTHED_NOISE * (var0 + m) + (MODEL_ERROR * m).powi(2)).sqrt()
     };
     let peaks = local_maxima(&s, nx, ny, &|i| nsigma * local(i));

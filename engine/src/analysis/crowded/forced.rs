@@ -180,7 +180,7 @@ fn amplitude(
     let (mut num, mut den) = (0.0, 0.0);
     for (i, px, py) in select_disc(rd, x, y, radius_px).0 {
         let psi = epsf.value(px - x, py - y);
-        let wgt = 1.0 / pixel_variance(model[i] + sky, 0.0, rd.var_floor_e2, 0.0);
+        let wgt = 1.0 / pixel_variance(model[i] + sky, 0.0, rd.floor_e2(i), 0.0);
         num += wgt * psi * (rd.e[i] - sky);
         den += wgt * psi * psi;
     }

@@ -292,9 +292,9 @@ impl<P: Profile> Problem<'_, P> {
         (star, sat)
     }
 
-    /// σᵢ²: the single-star fit's, plus the saturated stars' model error.
-    fn variance(&self, mu: f64, star: f64, model_e: f64) -> f64 {
-        pixel_variance(mu, star, self.img.var_floor_e2, self.img.flat_sigma) + model_e * model_e
+    /// σᵢ² of pixel `i`: the single-star fit's, plus the saturated stars' model error.
+    fn variance(&self, i: usize, mu: f64, star: f64, model_e: f64) -> f64 {
+        pixel_variance(mu, star, self.img.floor_e2(i), self.img.flat_sigma) + model_e * model_e
     }
 
     fn prior_chi2(&self, p: &[f64]) -> f64 {
@@ -309,7 +309,7 @@ impl<P: Profile> Problem<'_, P> {
         let (i, px, py) = self.all[q];
         let (star, sat) = self.eval(p, i, px, py, jac);
         let mu = star + s + self.other[q];
-        (self.img.e[i] - mu).powi(2) / self.variance(mu, star, sat + self.other_sat[q])
+        (self.img.e[i] - mu).powi(2) / self.variance(i, mu, star, sat + self.other_sat[q])
     }
 
     fn chi2_of(&self, p: &[f64]) -> f64 {
@@ -332,7 +332,7 @@ impl<P: Profile> Problem<'_, P> {
         for (&(i, px, py), (o, os)) in self.all.iter().zip(self.other.iter().zip(&self.other_sat)) {
             let (star, sat) = self.eval(p, i, px, py, &mut jac);
             let mu = star + s + o;
-            let w = 1.0 / self.variance(mu, star, sat + os);
+            let w = 1.0 / self.variance(i, mu, star, sat + os);
             let r = self.img.e[i] - mu;
             chi2 += w * r * r;
             for &(ia, ja) in &jac {
@@ -545,6 +545,7 @@ mod tests {
             e: img,
             bad,
             var_floor_e2: 100.0,
+            var_floor_px_e2: None,
             flat_sigma,
         }
     }

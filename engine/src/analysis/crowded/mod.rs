@@ -32,7 +32,7 @@ pub use pass::{GroupStats, fit_pass, model_image};
 pub use summary::CrowdedSummary;
 
 use crate::analysis::detection::MIN_EPSF_STARS;
-use crate::analysis::detection::sky_and_noise;
+use crate::analysis::detection::SkyNoise;
 use crate::analysis::epsf::Epsf;
 use crate::analysis::epsf::build::build_options;
 use crate::analysis::epsf::build::{self, StarStart, initial_start};
@@ -158,8 +158,9 @@ pub fn analyse(
     catalogue: Option<&[forced::CatalogueStar]>,
 ) -> Crowded {
     let pd = img.pixels();
-    let (sky, noise) = sky_and_noise(img);
-    let det = detect::detect_smoothed(img, cfg.crowded_detect_sigma, sky, noise);
+    let sn = SkyNoise::of(img);
+    let noise = sn.noise;
+    let det = detect::detect_smoothed(img, cfg.crowded_detect_sigma, &sn);
     let ann = crate::analysis::detection::sky_annulus(cfg);
     let starts: Vec<StarStart> = det
         .par_iter()
@@ -206,7 +207,7 @@ pub fn analyse(
     let (fits, _) = fit_pass(img, &epsf, &stars, node_error, cfg);
     stars = members_of(&fits, &stars, img.nx, img.ny);
     let mut from_residual = vec![false; stars.len()];
-    for m in residual_stars(img, &epsf, &stars, (sky, noise), node_error, cfg) {
+    for m in residual_stars(img, &epsf, &stars, &sn, node_error, cfg) {
         stars.push(m);
         from_residual.push(true);
     }
@@ -351,7 +352,7 @@ fn residual_stars(
     img: &AnalysisImage,
     epsf: &Epsf,
     stars: &[Member],
-    (sky, noise): (f64, f64),
+    sn: &SkyNoise,
     node_error: f64,
     cfg: &AnalysisCfg,
 ) -> Vec<Member> {
@@ -361,8 +362,7 @@ fn residual_stars(
     let extra = detect::detect_residual(
         img,
         &model,
-        sky,
-        noise,
+        sn,
         cfg.crowded_detect_sigma,
         &Neighbours::new(&pos),
         RESIDUAL_MIN_SEP_PX,

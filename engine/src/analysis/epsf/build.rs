@@ -253,7 +253,7 @@ fn fit_flux_at(
                 / super::fit::pixel_variance(
                     f0 * psi + s,
                     f0 * psi,
-                    img.var_floor_e2,
+                    img.floor_e2(i),
                     img.flat_sigma,
                 );
             num += w * psi * (img.e[i] - s);

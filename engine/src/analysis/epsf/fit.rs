@@ -18,11 +18,22 @@ pub struct PixelData<'a> {
     pub e: &'a [f64],
     /// true = do not use (saturated, non-photosensitive, ADC clipped).
     pub bad: &'a [bool],
-    /// RN² + g²/12, e⁻².
+    /// RN² + g²/12, e⁻² (the image's typical floor: its rms over the pixels where it varies).
     pub var_floor_e2: f64,
+    /// Each pixel's own floor, e⁻², where it varies across the image (a chip read by amplifiers of
+    /// different read noise); `None`: every pixel's is `var_floor_e2`.
+    pub var_floor_px_e2: Option<&'a [f64]>,
     /// Relative flat-field error the weights count as noise: a pixel with star signal s has the extra
     /// variance (σ s)² (0: the flat is ignored).
     pub flat_sigma: f64,
+}
+
+impl PixelData<'_> {
+    /// The read/quantisation floor of pixel `i`, e⁻².
+    #[inline]
+    pub fn floor_e2(&self, i: usize) -> f64 {
+        self.var_floor_px_e2.map_or(self.var_floor_e2, |m| m[i])
+    }
 }
 
 /// The variance of a pixel predicted to hold `mu` e⁻ of which `star` come from the star: Poisson + floor +
@@ -239,7 +250,7 @@ fn fisher<P: Profile + ?Sized>(
     y: f64,
     f: f64,
     s: f64,
-    floor: f64,
+    floor: impl Fn(usize) -> f64,
     flat_sigma: f64,
     fit_sky: bool,
 ) -> (Vec<f64>, usize) {
@@ -248,7 +259,7 @@ fn fisher<P: Profile + ?Sized>(
     for &(i, px, py) in pix {
         let (psi, gx, gy) = epsf.eval_at(i, px, py, x, y);
         let mu = f * psi + s;
-        let w = 1.0 / pixel_variance(mu, f * psi, floor, flat_sigma);
+        let w = 1.0 / pixel_variance(mu, f * psi, floor(i), flat_sigma);
         let j = [-f * gx, -f * gy, psi, 1.0];
         for a in 0..np {
             for b in 0..np {
@@ -286,7 +297,7 @@ pub fn crlb(
             }
         }
     }
-    let (m, np) = fisher(epsf, &pix, x, y, f, s, floor, 0.0, fit_sky);
+    let (m, np) = fisher(epsf, &pix, x, y, f, s, |_| floor, 0.0, fit_sky);
     let inv = linalg::inverse(&m, np)?;
     Some((
         inv[0].max(0.0).sqrt(),
@@ -324,7 +335,7 @@ pub fn fit_star<P: Profile + ?Sized>(
             .map(|&(i, px, py)| {
                 let star = p[2] * epsf.eval_at(i, px, py, p[0], p[1]).0;
                 let mu = star + p[3];
-                (img.e[i] - mu).powi(2) / pixel_variance(mu, star, img.var_floor_e2, img.flat_sigma)
+                (img.e[i] - mu).powi(2) / pixel_variance(mu, star, img.floor_e2(i), img.flat_sigma)
             })
             .sum()
     };
@@ -341,7 +352,7 @@ pub fn fit_star<P: Profile + ?Sized>(
         for &(i, px, py) in &pix {
             let (psi, gx, gy) = epsf.eval_at(i, px, py, p[0], p[1]);
             let mu = p[2] * psi + p[3];
-            let w = 1.0 / pixel_variance(mu, p[2] * psi, img.var_floor_e2, img.flat_sigma);
+            let w = 1.0 / pixel_variance(mu, p[2] * psi, img.floor_e2(i), img.flat_sigma);
             let r = img.e[i] - mu;
             chi2 += w * r * r;
             let j = [-p[2] * gx, -p[2] * gy, psi, 1.0];
@@ -432,7 +443,7 @@ pub fn fit_star<P: Profile + ?Sized>(
         p[1],
         p[2],
         p[3],
-        img.var_floor_e2,
+        |i| img.floor_e2(i),
         img.flat_sigma,
         opt.fit_sky,
     );
@@ -501,6 +512,7 @@ mod tests {
             e: &img,
             bad: &bad,
             var_floor_e2: 225.0,
+            var_floor_px_e2: None,
             flat_sigma: 0.0,
         };
         let opt = FitOptions {
@@ -533,6 +545,7 @@ mod tests {
             e: &img,
             bad: &bad,
             var_floor_e2: 225.0,
+            var_floor_px_e2: None,
             flat_sigma: 0.0,
         };
         let opt = FitOptions {
@@ -556,6 +569,7 @@ mod tests {
             e: &img,
             bad: &allbad,
             var_floor_e2: 225.0,
+            var_floor_px_e2: None,
             flat_sigma: 0.0,
         };
         let r = fit_star(&pd, &e, 10.0, 10.0, 1000.0, 300.0, &opt);

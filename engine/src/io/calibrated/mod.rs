@@ -28,6 +28,7 @@
 //! the saturation level (`--saturate-units`, else `SATURATE`) are masked. The header's lookup-table
 //! distortions are read by [`lookup_tables`].
 
+mod amplifiers;
 mod header_wcs;
 mod lookup_tables;
 mod units;
@@ -189,7 +190,12 @@ pub struct CalibratedChip {
     pub ny: usize,
     pub electrons: Vec<f64>,
     pub bad: Vec<bool>,
+    /// The read noise, e⁻: where amplifiers of different read noise read the chip, their rms over its
+    /// pixels.
     pub read_noise_e: f64,
+    /// Where amplifiers of different read noise read the chip: (first column, e⁻) of each, in column
+    /// order; empty where one value holds for every pixel.
+    pub read_noise_columns_e: Vec<(usize, f64)>,
     /// From `PLTSCALE` or the WCS; `None` when the header has neither.
     pub plate_scale_mas: Option<f64>,
     pub electrons_per_unit: f64,
@@ -203,6 +209,25 @@ pub struct CalibratedChip {
 }
 
 impl CalibratedChip {
+    /// Each pixel's read noise squared, e⁻², where amplifiers of different read noise read the chip.
+    pub fn read_noise_map_e2(&self) -> Option<Vec<f64>> {
+        if self.read_noise_columns_e.len() < 2 {
+            return None;
+        }
+        let mut row = vec![0.0; self.nx];
+        for (k, &(x0, r)) in self.read_noise_columns_e.iter().enumerate() {
+            let x1 = self
+                .read_noise_columns_e
+                .get(k + 1)
+                .map_or(self.nx, |c| c.0)
+                .min(self.nx);
+            for v in &mut row[x0.min(x1)..x1] {
+                *v = r * r;
+            }
+        }
+        Some((0..self.ny).flat_map(|_| row.iter().copied()).collect())
+    }
+
     /// What was read, without the pixels.
     pub fn facts(&self) -> ChipFacts {
         ChipFacts {
@@ -252,6 +277,8 @@ pub(super) fn wanted_keys() -> Vec<String> {
         "CTYPE2", "CRPIX1", "CRPIX2", "CRVAL1", "CRVAL2", "A_ORDER", "B_ORDER", "SATURATE",
         // which lookup-table distortions the header states (lookup_tables reads their record cards)
         "CPDIS1", "CPDIS2", "D2IMDIS1", "D2IMDIS2",
+        // which amplifiers read which columns (amplifiers)
+        "DETECTOR", "CCDCHIP", "LTV1",
     ]
     .iter()
     .map(|s| s.to_string())

@@ -1,6 +1,7 @@
 //! From a chip's planes and header to electrons, a read noise and a mask: the units, the gain, the read noise and
 //! the DQ bits, in the order of precedence the module's documentation gives.
 
+use super::amplifiers::{self, per_amplifier};
 use super::header_wcs::{chip_wcs, plate_scale_mas};
 use super::{CalibratedChip, ChipPlanes, Keys, ReadOptions};
 
@@ -91,34 +92,6 @@ impl DataUnit {
             _ => None,
         }
     }
-}
-
-/// The amplifiers a chip was read through (`CCDAMP`, e.g. `C` or `ABCD`), as letters A–D.
-fn amplifiers(keys: &dyn Keys) -> Vec<char> {
-    keys.text("CCDAMP")
-        .map(|s| {
-            s.trim()
-                .to_ascii_uppercase()
-                .chars()
-                .filter(|c| ('A'..='D').contains(c))
-                .collect()
-        })
-        .unwrap_or_default()
-}
-
-/// The amplifiers of `CCDAMP` and the finite, positive values of `{prefix}{A–D}` for those that have one
-/// (`ATODGN`, `READNSE`).
-fn per_amplifier(keys: &dyn Keys, prefix: &str) -> (Vec<char>, Vec<(char, f64)>) {
-    let amps = amplifiers(keys);
-    let values = amps
-        .iter()
-        .filter_map(|a| {
-            keys.number(&format!("{prefix}{a}"))
-                .filter(|v| *v > 0.0 && v.is_finite())
-                .map(|v| (*a, v))
-        })
-        .collect();
-    (amps, values)
 }
 
 /// The gain (e⁻ per count) and the key it came from.
@@ -280,19 +253,24 @@ enum ReadNoiseSource {
     ErrPlane,
 }
 
-/// The read noise, e⁻, where it came from, and the report's sentence.
+/// The read noise, e⁻ (an rms over the pixels where amplifiers differ), where it came from, the report's
+/// sentence, and each amplifier's (first column, e⁻) where several of different read noise read the chip.
+type ReadNoise = (f64, ReadNoiseSource, String, Vec<(usize, f64)>);
+
+/// The chip's read noise ([`ReadNoise`]).
 fn read_noise_e(
     keys: &dyn Keys,
     planes: &ChipPlanes,
     good: &[bool],
     k: f64,
     opts: &ReadOptions,
-) -> Result<(f64, ReadNoiseSource, String), String> {
+) -> Result<ReadNoise, String> {
     if let Some(r) = opts.read_noise_e {
         return Ok((
             r,
             ReadNoiseSource::Option,
             format!("read noise {r} e⁻ (--read-noise-e)"),
+            Vec::new(),
         ));
     }
     for key in ["RDNOISE", "READNSE"] {
@@ -301,10 +279,43 @@ fn read_noise_e(
                 r,
                 ReadNoiseSource::Header,
                 format!("read noise {r} e⁻ from {key}"),
+                Vec::new(),
             ));
         }
     }
     let (amps, per_amp) = per_amplifier(keys, "READNSE");
+    if let Some(cols) = amplifiers::columns(keys, planes.nx, &per_amp) {
+        // each amplifier's own value on the columns it read; the rms over the chip's pixels reported
+        let mut var = 0.0;
+        let mut named = Vec::new();
+        for (k, &(x0, a, r)) in cols.iter().enumerate() {
+            let x1 = cols.get(k + 1).map_or(planes.nx, |c| c.0);
+            var += r * r * (x1 - x0) as f64 / planes.nx as f64;
+            named.push(format!(
+                "READNSE{a} = {r} on columns {x0}–{}",
+                x1.max(1) - 1
+            ));
+        }
+        let rms = var.sqrt();
+        let note = if cols.len() == 1 {
+            format!(
+                "read noise {} e⁻ from READNSE{} (the amplifier that read the chip)",
+                cols[0].2, cols[0].1
+            )
+        } else {
+            format!(
+                "read noise per amplifier: {} (amplifiers {} of CCDAMP; rms {rms:.3} e⁻)",
+                named.join(", "),
+                amps.iter().collect::<String>()
+            )
+        };
+        let per_column = if cols.len() > 1 {
+            cols.iter().map(|c| (c.0, c.2)).collect()
+        } else {
+            Vec::new()
+        };
+        return Ok((rms, ReadNoiseSource::Amplifiers, note, per_column));
+    }
     if !per_amp.is_empty() {
         let rms = (per_amp.iter().map(|p| p.1 * p.1).sum::<f64>() / per_amp.len() as f64).sqrt();
         let names: Vec<String> = per_amp
@@ -315,10 +326,12 @@ fn read_noise_e(
             rms,
             ReadNoiseSource::Amplifiers,
             format!(
-                "read noise {rms:.3} e⁻: rms of {} (amplifiers {} of CCDAMP)",
+                "read noise {rms:.3} e⁻: rms of {} (amplifiers {} of CCDAMP, whose columns this instrument \
+                 does not state)",
                 names.join(", "),
                 amps.iter().collect::<String>()
             ),
+            Vec::new(),
         ));
     }
     if let Some(vr) = &planes.var_rnoise {
@@ -335,6 +348,7 @@ fn read_noise_e(
                 r,
                 ReadNoiseSource::VarRnoise,
                 format!("read noise {r:.3} e⁻ from VAR_RNOISE (√median × e⁻ per unit)"),
+                Vec::new(),
             ));
         }
     }
@@ -347,6 +361,7 @@ fn read_noise_e(
             format!(
                 "read noise {r:.3} e⁻ from the ERR plane: √median((k·ERR)² − k·data) over the sky pixels"
             ),
+            Vec::new(),
         ));
     }
     Err("no read noise: no RDNOISE, READNSE, READNSE[A-D] (with CCDAMP), VAR_RNOISE or ERR plane; give --read-noise-e"
@@ -490,7 +505,7 @@ pub fn calibrate(
         return Err(format!("{k} e⁻ per data unit: must be a finite number > 0"));
     }
     notes.push(k_note);
-    let (rn, rn_source, rn_note) = read_noise_e(keys, &planes, &good, k, opts)?;
+    let (rn, rn_source, rn_note, rn_columns) = read_noise_e(keys, &planes, &good, k, opts)?;
     if !(rn >= 0.0 && rn.is_finite()) {
         return Err(format!("read noise {rn} e⁻: must be a finite number ≥ 0"));
     }
@@ -548,6 +563,7 @@ pub fn calibrate(
             .collect(),
         bad,
         read_noise_e: rn,
+        read_noise_columns_e: rn_columns,
         plate_scale_mas: plate.map(|p| p.0),
         electrons_per_unit: k,
         n_flagged,
