@@ -272,9 +272,10 @@ impl Keys for HduKeys {
 pub(super) fn wanted_keys() -> Vec<String> {
     let mut k: Vec<String> = [
         "BUNIT", "TELESCOP", "INSTRUME", "GAIN", "ATODGAIN", "CCDGAIN", "CCDAMP", "RDNOISE",
-        "READNSE", "EXPTIME", "XPOSURE", "EFFEXPTM", "PHOTMJSR", "PLTSCALE", "CD1_1", "CD1_2",
-        "CD2_1", "CD2_2", "CDELT1", "CDELT2", "PC1_1", "PC1_2", "PC2_1", "PC2_2", "CTYPE1",
-        "CTYPE2", "CRPIX1", "CRPIX2", "CRVAL1", "CRVAL2", "A_ORDER", "B_ORDER", "SATURATE",
+        "READNSE", "EXPTIME", "XPOSURE", "EFFEXPTM", "PHOTMJSR", "PIXAR_SR", "PLTSCALE", "CD1_1",
+        "CD1_2", "CD2_1", "CD2_2", "CDELT1", "CDELT2", "PC1_1", "PC1_2", "PC2_1", "PC2_2",
+        "CTYPE1", "CTYPE2", "CRPIX1", "CRPIX2", "CRVAL1", "CRVAL2", "A_ORDER", "B_ORDER",
+        "SATURATE",
         // which lookup-table distortions the header states (lookup_tables reads their record cards)
         "CPDIS1", "CPDIS2", "D2IMDIS1", "D2IMDIS2",
         // which amplifiers read which columns (amplifiers)

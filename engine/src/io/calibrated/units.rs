@@ -66,6 +66,8 @@ pub enum DataUnit {
     ElectronsPerS,
     CountsPerS,
     MjyPerSr,
+    /// MJy per pixel: MJy/sr times the pixel's solid angle `PIXAR_SR`.
+    Mjy,
 }
 
 impl DataUnit {
@@ -80,6 +82,7 @@ impl DataUnit {
             Some((n, "S" | "SEC" | "SECOND" | "SECONDS")) => (n.to_string(), true),
             Some((n, d)) if n == "MJY" && d == "SR" => return Some(Self::MjyPerSr),
             Some(_) => return None,
+            None if s == "MJY" => return Some(Self::Mjy),
             None => (s, false),
         };
         let electrons = matches!(num.as_str(), "ELECTRONS" | "ELECTRON" | "E-" | "E");
@@ -180,7 +183,7 @@ fn electrons_per_unit(
     };
     let unit = DataUnit::parse(&raw).ok_or_else(|| {
         format!(
-            "header BUNIT = '{}': not a unit jsim reads (ELECTRONS, COUNTS, DN, their rates …/S, or MJy/sr); \
+            "header BUNIT = '{}': not a unit jsim reads (ELECTRONS, COUNTS, DN, their rates …/S, MJy/sr or MJy); \
              give --electrons-per-unit",
             raw.trim()
         )
@@ -221,7 +224,7 @@ fn electrons_per_unit(
                 format!("BUNIT {b}: gain {g} e⁻/count from {gfrom} × {t} s ({tfrom})"),
             )
         }
-        DataUnit::MjyPerSr => {
+        DataUnit::MjyPerSr | DataUnit::Mjy => {
             let p = keys
                 .number("PHOTMJSR")
                 .filter(|v| *v > 0.0 && v.is_finite())
@@ -230,10 +233,26 @@ fn electrons_per_unit(
                 })?;
             let (g, gfrom) = need_gain()?;
             let (t, tfrom) = need_exposure()?;
-            (
-                g * t / p,
-                format!("BUNIT {b}: gain {g} ({gfrom}) × {t} s ({tfrom}) / PHOTMJSR {p}"),
-            )
+            if unit == DataUnit::Mjy {
+                // MJy in a pixel = MJy/sr × PIXAR_SR: divide it out first
+                let a = keys
+                    .number("PIXAR_SR")
+                    .filter(|v| *v > 0.0 && v.is_finite())
+                    .ok_or_else(|| {
+                        format!("BUNIT = '{b}' needs PIXAR_SR (the pixel's solid angle, sr) > 0; give --electrons-per-unit")
+                    })?;
+                (
+                    g * t / (p * a),
+                    format!(
+                        "BUNIT {b}: gain {g} ({gfrom}) × {t} s ({tfrom}) / PHOTMJSR {p} / PIXAR_SR {a:e}"
+                    ),
+                )
+            } else {
+                (
+                    g * t / p,
+                    format!("BUNIT {b}: gain {g} ({gfrom}) × {t} s ({tfrom}) / PHOTMJSR {p}"),
+                )
+            }
         }
     })
 }
@@ -639,6 +658,7 @@ mod tests {
             ("DN/s", Some(CountsPerS)),
             ("counts", Some(Counts)),
             ("MJy/sr", Some(MjyPerSr)),
+            ("MJy", Some(Mjy)),
             ("Jy", None),
             ("ELECTRONS/HOUR", None),
         ] {
@@ -785,6 +805,61 @@ mod tests {
         );
         assert!(c.bad[0] && !c.bad[1]);
         assert_eq!(c.n_flagged, 1);
+    }
+
+    /// A surface brightness in MJy/sr and the same image in MJy per pixel (× PIXAR_SR): through PHOTMJSR,
+    /// the gain and the exposure both give the electrons a count rate of 1 DN/s worked by hand holds; without
+    /// PIXAR_SR the per-pixel unit is a named error.
+    #[test]
+    fn mjy_per_pixel_is_mjy_per_sr_times_the_pixel_solid_angle() {
+        let (g, t, photmjsr, pixar) = (1.6, 300.0, 0.25, 2.3e-13);
+        let rate_dn_s = 1.0;
+        let per_sr = rate_dn_s * photmjsr; // MJy/sr of 1 DN/s
+        for (bunit, value) in [("MJy/sr", per_sr), ("MJy", per_sr * pixar)] {
+            let keys = MapKeys(HashMap::from([
+                ("BUNIT", bunit),
+                ("GAIN", "1.6"),
+                ("EXPTIME", "300.0"),
+                ("PHOTMJSR", "0.25"),
+                ("PIXAR_SR", "2.3e-13"),
+                ("RDNOISE", "5.0"),
+            ]));
+            let c = calibrate(
+                &keys,
+                ChipPlanes {
+                    nx: 2,
+                    ny: 2,
+                    sci: vec![value as f32; 4],
+                    ..Default::default()
+                },
+                &ReadOptions::default(),
+            )
+            .expect("ok");
+            let want_e = rate_dn_s * t * g;
+            assert!(
+                (c.electrons[0] / want_e - 1.0).abs() < 1e-6,
+                "{bunit}: {} e⁻ against {want_e}",
+                c.electrons[0]
+            );
+        }
+        let no_area = MapKeys(HashMap::from([
+            ("BUNIT", "MJy"),
+            ("GAIN", "1.6"),
+            ("EXPTIME", "300.0"),
+            ("PHOTMJSR", "0.25"),
+        ]));
+        let e = calibrate(
+            &no_area,
+            ChipPlanes {
+                nx: 2,
+                ny: 2,
+                sci: vec![1.0; 4],
+                ..Default::default()
+            },
+            &ReadOptions::default(),
+        )
+        .expect_err("no PIXAR_SR");
+        assert!(e.contains("needs PIXAR_SR"), "{e}");
     }
 
     /// A raw frame: its bias (given) comes off before the gain, its pixels at the saturation level (given, or
