@@ -4,6 +4,7 @@
 use crate::analysis::epsf::build::{self, StarStart};
 use crate::analysis::image::AnalysisImage;
 use crate::config::Analysis as AnalysisCfg;
+use crate::numerics::neighbours::Neighbours;
 use crate::numerics::stats;
 use rayon::prelude::*;
 
@@ -18,27 +19,24 @@ pub fn drop_close(sorted: impl IntoIterator<Item = (f64, f64)>, d_px: f64) -> Ve
 }
 
 /// Of positions sorted brightest first, those that `same` ties to no brighter one kept before, where `same`
-/// is only asked of pairs within `reach_px`: O(N) with a grid of `reach_px` cells (each position looks at its
-/// own cell and the eight around it).
+/// is true only of pairs within `reach_px`: O(N log N) with the k-d tree of every position (each asks its
+/// neighbours within reach that were kept).
 pub fn keep_first(
     sorted: impl IntoIterator<Item = (f64, f64)>,
     reach_px: f64,
     same: impl Fn((f64, f64), (f64, f64)) -> bool,
 ) -> Vec<(f64, f64)> {
-    let cell = reach_px.max(1e-9);
-    let mut grid: std::collections::HashMap<(i64, i64), Vec<(f64, f64)>> =
-        std::collections::HashMap::new();
+    let pts: Vec<(f64, f64)> = sorted.into_iter().collect();
+    let nb = Neighbours::new(&pts);
+    let mut is_kept = vec![false; pts.len()];
     let mut kept = Vec::new();
-    for p in sorted {
-        let (cx, cy) = ((p.0 / cell).floor() as i64, (p.1 / cell).floor() as i64);
-        let tied = (cy - 1..=cy + 1).any(|gy| {
-            (cx - 1..=cx + 1).any(|gx| {
-                grid.get(&(gx, gy))
-                    .is_some_and(|v| v.iter().any(|&q| same(p, q)))
-            })
-        });
+    for (k, &p) in pts.iter().enumerate() {
+        let tied = nb
+            .near(p.0, p.1, reach_px)
+            .into_iter()
+            .any(|j| is_kept[j] && same(p, pts[j]));
         if !tied {
-            grid.entry((cx, cy)).or_default().push(p);
+            is_kept[k] = true;
             kept.push(p);
         }
     }

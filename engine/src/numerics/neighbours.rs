@@ -42,6 +42,58 @@ impl Neighbours {
     }
 }
 
+impl Neighbours {
+    /// Indices of the positions within `radius_px` of (x, y), and perhaps a hair beyond (10⁻⁹ of the
+    /// radius): for a caller that tests each distance itself, so that the tree's squared distances, rounded
+    /// otherwise than the caller's, never leave one out.
+    pub fn near(&self, x: f64, y: f64, radius_px: f64) -> Vec<usize> {
+        self.within(x, y, radius_px * (1.0 + 1e-9) + 1e-12)
+    }
+}
+
+/// A k-d tree that grows: positions pushed after it was built are searched one by one until they are many
+/// (an eighth of the tree, and at least [`GROW_REBUILD_MIN`]), then the tree is rebuilt over them all, so N
+/// pushes cost O(N log² N) in all and a query O(log N + N/8) at worst.
+pub struct GrowingNeighbours {
+    pos: Vec<(f64, f64)>,
+    tree: Neighbours,
+    /// Positions `0..in_tree` are in the tree; the rest are searched one by one.
+    in_tree: usize,
+}
+
+/// The fewest positions pushed since the last build that rebuild a [`GrowingNeighbours`] tree.
+const GROW_REBUILD_MIN: usize = 256;
+
+impl GrowingNeighbours {
+    pub fn new(pos: Vec<(f64, f64)>) -> Self {
+        let tree = Neighbours::new(&pos);
+        let in_tree = pos.len();
+        Self { pos, tree, in_tree }
+    }
+
+    /// Add a position; its index is the number of positions before it.
+    pub fn push(&mut self, p: (f64, f64)) -> usize {
+        self.pos.push(p);
+        let extra = self.pos.len() - self.in_tree;
+        if extra >= GROW_REBUILD_MIN.max(self.in_tree / 8) {
+            self.tree = Neighbours::new(&self.pos);
+            self.in_tree = self.pos.len();
+        }
+        self.pos.len() - 1
+    }
+
+    /// As [`Neighbours::near`]: every position within `radius_px`, perhaps a hair beyond.
+    pub fn near(&self, x: f64, y: f64, radius_px: f64) -> Vec<usize> {
+        let mut out = self.tree.near(x, y, radius_px);
+        let r = radius_px * (1.0 + 1e-9) + 1e-12;
+        out.extend(
+            (self.in_tree..self.pos.len())
+                .filter(|&k| (self.pos[k].0 - x).powi(2) + (self.pos[k].1 - y).powi(2) <= r * r),
+        );
+        out
+    }
+}
+
 /// Union–find with path halving.
 struct Disjoint(Vec<usize>);
 
@@ -87,6 +139,45 @@ pub fn groups(pos: &[(f64, f64)], link_px: f64) -> Vec<Vec<usize>> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A tree grown by 3 000 pushes (several rebuilds, and positions between them searched one by one, some
+    /// on one shared x, as pixel positions are) finds what brute force finds, and nothing beyond the radius's
+    /// hair.
+    #[test]
+    fn a_grown_tree_finds_what_brute_force_finds() {
+        let mut s = 11u64;
+        let mut u = move || {
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (s >> 11) as f64 / (1u64 << 53) as f64 * 200.0
+        };
+        let mut g = GrowingNeighbours::new((0..50).map(|_| (u(), u())).collect());
+        let mut all: Vec<(f64, f64)> = g.pos.clone();
+        for k in 0..3000 {
+            let p = if k % 5 == 0 { (17.0, u()) } else { (u(), u()) };
+            assert_eq!(g.push(p), all.len());
+            all.push(p);
+            if k % 97 == 0 {
+                let (x, y, r) = (u(), u(), 1.0 + u() / 20.0);
+                let mut got = g.near(x, y, r);
+                got.sort_unstable();
+                let want: Vec<usize> = (0..all.len())
+                    .filter(|&j| (all[j].0 - x).hypot(all[j].1 - y) <= r)
+                    .collect();
+                let beyond: Vec<usize> =
+                    got.iter().copied().filter(|j| !want.contains(j)).collect();
+                assert!(want.iter().all(|j| got.contains(j)), "missed at push {k}");
+                assert!(
+                    beyond
+                        .iter()
+                        .all(|&j| (all[j].0 - x).hypot(all[j].1 - y) <= r * (1.0 + 1e-8)),
+                    "{beyond:?}"
+                );
+            }
+        }
+        assert!(g.in_tree > 2000, "{}", g.in_tree);
+    }
 
     /// Groups against the brute-force connected components of the same graph.
     #[test]

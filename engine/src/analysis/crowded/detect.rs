@@ -5,6 +5,7 @@
 
 use crate::analysis::detection::{SkyNoise, plateau_centre};
 use crate::analysis::image::AnalysisImage;
+use crate::numerics::neighbours::Neighbours;
 use rayon::prelude::*;
 
 /// Noise of the 3 × 3 binomial smoothing of white noise of unit σ: √Σk² = √(6/16)² = 0.375.
@@ -101,43 +102,44 @@ fn deblend(
     peaks: &[(f64, usize, usize)],
     local_sigma: &dyn Fn(f64) -> f64,
 ) -> Vec<(usize, usize)> {
+    // the k-d tree of every peak; a peak asks the kept ones within reach
+    let pos: Vec<(f64, f64)> = peaks
+        .iter()
+        .map(|&(_, x, y)| (x as f64, y as f64))
+        .collect();
+    let nb = Neighbours::new(&pos);
+    let mut is_kept = vec![false; peaks.len()];
     let mut kept: Vec<(f64, usize, usize)> = Vec::new();
-    let mut grid: std::collections::HashMap<(i64, i64), Vec<usize>> = Default::default();
-    let cell = DEBLEND_RADIUS_PX;
-    let key = |x: usize, y: usize| ((x as f64 / cell) as i64, (y as f64 / cell) as i64);
-    for &(p, x, y) in peaks {
-        let (cx, cy) = key(x, y);
-        let mut separate = true;
-        'g: for gy in cy - 1..=cy + 1 {
-            for gx in cx - 1..=cx + 1 {
-                for &k in grid.get(&(gx, gy)).map(|v| v.as_slice()).unwrap_or(&[]) {
-                    let (_, bx, by) = kept[k];
-                    let d = (bx as f64 - x as f64).hypot(by as f64 - y as f64);
-                    if d > DEBLEND_RADIUS_PX {
-                        continue;
-                    }
-                    let steps = (4.0 * d).ceil().max(2.0) as usize;
-                    let saddle = (0..=steps)
-                        .map(|t| {
-                            let f = t as f64 / steps as f64;
-                            bilinear(
-                                s,
-                                nx,
-                                ny,
-                                x as f64 + f * (bx as f64 - x as f64),
-                                y as f64 + f * (by as f64 - y as f64),
-                            )
-                        })
-                        .fold(f64::INFINITY, f64::min);
-                    if p - saddle < DEBLEND_SIGMA * local_sigma(p) {
-                        separate = false;
-                        break 'g;
-                    }
+    for (k, &(p, x, y)) in peaks.iter().enumerate() {
+        let separate = nb
+            .near(x as f64, y as f64, DEBLEND_RADIUS_PX)
+            .into_iter()
+            .filter(|&j| is_kept[j])
+            .all(|j| {
+                let (_, bx, by) = peaks[j];
+                let d = (bx as f64 - x as f64).hypot(by as f64 - y as f64);
+                if d > DEBLEND_RADIUS_PX {
+                    return true;
                 }
-            }
-        }
+                let steps = (4.0 * d).ceil().max(2.0) as usize;
+                let saddle = (0..=steps)
+                    .map(|t| {
+                        let f = t as f64 / steps as f64;
+                        bilinear(
+                            s,
+                            nx,
+                            ny,
+                            x as f64 + f * (bx as f64 - x as f64),
+                            y as f64 + f * (by as f64 - y as f64),
+                        )
+                    })
+                    .fold(f64::INFINITY, f64::min);
+                // one star's when the dip between them is within the noise (NaN: separate, as before)
+                let merged = p - saddle < DEBLEND_SIGMA * local_sigma(p);
+                !merged
+            });
         if separate {
-            grid.entry((cx, cy)).or_default().push(kept.len());
+            is_kept[k] = true;
             kept.push((p, x, y));
         }
     }

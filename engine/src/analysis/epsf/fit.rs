@@ -73,31 +73,17 @@ pub mod flags {
         fit_radius_px + 3.0
     }
 
-    /// Flag the fits with another fit within `radius_px` (positions bucketed on a grid: O(n)).
+    /// Flag the fits with another fit within `radius_px` (the k-d tree of their positions: O(n log n)).
     pub fn mark_blends(fits: &mut [super::StarFit], radius_px: f64) {
-        use std::collections::HashMap;
-        let cell = radius_px.max(1.0);
-        let key = |x: f64, y: f64| ((x / cell).floor() as i64, (y / cell).floor() as i64);
-        let mut grid: HashMap<(i64, i64), Vec<usize>> = HashMap::new();
-        for (k, f) in fits.iter().enumerate() {
-            if f.x.is_finite() && f.y.is_finite() {
-                grid.entry(key(f.x, f.y)).or_default().push(k);
-            }
-        }
-        let blended: Vec<bool> = fits
+        let pos: Vec<(f64, f64)> = fits.iter().map(|f| (f.x, f.y)).collect();
+        let nb = crate::numerics::neighbours::Neighbours::new(&pos);
+        let blended: Vec<bool> = pos
             .iter()
             .enumerate()
-            .map(|(k, f)| {
-                let (cx, cy) = key(f.x, f.y);
-                (cy - 1..=cy + 1).any(|gy| {
-                    (cx - 1..=cx + 1).any(|gx| {
-                        grid.get(&(gx, gy)).is_some_and(|v| {
-                            v.iter().any(|&j| {
-                                j != k && (fits[j].x - f.x).hypot(fits[j].y - f.y) < radius_px
-                            })
-                        })
-                    })
-                })
+            .map(|(k, &(x, y))| {
+                nb.near(x, y, radius_px)
+                    .into_iter()
+                    .any(|j| j != k && (pos[j].0 - x).hypot(pos[j].1 - y) < radius_px)
             })
             .collect();
         for (f, b) in fits.iter_mut().zip(blended) {
