@@ -4,7 +4,7 @@
 use crate::analysis::epsf::build::{self, StarStart};
 use crate::analysis::image::AnalysisImage;
 use crate::config::Analysis as AnalysisCfg;
-use crate::numerics::neighbours::Neighbours;
+use crate::numerics::neighbours::{Neighbours, nearest_of};
 use crate::numerics::stats;
 use rayon::prelude::*;
 
@@ -301,40 +301,18 @@ pub fn common_offset_of_brightest(
 }
 
 /// For each position, the index of the nearest reference position within `radius_px` of the position minus
-/// `offset` (a grid of cells one radius wide: O(n) for any number of stars).
+/// `offset` (ties to the lowest index; the k-d tree of the references: O(n log n)).
 pub fn nearest_within(
     pos: &[(f64, f64)],
     refs: &[(f64, f64)],
     radius_px: f64,
     offset: (f64, f64),
 ) -> Vec<Option<usize>> {
-    let cell = radius_px.max(1.0);
-    let mut grid: std::collections::HashMap<(i64, i64), Vec<usize>> =
-        std::collections::HashMap::new();
-    for (k, &(rx, ry)) in refs.iter().enumerate() {
-        if !(rx.is_finite() && ry.is_finite()) {
-            continue;
-        }
-        grid.entry(((rx / cell).floor() as i64, (ry / cell).floor() as i64))
-            .or_default()
-            .push(k);
-    }
+    let nb = Neighbours::new(refs);
     pos.iter()
         .map(|&(x, y)| {
             let (x, y) = (x - offset.0, y - offset.1);
-            let (cx, cy) = ((x / cell).floor() as i64, (y / cell).floor() as i64);
-            let mut best: Option<(usize, f64)> = None;
-            for gy in cy - 1..=cy + 1 {
-                for gx in cx - 1..=cx + 1 {
-                    for &k in grid.get(&(gx, gy)).map(|v| v.as_slice()).unwrap_or(&[]) {
-                        let d = (refs[k].0 - x).powi(2) + (refs[k].1 - y).powi(2);
-                        if d <= radius_px * radius_px && best.is_none_or(|(_, bd)| d < bd) {
-                            best = Some((k, d));
-                        }
-                    }
-                }
-            }
-            best.map(|b| b.0)
+            nearest_of(nb.near(x, y, radius_px), |k| refs[k], (x, y), radius_px).map(|b| b.0)
         })
         .collect()
 }

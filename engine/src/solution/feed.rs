@@ -18,6 +18,7 @@
 
 use super::{ExposureGeometry, Observation, Reference};
 use crate::config::Config;
+use crate::numerics::neighbours::{GrowingNeighbours, Neighbours, nearest_of};
 use crate::sky::apparent;
 use crate::time::Epoch;
 use std::collections::HashMap;
@@ -165,43 +166,6 @@ impl FeedOptions {
     }
 }
 
-/// A uniform grid of points on the plane for neighbour queries.
-struct Grid {
-    cell: f64,
-    cells: HashMap<(i64, i64), Vec<usize>>,
-}
-
-impl Grid {
-    fn new(cell: f64) -> Self {
-        Self {
-            cell,
-            cells: HashMap::new(),
-        }
-    }
-    fn key(&self, p: [f64; 2]) -> (i64, i64) {
-        (
-            (p[0] / self.cell).floor() as i64,
-            (p[1] / self.cell).floor() as i64,
-        )
-    }
-    fn insert(&mut self, p: [f64; 2], i: usize) {
-        let k = self.key(p);
-        self.cells.entry(k).or_default().push(i);
-    }
-    /// Every index within `r` cells' reach of `p` (r = ⌈radius / cell⌉).
-    fn near(&self, p: [f64; 2], radius: f64, mut f: impl FnMut(usize)) {
-        let (kx, ky) = self.key(p);
-        let r = (radius / self.cell).ceil() as i64;
-        for dy in -r..=r {
-            for dx in -r..=r {
-                if let Some(v) = self.cells.get(&(kx + dx, ky + dy)) {
-                    v.iter().for_each(|i| f(*i));
-                }
-            }
-        }
-    }
-}
-
 /// Build the solution's input (see the module's documentation).
 pub fn feed(
     detections: &[Detection],
@@ -225,10 +189,9 @@ pub fn feed(
         .ok_or(FeedError::Reference(0))?;
     let (models, exposures) = design_models(designs, tangent_deg, ref_epoch)?;
     let places = detections_on_plane(detections, &models, tangent_deg)?;
-    // the references on the plane, their parameters and a grid of them
+    // the references on the plane, their parameters and a k-d tree of them
     let mut refs = Vec::with_capacity(references.len());
-    let mut ref_grid = Grid::new(opt.search_radius_mas.max(1000.0));
-    for (i, r) in references.iter().enumerate() {
+    for r in references {
         let p = plane_params(
             tangent_deg,
             r.ra_deg,
@@ -236,9 +199,9 @@ pub fn feed(
             [r.pmra_mas_per_yr, r.pmdec_mas_per_yr],
             r.parallax_mas,
         );
-        ref_grid.insert([p[0], p[1]], i);
         refs.push(p);
     }
+    let ref_tree = Neighbours::new(&refs.iter().map(|p| (p[0], p[1])).collect::<Vec<_>>());
     // align each (exposure, array) to the references
     let mut groups: HashMap<(usize, usize), Vec<usize>> = HashMap::new();
     for (i, d) in detections.iter().enumerate() {
@@ -251,7 +214,7 @@ pub fn feed(
     for key in &keys {
         let members = &groups[key];
         let shift = models[key.0].shift_mas;
-        match align(members, detections, &places, &refs, &ref_grid, shift, opt) {
+        match align(members, detections, &places, &refs, &ref_tree, shift, opt) {
             Ok(m) => {
                 maps.insert(*key, m);
             }
@@ -414,17 +377,13 @@ fn identify(
 ) -> Identified {
     let mut source_pos: Vec<[f64; 2]> = refs.iter().map(|r| [r[0], r[1]]).collect();
     let mut reference: Vec<Option<usize>> = (0..refs.len()).map(Some).collect();
-    let mut grid = Grid::new(opt.match_radius_mas);
-    for (i, p) in source_pos.iter().enumerate() {
-        grid.insert(*p, i);
-    }
+    let mut tree = GrowingNeighbours::new(source_pos.iter().map(|p| (p[0], p[1])).collect());
     let mut assigned: Vec<Option<usize>> = vec![None; detections.len()];
     let mut left_out = 0usize;
     let mut by_exposure: Vec<Vec<usize>> = vec![Vec::new(); n_exposures];
     for (i, d) in detections.iter().enumerate() {
         by_exposure[d.exposure].push(i);
     }
-    let r2 = opt.match_radius_mas * opt.match_radius_mas;
     for members in &by_exposure {
         // each detection's nearest source within the radius; a source keeps its nearest detection
         let mut claim: HashMap<usize, (usize, f64)> = HashMap::new();
@@ -440,15 +399,9 @@ fn identify(
                 continue;
             }
             let p = apply(m, places[i].0);
-            let mut best: Option<(usize, f64)> = None;
-            grid.near(p, opt.match_radius_mas, |s| {
-                let q = source_pos[s];
-                let d2 = (q[0] - p[0]).powi(2) + (q[1] - p[1]).powi(2);
-                if d2 <= r2 && best.is_none_or(|(_, b)| d2 < b) {
-                    best = Some((s, d2));
-                }
-            });
-            match best {
+            let near = tree.near(p[0], p[1], opt.match_radius_mas);
+            let at = |s: usize| (source_pos[s][0], source_pos[s][1]);
+            match nearest_of(near, at, (p[0], p[1]), opt.match_radius_mas) {
                 Some((s, d2)) => {
                     if let Some((_, od2)) = claim.get(&s).copied() {
                         // one of the two is left out: the farther
@@ -467,10 +420,9 @@ fn identify(
             assigned[i] = Some(s);
         }
         for (i, p) in fresh {
-            let s = source_pos.len();
+            let s = tree.push((p[0], p[1]));
             source_pos.push(p);
             reference.push(None);
-            grid.insert(p, s);
             assigned[i] = Some(s);
         }
     }
@@ -614,7 +566,7 @@ fn align(
     detections: &[Detection],
     places: &[([f64; 2], [f64; 2])],
     refs: &[[f64; 5]],
-    grid: &Grid,
+    tree: &Neighbours,
     shift_mas: [f64; 2],
     opt: &FeedOptions,
 ) -> Result<[f64; 6], usize> {
@@ -632,14 +584,15 @@ fn align(
     for &i in &bright {
         let p = places[i].0;
         let guess = [p[0] - shift_mas[0], p[1] - shift_mas[1]];
-        grid.near(guess, radius, |r| {
+        // the square of half-side `radius` around the guess: within its circumscribed circle
+        for r in tree.near(guess[0], guess[1], radius * std::f64::consts::SQRT_2) {
             let d = [refs[r][0] - guess[0], refs[r][1] - guess[1]];
             if d[0].abs() <= radius && d[1].abs() <= radius {
                 *votes
                     .entry(((d[0] / bin).floor() as i64, (d[1] / bin).floor() as i64))
                     .or_default() += 1;
             }
-        });
+        }
     }
     let Some((&(bx, by), _)) = votes
         .iter()
@@ -658,14 +611,9 @@ fn align(
             .filter_map(|&i| {
                 let o = places[i].0;
                 let p = apply(&map, o);
-                let mut best: Option<(usize, f64)> = None;
-                grid.near(p, radius, |r| {
-                    let d2 = (refs[r][0] - p[0]).powi(2) + (refs[r][1] - p[1]).powi(2);
-                    if d2 <= radius * radius && best.is_none_or(|(_, b)| d2 < b) {
-                        best = Some((r, d2));
-                    }
-                });
-                best.map(|(r, _)| (o, [refs[r][0], refs[r][1]]))
+                let near = tree.near(p[0], p[1], radius);
+                nearest_of(near, |r| (refs[r][0], refs[r][1]), (p[0], p[1]), radius)
+                    .map(|(r, _)| (o, [refs[r][0], refs[r][1]]))
             })
             .collect();
         if pairs.len() < MIN_ALIGNMENT_STARS {
