@@ -225,22 +225,20 @@ fn electrons_per_unit(
             )
         }
         DataUnit::MjyPerSr | DataUnit::Mjy => {
-            let p = keys
-                .number("PHOTMJSR")
-                .filter(|v| *v > 0.0 && v.is_finite())
-                .ok_or_else(|| {
-                    format!("BUNIT = '{b}' needs PHOTMJSR (MJy/sr per count/s) > 0; give --electrons-per-unit")
-                })?;
+            // a positive header number the unit needs, or an error naming it
+            let need = |key: &str, what: &str| {
+                keys.number(key)
+                    .filter(|v| *v > 0.0 && v.is_finite())
+                    .ok_or_else(|| {
+                        format!("BUNIT = '{b}' needs {key} ({what}) > 0; give --electrons-per-unit")
+                    })
+            };
+            let p = need("PHOTMJSR", "MJy/sr per count/s")?;
             let (g, gfrom) = need_gain()?;
             let (t, tfrom) = need_exposure()?;
             if unit == DataUnit::Mjy {
                 // MJy in a pixel = MJy/sr × PIXAR_SR: divide it out first
-                let a = keys
-                    .number("PIXAR_SR")
-                    .filter(|v| *v > 0.0 && v.is_finite())
-                    .ok_or_else(|| {
-                        format!("BUNIT = '{b}' needs PIXAR_SR (the pixel's solid angle, sr) > 0; give --electrons-per-unit")
-                    })?;
+                let a = need("PIXAR_SR", "the pixel's solid angle, sr")?;
                 (
                     g * t / (p * a),
                     format!(
