@@ -316,15 +316,6 @@ pub fn fit_star<P: Profile + ?Sized>(
     let mut lambda = 1e-3;
     let mut converged = false;
     let mut reselected = false;
-    let chi2_of = |p: &[f64; 4], pix: &[(usize, f64, f64)]| -> f64 {
-        pix.iter()
-            .map(|&(i, px, py)| {
-                let star = p[2] * epsf.eval_at(i, px, py, p[0], p[1]).0;
-                let mu = star + p[3];
-                (img.e[i] - mu).powi(2) / pixel_variance(mu, star, img.floor_e2(i), img.flat_sigma)
-            })
-            .sum()
-    };
     let mut iter = 0;
     while iter < opt.max_iter {
         iter += 1;
@@ -332,68 +323,21 @@ pub fn fit_star<P: Profile + ?Sized>(
             out.flags |= flags::FEW_PIXELS;
             break;
         }
-        let mut jtj = vec![0.0; np * np];
-        let mut jtr = vec![0.0; np];
-        let mut chi2 = 0.0;
-        for &(i, px, py) in &pix {
-            let (psi, gx, gy) = epsf.eval_at(i, px, py, p[0], p[1]);
-            let mu = p[2] * psi + p[3];
-            let w = 1.0 / pixel_variance(mu, p[2] * psi, img.floor_e2(i), img.flat_sigma);
-            let r = img.e[i] - mu;
-            chi2 += w * r * r;
-            let j = [-p[2] * gx, -p[2] * gy, psi, 1.0];
-            for a in 0..np {
-                jtr[a] += w * j[a] * r;
-                for b in 0..np {
-                    jtj[a * np + b] += w * j[a] * j[b];
-                }
-            }
-        }
-        // Levenberg–Marquardt step, increasing the damping until χ² does not grow
-        let mut accepted = false;
-        for _ in 0..12 {
-            let mut a = jtj.clone();
-            for k in 0..np {
-                a[k * np + k] *= 1.0 + lambda;
-            }
-            let Some(d) = linalg::solve(&a, &jtr, np) else {
-                lambda *= 10.0;
-                continue;
-            };
-            let mut q = p;
-            for k in 0..np {
-                q[k] += d[k];
-            }
-            // never jump more than half a pixel per step
-            let jump = (d[0] * d[0] + d[1] * d[1]).sqrt();
-            if jump > 0.5 {
-                q[0] = p[0] + d[0] * 0.5 / jump;
-                q[1] = p[1] + d[1] * 0.5 / jump;
-            }
-            let c2 = chi2_of(&q, &pix);
-            if c2.is_finite() && c2 <= chi2 * (1.0 + 1e-12) {
-                let small = d[0].abs() < 1e-6
-                    && d[1].abs() < 1e-6
-                    && d[2].abs() < 1e-7 * p[2].abs().max(1.0);
+        let normal = normal_equations(img, epsf, &pix, &p, np);
+        match lm_step(&normal, &p, np, &mut lambda, |q| {
+            chi2_of(img, epsf, q, &pix)
+        }) {
+            Some((q, small)) => {
                 p = q;
-                lambda = (lambda * 0.3).max(1e-9);
-                accepted = true;
                 converged = small;
-                break;
             }
-            lambda *= 10.0;
-        }
-        if !accepted {
             // no step lowers χ²: we are at the minimum to working precision
-            converged = true;
+            None => converged = true,
         }
         if converged {
             // the pixel set was chosen around the start: choose again around the solution once
             if !reselected && ((p[0] - x0).abs() > 0.5 || (p[1] - y0).abs() > 0.5) {
-                let (np_, e2, b2) = select(img, p[0], p[1], opt.radius_px);
-                pix = np_;
-                edge = e2;
-                bad = b2;
+                (pix, edge, bad) = select(img, p[0], p[1], opt.radius_px);
                 reselected = true;
                 converged = false;
                 continue;
@@ -402,36 +346,131 @@ pub fn fit_star<P: Profile + ?Sized>(
         }
     }
     out.iterations = iter;
+    out.n_pix = pix.len();
+    for (on, flag) in [
+        (edge, flags::EDGE),
+        (bad, flags::SATURATED),
+        (!converged, flags::NOT_CONVERGED),
+        ((p[0] - x0).hypot(p[1] - y0) > 1.5, flags::MOVED),
+        (!(p[2] > 0.0), flags::NONPOSITIVE_FLUX),
+    ] {
+        if on {
+            out.flags |= flag;
+        }
+    }
+    finish(&mut out, img, epsf, &pix, p, (x0, y0, f0), opt.fit_sky);
+    out
+}
+
+/// χ² of the star `p` = (x, y, flux, sky) over the pixels `pix`.
+fn chi2_of<P: Profile + ?Sized>(
+    img: &PixelData<'_>,
+    epsf: &P,
+    p: &[f64; 4],
+    pix: &[(usize, f64, f64)],
+) -> f64 {
+    pix.iter()
+        .map(|&(i, px, py)| {
+            let star = p[2] * epsf.eval_at(i, px, py, p[0], p[1]).0;
+            let mu = star + p[3];
+            (img.e[i] - mu).powi(2) / pixel_variance(mu, star, img.floor_e2(i), img.flat_sigma)
+        })
+        .sum()
+}
+
+/// The weighted normal equations at `p` over the first `np` parameters: (JᵀWJ, JᵀWr, χ²).
+fn normal_equations<P: Profile + ?Sized>(
+    img: &PixelData<'_>,
+    epsf: &P,
+    pix: &[(usize, f64, f64)],
+    p: &[f64; 4],
+    np: usize,
+) -> (Vec<f64>, Vec<f64>, f64) {
+    let mut jtj = vec![0.0; np * np];
+    let mut jtr = vec![0.0; np];
+    let mut chi2 = 0.0;
+    for &(i, px, py) in pix {
+        let (psi, gx, gy) = epsf.eval_at(i, px, py, p[0], p[1]);
+        let mu = p[2] * psi + p[3];
+        let w = 1.0 / pixel_variance(mu, p[2] * psi, img.floor_e2(i), img.flat_sigma);
+        let r = img.e[i] - mu;
+        chi2 += w * r * r;
+        let j = [-p[2] * gx, -p[2] * gy, psi, 1.0];
+        for a in 0..np {
+            jtr[a] += w * j[a] * r;
+            for b in 0..np {
+                jtj[a * np + b] += w * j[a] * j[b];
+            }
+        }
+    }
+    (jtj, jtr, chi2)
+}
+
+/// A Levenberg–Marquardt step from `p`, the damping `lambda` raised until χ² (`chi2_of`) does not grow and
+/// lowered after: the new parameters and whether the step was negligible, or `None` when no step lowers χ².
+/// No step moves the star more than half a pixel.
+fn lm_step(
+    (jtj, jtr, chi2): &(Vec<f64>, Vec<f64>, f64),
+    p: &[f64; 4],
+    np: usize,
+    lambda: &mut f64,
+    chi2_of: impl Fn(&[f64; 4]) -> f64,
+) -> Option<([f64; 4], bool)> {
+    for _ in 0..12 {
+        let mut a = jtj.clone();
+        for k in 0..np {
+            a[k * np + k] *= 1.0 + *lambda;
+        }
+        let Some(d) = linalg::solve(&a, jtr, np) else {
+            *lambda *= 10.0;
+            continue;
+        };
+        let mut q = *p;
+        for k in 0..np {
+            q[k] += d[k];
+        }
+        let jump = (d[0] * d[0] + d[1] * d[1]).sqrt();
+        if jump > 0.5 {
+            q[0] = p[0] + d[0] * 0.5 / jump;
+            q[1] = p[1] + d[1] * 0.5 / jump;
+        }
+        let c2 = chi2_of(&q);
+        if c2.is_finite() && c2 <= chi2 * (1.0 + 1e-12) {
+            let small =
+                d[0].abs() < 1e-6 && d[1].abs() < 1e-6 && d[2].abs() < 1e-7 * p[2].abs().max(1.0);
+            *lambda = (*lambda * 0.3).max(1e-9);
+            return Some((q, small));
+        }
+        *lambda *= 10.0;
+    }
+    None
+}
+
+/// The fitted values, their Cramér–Rao bounds (flagged singular without them), the reduced χ², and the start
+/// (`x0, y0, f0`) kept where the fit ran off to a non-finite value.
+fn finish<P: Profile + ?Sized>(
+    out: &mut StarFit,
+    img: &PixelData<'_>,
+    epsf: &P,
+    pix: &[(usize, f64, f64)],
+    p: [f64; 4],
+    (x0, y0, f0): (f64, f64, f64),
+    fit_sky: bool,
+) {
     out.x = p[0];
     out.y = p[1];
     out.flux = p[2];
     out.sky = p[3];
-    out.n_pix = pix.len();
-    if edge {
-        out.flags |= flags::EDGE;
-    }
-    if bad {
-        out.flags |= flags::SATURATED;
-    }
-    if !converged {
-        out.flags |= flags::NOT_CONVERGED;
-    }
-    if (p[0] - x0).hypot(p[1] - y0) > 1.5 {
-        out.flags |= flags::MOVED;
-    }
-    if !(p[2] > 0.0) {
-        out.flags |= flags::NONPOSITIVE_FLUX;
-    }
     let (m, npar) = fisher(
         epsf,
-        &pix,
+        pix,
         p[0],
         p[1],
         p[2],
         p[3],
         |i| img.floor_e2(i),
         img.flat_sigma,
-        opt.fit_sky,
+        fit_sky,
     );
     match linalg::inverse(&m, npar) {
         Some(inv) if inv[0] > 0.0 && inv[npar + 1] > 0.0 => {
@@ -447,14 +486,13 @@ pub fn fit_star<P: Profile + ?Sized>(
         }
     }
     let dof = pix.len().saturating_sub(npar).max(1) as f64;
-    out.chi2_red = chi2_of(&p, &pix) / dof;
+    out.chi2_red = chi2_of(img, epsf, &p, pix) / dof;
     if !out.x.is_finite() || !out.y.is_finite() || !out.flux.is_finite() {
         out.x = x0;
         out.y = y0;
         out.flux = f0;
         out.flags |= flags::SINGULAR;
     }
-    out
 }
 
 #[cfg(test)]
