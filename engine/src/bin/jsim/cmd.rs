@@ -699,6 +699,73 @@ pub struct Part {
 /// fits and the outputs' guard (to declare the files it writes).
 pub type Finish<'a> = &'a dyn Fn(&[Vec<StarResult>], &mut Outputs) -> Result<()>;
 
+/// An array's scored stars, its truth and its size (px), for the accuracy against magnitude.
+type ScoredArray = (
+    Vec<engine::scoring::image::ScoredStar>,
+    Vec<engine::truth::TruthRow>,
+    usize,
+);
+
+/// The parts' catalogue rows in one table (`array` first); with `with_sky` the RA/Dec columns, NaN for a
+/// part without a WCS.
+fn write_combined_catalogue(
+    path: &std::path::Path,
+    mut rows: Vec<Vec<csv::Cell>>,
+    with_sky: bool,
+) -> Result<()> {
+    let mut header = vec!["array"];
+    header.extend(products::CATALOGUE_HEADER);
+    if with_sky {
+        header.extend(products::SKY_HEADER);
+        for r in rows.iter_mut() {
+            r.resize(header.len(), csv::Cell::F(f64::NAN));
+        }
+    }
+    csv::write(path, &header, &rows)?;
+    Ok(())
+}
+
+/// With every array's truth: the accuracy against magnitude as `jsim crowded` reports it (its bins, its
+/// classes, the same file, `crowded_bins.csv`); `None` when an array has no truth.
+fn accuracy_bins(
+    cfg: &Config,
+    a: &AnalyzeArgs,
+    scored: &[Option<ScoredArray>],
+    scale: f64,
+    outputs: &mut Outputs,
+) -> Result<Option<Vec<engine::scoring::crowded::MagBin>>> {
+    let Some(arrays) = scored
+        .iter()
+        .map(|o| o.as_ref())
+        .collect::<Option<Vec<_>>>()
+    else {
+        return Ok(None);
+    };
+    let views: Vec<engine::scoring::crowded::ArrayStars<'_>> = arrays
+        .iter()
+        .map(
+            |(stars, truth, n_px)| engine::scoring::crowded::ArrayStars {
+                stars,
+                truth,
+                n_px: *n_px,
+                // the undetected stars' shifts are `jsim crowded`'s (they need the arrays' ePSFs)
+                undetected: None,
+            },
+        )
+        .collect();
+    let b = &cfg.scene.bulge;
+    let edges = engine::scoring::crowded::edges(b.hw_min, b.hw_max, 0.5);
+    let bins = engine::scoring::crowded::mag_bins(&views, scale, &edges);
+    let path = a.out.join("crowded_bins.csv");
+    outputs.add(&path);
+    engine::io::crowded::write_table(
+        &path,
+        &engine::io::crowded::BINS_HEADER,
+        &engine::io::crowded::bin_rows("image", &a.countermeasure.to_string(), &bins),
+    )?;
+    Ok(Some(bins))
+}
+
 /// `jsim analyze` on a file of several images: each part (a focal plane's `ARRAY1` … with its own flat
 /// `FLAT1` …, or a calibrated file's chips) analysed alone and written to `OUT/<part>/`, and the parts
 /// together: `OUT/catalogue.csv` (every part's stars with an `array` column) and `OUT/summary.json` (each
@@ -724,13 +791,7 @@ pub fn analyze_parts(
     let mut with_sky_columns = false;
     let mut scale = f64::NAN;
     // each array's stars, truth and size, for the accuracy against magnitude when every array has a truth
-    let mut scored: Vec<
-        Option<(
-            Vec<engine::scoring::image::ScoredStar>,
-            Vec<engine::truth::TruthRow>,
-            usize,
-        )>,
-    > = Vec::new();
+    let mut scored: Vec<Option<ScoredArray>> = Vec::new();
     for (k, part) in parts.iter().enumerate() {
         let name = &part.label;
         let t = Instant::now();
@@ -810,50 +871,8 @@ pub fn analyze_parts(
             ..Default::default()
         },
     );
-    let mut header = vec!["array"];
-    header.extend(products::CATALOGUE_HEADER);
-    if with_sky_columns {
-        header.extend(products::SKY_HEADER);
-        // a part without a WCS has no sky position
-        for r in rows.iter_mut() {
-            r.resize(header.len(), csv::Cell::F(f64::NAN));
-        }
-    }
-    csv::write(&a.out.join("catalogue.csv"), &header, &rows)?;
-    // with every array's truth: accuracy against magnitude as `jsim crowded` reports it (its bins, its
-    // classes, the same file)
-    let bins = match scored
-        .iter()
-        .map(|o| o.as_ref())
-        .collect::<Option<Vec<_>>>()
-    {
-        Some(arrays) => {
-            let views: Vec<engine::scoring::crowded::ArrayStars<'_>> = arrays
-                .iter()
-                .map(
-                    |(stars, truth, n_px)| engine::scoring::crowded::ArrayStars {
-                        stars,
-                        truth,
-                        n_px: *n_px,
-                        // the undetected stars' shifts are `jsim crowded`'s (they need the arrays' ePSFs)
-                        undetected: None,
-                    },
-                )
-                .collect();
-            let b = &cfg.scene.bulge;
-            let edges = engine::scoring::crowded::edges(b.hw_min, b.hw_max, 0.5);
-            let bins = engine::scoring::crowded::mag_bins(&views, scale, &edges);
-            let path = a.out.join("crowded_bins.csv");
-            outputs.add(&path);
-            engine::io::crowded::write_table(
-                &path,
-                &engine::io::crowded::BINS_HEADER,
-                &engine::io::crowded::bin_rows("image", &a.countermeasure.to_string(), &bins),
-            )?;
-            Some(bins)
-        }
-        None => None,
-    };
+    write_combined_catalogue(&a.out.join("catalogue.csv"), rows, with_sky_columns)?;
+    let bins = accuracy_bins(cfg, a, &scored, scale, &mut outputs)?;
     let json = serde_json::json!({
         "image": a.image.display().to_string(),
         "plate_scale_mas": scale,
