@@ -90,6 +90,20 @@ impl Saver<'_> {
         }
         Ok(())
     }
+
+    /// The checkpoint of this very input, if one was saved (another input's is a named error).
+    fn load(&self, opt: &Options) -> Result<Option<checkpoint::Saved>, SolutionError> {
+        let name = self.ck.store.name();
+        self.ck
+            .store
+            .load()
+            .map_err(|e| checkpoint::checkpoint_error(&name, &e))?
+            .map(|bytes| {
+                let template = Calibration::zero(opt.calibration, opt.focal_norm_px);
+                checkpoint::decode(&bytes, &name, self.fingerprint, &template)
+            })
+            .transpose()
+    }
 }
 
 /// [`solve_on`] with a checkpoint: resumed from it when it is there (of this very input: else a named
@@ -152,16 +166,7 @@ pub fn solve_with(
     });
     let (mut first_round, mut resume) = (0, None);
     let saved = match &saver {
-        Some(sv) => sv
-            .ck
-            .store
-            .load()
-            .map_err(|e| checkpoint::checkpoint_error(&sv.ck.store.name(), &e))?
-            .map(|bytes| {
-                let template = Calibration::zero(opt.calibration, opt.focal_norm_px);
-                checkpoint::decode(&bytes, &sv.ck.store.name(), sv.fingerprint, &template)
-            })
-            .transpose()?,
+        Some(sv) => sv.load(opt)?,
         None => None,
     };
     // from the checkpoint where there is one, else the start from the references
@@ -230,13 +235,35 @@ pub fn solve_with(
         // done: nothing to resume
         sv.ck.store.clear();
     }
-    let (chi2_total, n_terms) = chi2(&problem, &mut state, &active);
+    Ok(solution_of(
+        &problem,
+        state,
+        &active,
+        refs,
+        skipped,
+        (iterations, converged, rejected),
+    ))
+}
+
+/// The solution from the final state: a left-out exposure's attitude NaN, and χ² per degree of freedom
+/// counting the references' anchoring priors (NaN without a degree of freedom left).
+fn solution_of(
+    problem: &Problem<'_>,
+    mut state: State,
+    active: &[bool],
+    refs: &[Reference],
+    skipped: Vec<usize>,
+    (iterations, converged, rejected): (usize, bool, usize),
+) -> Solution {
+    let opt = problem.opt;
+    let n_sources = problem.prior.len();
+    let (chi2_total, n_terms) = chi2(problem, &mut state, active);
     let priors: usize = refs
         .iter()
         .map(|r| r.sigma.iter().filter(|s| anchors(**s)).count())
         .sum();
     let unknowns = n_sources * opt.model.len()
-        + 4 * (exposures.len() - skipped.len())
+        + 4 * (problem.exposures.len() - skipped.len())
         + opt.calibration.unknowns();
     // a left-out exposure has no attitude
     for &e in &skipped {
@@ -248,7 +275,7 @@ pub fn solve_with(
     }
     // no degree of freedom left: no χ² to report
     let dof = (n_terms + priors).saturating_sub(unknowns);
-    Ok(Solution {
+    Solution {
         sources: state.sources,
         attitudes: state.attitudes,
         skipped_exposures: skipped,
@@ -261,7 +288,7 @@ pub fn solve_with(
         } else {
             f64::NAN
         },
-    })
+    }
 }
 
 /// The start: every exposure's attitude from the reference sources alone (the frame right from the start),
