@@ -253,6 +253,18 @@ fn draw_vector_map(
         text.pos(Pos::new(HPos::Right, VPos::Center)),
     ))?;
 
+    draw_legend(&area, sets, &text, (xr.start - ox, x_start, y_mid))?;
+    Ok(chart.plotting_area().dim_in_pixel())
+}
+
+/// The legend in the strip above the plot: an arrow in each labelled set's colour and its label, in a
+/// framed box from `box_left` that stops short of the reference arrow (at `x_reference`), centred on `y_mid`.
+fn draw_legend(
+    area: &Area<'_>,
+    sets: &[(String, Vec<(f64, f64, f64, f64)>)],
+    text: &TextStyle<'_>,
+    (box_left, x_reference, y_mid): (i32, i32, i32),
+) -> Result<(), Box<dyn Error>> {
     let labelled: Vec<(usize, &str)> = sets
         .iter()
         .enumerate()
@@ -261,14 +273,13 @@ fn draw_vector_map(
         .collect();
     if !labelled.is_empty() {
         let mut entries = Vec::new();
-        let mut x = xr.start - ox + 10;
+        let mut x = box_left + 10;
         for &(i, label) in &labelled {
-            let (tw, _) = area.estimate_text_size(label, &text)?;
+            let (tw, _) = area.estimate_text_size(label, text)?;
             entries.push((i, label, x));
             x += 34 + tw as i32 + 18;
         }
-        let box_left = xr.start - ox;
-        let box_right = (x - 8).min(x_start - 90).max(box_left + 40);
+        let box_right = (x - 8).min(x_reference - 90).max(box_left + 40);
         area.draw(&Rectangle::new(
             [(box_left, y_mid - 15), (box_right, y_mid + 15)],
             WHITE.filled(),
@@ -292,7 +303,7 @@ fn draw_vector_map(
             ))?;
         }
     }
-    Ok(chart.plotting_area().dim_in_pixel())
+    Ok(())
 }
 
 #[cfg(test)]
