@@ -96,49 +96,20 @@ fn draw_xy(
             .collect();
         occupied.extend(valid.iter().map(|&(x, y)| (x_axis.frac(x), y_axis.frac(y))));
 
-        // Error bars; a lower end that a log axis cannot show runs to the axis, without a cap.
         let bar_style = c.stroke_width(1);
-        let mut bars = Vec::new();
-        let mut caps = Vec::new();
-        for &(x, y, e) in pts.iter().filter(|p| ok(p.0, p.1)) {
-            let Some((below, above)) = usable_err(e) else {
-                continue;
-            };
-            let (lo, hi) = (y - below, y + above);
-            for end in [lo, hi] {
-                if Axis::usable(end, y_scale) && y_axis.contains(end) {
-                    caps.push((x, end));
-                }
-            }
-            let lo = if Axis::usable(lo, y_scale) {
-                lo
-            } else {
-                y_axis.lo
-            };
-            bars.push(vec![(x, y_axis.clamp(lo)), (x, y_axis.clamp(hi))]);
-        }
+        let (bars, caps) = error_bars(&pts, &ok, &y_axis, y_scale);
         chart.draw_series(bars.into_iter().map(|b| PathElement::new(b, bar_style)))?;
         chart
             .draw_series(caps.into_iter().map(|p| {
                 EmptyElement::at(p) + PathElement::new(vec![(-4, 0), (4, 0)], bar_style)
             }))?;
 
-        // Lines, broken at unusable points.
         let line_style = c.stroke_width(2);
-        let mut segments: Vec<Vec<(f64, f64)>> = Vec::new();
-        if opts.lines {
-            let mut current = Vec::new();
-            for p in &pts {
-                if ok(p.0, p.1) {
-                    current.push((p.0, p.1));
-                } else if !current.is_empty() {
-                    segments.push(std::mem::take(&mut current));
-                }
-            }
-            if !current.is_empty() {
-                segments.push(current);
-            }
-        }
+        let segments = if opts.lines {
+            line_segments(&pts, &ok)
+        } else {
+            Vec::new()
+        };
         chart.draw_series(
             segments
                 .into_iter()
@@ -206,36 +177,96 @@ fn draw_xy(
     }
 
     // y = x over the part of the plot where both axes overlap.
-    if opts.diagonal {
-        let (lo, hi) = (x_axis.lo.max(y_axis.lo), x_axis.hi.min(y_axis.hi));
-        if lo < hi {
-            let (ta, tb) = (x_axis.t(lo), x_axis.t(hi));
-            let line: Vec<(f64, f64)> = (0..=200)
-                .map(|k| {
-                    x_axis
-                        .inv_t(ta + (tb - ta) * k as f64 / 200.0)
-                        .clamp(lo, hi)
-                })
-                .map(|v| (v, v))
-                .collect();
-            occupied.extend(
-                line.iter()
-                    .step_by(10)
-                    .map(|&(x, y)| (x_axis.frac(x), y_axis.frac(y))),
-            );
-            let style = REF_COLORS[1].stroke_width(1);
-            chart
-                .draw_series(DashedLineSeries::new(line, 8, 5, style))?
-                .label("y = x")
-                .legend(move |p| dashed_glyph!(p, style));
-            labels += 1;
-        }
+    if opts.diagonal
+        && let Some(line) = diagonal(&x_axis, &y_axis)
+    {
+        occupied.extend(
+            line.iter()
+                .step_by(10)
+                .map(|&(x, y)| (x_axis.frac(x), y_axis.frac(y))),
+        );
+        let style = REF_COLORS[1].stroke_width(1);
+        chart
+            .draw_series(DashedLineSeries::new(line, 8, 5, style))?
+            .label("y = x")
+            .legend(move |p| dashed_glyph!(p, style));
+        labels += 1;
     }
 
     if labels > 0 {
         draw_legend(&mut chart, legend_corner(&occupied, labels))?;
     }
     Ok(())
+}
+
+/// Error bars of the usable points: each bar's ends (a lower end that a log axis cannot show runs to the
+/// axis) and the caps the axis can show (none at such an end).
+fn error_bars(
+    pts: &[(f64, f64, Option<Bar>)],
+    ok: &dyn Fn(f64, f64) -> bool,
+    y_axis: &Axis,
+    y_scale: Scale,
+) -> (Vec<Vec<(f64, f64)>>, Vec<(f64, f64)>) {
+    let mut bars = Vec::new();
+    let mut caps = Vec::new();
+    for &(x, y, e) in pts.iter().filter(|p| ok(p.0, p.1)) {
+        let Some((below, above)) = usable_err(e) else {
+            continue;
+        };
+        let (lo, hi) = (y - below, y + above);
+        for end in [lo, hi] {
+            if Axis::usable(end, y_scale) && y_axis.contains(end) {
+                caps.push((x, end));
+            }
+        }
+        let lo = if Axis::usable(lo, y_scale) {
+            lo
+        } else {
+            y_axis.lo
+        };
+        bars.push(vec![(x, y_axis.clamp(lo)), (x, y_axis.clamp(hi))]);
+    }
+    (bars, caps)
+}
+
+/// A series' line, broken at its unusable points.
+fn line_segments(
+    pts: &[(f64, f64, Option<Bar>)],
+    ok: &dyn Fn(f64, f64) -> bool,
+) -> Vec<Vec<(f64, f64)>> {
+    let mut segments = Vec::new();
+    let mut current = Vec::new();
+    for p in pts {
+        if ok(p.0, p.1) {
+            current.push((p.0, p.1));
+        } else if !current.is_empty() {
+            segments.push(std::mem::take(&mut current));
+        }
+    }
+    if !current.is_empty() {
+        segments.push(current);
+    }
+    segments
+}
+
+/// y = x over the range both axes show, as 201 points even in the x axis' scale; `None` where they do not
+/// overlap.
+fn diagonal(x_axis: &Axis, y_axis: &Axis) -> Option<Vec<(f64, f64)>> {
+    let (lo, hi) = (x_axis.lo.max(y_axis.lo), x_axis.hi.min(y_axis.hi));
+    if !(lo < hi) {
+        return None;
+    }
+    let (ta, tb) = (x_axis.t(lo), x_axis.t(hi));
+    Some(
+        (0..=200)
+            .map(|k| {
+                x_axis
+                    .inv_t(ta + (tb - ta) * k as f64 / 200.0)
+                    .clamp(lo, hi)
+            })
+            .map(|v| (v, v))
+            .collect(),
+    )
 }
 
 /// Line plot with error bars and a legend; `hlines` are horizontal dashed reference lines (value, label),
