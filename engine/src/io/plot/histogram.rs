@@ -40,23 +40,7 @@ fn draw_histogram(
     let n = vals.len();
     let threshold = threshold.filter(|t| Axis::usable(t.0, Scale::Linear));
 
-    // Bins over [lo, hi] (widened when all values are equal).
-    let mut nbins = ((n as f64).sqrt().ceil() as usize).clamp(1, 40);
-    let (mut lo, mut hi) = match (vals.first(), vals.last()) {
-        (Some(&a), Some(&b)) => (a, b),
-        _ => (0.0, 1.0),
-    };
-    if hi - lo <= 1e-12 * lo.abs().max(hi.abs()) {
-        // All values equal: one bin centred on them.
-        let half = if lo == 0.0 { 0.5 } else { 0.05 * lo.abs() };
-        (lo, hi, nbins) = (lo - half, hi + half, 1);
-    }
-    let width = (hi - lo) / nbins as f64;
-    let mut counts = vec![0usize; nbins];
-    for &v in &vals {
-        let k = (((v - lo) / width).floor().max(0.0) as usize).min(nbins - 1);
-        counts[k] += 1;
-    }
+    let (lo, hi, width, counts) = bins(&vals);
     let max_count = counts.iter().copied().max().unwrap_or(0);
 
     let x_axis = Axis::fit(
@@ -126,13 +110,7 @@ fn draw_histogram(
             Rectangle::new([(a, 0.0), (b, c as f64)], bar_color.stroke_width(1))
         }))?;
 
-        // Empirical CDF as a step function over the whole x axis.
-        let mut steps = vec![(x_axis.lo, 0.0)];
-        for (i, &v) in vals.iter().enumerate() {
-            steps.push((v, i as f64 / n as f64));
-            steps.push((v, (i + 1) as f64 / n as f64));
-        }
-        steps.push((x_axis.hi, 1.0));
+        let steps = cdf_steps(&vals, &x_axis);
         occupied.extend(
             steps
                 .iter()
@@ -177,6 +155,41 @@ fn draw_histogram(
         draw_legend(&mut chart, legend_corner(&occupied, entries))?;
     }
     Ok(())
+}
+
+/// Bins of the sorted values, √n of them (1–40), over [lo, hi] (widened to one bin about them when all are
+/// equal): (lo, hi, bin width, counts).
+fn bins(sorted: &[f64]) -> (f64, f64, f64, Vec<usize>) {
+    let n = sorted.len();
+    let mut nbins = ((n as f64).sqrt().ceil() as usize).clamp(1, 40);
+    let (mut lo, mut hi) = match (sorted.first(), sorted.last()) {
+        (Some(&a), Some(&b)) => (a, b),
+        _ => (0.0, 1.0),
+    };
+    if hi - lo <= 1e-12 * lo.abs().max(hi.abs()) {
+        // All values equal: one bin centred on them.
+        let half = if lo == 0.0 { 0.5 } else { 0.05 * lo.abs() };
+        (lo, hi, nbins) = (lo - half, hi + half, 1);
+    }
+    let width = (hi - lo) / nbins as f64;
+    let mut counts = vec![0usize; nbins];
+    for &v in sorted {
+        let k = (((v - lo) / width).floor().max(0.0) as usize).min(nbins - 1);
+        counts[k] += 1;
+    }
+    (lo, hi, width, counts)
+}
+
+/// The empirical CDF of the sorted values as a step function over the whole x axis.
+fn cdf_steps(sorted: &[f64], x_axis: &Axis) -> Vec<(f64, f64)> {
+    let n = sorted.len();
+    let mut steps = vec![(x_axis.lo, 0.0)];
+    for (i, &v) in sorted.iter().enumerate() {
+        steps.push((v, i as f64 / n as f64));
+        steps.push((v, (i + 1) as f64 / n as f64));
+    }
+    steps.push((x_axis.hi, 1.0));
+    steps
 }
 
 #[cfg(test)]
