@@ -51,30 +51,7 @@ fn draw_xy(
     opts: &XyOptions<'_>,
 ) -> DynResult {
     let ok = |x: f64, y: f64| Axis::usable(x, x_scale) && Axis::usable(y, y_scale);
-    let x_axis = Axis::fit(
-        series
-            .iter()
-            .flat_map(triples)
-            .filter(|&(x, y, _)| ok(x, y))
-            .map(|p| p.0),
-        x_scale,
-    );
-    let y_values = series
-        .iter()
-        .flat_map(triples)
-        .filter(|&(x, y, _)| ok(x, y))
-        .flat_map(|(_, y, e)| {
-            let (below, above) = usable_err(e).unwrap_or((0.0, 0.0));
-            [y, y - below, y + above]
-        });
-    let hline_values = opts.hlines.iter().map(|h| h.0);
-    let guide_values = opts
-        .guides
-        .iter()
-        .flat_map(|g| g.x.iter().zip(&g.y))
-        .filter(|&(x, y)| ok(*x, *y) && x_axis.contains(*x))
-        .map(|(_, y)| *y);
-    let y_axis = Axis::fit(y_values.chain(hline_values).chain(guide_values), y_scale);
+    let (x_axis, y_axis) = fit_axes(series, (x_scale, y_scale), opts, &ok);
 
     let mut chart = ChartBuilder::on(root)
         .caption(title, (FONT, TITLE_SIZE))
@@ -197,6 +174,41 @@ fn draw_xy(
         draw_legend(&mut chart, legend_corner(&occupied, labels))?;
     }
     Ok(())
+}
+
+/// The axes that show every usable point with its error bar, the reference lines and the guides (within
+/// the x axis).
+fn fit_axes(
+    series: &[Series],
+    (x_scale, y_scale): (Scale, Scale),
+    opts: &XyOptions<'_>,
+    ok: &dyn Fn(f64, f64) -> bool,
+) -> (Axis, Axis) {
+    let x_axis = Axis::fit(
+        series
+            .iter()
+            .flat_map(triples)
+            .filter(|&(x, y, _)| ok(x, y))
+            .map(|p| p.0),
+        x_scale,
+    );
+    let y_values = series
+        .iter()
+        .flat_map(triples)
+        .filter(|&(x, y, _)| ok(x, y))
+        .flat_map(|(_, y, e)| {
+            let (below, above) = usable_err(e).unwrap_or((0.0, 0.0));
+            [y, y - below, y + above]
+        });
+    let hline_values = opts.hlines.iter().map(|h| h.0);
+    let guide_values = opts
+        .guides
+        .iter()
+        .flat_map(|g| g.x.iter().zip(&g.y))
+        .filter(|&(x, y)| ok(*x, *y) && x_axis.contains(*x))
+        .map(|(_, y)| *y);
+    let y_axis = Axis::fit(y_values.chain(hline_values).chain(guide_values), y_scale);
+    (x_axis, y_axis)
 }
 
 /// Error bars of the usable points: each bar's ends (a lower end that a log axis cannot show runs to the
