@@ -261,14 +261,9 @@ fn write_inner(path: &Path, hdus: &[Hdu<'_>]) -> Result<(), IoError> {
             cards,
             ..
         }) => {
-            let primary_type = match pixels {
-                Pixels::U16(_) => ImageType::UnsignedShort,
-                Pixels::F32(_) => ImageType::Float,
-                Pixels::F64(_) => ImageType::Double,
-            };
             let dims = [*ny, *nx];
             let desc = ImageDescription {
-                data_type: primary_type,
+                data_type: pixels.image_type(),
                 dimensions: &dims,
             };
             let mut f = FitsFile::create(path)
@@ -277,12 +272,7 @@ fn write_inner(path: &Path, hdus: &[Hdu<'_>]) -> Result<(), IoError> {
                 .map_err(fe)?;
             drop_primary_extname(&mut f).map_err(|e| IoError::fits(path, e))?;
             let primary = f.primary_hdu().map_err(fe)?;
-            match pixels {
-                Pixels::U16(d) => primary.write_image(&mut f, d),
-                Pixels::F32(d) => primary.write_image(&mut f, d),
-                Pixels::F64(d) => primary.write_image(&mut f, d),
-            }
-            .map_err(fe)?;
+            pixels.write(&primary, &mut f).map_err(fe)?;
             write_cards(&mut f, &primary, cards, path)?;
             f
         }
@@ -305,27 +295,17 @@ fn write_inner(path: &Path, hdus: &[Hdu<'_>]) -> Result<(), IoError> {
                 pixels,
                 cards,
             } => {
-                let t = match pixels {
-                    Pixels::U16(_) => ImageType::UnsignedShort,
-                    Pixels::F32(_) => ImageType::Float,
-                    Pixels::F64(_) => ImageType::Double,
-                };
                 let dims = [*ny, *nx];
                 let hdu = f
                     .create_image(
                         *name,
                         &ImageDescription {
-                            data_type: t,
+                            data_type: pixels.image_type(),
                             dimensions: &dims,
                         },
                     )
                     .map_err(fe)?;
-                match pixels {
-                    Pixels::U16(d) => hdu.write_image(&mut f, d),
-                    Pixels::F32(d) => hdu.write_image(&mut f, d),
-                    Pixels::F64(d) => hdu.write_image(&mut f, d),
-                }
-                .map_err(fe)?;
+                pixels.write(&hdu, &mut f).map_err(fe)?;
                 write_cards(&mut f, &hdu, cards, path)?;
             }
             Hdu::U8Image { name, nx, ny, data } => {
@@ -345,64 +325,103 @@ fn write_inner(path: &Path, hdus: &[Hdu<'_>]) -> Result<(), IoError> {
                 name,
                 columns,
                 cards,
-            } => {
-                let descs = columns
-                    .iter()
-                    .map(|c| {
-                        let t = match c {
-                            Column::F64(..) => ColumnDataType::Double,
-                            Column::I64(..) => ColumnDataType::Long,
-                        };
-                        ColumnDescription::new(c.name()).with_type(t).create()
-                    })
-                    .collect::<Result<Vec<_>, _>>()
-                    .map_err(fe)?;
-                let hdu = f.create_table(*name, &descs).map_err(fe)?;
-                for (i, c) in columns.iter().enumerate() {
-                    hdu.write_key(
-                        &mut f,
-                        &format!("TUNIT{}", i + 1),
-                        column_unit(c.name()).to_string(),
-                    )
-                    .map_err(fe)?;
-                }
-                for c in columns {
-                    if c.len() == 0 {
-                        continue;
-                    }
-                    match c {
-                        Column::F64(n, v) => hdu.write_col(&mut f, n.as_str(), v),
-                        Column::I64(n, v) => hdu.write_col(&mut f, n.as_str(), v),
-                    }
-                    .map_err(fe)?;
-                }
-                write_cards(&mut f, &hdu, cards, path)?;
-            }
-            Hdu::Text { name, text } => {
-                let lines: Vec<String> = text
-                    .lines()
-                    .map(|l| {
-                        if l.is_empty() {
-                            " ".to_string()
-                        } else {
-                            l.to_string()
-                        }
-                    })
-                    .collect();
-                let width = lines.iter().map(|l| l.len()).max().unwrap_or(1).max(1);
-                let desc = ColumnDescription::new("LINE")
-                    .with_type(ColumnDataType::String)
-                    .that_repeats(width)
-                    .create()
-                    .map_err(fe)?;
-                let hdu = f.create_table(*name, &[desc]).map_err(fe)?;
-                // text has no unit, said as every column's is (TUNITn on every column)
-                hdu.write_key(&mut f, "TUNIT1", String::new()).map_err(fe)?;
-                if !lines.is_empty() {
-                    hdu.write_col(&mut f, "LINE", &lines).map_err(fe)?;
-                }
-            }
+            } => write_table(&mut f, path, name, columns, cards)?,
+            Hdu::Text { name, text } => write_text(&mut f, path, name, text)?,
         }
+    }
+    Ok(())
+}
+
+impl Pixels<'_> {
+    /// The FITS image type of the pixels.
+    fn image_type(&self) -> ImageType {
+        match self {
+            Pixels::U16(_) => ImageType::UnsignedShort,
+            Pixels::F32(_) => ImageType::Float,
+            Pixels::F64(_) => ImageType::Double,
+        }
+    }
+
+    /// Write the pixels into image HDU `hdu`.
+    fn write(
+        &self,
+        hdu: &fitsio::hdu::FitsHdu,
+        f: &mut FitsFile,
+    ) -> Result<(), fitsio::errors::Error> {
+        match self {
+            Pixels::U16(d) => hdu.write_image(f, d),
+            Pixels::F32(d) => hdu.write_image(f, d),
+            Pixels::F64(d) => hdu.write_image(f, d),
+        }
+    }
+}
+
+/// A binary table HDU `name`: each column with its unit (`TUNITn`), then the cards.
+fn write_table(
+    f: &mut FitsFile,
+    path: &Path,
+    name: &str,
+    columns: &[Column],
+    cards: &[Card],
+) -> Result<(), IoError> {
+    let fe = |e: fitsio::errors::Error| IoError::fits(path, e);
+    let descs = columns
+        .iter()
+        .map(|c| {
+            let t = match c {
+                Column::F64(..) => ColumnDataType::Double,
+                Column::I64(..) => ColumnDataType::Long,
+            };
+            ColumnDescription::new(c.name()).with_type(t).create()
+        })
+        .collect::<Result<Vec<_>, _>>()
+        .map_err(fe)?;
+    let hdu = f.create_table(name, &descs).map_err(fe)?;
+    for (i, c) in columns.iter().enumerate() {
+        hdu.write_key(
+            f,
+            &format!("TUNIT{}", i + 1),
+            column_unit(c.name()).to_string(),
+        )
+        .map_err(fe)?;
+    }
+    for c in columns {
+        if c.len() == 0 {
+            continue;
+        }
+        match c {
+            Column::F64(n, v) => hdu.write_col(f, n.as_str(), v),
+            Column::I64(n, v) => hdu.write_col(f, n.as_str(), v),
+        }
+        .map_err(fe)?;
+    }
+    write_cards(f, &hdu, cards, path)
+}
+
+/// A text HDU `name`: a table of one string column `LINE`, a line per row (an empty line a space).
+fn write_text(f: &mut FitsFile, path: &Path, name: &str, text: &str) -> Result<(), IoError> {
+    let fe = |e: fitsio::errors::Error| IoError::fits(path, e);
+    let lines: Vec<String> = text
+        .lines()
+        .map(|l| {
+            if l.is_empty() {
+                " ".to_string()
+            } else {
+                l.to_string()
+            }
+        })
+        .collect();
+    let width = lines.iter().map(|l| l.len()).max().unwrap_or(1).max(1);
+    let desc = ColumnDescription::new("LINE")
+        .with_type(ColumnDataType::String)
+        .that_repeats(width)
+        .create()
+        .map_err(fe)?;
+    let hdu = f.create_table(name, &[desc]).map_err(fe)?;
+    // text has no unit, said as every column's is (TUNITn on every column)
+    hdu.write_key(f, "TUNIT1", String::new()).map_err(fe)?;
+    if !lines.is_empty() {
+        hdu.write_col(f, "LINE", &lines).map_err(fe)?;
     }
     Ok(())
 }
