@@ -93,27 +93,7 @@ pub fn synthetic(spec: &SyntheticSpec) -> Synthetic {
             ]
         })
         .collect();
-    let mut exposures = Vec::new();
-    // epochs in seasons half a year apart (spring and autumn) over three years: the first seven epochs one
-    // season each, later ones revisit the seasons, spread over a fortnight within each (one epoch in the
-    // solution's sense: no gap of EPOCH_GAP_YR)
-    let visits = spec.epochs.div_ceil(7).max(1);
-    for epoch in 0..spec.epochs {
-        let (season, visit) = (epoch % 7, epoch / 7);
-        for k in 0..side * side {
-            let t = 0.5 * season as f64 + 0.04 * visit as f64 / visits as f64 + 0.002 * k as f64;
-            let phase = std::f64::consts::TAU * t;
-            exposures.push(ExposureGeometry {
-                t_yr: t,
-                parallax_factor: [phase.sin(), 0.4 * phase.cos()],
-                centre_mas: [
-                    (k % side) as f64 * step - reach,
-                    (k / side) as f64 * step - reach,
-                ],
-                to_plane: TO_PLANE,
-            });
-        }
-    }
+    let exposures = synthetic_exposures(spec, step, reach);
     let attitudes: Vec<Attitude> = exposures
         .iter()
         .map(|_| {
@@ -173,17 +153,7 @@ pub fn synthetic(spec: &SyntheticSpec) -> Synthetic {
                 focal_px[0] / crate::solution::calibration::DEFAULT_FOCAL_NORM_PX,
                 focal_px[1] / crate::solution::calibration::DEFAULT_FOCAL_NORM_PX,
             );
-            let mut dfx = [0.0; 2];
-            if let Some(c) = calibration.arrays.get(array) {
-                for (m, (p, q)) in spec.calibration.array_terms().into_iter().enumerate() {
-                    dfx[0] += c[0][m] * u.powi(p) * v.powi(q);
-                    dfx[1] += c[1][m] * u.powi(p) * v.powi(q);
-                }
-            }
-            for (m, (p, q)) in spec.calibration.monomials().into_iter().enumerate() {
-                dfx[0] += calibration.distortion[0][m] * u.powi(p) * v.powi(q);
-                dfx[1] += calibration.distortion[1][m] * u.powi(p) * v.powi(q);
-            }
+            let dfx = instrument_px(spec, &calibration, array, (u, v));
             let o = [
                 g.centre_mas[0] + scale * (cos * d0 - sin * d1) + a.offset_mas[0]
                     - SYNTHETIC_MAS_PER_PX * dfx[0],
@@ -229,6 +199,55 @@ pub fn synthetic(spec: &SyntheticSpec) -> Synthetic {
         refs,
         calibration,
     }
+}
+
+/// The synthetic survey's exposures: `pointings_per_side`² pointings `step` mas apart, centred, per epoch;
+/// epochs in seasons half a year apart (spring and autumn) over three years, the first seven one season each,
+/// later ones revisiting the seasons, spread over a fortnight within each (one epoch in the solution's sense:
+/// no gap of EPOCH_GAP_YR).
+fn synthetic_exposures(spec: &SyntheticSpec, step: f64, reach: f64) -> Vec<ExposureGeometry> {
+    let side = spec.pointings_per_side.max(1);
+    let mut exposures = Vec::new();
+    let visits = spec.epochs.div_ceil(7).max(1);
+    for epoch in 0..spec.epochs {
+        let (season, visit) = (epoch % 7, epoch / 7);
+        for k in 0..side * side {
+            let t = 0.5 * season as f64 + 0.04 * visit as f64 / visits as f64 + 0.002 * k as f64;
+            let phase = std::f64::consts::TAU * t;
+            exposures.push(ExposureGeometry {
+                t_yr: t,
+                parallax_factor: [phase.sin(), 0.4 * phase.cos()],
+                centre_mas: [
+                    (k % side) as f64 * step - reach,
+                    (k / side) as f64 * step - reach,
+                ],
+                to_plane: TO_PLANE,
+            });
+        }
+    }
+    exposures
+}
+
+/// What the instrument adds at the normalised focal-plane position (u, v) of `array`, focal-plane px: the
+/// array's own terms and the distortion, written out (not through the solution's calibration).
+fn instrument_px(
+    spec: &SyntheticSpec,
+    calibration: &Calibration,
+    array: usize,
+    (u, v): (f64, f64),
+) -> [f64; 2] {
+    let mut dfx = [0.0; 2];
+    if let Some(c) = calibration.arrays.get(array) {
+        for (m, (p, q)) in spec.calibration.array_terms().into_iter().enumerate() {
+            dfx[0] += c[0][m] * u.powi(p) * v.powi(q);
+            dfx[1] += c[1][m] * u.powi(p) * v.powi(q);
+        }
+    }
+    for (m, (p, q)) in spec.calibration.monomials().into_iter().enumerate() {
+        dfx[0] += calibration.distortion[0][m] * u.powi(p) * v.powi(q);
+        dfx[1] += calibration.distortion[1][m] * u.powi(p) * v.powi(q);
+    }
+    dfx
 }
 
 /// The instrument's calibration of the benchmark (and of the tests that solve one): four arrays with their
