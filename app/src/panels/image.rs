@@ -5,6 +5,7 @@ use super::widgets::title;
 use crate::settings::ViewSettings;
 use crate::state::{OnScreen, Results, chosen_pixel};
 use crate::view::{Colormap, Scale, Stretch, diverging, stamp, to_color_image};
+use crate::worker::FrameResult;
 use egui::{Color32, TextureHandle, TextureOptions, vec2};
 use egui_plot::{MarkerShape, Plot, PlotImage, PlotPoint, PlotPoints, Points, VLine};
 use engine::readout::ReadoutTiming;
@@ -75,23 +76,7 @@ pub fn frame_ui(
         None => "Simulated frame".into(),
     };
     title(ui, &heading, stale);
-    ui.horizontal_wrapped(|ui| {
-        ui.label("stretch");
-        for s in Stretch::ALL {
-            ui.radio_value(&mut view.stretch, s, s.name());
-        }
-        ui.separator();
-        let mut false_colour = view.colormap == Colormap::Inferno;
-        if ui.checkbox(&mut false_colour, "false colour").changed() {
-            view.colormap = if false_colour {
-                Colormap::Inferno
-            } else {
-                Colormap::Gray
-            };
-        }
-        ui.checkbox(&mut view.show_channels, "channels");
-        ui.checkbox(&mut view.show_stars, "star marks");
-    });
+    view_controls(ui, view);
     let Some(f) = &results.frame else {
         ui.centered_and_justified(|ui| {
             ui.weak("the first frame is on its way…");
@@ -199,8 +184,39 @@ pub fn frame_ui(
             view.star = k;
         }
     }
+    let line = pixel_line(f, hovered, chosen);
+    ui.label(egui::RichText::new(line).monospace().small());
+}
+
+/// The frame's view controls: the stretch, false colour, the channel boundaries and the star marks.
+fn view_controls(ui: &mut egui::Ui, view: &mut ViewSettings) {
+    ui.horizontal_wrapped(|ui| {
+        ui.label("stretch");
+        for s in Stretch::ALL {
+            ui.radio_value(&mut view.stretch, s, s.name());
+        }
+        ui.separator();
+        let mut false_colour = view.colormap == Colormap::Inferno;
+        if ui.checkbox(&mut false_colour, "false colour").changed() {
+            view.colormap = if false_colour {
+                Colormap::Inferno
+            } else {
+                Colormap::Gray
+            };
+        }
+        ui.checkbox(&mut view.show_channels, "channels");
+        ui.checkbox(&mut view.show_stars, "star marks");
+    });
+}
+
+/// The line under the frame: the hovered (else the chosen) pixel's value, DQ and exposure window.
+fn pixel_line(
+    f: &FrameResult,
+    hovered: Option<(usize, usize)>,
+    chosen: Option<(usize, usize)>,
+) -> String {
     let timing = ReadoutTiming::new(&f.cfg);
-    let line = match hovered.or(chosen) {
+    match hovered.or(chosen) {
         Some((x, y)) => {
             let i = y * f.n + x;
             let (a, b) = timing.window_s(x, y);
@@ -216,8 +232,7 @@ pub fn frame_ui(
             )
         }
         None => "hover for pixel values; click to choose a star and pixel".into(),
-    };
-    ui.label(egui::RichText::new(line).monospace().small());
+    }
 }
 
 /// The chosen star beside its Gaussian-ACE twin, and their difference.
