@@ -379,54 +379,7 @@ impl GpuIntegrator {
         let fixed_scale = ((u32::MAX as f64) / (n_common_max as f64 + 4.0))
             .floor()
             .min((1u64 << 24) as f64) as f32;
-        // per-pixel windows and each stamp's shared window, in parallel over stars
-        let per_star: Vec<(Vec<GpuWindow>, GpuWindow)> = batch
-            .par_iter()
-            .map(|(_, (x0, y0, nx, ny))| {
-                if is_static {
-                    return (
-                        vec![
-                            GpuWindow {
-                                first: 0,
-                                last: 0,
-                                wf: 1.0,
-                                wl: 1.0
-                            };
-                            nx * ny
-                        ],
-                        GpuWindow {
-                            first: 1,
-                            last: 0,
-                            wf: 0.0,
-                            wl: 0.0,
-                        },
-                    );
-                }
-                let mut w = Vec::with_capacity(nx * ny);
-                let (mut a_max, mut b_min) = (f64::NEG_INFINITY, f64::INFINITY);
-                for iy in 0..*ny {
-                    for ix in 0..*nx {
-                        let (a, b) = frame
-                            .timing
-                            .window_s((*x0 + ix as i64) as usize, (*y0 + iy as i64) as usize);
-                        a_max = a_max.max(a);
-                        b_min = b_min.min(b);
-                        w.push(track.window(a, b).into());
-                    }
-                }
-                let common = if b_min > a_max {
-                    track.window(a_max, b_min).into()
-                } else {
-                    GpuWindow {
-                        first: 1,
-                        last: 0,
-                        wf: 0.0,
-                        wl: 0.0,
-                    }
-                };
-                (w, common)
-            })
-            .collect();
+        let per_star = pixel_windows(batch, track, frame, is_static);
         windows.reserve(per_star.iter().map(|p| p.0.len()).sum());
         for (k, ((job, (x0, y0, nx, ny)), (w, common))) in batch.iter().zip(per_star).enumerate() {
             let x_rel = job.star.x_px - *x0 as f64;
@@ -482,29 +435,7 @@ impl GpuIntegrator {
             usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        // passes: the whole range at once on a hardware GPU; chunks on a software adapter
-        let budget = if self.is_software() {
-            SOFTWARE_ITERATION_BUDGET
-        } else {
-            usize::MAX / 2
-        };
-        let (extent, per_pass) = if fast {
-            (nv, (budget / nu.max(1)).max(1))
-        } else {
-            (track.len(), budget)
-        };
-        let passes: Vec<GpuParams> = (0..extent.div_ceil(per_pass))
-            .map(|k| GpuParams {
-                hist_nu: nu as u32,
-                hist_nv: nv as u32,
-                fixed_scale,
-                star_base: 0,
-                lo: (k * per_pass) as u32,
-                hi: ((k + 1) * per_pass - 1).min(extent - 1) as u32,
-                accumulate: u32::from(k > 0),
-                pad: 0,
-            })
-            .collect();
+        let passes = passes(fast, (nu, nv), track.len(), self.is_software(), fixed_scale);
         let scope = self.device.push_error_scope(wgpu::ErrorFilter::Validation);
         let mut enc = self
             .device
@@ -570,20 +501,7 @@ impl GpuIntegrator {
             return Err(GpuError::Validation(Arc::new(e)));
         }
         let values = self.read_back(&staging, n_pixels)?;
-        Ok(batch
-            .iter()
-            .zip(&stars)
-            .map(|((_, (x0, y0, nx, ny)), s)| {
-                let a = s.pixel_offset as usize;
-                Stamp {
-                    x0: *x0,
-                    y0: *y0,
-                    nx: *nx,
-                    ny: *ny,
-                    data: values[a..a + nx * ny].iter().map(|v| *v as f64).collect(),
-                }
-            })
-            .collect())
+        Ok(stamps(batch, &stars, &values))
     }
 
     /// Bind `buffers` to bindings 0, 1, … of `pipeline` and dispatch `groups` workgroups in a compute pass.
@@ -657,4 +575,117 @@ pub fn software_adapter() -> Option<wgpu::Adapter> {
         best.get_or_insert(a);
     }
     best
+}
+
+/// Each stamp's per-pixel windows of the track and the window its pixels share (none: `first > last`), in
+/// parallel over the stars; a static exposure's are the one whole sample.
+fn pixel_windows(
+    batch: &[(&StarJob, (i64, i64, usize, usize))],
+    track: &Track,
+    frame: &FrameSpec<'_>,
+    is_static: bool,
+) -> Vec<(Vec<GpuWindow>, GpuWindow)> {
+    batch
+        .par_iter()
+        .map(|(_, (x0, y0, nx, ny))| {
+            if is_static {
+                return (
+                    vec![
+                        GpuWindow {
+                            first: 0,
+                            last: 0,
+                            wf: 1.0,
+                            wl: 1.0
+                        };
+                        nx * ny
+                    ],
+                    GpuWindow {
+                        first: 1,
+                        last: 0,
+                        wf: 0.0,
+                        wl: 0.0,
+                    },
+                );
+            }
+            let mut w = Vec::with_capacity(nx * ny);
+            let (mut a_max, mut b_min) = (f64::NEG_INFINITY, f64::INFINITY);
+            for iy in 0..*ny {
+                for ix in 0..*nx {
+                    let (a, b) = frame
+                        .timing
+                        .window_s((*x0 + ix as i64) as usize, (*y0 + iy as i64) as usize);
+                    a_max = a_max.max(a);
+                    b_min = b_min.min(b);
+                    w.push(track.window(a, b).into());
+                }
+            }
+            let common = if b_min > a_max {
+                track.window(a_max, b_min).into()
+            } else {
+                GpuWindow {
+                    first: 1,
+                    last: 0,
+                    wf: 0.0,
+                    wl: 0.0,
+                }
+            };
+            (w, common)
+        })
+        .collect()
+}
+
+/// The dispatch passes over the range (the histogram's rows with the fast method, the track's samples with
+/// the direct one): the whole range at once on a hardware GPU, chunks of [`SOFTWARE_ITERATION_BUDGET`]
+/// iterations on a software adapter.
+fn passes(
+    fast: bool,
+    (nu, nv): (usize, usize),
+    track_len: usize,
+    software: bool,
+    fixed_scale: f32,
+) -> Vec<GpuParams> {
+    let budget = if software {
+        SOFTWARE_ITERATION_BUDGET
+    } else {
+        usize::MAX / 2
+    };
+    let (extent, per_pass) = if fast {
+        (nv, (budget / nu.max(1)).max(1))
+    } else {
+        (track_len, budget)
+    };
+    (0..extent.div_ceil(per_pass))
+        .map(|k| GpuParams {
+            hist_nu: nu as u32,
+            hist_nv: nv as u32,
+            fixed_scale,
+            star_base: 0,
+            lo: (k * per_pass) as u32,
+            hi: ((k + 1) * per_pass - 1).min(extent - 1) as u32,
+            accumulate: u32::from(k > 0),
+            pad: 0,
+        })
+        .collect()
+}
+
+/// The stamps of a batch from the values read back, each star's at its pixel offset.
+fn stamps(
+    batch: &[(&StarJob, (i64, i64, usize, usize))],
+    stars: &[GpuStar],
+    values: &[f32],
+) -> Vec<Stamp> {
+    batch
+        .iter()
+        .zip(stars)
+        .map(|((_, (x0, y0, nx, ny)), s)| {
+            let a = s.pixel_offset as usize;
+            Stamp {
+                x0: *x0,
+                y0: *y0,
+                nx: *nx,
+                ny: *ny,
+                data: values[a..a + nx * ny].iter().map(|v| *v as f64).collect(),
+            }
+        })
+        .collect()
 }
