@@ -407,6 +407,15 @@ fn too_few_stars_for_an_epsf_fall_back_to_a_stated_psf() {
         "{:?}",
         a.report
     );
+    assert_eq!(a.report.epsf_variation, "constant");
+    // a varying ePSF from them: 64 stars hold a linear one (30 needed); with 4 stars the fallback above
+    // comes first (engine::analysis::epsf::varying's tests: too few, or bunched, ePSF stars keep one table)
+    let mut cv = c.clone();
+    cv.analysis.epsf_variation = engine::config::EpsfVariation::Linear;
+    let img = AnalysisImage::from_detector(&cv, &e.image);
+    let v = astrometry::analyze(&img, &Options::new(&cv.analysis)).expect("analysis");
+    assert_eq!(v.report.epsf_variation, "linear", "{:?}", v.report);
+    assert!(v.stars.iter().all(|s| s.x.is_finite() && s.y.is_finite()));
 }
 
 #[test]

@@ -13,10 +13,11 @@ use crate::analysis::detection::{detect, starts};
 use crate::analysis::epsf::Epsf;
 use crate::analysis::epsf::build::{self, BuildOptions, StarStart};
 use crate::analysis::epsf::fit::{StarFit, fit_star, flags};
+use crate::analysis::epsf::varying::{self, epsf_variation_name};
 use crate::analysis::image::AnalysisImage;
 use crate::analysis::report::{Report, StarResult, star_results};
 use crate::analysis::response::FitNoise;
-use crate::config::{Analysis as AnalysisCfg, TelemetryKernel};
+use crate::config::{Analysis as AnalysisCfg, EpsfVariation, TelemetryKernel};
 use crate::integrate::kernel::PixelKernel;
 use rayon::prelude::*;
 use std::sync::Arc;
@@ -122,6 +123,7 @@ fn analyze_prepared_with(
             .collect()
     };
     let mut fallback = String::new();
+    let mut variation = epsf_variation_name(EpsfVariation::Constant).to_string();
     let (mut fits, epsf, iterations) = match &opts.fixed_epsf {
         Some(e) => (fit_all(e), e.clone(), 0),
         None if n_build < MIN_EPSF_STARS => {
@@ -140,7 +142,18 @@ fn analyze_prepared_with(
         }
         None => {
             let built = build::build(&pd, &starts, &usable, &bopt, None, None);
-            (built.fits, built.epsf, built.iterations)
+            match opts.cfg.epsf_variation {
+                EpsfVariation::Constant => (built.fits, built.epsf, built.iterations),
+                v => {
+                    let var = varying::build(&pd, &starts, &usable, &bopt, v, &built.epsf);
+                    variation = if var.kept_constant.is_empty() {
+                        epsf_variation_name(v).to_string()
+                    } else {
+                        var.kept_constant
+                    };
+                    (var.fits, var.epsf.base, built.iterations + var.iterations)
+                }
+            }
         }
     };
     flags::mark_poor_fits(&mut fits);
@@ -151,6 +164,7 @@ fn analyze_prepared_with(
         epsf_iterations: iterations,
         epsf_stars: n_build,
         epsf_fallback: fallback,
+        epsf_variation: variation,
         countermeasure: Countermeasure::None.to_string(),
         ..Default::default()
     };
@@ -178,6 +192,7 @@ fn countermeasure_report(plain: &Report, cm: &Countermeasure) -> Report {
         epsf_iterations: plain.epsf_iterations,
         epsf_stars: plain.epsf_stars,
         epsf_fallback: plain.epsf_fallback.clone(),
+        epsf_variation: plain.epsf_variation.clone(),
         countermeasure: cm.to_string(),
         ..Default::default()
     }

@@ -56,6 +56,9 @@ pub struct Report {
     pub epsf_stars: usize,
     /// Empty when the ePSF was built from the image; else what stood in for it and why (too few stars).
     pub epsf_fallback: String,
+    /// How the ePSF varies across the image (`analysis.epsf_variation`): `constant`, `linear`, `quadratic`, or
+    /// why a varying ePSF asked for was kept constant.
+    pub epsf_variation: String,
     pub countermeasure: String,
     /// Whether the crowded-field analysis measured the image ([`crate::analysis::crowding`]).
     pub crowded: bool,

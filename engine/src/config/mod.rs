@@ -690,6 +690,23 @@ pub enum Smoothing {
     Quadratic,
 }
 
+/// How the plain analysis' ePSF varies across the image (`analysis::epsf::varying`). A PSF that changes over
+/// the field (an as-built wavefront's field gradient) fitted with one ePSF leaves a smooth displacement of each
+/// star by the difference between its local profile and the mean one; a varying ePSF learns the local profile
+/// from the stars, as DAOPHOT's variable PSF (Stetson 1987, PASP 99, 191: a lookup table plus its linear or
+/// quadratic change over the frame) and Anderson & King's (2006, ISR ACS 2006-01) fiducial arrays do.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum EpsfVariation {
+    /// One ePSF for the whole image (default).
+    #[default]
+    Constant,
+    /// ψ(Δ; ξ, η) = ψ₀(Δ) + ξ ψ_ξ(Δ) + η ψ_η(Δ), ξ and η the star's position scaled to [−1, 1] across the image.
+    Linear,
+    /// The linear form plus ξ², ξη and η² planes.
+    Quadratic,
+}
+
 /// The PSF the telemetry correction's fit response is built from (`analysis::response`): the
 /// response needs the PSF *before* the jitter, which it then blurs with the telemetry's own window.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -784,6 +801,9 @@ pub struct Analysis {
     /// Y zones of the position-dependent ePSF of the `yzones` countermeasures (at least 2 are used; the plain
     /// analysis builds one ePSF for the image).
     pub epsf_zones: usize,
+    /// How the plain analysis' ePSF varies across the image: one table (`constant`) or a table with its
+    /// linear or quadratic change over the field, learned from the stars.
+    pub epsf_variation: EpsfVariation,
     /// Detection threshold (peak above sky) in units of the sky noise.
     pub detect_sigma: f64,
     /// Detection threshold of the crowded-field analysis (`analysis::crowded`): S/N of a peak in
@@ -842,6 +862,7 @@ impl Default for Analysis {
             fit_sky: false,
             smoothing: Smoothing::Quadratic,
             epsf_zones: 4,
+            epsf_variation: EpsfVariation::Constant,
             detect_sigma: 10.0,
             crowded_detect_sigma: 3.0,
             crowded_forced_catalogue: false,

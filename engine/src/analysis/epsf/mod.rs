@@ -9,11 +9,13 @@
 //!
 //! * [`fit`]: weighted least-squares fit of one star (x, y, flux; sky from an annulus) and its Cramér–Rao bound;
 //! * [`build`]: the iterative ePSF builder from the stars of an image;
-//! * [`smooth`]: the smoothing kernels of the builder.
+//! * [`smooth`]: the smoothing kernels of the builder;
+//! * [`varying`]: the ePSF with its change across the image (`analysis.epsf_variation`).
 
 pub mod build;
 pub mod fit;
 pub mod smooth;
+pub mod varying;
 
 /// Radius within which the centroid convention is applied, pixels.
 pub const CENTROID_RADIUS_PX: f64 = 2.0;
