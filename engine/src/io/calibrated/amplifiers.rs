@@ -38,6 +38,19 @@ pub(super) fn per_amplifier(keys: &dyn Keys, prefix: &str) -> (Vec<char>, Vec<(c
     (amps, values)
 }
 
+/// Column spans [x0, x1) of a chip `nx` columns wide from each span's first column (in column order): each
+/// ends where the next begins, the last at `nx` (clamped to the chip).
+pub(super) fn spans<T: Copy>(first_columns: &[(usize, T)], nx: usize) -> Vec<(usize, usize, T)> {
+    first_columns
+        .iter()
+        .enumerate()
+        .map(|(k, &(x0, v))| {
+            let x1 = first_columns.get(k + 1).map_or(nx, |c| c.0).min(nx);
+            (x0.min(x1), x1, v)
+        })
+        .collect()
+}
+
 /// The trimmed chip's column where ACS/WFC's and WFC3/UVIS's second amplifier begins.
 const WFC_UVIS_SPLIT_PX: f64 = 2048.0;
 

@@ -215,13 +215,8 @@ impl CalibratedChip {
             return None;
         }
         let mut row = vec![0.0; self.nx];
-        for (k, &(x0, r)) in self.read_noise_columns_e.iter().enumerate() {
-            let x1 = self
-                .read_noise_columns_e
-                .get(k + 1)
-                .map_or(self.nx, |c| c.0)
-                .min(self.nx);
-            for v in &mut row[x0.min(x1)..x1] {
+        for (x0, x1, r) in amplifiers::spans(&self.read_noise_columns_e, self.nx) {
+            for v in &mut row[x0..x1] {
                 *v = r * r;
             }
         }

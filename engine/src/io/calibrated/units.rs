@@ -305,8 +305,9 @@ fn read_noise_e(
         // each amplifier's own value on the columns it read; the rms over the chip's pixels reported
         let mut var = 0.0;
         let mut named = Vec::new();
-        for (k, &(x0, a, r)) in cols.iter().enumerate() {
-            let x1 = cols.get(k + 1).map_or(planes.nx, |c| c.0);
+        let firsts: Vec<(usize, (char, f64))> =
+            cols.iter().map(|&(x0, a, r)| (x0, (a, r))).collect();
+        for (x0, x1, (a, r)) in amplifiers::spans(&firsts, planes.nx) {
             var += r * r * (x1 - x0) as f64 / planes.nx as f64;
             named.push(format!(
                 "READNSE{a} = {r} on columns {x0}–{}",
