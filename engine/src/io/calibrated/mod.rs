@@ -485,23 +485,24 @@ pub fn read_chip(path: &Path, set: &Imset, opts: &ReadOptions) -> Result<Calibra
     let states_tables = ["CPDIS1", "CPDIS2", "D2IMDIS1", "D2IMDIS2"]
         .iter()
         .any(|k| keys.text(k).is_some());
-    if states_tables && chip.wcs.is_some() {
-        match lookup_tables::read(&mut f, path, set.sci)? {
-            Some(lookup_tables::Tables::Read(lookup, note)) => {
-                if let Some(w) = chip.wcs.as_mut() {
-                    w.lookup = Some(*lookup);
-                }
-                chip.notes.push(note);
-            }
-            Some(lookup_tables::Tables::Unsupported(note)) => {
-                if let Some(w) = chip.wcs.take() {
-                    let said = units::wcs_note(&w);
-                    chip.notes.retain(|n| *n != said);
-                }
-                chip.notes.push(note);
-            }
-            None => {}
+    let tables = match states_tables && chip.wcs.is_some() {
+        true => lookup_tables::read(&mut f, path, set.sci)?,
+        false => None,
+    };
+    // RA/Dec through the header's WCS, said once what the tables make of it is known: a distortion jsim cannot
+    // apply leaves the chip without RA/Dec
+    let (lookup, tables_note) = match tables {
+        Some(lookup_tables::Tables::Read(lookup, note)) => (Some(*lookup), Some(note)),
+        Some(lookup_tables::Tables::Unsupported(note)) => {
+            chip.wcs = None;
+            (None, Some(note))
         }
+        None => (None, None),
+    };
+    if let Some(w) = chip.wcs.as_mut() {
+        w.lookup = lookup;
+        chip.notes.push(units::wcs_note(w));
     }
+    chip.notes.extend(tables_note);
     Ok(chip)
 }

@@ -561,11 +561,9 @@ pub fn calibrate(
     if let Some((s, from)) = plate {
         notes.push(format!("plate scale {s:.4} mas/px from {from}"));
     }
+    // the sentence on RA/Dec is the reader's (`read_chip`), once it knows the distortion tables jsim applies
     let wcs = match chip_wcs(keys, [planes.nx, planes.ny]) {
-        Ok(w) => {
-            notes.push(wcs_note(&w));
-            Some(w)
-        }
+        Ok(w) => Some(w),
         Err(why) => {
             notes.push(why);
             None

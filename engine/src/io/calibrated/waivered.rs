@@ -158,5 +158,9 @@ pub fn read_group(path: &Path, set: &Imset, opts: &ReadOptions) -> Result<Calibr
     })?;
     notes.append(&mut chip.notes);
     chip.notes = notes;
+    // no distortion tables in a waivered file: RA/Dec through the header's WCS as it is
+    if let Some(w) = &chip.wcs {
+        chip.notes.push(super::units::wcs_note(w));
+    }
     Ok(chip)
 }
