@@ -27,17 +27,30 @@ pub fn keep_first(
     same: impl Fn((f64, f64), (f64, f64)) -> bool,
 ) -> Vec<(f64, f64)> {
     let pts: Vec<(f64, f64)> = sorted.into_iter().collect();
-    let nb = Neighbours::new(&pts);
-    let mut is_kept = vec![false; pts.len()];
+    keep_first_of(&pts, reach_px, |k, j| same(pts[k], pts[j]))
+        .into_iter()
+        .map(|k| pts[k])
+        .collect()
+}
+
+/// [`keep_first`] by index: the indices of `sorted` (brightest first) that `same(k, j)` ties to no kept
+/// brighter `j` within `reach_px`, in order.
+pub fn keep_first_of(
+    sorted: &[(f64, f64)],
+    reach_px: f64,
+    same: impl Fn(usize, usize) -> bool,
+) -> Vec<usize> {
+    let nb = Neighbours::new(sorted);
+    let mut is_kept = vec![false; sorted.len()];
     let mut kept = Vec::new();
-    for (k, &p) in pts.iter().enumerate() {
+    for (k, &p) in sorted.iter().enumerate() {
         let tied = nb
             .near(p.0, p.1, reach_px)
             .into_iter()
-            .any(|j| is_kept[j] && same(p, pts[j]));
+            .any(|j| is_kept[j] && same(k, j));
         if !tied {
             is_kept[k] = true;
-            kept.push(p);
+            kept.push(k);
         }
     }
     kept

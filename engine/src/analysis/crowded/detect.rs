@@ -3,9 +3,8 @@
 //! residual image (image − model of the stars found), the companions the first pass merged into a brighter
 //! star (the iterative scheme of DAOPHOT's FIND/ALLSTAR and photutils' `IterativePSFPhotometry`).
 
-use crate::analysis::detection::{SkyNoise, plateau_centre};
+use crate::analysis::detection::{SkyNoise, keep_first_of, plateau_centre};
 use crate::analysis::image::AnalysisImage;
-use crate::numerics::neighbours::Neighbours;
 use rayon::prelude::*;
 
 /// Noise of the 3 × 3 binomial smoothing of white noise of unit σ: √Σk² = √(6/16)² = 0.375.
@@ -102,48 +101,37 @@ fn deblend(
     peaks: &[(f64, usize, usize)],
     local_sigma: &dyn Fn(f64) -> f64,
 ) -> Vec<(usize, usize)> {
-    // the k-d tree of every peak; a peak asks the kept ones within reach
+    // a peak asks the kept ones within reach (the k-d tree of every peak)
     let pos: Vec<(f64, f64)> = peaks
         .iter()
         .map(|&(_, x, y)| (x as f64, y as f64))
         .collect();
-    let nb = Neighbours::new(&pos);
-    let mut is_kept = vec![false; peaks.len()];
-    let mut kept: Vec<(f64, usize, usize)> = Vec::new();
-    for (k, &(p, x, y)) in peaks.iter().enumerate() {
-        let separate = nb
-            .near(x as f64, y as f64, DEBLEND_RADIUS_PX)
-            .into_iter()
-            .filter(|&j| is_kept[j])
-            .all(|j| {
-                let (_, bx, by) = peaks[j];
-                let d = (bx as f64 - x as f64).hypot(by as f64 - y as f64);
-                if d > DEBLEND_RADIUS_PX {
-                    return true;
-                }
-                let steps = (4.0 * d).ceil().max(2.0) as usize;
-                let saddle = (0..=steps)
-                    .map(|t| {
-                        let f = t as f64 / steps as f64;
-                        bilinear(
-                            s,
-                            nx,
-                            ny,
-                            x as f64 + f * (bx as f64 - x as f64),
-                            y as f64 + f * (by as f64 - y as f64),
-                        )
-                    })
-                    .fold(f64::INFINITY, f64::min);
-                // one star's when the dip between them is within the noise (NaN: separate, as before)
-                let merged = p - saddle < DEBLEND_SIGMA * local_sigma(p);
-                !merged
-            });
-        if separate {
-            is_kept[k] = true;
-            kept.push((p, x, y));
+    let merged = |k: usize, j: usize| {
+        let ((p, x, y), (_, bx, by)) = (peaks[k], peaks[j]);
+        let d = (bx as f64 - x as f64).hypot(by as f64 - y as f64);
+        if d > DEBLEND_RADIUS_PX {
+            return false;
         }
-    }
-    kept.into_iter().map(|(_, x, y)| (x, y)).collect()
+        let steps = (4.0 * d).ceil().max(2.0) as usize;
+        let saddle = (0..=steps)
+            .map(|t| {
+                let f = t as f64 / steps as f64;
+                bilinear(
+                    s,
+                    nx,
+                    ny,
+                    x as f64 + f * (bx as f64 - x as f64),
+                    y as f64 + f * (by as f64 - y as f64),
+                )
+            })
+            .fold(f64::INFINITY, f64::min);
+        // one star's when the dip between them is within the noise (NaN: separate, as before)
+        p - saddle < DEBLEND_SIGMA * local_sigma(p)
+    };
+    keep_first_of(&pos, DEBLEND_RADIUS_PX, merged)
+        .into_iter()
+        .map(|k| (peaks[k].1, peaks[k].2))
+        .collect()
 }
 
 /// No residual peak is taken within this many pixels of a masked pixel: the edge of a saturated core is

@@ -270,6 +270,27 @@ fn fit_flux_at(
     }
 }
 
+/// Most iterations of a build that iterates until converged (`iterations = 0`).
+pub const MAX_BUILD_ITERATIONS: usize = 30;
+
+/// The iterations a build makes at most: `opts.iterations`, or [`MAX_BUILD_ITERATIONS`] for 0 (until converged).
+pub fn iteration_cap(opts: &BuildOptions) -> usize {
+    match opts.iterations {
+        0 => MAX_BUILD_ITERATIONS,
+        n => n,
+    }
+}
+
+/// The χ²/dof above which a star gives the builder no samples: [`super::fit::flags::POOR_FIT_FACTOR`] × the
+/// median of the usable stars' (at least 1); none with fewer than 5 stars.
+pub fn sample_chi_limit(chi: &[f64]) -> f64 {
+    if chi.len() < 5 {
+        f64::INFINITY
+    } else {
+        super::fit::flags::POOR_FIT_FACTOR * stats::median(chi).max(1.0)
+    }
+}
+
 /// Build an ePSF from `starts`; `use_for_build[k]` selects the stars that contribute samples (all are fit).
 /// With `fixed_positions`, star positions are held there while building (only fluxes are refit).
 pub fn build(
@@ -299,13 +320,8 @@ pub fn build(
             opts.half_px,
         ),
     };
-    let max_iter = if opts.iterations == 0 {
-        30
-    } else {
-        opts.iterations
-    };
     let mut done = 0;
-    for _ in 0..max_iter {
+    for _ in 0..iteration_cap(opts) {
         done += 1;
         let fitted: Vec<Option<(StarFit, f64, f64)>> = starts
             .par_iter()
@@ -337,10 +353,9 @@ pub fn build(
             .filter(|(f, _, _)| f.usable())
             .map(|(f, _, _)| f.chi2_red)
             .collect();
-        let chi_limit = if fixed_positions.is_some() || chi.len() < 5 {
-            f64::INFINITY
-        } else {
-            crate::analysis::epsf::fit::flags::POOR_FIT_FACTOR * stats::median(&chi).max(1.0)
+        let chi_limit = match fixed_positions {
+            Some(_) => f64::INFINITY,
+            None => sample_chi_limit(&chi),
         };
         let per_star: Vec<Vec<(usize, f64)>> = fitted
             .par_iter()

@@ -22,8 +22,8 @@
 //! constrain the planes: the build then keeps the constant ePSF and says so.
 
 use super::Epsf;
-use super::build::{BuildOptions, StarStart, residual_samples};
-use super::fit::{PixelData, StarFit, fit_star, flags};
+use super::build::{BuildOptions, StarStart, iteration_cap, residual_samples, sample_chi_limit};
+use super::fit::{PixelData, StarFit, fit_star};
 use super::smooth;
 use crate::config::EpsfVariation;
 use crate::numerics::{linalg, stats};
@@ -281,7 +281,7 @@ pub fn update(
 }
 
 /// Build a varying ePSF from the constant one `constant` (the plain build's): `opts.iterations` steps (0:
-/// until the base's largest correction is below 1e-4 of its peak, at most 30), each star refitted from its
+/// until the base's largest correction is below 1e-4 of its peak, at most [`super::build::MAX_BUILD_ITERATIONS`]), each star refitted from its
 /// start with its own position's table; then every star fitted with it. Few or bunched ePSF stars keep the
 /// constant ePSF ([`unconstrained`]).
 pub fn build(
@@ -308,13 +308,8 @@ pub fn build(
             kept_constant: why,
         };
     }
-    let max_iter = if opts.iterations == 0 {
-        30
-    } else {
-        opts.iterations
-    };
     let mut done = 0;
-    for _ in 0..max_iter {
+    for _ in 0..iteration_cap(opts) {
         done += 1;
         let fitted: Vec<Option<(StarFit, Epsf)>> = starts
             .par_iter()
@@ -335,11 +330,7 @@ pub fn build(
             .filter(|(f, _)| f.usable())
             .map(|(f, _)| f.chi2_red)
             .collect();
-        let chi_limit = if chi.len() < 5 {
-            f64::INFINITY
-        } else {
-            flags::POOR_FIT_FACTOR * stats::median(&chi).max(1.0)
-        };
+        let chi_limit = sample_chi_limit(&chi);
         let per_star: Vec<([f64; 6], Vec<(usize, f64)>)> = fitted
             .par_iter()
             .flatten()
@@ -411,6 +402,7 @@ mod tests {
     struct Field {
         n: usize,
         img: Vec<f64>,
+        bad: Vec<bool>,
         truth: Vec<(f64, f64)>,
         flux: f64,
         sky: f64,
@@ -449,22 +441,35 @@ mod tests {
         Field {
             n,
             img,
+            bad: vec![false; n * n],
             truth,
             flux,
             sky,
         }
     }
 
-    fn pixels<'a>(f: &'a Field, bad: &'a [bool]) -> PixelData<'a> {
+    fn pixels(f: &Field) -> PixelData<'_> {
         PixelData {
             nx: f.n,
             ny: f.n,
             e: &f.img,
-            bad,
+            bad: &f.bad,
             var_floor_e2: 25.0,
             var_floor_px_e2: None,
             flat_sigma: 0.0,
         }
+    }
+
+    /// A field's starts and the constant build from `use_for_build` (every star: `None`).
+    fn constant_from(
+        f: &Field,
+        opts: &BuildOptions,
+        use_for_build: Option<Vec<bool>>,
+    ) -> (Vec<StarStart>, Vec<bool>, constant_build::Built) {
+        let s = starts(f);
+        let used = use_for_build.unwrap_or_else(|| vec![true; s.len()]);
+        let cst = constant_build::build(&pixels(f), &s, &used, opts, None, None);
+        (s, used, cst)
     }
 
     fn starts(f: &Field) -> Vec<StarStart> {
@@ -489,13 +494,10 @@ mod tests {
     #[test]
     fn a_linear_epsf_fits_each_star_as_its_own_exact_epsf_does() {
         let f = field(16);
-        let bad = vec![false; f.n * f.n];
-        let pd = pixels(&f, &bad);
-        let s = starts(&f);
-        let all = vec![true; s.len()];
+        let pd = pixels(&f);
         let mut opts = build_options(&Analysis::default());
         opts.iterations = 6;
-        let cst = constant_build::build(&pd, &s, &all, &opts, None, None);
+        let (s, all, cst) = constant_from(&f, &opts, None);
         let var = build(&pd, &s, &all, &opts, EpsfVariation::Linear, &cst.epsf);
         assert!(var.kept_constant.is_empty(), "{}", var.kept_constant);
         assert_eq!(var.epsf.terms.len(), 2);
@@ -543,13 +545,16 @@ mod tests {
     #[test]
     fn every_local_table_is_normalised_and_centred() {
         let f = field(16);
-        let bad = vec![false; f.n * f.n];
-        let pd = pixels(&f, &bad);
-        let s = starts(&f);
-        let all = vec![true; s.len()];
         let opts = build_options(&Analysis::default());
-        let cst = constant_build::build(&pd, &s, &all, &opts, None, None);
-        let var = build(&pd, &s, &all, &opts, EpsfVariation::Quadratic, &cst.epsf);
+        let (s, all, cst) = constant_from(&f, &opts, None);
+        let var = build(
+            &pixels(&f),
+            &s,
+            &all,
+            &opts,
+            EpsfVariation::Quadratic,
+            &cst.epsf,
+        );
         assert_eq!(var.epsf.terms.len(), 5);
         let n = f.n as f64;
         for (x, y) in [(0.0, 0.0), (n, 0.0), (0.0, n), (n, n), (0.3 * n, 0.8 * n)] {
@@ -577,13 +582,16 @@ mod tests {
     #[test]
     fn few_or_bunched_stars_keep_one_epsf() {
         let f = field(4); // 16 stars: fewer than 10 per table for three tables
-        let bad = vec![false; f.n * f.n];
-        let pd = pixels(&f, &bad);
-        let s = starts(&f);
-        let all = vec![true; s.len()];
         let opts = build_options(&Analysis::default());
-        let cst = constant_build::build(&pd, &s, &all, &opts, None, None);
-        let var = build(&pd, &s, &all, &opts, EpsfVariation::Linear, &cst.epsf);
+        let (s, all, cst) = constant_from(&f, &opts, None);
+        let var = build(
+            &pixels(&f),
+            &s,
+            &all,
+            &opts,
+            EpsfVariation::Linear,
+            &cst.epsf,
+        );
         assert!(var.epsf.terms.is_empty());
         assert!(
             var.kept_constant.contains("16 ePSF stars, fewer than 30"),
@@ -593,12 +601,16 @@ mod tests {
         assert_eq!(var.epsf.base, cst.epsf);
         // 144 stars, but only those of the first four columns build the ePSF: ξ spreads too little (σ 0.19)
         let f = field(12);
-        let bad = vec![false; f.n * f.n];
-        let pd = pixels(&f, &bad);
-        let s = starts(&f);
         let left: Vec<bool> = f.truth.iter().map(|&(x, _)| x < 80.0).collect();
-        let cst = constant_build::build(&pd, &s, &left, &opts, None, None);
-        let var = build(&pd, &s, &left, &opts, EpsfVariation::Linear, &cst.epsf);
+        let (s, left, cst) = constant_from(&f, &opts, Some(left));
+        let var = build(
+            &pixels(&f),
+            &s,
+            &left,
+            &opts,
+            EpsfVariation::Linear,
+            &cst.epsf,
+        );
         assert!(var.epsf.terms.is_empty());
         assert!(
             var.kept_constant.contains("spread over too little"),
