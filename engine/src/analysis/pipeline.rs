@@ -13,7 +13,7 @@ use crate::analysis::detection::{detect, starts};
 use crate::analysis::epsf::Epsf;
 use crate::analysis::epsf::build::{self, BuildOptions, StarStart};
 use crate::analysis::epsf::fit::{StarFit, fit_star, flags};
-use crate::analysis::epsf::varying::{self, epsf_variation_name};
+use crate::analysis::epsf::varying;
 use crate::analysis::image::AnalysisImage;
 use crate::analysis::report::{Report, StarResult, star_results};
 use crate::analysis::response::FitNoise;
@@ -123,7 +123,7 @@ fn analyze_prepared_with(
             .collect()
     };
     let mut fallback = String::new();
-    let mut variation = epsf_variation_name(EpsfVariation::Constant).to_string();
+    let mut variation = EpsfVariation::Constant.name().to_string();
     let (mut fits, epsf, iterations) = match &opts.fixed_epsf {
         Some(e) => (fit_all(e), e.clone(), 0),
         None if n_build < MIN_EPSF_STARS => {
@@ -145,9 +145,9 @@ fn analyze_prepared_with(
             match opts.cfg.epsf_variation {
                 EpsfVariation::Constant => (built.fits, built.epsf, built.iterations),
                 v => {
-                    let var = varying::build(&pd, &starts, &usable, &bopt, v, &built.epsf);
+                    let var = varying::build(&pd, &starts, &usable, &bopt, v, &built);
                     variation = if var.kept_constant.is_empty() {
-                        epsf_variation_name(v).to_string()
+                        v.name().to_string()
                     } else {
                         var.kept_constant
                     };

@@ -707,6 +707,17 @@ pub enum EpsfVariation {
     Quadratic,
 }
 
+impl EpsfVariation {
+    /// The configuration's spelling.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Self::Constant => "constant",
+            Self::Linear => "linear",
+            Self::Quadratic => "quadratic",
+        }
+    }
+}
+
 /// The PSF the telemetry correction's fit response is built from (`analysis::response`): the
 /// response needs the PSF *before* the jitter, which it then blurs with the telemetry's own window.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]

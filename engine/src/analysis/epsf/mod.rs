@@ -161,8 +161,9 @@ impl Epsf {
         }
     }
 
-    /// Flux-weighted centroid (pixels) of the nodes within [`CENTROID_RADIUS_PX`].
-    pub fn centroid(&self) -> (f64, f64) {
+    /// The sum and the first moments (Σψ, Σψ Δx, Σψ Δy) of the nodes within [`CENTROID_RADIUS_PX`]: the
+    /// centring convention's moments.
+    pub fn central_moments(&self) -> (f64, f64, f64) {
         let n = self.n();
         let (mut sx, mut sy, mut s) = (0.0, 0.0, 0.0);
         for iy in 0..n {
@@ -177,6 +178,12 @@ impl Epsf {
                 }
             }
         }
+        (s, sx, sy)
+    }
+
+    /// Flux-weighted centroid (pixels) of the nodes within [`CENTROID_RADIUS_PX`].
+    pub fn centroid(&self) -> (f64, f64) {
+        let (s, sx, sy) = self.central_moments();
         if s > 0.0 {
             (sx / s, sy / s)
         } else {

@@ -22,7 +22,9 @@
 //! constrain the planes: the build then keeps the constant ePSF and says so.
 
 use super::Epsf;
-use super::build::{BuildOptions, StarStart, iteration_cap, residual_samples, sample_chi_limit};
+use super::build::{
+    BuildOptions, Built, StarStart, iteration_cap, residual_samples, sample_chi_limit,
+};
 use super::fit::{PixelData, StarFit, fit_star};
 use super::smooth;
 use crate::config::EpsfVariation;
@@ -126,7 +128,7 @@ pub fn unconstrained(
             "{} ePSF stars, fewer than {} for a {} ePSF ({MIN_STARS_PER_TERM} per table): one ePSF for the image",
             b.len(),
             MIN_STARS_PER_TERM * m,
-            epsf_variation_name(variation)
+            variation.name()
         ));
     }
     let spread = |k: usize| stats::std_dev(&b.iter().map(|v| v[k]).collect::<Vec<_>>());
@@ -135,18 +137,9 @@ pub fn unconstrained(
         format!(
             "the ePSF stars spread over too little of the image (σ of ξ, η: {sx:.2}, {sy:.2}; at least \
              {MIN_SPREAD}) for a {} ePSF: one ePSF for the image",
-            epsf_variation_name(variation)
+            variation.name()
         )
     })
-}
-
-/// The configuration's spelling of a variation.
-pub fn epsf_variation_name(v: EpsfVariation) -> &'static str {
-    match v {
-        EpsfVariation::Constant => "constant",
-        EpsfVariation::Linear => "linear",
-        EpsfVariation::Quadratic => "quadratic",
-    }
 }
 
 /// Least squares of one node's samples on the basis, clipped once: the coefficients (δ₀, δ₁, …), or `None`
@@ -181,24 +174,11 @@ fn node_fit(samples: &[(f64, [f64; 6])], m: usize, clip_sigma: f64) -> Option<Ve
     solve(&|k| res[k].abs() <= clip_sigma * sigma).or(Some(first))
 }
 
-/// The sum over all nodes, and the first moments within the centroid radius, of a table.
+/// The sum over all nodes (the normalisation), and the first moments within the centroid radius (the centring
+/// convention: [`Epsf::central_moments`]), of a table.
 fn moments(e: &Epsf) -> [f64; 3] {
-    let n = e.n();
-    let r2 = super::CENTROID_RADIUS_PX * super::CENTROID_RADIUS_PX;
-    let mut m = [0.0; 3];
-    for iy in 0..n {
-        let y = e.node_px(iy);
-        for ix in 0..n {
-            let x = e.node_px(ix);
-            let v = e.data[iy * n + ix];
-            m[0] += v;
-            if x * x + y * y <= r2 {
-                m[1] += v * x;
-                m[2] += v * y;
-            }
-        }
-    }
-    m
+    let (_, sx, sy) = e.central_moments();
+    [e.data.iter().sum(), sx, sy]
 }
 
 /// Remove from each plane its components along ψ₀, ∂ψ₀/∂Δx, ∂ψ₀/∂Δy that give it a sum or a first moment (the
@@ -280,19 +260,19 @@ pub fn update(
     (next, max_delta)
 }
 
-/// Build a varying ePSF from the constant one `constant` (the plain build's): `opts.iterations` steps (0:
+/// Build a varying ePSF from the constant build `constant` (the plain build's): `opts.iterations` steps (0:
 /// until the base's largest correction is below 1e-4 of its peak, at most [`super::build::MAX_BUILD_ITERATIONS`]), each star refitted from its
 /// start with its own position's table; then every star fitted with it. Few or bunched ePSF stars keep the
-/// constant ePSF ([`unconstrained`]).
+/// constant ePSF and its fits ([`unconstrained`]).
 pub fn build(
     img: &PixelData<'_>,
     starts: &[StarStart],
     use_for_build: &[bool],
     opts: &BuildOptions,
     variation: EpsfVariation,
-    constant: &Epsf,
+    constant: &Built,
 ) -> BuiltVarying {
-    let mut psi = VaryingEpsf::new(constant.clone(), variation, img.nx, img.ny);
+    let mut psi = VaryingEpsf::new(constant.epsf.clone(), variation, img.nx, img.ny);
     let fit_all = |psi: &VaryingEpsf| -> Vec<StarFit> {
         starts
             .par_iter()
@@ -302,7 +282,7 @@ pub fn build(
     if let Some(why) = unconstrained(starts, use_for_build, variation, &psi) {
         psi.terms.clear();
         return BuiltVarying {
-            fits: fit_all(&psi),
+            fits: constant.fits.clone(),
             epsf: psi,
             iterations: 0,
             kept_constant: why,
@@ -498,7 +478,7 @@ mod tests {
         let mut opts = build_options(&Analysis::default());
         opts.iterations = 6;
         let (s, all, cst) = constant_from(&f, &opts, None);
-        let var = build(&pd, &s, &all, &opts, EpsfVariation::Linear, &cst.epsf);
+        let var = build(&pd, &s, &all, &opts, EpsfVariation::Linear, &cst);
         assert!(var.kept_constant.is_empty(), "{}", var.kept_constant);
         assert_eq!(var.epsf.terms.len(), 2);
         let exact: Vec<StarFit> = f
@@ -547,14 +527,7 @@ mod tests {
         let f = field(16);
         let opts = build_options(&Analysis::default());
         let (s, all, cst) = constant_from(&f, &opts, None);
-        let var = build(
-            &pixels(&f),
-            &s,
-            &all,
-            &opts,
-            EpsfVariation::Quadratic,
-            &cst.epsf,
-        );
+        let var = build(&pixels(&f), &s, &all, &opts, EpsfVariation::Quadratic, &cst);
         assert_eq!(var.epsf.terms.len(), 5);
         let n = f.n as f64;
         for (x, y) in [(0.0, 0.0), (n, 0.0), (0.0, n), (n, n), (0.3 * n, 0.8 * n)] {
@@ -584,14 +557,7 @@ mod tests {
         let f = field(4); // 16 stars: fewer than 10 per table for three tables
         let opts = build_options(&Analysis::default());
         let (s, all, cst) = constant_from(&f, &opts, None);
-        let var = build(
-            &pixels(&f),
-            &s,
-            &all,
-            &opts,
-            EpsfVariation::Linear,
-            &cst.epsf,
-        );
+        let var = build(&pixels(&f), &s, &all, &opts, EpsfVariation::Linear, &cst);
         assert!(var.epsf.terms.is_empty());
         assert!(
             var.kept_constant.contains("16 ePSF stars, fewer than 30"),
@@ -603,14 +569,7 @@ mod tests {
         let f = field(12);
         let left: Vec<bool> = f.truth.iter().map(|&(x, _)| x < 80.0).collect();
         let (s, left, cst) = constant_from(&f, &opts, Some(left));
-        let var = build(
-            &pixels(&f),
-            &s,
-            &left,
-            &opts,
-            EpsfVariation::Linear,
-            &cst.epsf,
-        );
+        let var = build(&pixels(&f), &s, &left, &opts, EpsfVariation::Linear, &cst);
         assert!(var.epsf.terms.is_empty());
         assert!(
             var.kept_constant.contains("spread over too little"),

@@ -485,9 +485,10 @@ pub fn read_chip(path: &Path, set: &Imset, opts: &ReadOptions) -> Result<Calibra
     let states_tables = ["CPDIS1", "CPDIS2", "D2IMDIS1", "D2IMDIS2"]
         .iter()
         .any(|k| keys.text(k).is_some());
-    let tables = match states_tables && chip.wcs.is_some() {
-        true => lookup_tables::read(&mut f, path, set.sci)?,
-        false => None,
+    let tables = if states_tables && chip.wcs.is_some() {
+        lookup_tables::read(&mut f, path, set.sci)?
+    } else {
+        None
     };
     // RA/Dec through the header's WCS, said once what the tables make of it is known: a distortion jsim cannot
     // apply leaves the chip without RA/Dec
