@@ -155,6 +155,64 @@ fn bad_input_is_named() {
         run(&dup, &t.exposures, &t.refs, &opt),
         Some(SolutionError::Duplicate { .. })
     ));
+    // one epoch cannot give motions
+    let first: Vec<Observation> = t.obs.iter().filter(|o| o.exposure == 0).copied().collect();
+    let e = run(&first, &t.exposures[..1], &t.refs, &opt);
+    assert!(matches!(e, Some(SolutionError::Degenerate { .. })), "{e:?}");
+    // … but positions, yes
+    let pos = Options {
+        model: SourceModel::Position,
+        ..opt
+    };
+    let refs0: Vec<Reference> = t.refs.clone();
+    assert!(solve(&first, &t.exposures[..1], &refs0, 200, &pos).is_ok());
+    // the frame needs two anchors, and a multi-epoch one their motions
+    assert!(matches!(
+        run(&t.obs, &t.exposures, &t.refs[..1], &opt),
+        Some(SolutionError::TooFewReferences(1))
+    ));
+    let no_motion: Vec<Reference> = t
+        .refs
+        .iter()
+        .map(|r| Reference {
+            sigma: [1.0, 1.0, 0.0, 0.0, 0.0],
+            ..*r
+        })
+        .collect();
+    assert!(matches!(
+        run(&t.obs, &t.exposures, &no_motion, &opt),
+        Some(SolutionError::FrameUnanchored(_))
+    ));
+    // the criterion is a fraction of the formal error
+    for tol in [0.0, 1.0, f64::NAN] {
+        let e = run(
+            &t.obs,
+            &t.exposures,
+            &t.refs,
+            &Options {
+                tolerance_sigma: tol,
+                ..opt
+            },
+        );
+        assert!(
+            matches!(
+                e,
+                Some(SolutionError::Knob {
+                    field: "tolerance_sigma",
+                    ..
+                })
+            ),
+            "{e:?}"
+        );
+    }
+}
+
+/// An exposure whose sources nobody else sees and no reference names is left out and reported; the rest is
+/// solved as without it.
+#[test]
+fn an_exposure_tied_to_nothing_is_left_out() {
+    let t = sequence(200, 0.0, [0.0; 5], 3);
+    let opt = Options::default();
     // an exposure whose sources nobody else sees and no reference names: no overlap
     let mut lonely = t.obs.clone();
     let mut ex = t.exposures.clone();
@@ -190,6 +248,14 @@ fn bad_input_is_named() {
     assert!(sol.sources[..200].iter().all(|s| s.params[0].is_finite()));
     let alone = solve(&t.obs, &t.exposures, &t.refs, 200, &opt).expect("without it");
     assert_eq!(sol.sources[..200], alone.sources[..]);
+}
+
+/// Exposures tied to nothing, or a patch of sky tied to no reference star: named errors; with its own
+/// reference stars the patch is solved.
+#[test]
+fn unconnected_exposures_and_patches_are_named() {
+    let t = sequence(200, 0.0, [0.0; 5], 3);
+    let opt = Options::default();
     // with no exposure tied to another or to the catalogue (every source seen once, no reference seen)
     // nothing can be solved: a named error
     let once: Vec<Observation> = (0..4)
@@ -243,56 +309,6 @@ fn bad_input_is_named() {
         ..*r
     }));
     assert!(solve(&two, &ex2, &refs2, 400, &opt).is_ok());
-    // one epoch cannot give motions
-    let first: Vec<Observation> = t.obs.iter().filter(|o| o.exposure == 0).copied().collect();
-    let e = run(&first, &t.exposures[..1], &t.refs, &opt);
-    assert!(matches!(e, Some(SolutionError::Degenerate { .. })), "{e:?}");
-    // … but positions, yes
-    let pos = Options {
-        model: SourceModel::Position,
-        ..opt
-    };
-    let refs0: Vec<Reference> = t.refs.clone();
-    assert!(solve(&first, &t.exposures[..1], &refs0, 200, &pos).is_ok());
-    // the frame needs two anchors, and a multi-epoch one their motions
-    assert!(matches!(
-        run(&t.obs, &t.exposures, &t.refs[..1], &opt),
-        Some(SolutionError::TooFewReferences(1))
-    ));
-    let no_motion: Vec<Reference> = t
-        .refs
-        .iter()
-        .map(|r| Reference {
-            sigma: [1.0, 1.0, 0.0, 0.0, 0.0],
-            ..*r
-        })
-        .collect();
-    assert!(matches!(
-        run(&t.obs, &t.exposures, &no_motion, &opt),
-        Some(SolutionError::FrameUnanchored(_))
-    ));
-    // the criterion is a fraction of the formal error
-    for tol in [0.0, 1.0, f64::NAN] {
-        let e = run(
-            &t.obs,
-            &t.exposures,
-            &t.refs,
-            &Options {
-                tolerance_sigma: tol,
-                ..opt
-            },
-        );
-        assert!(
-            matches!(
-                e,
-                Some(SolutionError::Knob {
-                    field: "tolerance_sigma",
-                    ..
-                })
-            ),
-            "{e:?}"
-        );
-    }
 }
 
 /// Four arrays with offsets of 10 px and turns of 0.1° (the plate model's priors) and a third-order

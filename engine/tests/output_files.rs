@@ -92,15 +92,41 @@ fn every_file_written_is_declared_and_every_declared_file_is_written() {
         .join(format!("jsim-output-files-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).expect("scratch");
-    let d = |name: &str| dir.join(name);
     let mut seen = BTreeSet::new();
-    let long_ace = "ace.span_s=200.0";
+    simulate_analyse_and_score(&dir, &mut seen);
+    experiment_and_crowded(&dir, &mut seen);
+    sequence_and_solutions(&dir, &mut seen);
+    transit_runs(&dir, &mut seen);
+    sweep_runs(&dir, &mut seen);
+    bench_run(&dir, &mut seen);
+    let unseen: Vec<&str> = OUTPUT_FILES
+        .iter()
+        .map(|o| o.pattern)
+        .filter(|p| !seen.contains(p))
+        .collect();
+    assert!(
+        unseen.is_empty(),
+        "declared but written by no run here: {unseen:?}"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
 
+/// The path of one run's output under the scratch directory.
+fn scratch(dir: &Path) -> impl Fn(&str) -> PathBuf + '_ {
+    move |name: &str| dir.join(name)
+}
+
+/// The realistic ACE's span the runs that draw it need.
+const LONG_ACE: &str = "ace.span_s=200.0";
+
+/// simulate (one array, the focal plane), analyze (one array, the focal plane, HST and PANOPTES files) and score.
+fn simulate_analyse_and_score(dir: &Path, seen: &mut BTreeSet<&'static str>) {
+    let d = scratch(dir);
     // simulate: one array (two realistic-ACE exposures) and the focal plane
     let mut c = small(&["simulate", "--images", "2"]);
     c.args([
         "--set",
-        long_ace,
+        LONG_ACE,
         "--set",
         "scene.grid_n=3",
         "--set",
@@ -110,11 +136,11 @@ fn every_file_written_is_declared_and_every_declared_file_is_written() {
     .arg(d("sim"));
     c.args(["--set", "ace.case=\"realistic\""]);
     ok(c);
-    check(&d("sim"), &[Cmd::Simulate], &mut seen);
+    check(&d("sim"), &[Cmd::Simulate], seen);
     let mut c = small(&["simulate", "--scene", "bulge", "--images", "1"]);
     c.arg("--out").arg(d("fp"));
     ok(c);
-    check(&d("fp"), &[Cmd::Simulate], &mut seen);
+    check(&d("fp"), &[Cmd::Simulate], seen);
 
     // analyze: one array, the focal plane, a CR-split HST file, a waivered one and a tile-compressed raw frame;
     // then score
@@ -151,7 +177,7 @@ fn every_file_written_is_declared_and_every_declared_file_is_written() {
             .arg("--out")
             .arg(d(out));
         ok(c);
-        check(&d(out), &[Cmd::Analyze], &mut seen);
+        check(&d(out), &[Cmd::Analyze], seen);
     }
     let mut c = jsim();
     c.args(["score", "--catalogue"])
@@ -161,8 +187,12 @@ fn every_file_written_is_declared_and_every_declared_file_is_written() {
         .arg("--out")
         .arg(d("score"));
     ok(c);
-    check(&d("score"), &[Cmd::Score], &mut seen);
+    check(&d("score"), &[Cmd::Score], seen);
+}
 
+/// experiment and crowded (both ACE cases, their exposures saved).
+fn experiment_and_crowded(dir: &Path, seen: &mut BTreeSet<&'static str>) {
+    let d = scratch(dir);
     // experiment, crowded (both ACE cases, their exposures saved)
     let mut c = small(&[
         "experiment",
@@ -186,7 +216,7 @@ fn every_file_written_is_declared_and_every_declared_file_is_written() {
     ])
     .arg(d("experiment"));
     ok(c);
-    check(&d("experiment"), &[Cmd::Experiment], &mut seen);
+    check(&d("experiment"), &[Cmd::Experiment], seen);
     let mut c = small(&[
         "crowded",
         "--aces",
@@ -195,10 +225,14 @@ fn every_file_written_is_declared_and_every_declared_file_is_written() {
         "none",
         "--save-images",
     ]);
-    c.args(["--set", long_ace, "--out"]).arg(d("crowded"));
+    c.args(["--set", LONG_ACE, "--out"]).arg(d("crowded"));
     ok(c);
-    check(&d("crowded"), &[Cmd::Crowded], &mut seen);
+    check(&d("crowded"), &[Cmd::Crowded], seen);
+}
 
+/// A sequence (persistence on, images kept), its Slurm job and the solution's; solve; solve-synthetic.
+fn sequence_and_solutions(dir: &Path, seen: &mut BTreeSet<&'static str>) {
+    let d = scratch(dir);
     // sequence (persistence on, images kept), its Slurm job and the solution's; solve; solve-synthetic
     let spec = d("seq.toml");
     std::fs::write(
@@ -219,7 +253,7 @@ fn every_file_written_is_declared_and_every_declared_file_is_written() {
     .arg("--out")
     .arg(d("sequence"));
     ok(c);
-    check(&d("sequence"), &[Cmd::Sequence], &mut seen);
+    check(&d("sequence"), &[Cmd::Sequence], seen);
     let mut c = small(&["sequence", "--countermeasure", "none", "--emit-slurm"]);
     c.arg("--spec")
         .arg(&spec)
@@ -232,11 +266,7 @@ fn every_file_written_is_declared_and_every_declared_file_is_written() {
         .arg("--jsim-mpi")
         .arg(env!("CARGO_BIN_EXE_jsim"));
     ok(c);
-    check(
-        &d("sequence-slurm"),
-        &[Cmd::Sequence, Cmd::Solve],
-        &mut seen,
-    );
+    check(&d("sequence-slurm"), &[Cmd::Sequence, Cmd::Solve], seen);
     let mut c = jsim();
     // two of them: the sequence's exposures per stare among them, for the mission's budget
     c.args(["solve", "--exposures", "2,4", "--sequence"])
@@ -244,7 +274,7 @@ fn every_file_written_is_declared_and_every_declared_file_is_written() {
         .arg("--out")
         .arg(d("solution"));
     ok(c);
-    check(&d("solution"), &[Cmd::Solve], &mut seen);
+    check(&d("solution"), &[Cmd::Solve], seen);
     let mut c = jsim();
     c.args([
         "solve-synthetic",
@@ -256,14 +286,18 @@ fn every_file_written_is_declared_and_every_declared_file_is_written() {
     ])
     .arg(d("synthetic"));
     ok(c);
-    check(&d("synthetic"), &[Cmd::SolveSynthetic], &mut seen);
+    check(&d("synthetic"), &[Cmd::SolveSynthetic], seen);
+}
 
+/// transit: a short stare with its products, and the precision study at one magnitude.
+fn transit_runs(dir: &Path, seen: &mut BTreeSet<&'static str>) {
+    let d = scratch(dir);
     // transit: a short stare with its products, and the precision study at one magnitude
     let transit = |extra: &[&str], out: &str| {
         let mut c = small(&["transit", "--hours", "0.3", "--depth", "0"]);
         c.args([
             "--set",
-            long_ace,
+            LONG_ACE,
             "--set",
             "instrument.detector_px=512",
             "--set",
@@ -281,10 +315,14 @@ fn every_file_written_is_declared_and_every_declared_file_is_written() {
         ok(c);
     };
     transit(&["--write-products"], "transit");
-    check(&d("transit"), &[Cmd::Transit], &mut seen);
+    check(&d("transit"), &[Cmd::Transit], seen);
     transit(&["--magnitudes", "9"], "precision");
-    check(&d("precision"), &[Cmd::Transit], &mut seen);
+    check(&d("precision"), &[Cmd::Transit], seen);
+}
 
+/// sweep, merge, report; and its Slurm job.
+fn sweep_runs(dir: &Path, seen: &mut BTreeSet<&'static str>) {
+    let d = scratch(dir);
     // sweep, merge, report; and its Slurm job
     let sweep_file = root().join("engine/sweeps/quick_sweep.toml");
     let mut c = jsim();
@@ -307,7 +345,7 @@ fn every_file_written_is_declared_and_every_declared_file_is_written() {
         } else {
             &[Cmd::Merge, Cmd::Report]
         };
-        expect_declared(&d("sweep"), &path, by, &mut seen);
+        expect_declared(&d("sweep"), &path, by, seen);
     }
     let mut c = jsim();
     c.arg("sweep")
@@ -317,8 +355,12 @@ fn every_file_written_is_declared_and_every_declared_file_is_written() {
         .arg("--out")
         .arg(d("sweep-slurm"));
     ok(c);
-    check(&d("sweep-slurm"), &[Cmd::Sweep], &mut seen);
+    check(&d("sweep-slurm"), &[Cmd::Sweep], seen);
+}
 
+/// bench: a knob sweep with a figure.
+fn bench_run(dir: &Path, seen: &mut BTreeSet<&'static str>) {
+    let d = scratch(dir);
     // bench: a knob sweep with a figure
     let mut c = small(&["bench", "--quick", "--parts", "knobs", "--ref-stars", "1"]);
     c.args([
@@ -330,18 +372,7 @@ fn every_file_written_is_declared_and_every_declared_file_is_written() {
     ])
     .arg(d("bench"));
     ok(c);
-    check(&d("bench"), &[Cmd::Bench], &mut seen);
-
-    let unseen: Vec<&str> = OUTPUT_FILES
-        .iter()
-        .map(|o| o.pattern)
-        .filter(|p| !seen.contains(p))
-        .collect();
-    assert!(
-        unseen.is_empty(),
-        "declared but written by no run here: {unseen:?}"
-    );
-    let _ = std::fs::remove_dir_all(&dir);
+    check(&d("bench"), &[Cmd::Bench], seen);
 }
 
 #[test]

@@ -390,6 +390,26 @@ fn a_sequence_is_solved_from_its_products_and_scored() {
     let out = dir.join("seq");
     let o = run(&out, &spec, &[]);
     assert!(o.status.success(), "{}", stderr(&o));
+    let bare = products_alone_are_what_the_solution_reads(&dir, &out);
+    a_catalogue_of_another_sequence_is_refused(&dir, &bare);
+    an_exposure_of_flagged_stars_is_left_out(&dir, &out);
+    let sol = dir.join("solution");
+    let o = jsim()
+        .args(["solve", "--sequence"])
+        .arg(&out)
+        .args(["--exposures", "4,8", "--out"])
+        .arg(&sol)
+        .output()
+        .expect("solve");
+    assert!(o.status.success(), "{}", stderr(&o));
+    the_sources_scatter_as_their_errors_say(&sol);
+    the_assembly_and_the_attitudes_are_solved(&sol);
+    bad_solve_input_is_named(&dir, &out);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The sequence's products, copied without a truth file: the solution reads them all (returns their directory).
+fn products_alone_are_what_the_solution_reads(dir: &Path, out: &Path) -> PathBuf {
     // the products the solution reads, and nothing of the truth among them: the instrument as designed
     // (the arrays where they were designed), where the simulation's config.toml has them as assembled
     for f in ["design.toml", "sequence.toml", "reference.csv", "plan.csv"] {
@@ -419,15 +439,20 @@ fn a_sequence_is_solved_from_its_products_and_scored() {
     let products =
         engine::studies::sequence::solution::read_products(&bare).expect("products alone");
     assert_eq!(products.exposures_run, 8);
+    bare
+}
+
+/// A catalogue of another sequence mixed into `bare`'s products is refused by name; nothing is written.
+fn a_catalogue_of_another_sequence_is_refused(dir: &Path, bare: &Path) {
     // a catalogue of another sequence (another plan: one visit, other times) mixed in is refused by name,
     // and nothing is written
     let other = dir.join("other");
-    let one_visit = self::spec(&dir);
+    let one_visit = self::spec(dir);
     let o = run(&other, &one_visit, &["--exposures", "2"]);
     assert!(o.status.success(), "{}", stderr(&o));
     let mixed = dir.join("mixed");
     std::fs::create_dir_all(mixed.join("exposures")).expect("mkdir");
-    for e in std::fs::read_dir(&bare).expect("bare").flatten() {
+    for e in std::fs::read_dir(bare).expect("bare").flatten() {
         if e.path().is_file() {
             std::fs::copy(e.path(), mixed.join(e.file_name())).expect("copy");
         }
@@ -458,11 +483,15 @@ fn a_sequence_is_solved_from_its_products_and_scored() {
         !mixed.join("solution").exists(),
         "nothing is written on error"
     );
+}
+
+/// An exposure whose every star is flagged is reported and left out; the rest is solved.
+fn an_exposure_of_flagged_stars_is_left_out(dir: &Path, out: &Path) {
     // an exposure whose every star is flagged (saturated, say) is reported and left out; the rest is solved
     let flagged = dir.join("flagged");
     std::fs::create_dir_all(flagged.join("exposures")).expect("mkdir");
     for (from, to) in [
-        (&out, &flagged),
+        (&out.to_path_buf(), &flagged),
         (&out.join("exposures"), &flagged.join("exposures")),
     ] {
         for e in std::fs::read_dir(from).expect("dir").flatten() {
@@ -498,15 +527,10 @@ fn a_sequence_is_solved_from_its_products_and_scored() {
     )
     .expect("parse");
     assert_eq!(summary[0]["skipped_exposures"], serde_json::json!([3]));
-    let sol = dir.join("solution");
-    let o = jsim()
-        .args(["solve", "--sequence"])
-        .arg(&out)
-        .args(["--exposures", "4,8", "--out"])
-        .arg(&sol)
-        .output()
-        .expect("solve");
-    assert!(o.status.success(), "{}", stderr(&o));
+}
+
+/// The solution's positions scatter about the truth as its own errors say.
+fn the_sources_scatter_as_their_errors_say(sol: &Path) {
     let (h, rows) = csv(&sol.join("sources.csv"));
     assert!(
         h.contains(&"parallax".to_string()) && rows.len() > 100,
@@ -532,6 +556,10 @@ fn a_sequence_is_solved_from_its_products_and_scored() {
         "{} pulls, rms {rms} (1 ± {tol})",
         pulls.len()
     );
+}
+
+/// The arrays' assembly and every exposure's attitude are solved.
+fn the_assembly_and_the_attitudes_are_solved(sol: &Path) {
     // the arrays' assembly (offsets of ≈ 10 px, turns of 0.1°) is solved: what is left of it on the arrays
     // is below 1 % of it (measured: 0.0095 of 6.1 px rms, from ≈ 400 reference stars of 3–40 mas and ≈ 650
     // sources)
@@ -576,6 +604,10 @@ fn a_sequence_is_solved_from_its_products_and_scored() {
     );
     eprintln!("attitudes: {dx:.3}/{dy:.3} mas, {roll:.4}″ rms");
     assert!(dx < 2.0 && dy < 2.0 && roll < 3.0, "{dx} {dy} mas, {roll}″");
+}
+
+/// Bad input to solve (not a sequence, too many exposures) is named; nothing is written.
+fn bad_solve_input_is_named(dir: &Path, out: &Path) {
     // bad input: not a sequence, too many exposures — named, nothing written
     let empty = dir.join("empty");
     std::fs::create_dir_all(&empty).expect("dir");
@@ -594,7 +626,7 @@ fn a_sequence_is_solved_from_its_products_and_scored() {
     assert!(!dir.join("no1").exists());
     let o = jsim()
         .args(["solve", "--sequence"])
-        .arg(&out)
+        .arg(out)
         .args(["--exposures", "9", "--out"])
         .arg(dir.join("no2"))
         .output()
@@ -605,7 +637,6 @@ fn a_sequence_is_solved_from_its_products_and_scored() {
         stderr(&o)
     );
     assert!(!dir.join("no2").exists());
-    let _ = std::fs::remove_dir_all(&dir);
 }
 
 /// plan.csv's seeds are the exposures' u64 seeds, unsigned (2⁶³ and above without a minus sign), so one

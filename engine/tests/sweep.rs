@@ -500,12 +500,9 @@ ace.modes.0.amplitude = [0.01, 0.02]
     let _ = std::fs::remove_dir_all(&d);
 }
 
-/// Bad input: each a clear error naming the problem, and no files written.
-#[test]
-fn bad_input_is_named_and_writes_nothing() {
-    let d = scratch("bad");
-    let good = std::fs::read_to_string(quick_path()).expect("quick");
-    let cases: Vec<(&str, String, Vec<&str>, &str)> = vec![
+/// The bad sweep files and options: (what, the sweep file's text, extra options, what the error names).
+fn bad_cases(good: &str) -> Vec<(&'static str, String, Vec<&'static str>, &'static str)> {
+    vec![
         (
             "unknown grid field",
             good.replace("\"ace.sigma_mas\"", "\"ace.sigma_mass\""),
@@ -554,33 +551,40 @@ fn bad_input_is_named_and_writes_nothing() {
             vec![],
             "exposurez",
         ),
-        ("N = 0", good.clone(), vec!["--shard", "0/0"], "N = 0"),
+        ("N = 0", good.to_string(), vec!["--shard", "0/0"], "N = 0"),
         (
             "i ≥ N",
-            good.clone(),
+            good.to_string(),
             vec!["--shard", "3/3"],
             "out of range",
         ),
         (
             "not i/N",
-            good.clone(),
+            good.to_string(),
             vec!["--shard", "2"],
             "expected i/N",
         ),
         (
             "bad slurm time",
-            good.clone(),
+            good.to_string(),
             vec!["--emit-slurm", "--time", "4h"],
             "--time 4h",
         ),
         (
             "zero slurm shards",
-            good.clone(),
+            good.to_string(),
             vec!["--emit-slurm", "--shards", "0"],
             "--shards 0",
         ),
-    ];
-    for (what, text, extra, needle) in cases {
+    ]
+}
+
+/// Bad input: each a clear error naming the problem, and no files written.
+#[test]
+fn bad_input_is_named_and_writes_nothing() {
+    let d = scratch("bad");
+    let good = std::fs::read_to_string(quick_path()).expect("quick");
+    for (what, text, extra, needle) in bad_cases(&good) {
         let file = d.join("s.toml");
         std::fs::write(&file, text).expect("write");
         let out = d.join("out");
@@ -600,8 +604,14 @@ fn bad_input_is_named_and_writes_nothing() {
         );
         assert!(!out.exists(), "{what}: wrote {}", out.display());
     }
+    let _ = std::fs::remove_dir_all(&d);
+}
 
-    // an output directory holding another sweep: refused, nothing in it changes
+/// An output directory holding another sweep: refused, nothing in it changes.
+#[test]
+fn another_sweeps_directory_is_refused_and_untouched() {
+    let d = scratch("bad-other-file");
+    let good = std::fs::read_to_string(quick_path()).expect("quick");
     let (rdir, _) = reference();
     let dir = scratch("bad-other");
     copy_dir(rdir, &dir);
@@ -627,8 +637,14 @@ fn bad_input_is_named_and_writes_nothing() {
         before,
         "the other sweep's directory is untouched"
     );
+    let _ = std::fs::remove_dir_all(&d);
+    let _ = std::fs::remove_dir_all(&dir);
+}
 
-    // merge: not a sweep directory; missing units named with a non-zero exit and no merged.csv
+/// merge: not a sweep directory; missing units named with a non-zero exit and no merged.csv.
+#[test]
+fn merge_names_a_missing_directory_and_missing_units() {
+    let d = scratch("bad-merge");
     let o = jsim()
         .arg("merge")
         .arg(d.join("nothing"))
@@ -667,7 +683,6 @@ fn bad_input_is_named_and_writes_nothing() {
         1 + 2 * 3
     );
     let _ = std::fs::remove_dir_all(&d);
-    let _ = std::fs::remove_dir_all(&dir);
     let _ = std::fs::remove_dir_all(&part);
 }
 
