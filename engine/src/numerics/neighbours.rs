@@ -101,6 +101,16 @@ impl GrowingNeighbours {
         self.pos.len() - 1
     }
 
+    /// Position `k` (its index as [`GrowingNeighbours::push`] returned it).
+    pub fn position(&self, k: usize) -> (f64, f64) {
+        self.pos[k]
+    }
+
+    /// Every position, in the order they were given.
+    pub fn into_positions(self) -> Vec<(f64, f64)> {
+        self.pos
+    }
+
     /// As [`Neighbours::near`]: every position within `radius_px`, perhaps a hair beyond.
     pub fn near(&mut self, x: f64, y: f64, radius_px: f64) -> Vec<usize> {
         if self.pos.len() - self.in_tree > GROW_LINEAR_MAX {

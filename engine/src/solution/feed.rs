@@ -375,9 +375,9 @@ fn identify(
     refs: &[[f64; 5]],
     opt: &FeedOptions,
 ) -> Identified {
-    let mut source_pos: Vec<[f64; 2]> = refs.iter().map(|r| [r[0], r[1]]).collect();
+    // the sources' positions live in the tree alone: the references', then each new source's
     let mut reference: Vec<Option<usize>> = (0..refs.len()).map(Some).collect();
-    let mut tree = GrowingNeighbours::new(source_pos.iter().map(|p| (p[0], p[1])).collect());
+    let mut tree = GrowingNeighbours::new(refs.iter().map(|r| (r[0], r[1])).collect());
     let mut assigned: Vec<Option<usize>> = vec![None; detections.len()];
     let mut left_out = 0usize;
     let mut by_exposure: Vec<Vec<usize>> = vec![Vec::new(); n_exposures];
@@ -400,7 +400,7 @@ fn identify(
             }
             let p = apply(m, places[i].0);
             let near = tree.near(p[0], p[1], opt.match_radius_mas);
-            let at = |s: usize| (source_pos[s][0], source_pos[s][1]);
+            let at = |s: usize| tree.position(s);
             match nearest_of(near, at, (p[0], p[1]), opt.match_radius_mas) {
                 Some((s, d2)) => {
                     if let Some((_, od2)) = claim.get(&s).copied() {
@@ -421,13 +421,16 @@ fn identify(
         }
         for (i, p) in fresh {
             let s = tree.push((p[0], p[1]));
-            source_pos.push(p);
             reference.push(None);
             assigned[i] = Some(s);
         }
     }
     Identified {
-        source_pos,
+        source_pos: tree
+            .into_positions()
+            .into_iter()
+            .map(|(x, y)| [x, y])
+            .collect(),
         reference,
         assigned,
         left_out,
