@@ -406,46 +406,28 @@ fn read_csv(path: &Path, lim: &Limits) -> Result<Catalogue, SceneError> {
 }
 
 fn read_fits(path: &Path, lim: &Limits) -> Result<Catalogue, SceneError> {
-    use fitsio::hdu::HduInfo;
+    use crate::formats::fits::{self, FitsError};
     let p = path.display().to_string();
-    let fe = |e: fitsio::errors::Error| SceneError::Parse {
-        path: p.clone(),
-        line: 0,
-        message: e.to_string(),
-    };
-    if !path.exists() {
-        return Err(SceneError::Io {
-            path: p,
-            source: std::io::Error::new(std::io::ErrorKind::NotFound, "no such file"),
-        });
-    }
-    let mut f = fitsio::FitsFile::open(path).map_err(fe)?;
-    let hdu = f.hdu(1).map_err(|e| SceneError::Parse {
-        path: p.clone(),
-        line: 0,
-        message: format!("no table extension: {e}"),
-    })?;
-    let HduInfo::TableInfo {
-        column_descriptions,
-        num_rows,
-    } = &hdu.info
-    else {
-        return Err(SceneError::Parse {
-            path: p,
+    let fe = |e: FitsError| match e {
+        FitsError::Io { reason, .. } => SceneError::Io {
+            path: p.clone(),
+            source: reason,
+        },
+        FitsError::Fits { message, .. } => SceneError::Parse {
+            path: p.clone(),
             line: 0,
-            message: "the first extension is not a table".into(),
-        });
+            message,
+        },
     };
-    if *num_rows > MAX_CATALOGUE_STARS {
+    let (names, num_rows) = fits::table_layout(path, 1).map_err(fe)?;
+    if num_rows > MAX_CATALOGUE_STARS {
         return Err(SceneError::TooMany {
             path: p,
             max: MAX_CATALOGUE_STARS,
         });
     }
-    let names: Vec<String> = column_descriptions.iter().map(|c| c.name.clone()).collect();
     let lay = Layout::from_names(&names, &p)?;
-    let mut cols: Vec<Option<Vec<f64>>> = vec![None; names.len()];
-    for i in [
+    let wanted: Vec<usize> = [
         Some(lay.pos[0]),
         Some(lay.pos[1]),
         lay.hw,
@@ -456,18 +438,17 @@ fn read_fits(path: &Path, lim: &Limits) -> Result<Catalogue, SceneError> {
     ]
     .into_iter()
     .flatten()
+    .collect();
+    let wanted_names: Vec<&str> = wanted.iter().map(|&i| names[i].as_str()).collect();
+    let mut cols: Vec<Option<Vec<f64>>> = vec![None; names.len()];
+    for (i, c) in wanted
+        .into_iter()
+        .zip(fits::read_table_at(path, 1, &wanted_names).map_err(fe)?)
     {
-        cols[i] = Some(
-            hdu.read_col::<f64>(&mut f, &names[i])
-                .map_err(|e| SceneError::Parse {
-                    path: p.clone(),
-                    line: 0,
-                    message: format!("column {}: {e}", names[i]),
-                })?,
-        );
+        cols[i] = Some(c);
     }
-    let mut rows = Vec::with_capacity(*num_rows);
-    for r in 0..*num_rows {
+    let mut rows = Vec::with_capacity(num_rows);
+    for r in 0..num_rows {
         let at = |message: String| SceneError::Parse {
             path: p.clone(),
             line: r + 1,
