@@ -15,15 +15,7 @@ pub struct ExposureFiles {
     pub truth_csv: PathBuf,
 }
 
-/// File name of image `index`.
-pub fn image_name(index: usize) -> String {
-    format!("img_{index:03}.fits")
-}
-
-/// File name of the truth catalogue of image `index`.
-pub fn truth_name(index: usize) -> String {
-    format!("truth_{index:03}.csv")
-}
+pub use crate::io::products::files::{image_name, truth_name};
 
 /// The time and place cards of an exposure starting `t_start_s` into the ACE series: `TIMESYS` (UTC),
 /// `DATE-OBS` and `MJD-OBS` (UTC of `observation.start_utc` + `TSTART`), `MJD-TDB`, `ORBPHASE` (the orbit's

@@ -16,10 +16,7 @@ use super::fits::{self, Card, Column, Hdu, Pixels};
 use crate::simulate::{FocalPlaneExposure, FocalPlaneSimulator};
 use std::path::{Path, PathBuf};
 
-/// File name of focal-plane exposure `index`.
-pub fn focal_plane_name(index: usize) -> String {
-    format!("fp_{index:03}.fits")
-}
+pub use crate::io::products::files::focal_plane_name;
 
 /// The primary header of a focal-plane file.
 fn primary_cards(fps: &FocalPlaneSimulator, exp: &FocalPlaneExposure) -> Vec<Card> {

@@ -27,7 +27,7 @@ use crate::simulate::{FocalPlaneSimulator, Simulator};
 use std::path::{Path, PathBuf};
 
 /// File name of the calibration flat beside the images.
-pub const FLAT_NAME: &str = "flat_cal.fits";
+pub const FLAT_NAME: &str = crate::io::products::files::FLAT_CAL_FITS;
 
 /// The extension of array `k` (0-based) in a focal-plane flat.
 pub fn flat_extension(k: usize) -> String {
@@ -167,7 +167,7 @@ pub fn find_flat(image: &Path, given: Option<&Path>) -> Option<PathBuf> {
 }
 
 /// File name of the reference astrometric catalogue beside the images.
-pub const REFCAT_NAME: &str = "refcat.csv";
+pub const REFCAT_NAME: &str = crate::io::products::files::REFCAT_CSV;
 
 /// Columns of `refcat.csv`.
 pub const REFCAT_HEADER: [&str; 8] = [
@@ -431,7 +431,7 @@ pub fn find_reference_catalogue(image: &Path, given: Option<&Path>) -> Option<Pa
 }
 
 /// File name of the design model PSF beside the images.
-pub const MODEL_PSF_NAME: &str = "psf_model.fits";
+pub const MODEL_PSF_NAME: &str = crate::io::products::files::PSF_MODEL_FITS;
 
 /// The design model PSF of a simulation as an ePSF table (8 nodes per pixel, `analysis.epsf_radius_px`).
 pub fn model_psf(
@@ -666,10 +666,7 @@ pub fn find_model_psf(image: &Path, given: Option<&Path>) -> Option<PathBuf> {
     }
 }
 
-/// File name of the attitude telemetry of exposure `index` beside the images.
-pub fn telemetry_name(index: usize) -> String {
-    format!("telemetry_{index:03}.fits")
-}
+pub use crate::io::products::files::telemetry_name;
 
 /// Write the attitude telemetry of exposure `index` as the spacecraft records it under `quality` (one
 /// binary table `ATTITUDE`: `T_S` in the ACE series' time, `ATT_X_MAS`, `ATT_Y_MAS` the telescope's attitude

@@ -215,7 +215,11 @@ pub fn score_rows(s: &Score) -> Vec<Vec<Cell>> {
 /// Write `score.csv` and `score.json` (the bins, the totals, the false detections, the offset and the
 /// options; the pairs are left out) into `dir`.
 pub fn write_score(dir: &Path, s: &Score, measured: &Path, truth: &Path) -> Result<(), IoError> {
-    csv::write(&dir.join("score.csv"), &SCORE_HEADER, &score_rows(s))?;
+    csv::write(
+        &dir.join(crate::io::products::files::SCORE_CSV),
+        &SCORE_HEADER,
+        &score_rows(s),
+    )?;
     let json = serde_json::json!({
         "measured": measured.display().to_string(),
         "truth": truth.display().to_string(),
@@ -227,7 +231,14 @@ pub fn write_score(dir: &Path, s: &Score, measured: &Path, truth: &Path) -> Resu
         "all": s.all,
         "bins": s.bins,
     });
-    let text = serde_json::to_string_pretty(&json)
-        .map_err(|e| format_err(&dir.join("score.json"), e.to_string()))?;
-    super::write_atomic(&dir.join("score.json"), text.as_bytes())
+    let text = serde_json::to_string_pretty(&json).map_err(|e| {
+        format_err(
+            &dir.join(crate::io::products::files::SCORE_JSON),
+            e.to_string(),
+        )
+    })?;
+    super::write_atomic(
+        &dir.join(crate::io::products::files::SCORE_JSON),
+        text.as_bytes(),
+    )
 }

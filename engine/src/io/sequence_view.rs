@@ -10,14 +10,14 @@ use crate::config::Config;
 use std::path::{Path, PathBuf};
 
 /// The files of a sequence's directory read here.
-pub const COVERAGE_NAME: &str = "coverage.csv";
-pub const PLAN_NAME: &str = "plan.csv";
-pub const DESIGN_NAME: &str = "design.toml";
-pub const CONFIG_NAME: &str = "config.toml";
+pub const COVERAGE_NAME: &str = crate::io::products::files::COVERAGE_CSV;
+pub const PLAN_NAME: &str = crate::io::products::files::PLAN_CSV;
+pub const DESIGN_NAME: &str = crate::io::products::files::DESIGN_TOML;
+pub const CONFIG_NAME: &str = crate::io::products::files::CONFIG_TOML;
 /// `jsim solve --sequence DIR`'s default output directory, and its files read here.
 pub const SOLUTION_DIR: &str = "solution";
-pub const PRECISION_NAME: &str = "precision_vs_n.csv";
-pub const CALIBRATION_MAP_NAME: &str = "calibration_map.csv";
+pub const PRECISION_NAME: &str = crate::io::products::files::PRECISION_VS_N_CSV;
+pub const CALIBRATION_MAP_NAME: &str = crate::io::products::files::CALIBRATION_MAP_CSV;
 
 /// A precision point is shown where its bin holds at least this many sources (as `jsim solve`'s figure).
 pub const MIN_SOURCES_PER_POINT: usize = 5;
@@ -636,7 +636,10 @@ mod tests {
         assert!((s.grid_step_px().expect("step") - 28.4).abs() < 1e-9);
         // the instrument as designed comes first (a broken config.toml is not read)
         d.write(CONFIG_NAME, "[instrument\n");
-        assert!(read_sequence_view(&d.0).is_err_and(|e| e.to_string().contains("config.toml")));
+        assert!(read_sequence_view(&d.0).is_err_and(|e| {
+            e.to_string()
+                .contains(crate::io::products::files::CONFIG_TOML)
+        }));
         d.write(DESIGN_NAME, "");
         let v = read_sequence_view(&d.0).expect("design.toml read");
         assert_eq!(
@@ -662,7 +665,8 @@ mod tests {
             .expect_err("no sequence")
             .to_string();
         assert!(
-            e.contains(&d.0.display().to_string()) && e.contains("coverage.csv"),
+            e.contains(&d.0.display().to_string())
+                && e.contains(crate::io::products::files::COVERAGE_CSV),
             "{e}"
         );
         let e = read_sequence_view(&d.0.join("nowhere"))
@@ -681,11 +685,14 @@ mod tests {
         d.write("solution/precision_vs_n.csv", PRECISION);
         // a solution/ directory without its files names the file missing
         let e = read_sequence_view(&d.0).expect_err("missing").to_string();
-        assert!(e.contains("calibration_map.csv"), "{e}");
+        assert!(
+            e.contains(crate::io::products::files::CALIBRATION_MAP_CSV),
+            "{e}"
+        );
         d.write("solution/calibration_map.csv", &calibration(f64::INFINITY));
         let e = read_sequence_view(&d.0).expect_err("inf").to_string();
         assert!(
-            e.contains("calibration_map.csv")
+            e.contains(crate::io::products::files::CALIBRATION_MAP_CSV)
                 && e.contains("row 2")
                 && e.contains("`residual_dx_px`"),
             "{e}"
@@ -698,7 +705,7 @@ mod tests {
         );
         let e = read_sequence_view(&d.0).expect_err("nan").to_string();
         assert!(
-            e.contains("precision_vs_n.csv")
+            e.contains(crate::io::products::files::PRECISION_VS_N_CSV)
                 && e.contains("row 3")
                 && e.contains("`position_robust_mas`"),
             "{e}"
@@ -709,13 +716,15 @@ mod tests {
         d.write(COVERAGE_NAME, &COVERAGE.replace("0.005,0,2", "0.005,0,2.5"));
         let e = read_sequence_view(&d.0).expect_err("fraction").to_string();
         assert!(
-            e.contains("coverage.csv") && e.contains("row 7") && e.contains("`exposures`"),
+            e.contains(crate::io::products::files::COVERAGE_CSV)
+                && e.contains("row 7")
+                && e.contains("`exposures`"),
             "{e}"
         );
         d.write(COVERAGE_NAME, &COVERAGE.replace("0.005,0,2", "0.0072,0,2"));
         let e = read_sequence_view(&d.0).expect_err("off grid").to_string();
         assert!(
-            e.contains("coverage.csv") && e.contains("off the grid"),
+            e.contains(crate::io::products::files::COVERAGE_CSV) && e.contains("off the grid"),
             "{e}"
         );
         d.write(COVERAGE_NAME, "l_deg,b_deg\n0,0\n");

@@ -8,7 +8,7 @@ pub use crate::solution::feed::SkyReference;
 use std::path::{Path, PathBuf};
 
 /// The file name in a sequence's directory.
-pub const REFERENCE_NAME: &str = "reference.csv";
+pub const REFERENCE_NAME: &str = crate::io::products::files::REFERENCE_CSV;
 
 /// Its columns (ICRS degrees; mas/yr; mas; errors in mas and mas/yr; the epoch a Julian year, TDB).
 pub const REFERENCE_HEADER: [&str; 12] = [

@@ -836,7 +836,7 @@ mod tests {
     fn the_figure_is_drawn_only_for_a_trade_off() {
         let dir = std::env::temp_dir().join(format!("jsim-bench-plot-{}", std::process::id()));
         std::fs::create_dir_all(&dir).expect("dir");
-        let png = dir.join("bench.png");
+        let png = dir.join(crate::io::products::files::BENCH_PNG);
         let one = [row("reference", 0.0), row("fast", 1e-4)];
         assert!(!plot_bench(&png, &one).expect("plot"));
         assert!(!png.exists());

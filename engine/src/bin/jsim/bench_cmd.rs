@@ -97,7 +97,10 @@ pub fn bench(a: &BenchArgs) -> Result<()> {
     }
     let cfg = a.cfg.load()?;
     let mut outputs = crate::outputs::Outputs::in_dir(&a.out)?;
-    for name in ["bench.csv", "bench.png"] {
+    for name in [
+        engine::io::products::files::BENCH_CSV,
+        engine::io::products::files::BENCH_PNG,
+    ] {
         outputs.path(name);
     }
     let session = engine::session::Session::new();
@@ -110,7 +113,8 @@ pub fn bench(a: &BenchArgs) -> Result<()> {
     let mut rows: Vec<BenchRow> = Vec::new();
     let save = |rows: &[BenchRow]| {
         crate::outputs::interrupted()?;
-        bench::write_bench(&a.out.join("bench.csv"), rows).map_err(anyhow::Error::from)
+        bench::write_bench(&a.out.join(engine::io::products::files::BENCH_CSV), rows)
+            .map_err(anyhow::Error::from)
     };
     let has = |p: &str| a.parts.iter().any(|x| x == p);
     if has("methods") {
@@ -197,7 +201,7 @@ pub fn bench(a: &BenchArgs) -> Result<()> {
         rows.extend(bench::scaling(&session, &cfg, &a.stars, gpu.as_ref())?);
         save(&rows)?;
     }
-    let drawn = bench::plot_bench(&a.out.join("bench.png"), &rows)?;
+    let drawn = bench::plot_bench(&a.out.join(engine::io::products::files::BENCH_PNG), &rows)?;
     outputs.keep();
     println!("{}", bench::render_table(&rows));
     if drawn {

@@ -60,7 +60,7 @@ pub fn write_budget(
         ]);
     }
     engine::io::csv::write(
-        &outputs.path("mission_budget.csv"),
+        &outputs.path(engine::io::products::files::MISSION_BUDGET_CSV),
         &[
             "hw_lo",
             "hw_hi",

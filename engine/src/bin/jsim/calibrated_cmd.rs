@@ -156,7 +156,7 @@ pub fn analyze_calibrated(session: &Session, cfg: &Config, a: &AnalyzeArgs) -> R
                 ));
             }
         }
-        let path = a.out.join("repeatability.csv");
+        let path = a.out.join(engine::io::products::files::REPEATABILITY_CSV);
         outputs.add(&path);
         csv::write(&path, &products::REPEAT_HEADER, &rows)?;
         Ok(())

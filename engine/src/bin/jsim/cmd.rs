@@ -109,7 +109,10 @@ pub fn simulate(
     sim.jobs()?; // PSFs and kernels now, so the timing below separates set-up from integration
     let setup_s = t0.elapsed().as_secs_f64();
     let mut outputs = Outputs::in_dir(out)?;
-    engine::io::write_atomic(&outputs.path("config.toml"), cfg.to_toml().as_bytes())?;
+    engine::io::write_atomic(
+        &outputs.path(engine::io::products::files::CONFIG_TOML),
+        cfg.to_toml().as_bytes(),
+    )?;
     outputs.path(engine::io::instrument::FLAT_NAME);
     engine::io::instrument::write_calibration_flat(out, &sim)?;
     outputs.path(engine::io::instrument::REFCAT_NAME);
@@ -154,7 +157,7 @@ pub fn simulate(
         "images": summary,
     });
     engine::io::write_atomic(
-        &outputs.path("run.json"),
+        &outputs.path(engine::io::products::files::RUN_JSON),
         serde_json::to_string_pretty(&run)?.as_bytes(),
     )?;
     outputs.keep();
@@ -191,7 +194,10 @@ fn simulate_focal_plane(
     }
     let setup_s = t0.elapsed().as_secs_f64();
     let mut outputs = Outputs::in_dir(out)?;
-    engine::io::write_atomic(&outputs.path("config.toml"), cfg.to_toml().as_bytes())?;
+    engine::io::write_atomic(
+        &outputs.path(engine::io::products::files::CONFIG_TOML),
+        cfg.to_toml().as_bytes(),
+    )?;
     outputs.path(engine::io::instrument::FLAT_NAME);
     engine::io::instrument::write_focal_plane_flats(out, &fps)?;
     outputs.path(engine::io::instrument::REFCAT_NAME);
@@ -248,7 +254,7 @@ fn simulate_focal_plane(
         "images": summary,
     });
     engine::io::write_atomic(
-        &outputs.path("run.json"),
+        &outputs.path(engine::io::products::files::RUN_JSON),
         serde_json::to_string_pretty(&run)?.as_bytes(),
     )?;
     outputs.keep();
@@ -351,11 +357,11 @@ pub fn analyze(session: &Session, cfg: &Config, a: &AnalyzeArgs) -> Result<()> {
     let an = &an;
     let mut outputs = Outputs::in_dir(&a.out)?;
     for name in [
-        "catalogue.csv",
-        "epsf.fits",
-        "summary.json",
-        "vectors.csv",
-        "vectors.png",
+        engine::io::products::files::CATALOGUE_CSV,
+        engine::io::products::files::EPSF_FITS,
+        engine::io::products::files::SUMMARY_JSON,
+        engine::io::products::files::VECTORS_CSV,
+        engine::io::products::files::VECTORS_PNG,
     ] {
         outputs.path(name);
     }
@@ -435,7 +441,11 @@ pub fn experiment(session: &Session, base: &Config, a: &ExperimentArgs) -> Resul
         );
     }
     let mut outputs = Outputs::in_dir(&a.out)?;
-    for name in ["experiment.csv", "images.csv", "accuracy.png"] {
+    for name in [
+        engine::io::products::files::EXPERIMENT_CSV,
+        engine::io::products::files::IMAGES_CSV,
+        engine::io::products::files::ACCURACY_PNG,
+    ] {
         outputs.path(name);
     }
     let total = (datasets.len() * base.fidelity.images) as u64;
@@ -493,9 +503,18 @@ pub fn experiment(session: &Session, base: &Config, a: &ExperimentArgs) -> Resul
         rows.extend(r);
     }
     pb.finish_and_clear();
-    products::write_experiment(&a.out.join("experiment.csv"), &rows)?;
-    products::write_images(&a.out.join("images.csv"), &image_rows)?;
-    products::plot_accuracy(&a.out.join("accuracy.png"), &rows)?;
+    products::write_experiment(
+        &a.out.join(engine::io::products::files::EXPERIMENT_CSV),
+        &rows,
+    )?;
+    products::write_images(
+        &a.out.join(engine::io::products::files::IMAGES_CSV),
+        &image_rows,
+    )?;
+    products::plot_accuracy(
+        &a.out.join(engine::io::products::files::ACCURACY_PNG),
+        &rows,
+    )?;
     outputs.keep();
     println!("{}", experiment::render_table(&rows));
     println!(
@@ -576,7 +595,12 @@ pub enum FrameArg {
 
 /// The `summary.json` beside a catalogue, if any.
 fn summary_beside(catalogue: &Path) -> Option<serde_json::Value> {
-    let text = std::fs::read_to_string(catalogue.parent()?.join("summary.json")).ok()?;
+    let text = std::fs::read_to_string(
+        catalogue
+            .parent()?
+            .join(engine::io::products::files::SUMMARY_JSON),
+    )
+    .ok()?;
     serde_json::from_str(&text).ok()
 }
 
@@ -646,7 +670,10 @@ pub fn score(a: &ScoreArgs) -> Result<()> {
     let truth = engine::io::score::read_truth_list(&a.truth, frame)?;
     let s = engine::scoring::score(&measured, &truth, &opts).map_err(anyhow::Error::msg)?;
     let mut outputs = Outputs::in_dir(&a.out)?;
-    for name in ["score.csv", "score.json"] {
+    for name in [
+        engine::io::products::files::SCORE_CSV,
+        engine::io::products::files::SCORE_JSON,
+    ] {
         outputs.path(name);
     }
     engine::io::score::write_score(&a.out, &s, &a.catalogue, &a.truth)?;
@@ -756,7 +783,7 @@ fn accuracy_bins(
     let b = &cfg.scene.bulge;
     let edges = engine::scoring::crowded::edges(b.hw_min, b.hw_max, 0.5);
     let bins = engine::scoring::crowded::mag_bins(&views, scale, &edges);
-    let path = a.out.join("crowded_bins.csv");
+    let path = a.out.join(engine::io::products::files::CROWDED_BINS_CSV);
     outputs.add(&path);
     engine::io::crowded::write_table(
         &path,
@@ -781,8 +808,8 @@ pub fn analyze_parts(
 ) -> Result<()> {
     let t0 = Instant::now();
     let mut outputs = Outputs::in_dir(&a.out)?;
-    outputs.path("catalogue.csv");
-    outputs.path("summary.json");
+    outputs.path(engine::io::products::files::CATALOGUE_CSV);
+    outputs.path(engine::io::products::files::SUMMARY_JSON);
     let mut per_array = Vec::new();
     let mut rows = Vec::new();
     let mut fits: Vec<Vec<StarResult>> = Vec::new();
@@ -805,7 +832,11 @@ pub fn analyze_parts(
             .with_context(|| format!("{}[{name}]", a.image.display()))?;
         scale = input.plate_scale_mas;
         let dir = a.out.join(&part.dir);
-        for f in ["catalogue.csv", "epsf.fits", "summary.json"] {
+        for f in [
+            engine::io::products::files::CATALOGUE_CSV,
+            engine::io::products::files::EPSF_FITS,
+            engine::io::products::files::SUMMARY_JSON,
+        ] {
             outputs.add(&dir.join(f));
         }
         std::fs::create_dir_all(&dir).with_context(|| dir.display().to_string())?;
@@ -871,7 +902,11 @@ pub fn analyze_parts(
             ..Default::default()
         },
     );
-    write_combined_catalogue(&a.out.join("catalogue.csv"), rows, with_sky_columns)?;
+    write_combined_catalogue(
+        &a.out.join(engine::io::products::files::CATALOGUE_CSV),
+        rows,
+        with_sky_columns,
+    )?;
     let bins = accuracy_bins(cfg, a, &scored, scale, &mut outputs)?;
     let json = serde_json::json!({
         "image": a.image.display().to_string(),
@@ -881,7 +916,7 @@ pub fn analyze_parts(
         "seconds": t0.elapsed().as_secs_f64(),
     });
     engine::io::write_atomic(
-        &a.out.join("summary.json"),
+        &a.out.join(engine::io::products::files::SUMMARY_JSON),
         serde_json::to_string_pretty(&json)?.as_bytes(),
     )?;
     if let Some(f) = finish {
@@ -896,7 +931,12 @@ pub fn analyze_parts(
     );
     if let Some(bins) = bins {
         crate::crowded_cmd::print_bin_table(&bins);
-        println!("wrote {}", a.out.join("crowded_bins.csv").display());
+        println!(
+            "wrote {}",
+            a.out
+                .join(engine::io::products::files::CROWDED_BINS_CSV)
+                .display()
+        );
     }
     Ok(())
 }

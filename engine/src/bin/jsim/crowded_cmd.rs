@@ -76,9 +76,9 @@ pub fn crowded(a: &CrowdedArgs) -> Result<()> {
         .unwrap_or(engine::analysis::countermeasures::TelemetryQuality::DEFAULT);
     let mut outputs = crate::outputs::Outputs::in_dir(&a.out)?;
     for name in [
-        "crowded_bins.csv",
-        "crowded_arrays.csv",
-        "accuracy_vs_mag.png",
+        engine::io::products::files::CROWDED_BINS_CSV,
+        engine::io::products::files::CROWDED_ARRAYS_CSV,
+        engine::io::products::files::ACCURACY_VS_MAG_PNG,
     ] {
         outputs.path(name);
     }
@@ -154,12 +154,12 @@ pub fn crowded(a: &CrowdedArgs) -> Result<()> {
         }
     }
     out::write_table(
-        &a.out.join("crowded_bins.csv"),
+        &a.out.join(engine::io::products::files::CROWDED_BINS_CSV),
         &out::BINS_HEADER,
         &bin_rows,
     )?;
     out::write_table(
-        &a.out.join("crowded_arrays.csv"),
+        &a.out.join(engine::io::products::files::CROWDED_ARRAYS_CSV),
         &out::ARRAYS_HEADER,
         &array_rows,
     )?;
@@ -167,7 +167,10 @@ pub fn crowded(a: &CrowdedArgs) -> Result<()> {
         .iter()
         .map(|(l, r)| (l.clone(), r.bins.as_slice()))
         .collect();
-    out::plot_accuracy(&a.out.join("accuracy_vs_mag.png"), &curves)?;
+    out::plot_accuracy(
+        &a.out.join(engine::io::products::files::ACCURACY_VS_MAG_PNG),
+        &curves,
+    )?;
     outputs.keep();
     eprintln!("wrote {}", a.out.display());
     Ok(())

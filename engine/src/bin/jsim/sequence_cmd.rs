@@ -114,7 +114,10 @@ pub fn sequence(a: &SequenceArgs) -> Result<()> {
         return emit_slurm(a, &plan, &cfg, outputs);
     }
     // what it is planned with, for the solution (`jsim solve`) to read back
-    for name in ["config.toml", "sequence.toml"] {
+    for name in [
+        engine::io::products::files::CONFIG_TOML,
+        engine::io::products::files::SEQUENCE_TOML,
+    ] {
         outputs.add(&a.out.join(name));
     }
     run::write_setup(&plan, &cfg, &a.out).map_err(anyhow::Error::msg)?;
@@ -215,8 +218,8 @@ fn emit_slurm(
         keep_images: a.keep_images,
     };
     for name in [
-        "config.toml",
-        "sequence.toml",
+        engine::io::products::files::CONFIG_TOML,
+        engine::io::products::files::SEQUENCE_TOML,
         run::FIELD_NAME,
         engine::io::sky_reference::REFERENCE_NAME,
     ] {

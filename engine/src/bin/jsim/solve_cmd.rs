@@ -120,7 +120,10 @@ fn emit_slurm(a: &SolveArgs) -> Result<()> {
         );
     }
     let sequence = std::path::absolute(&a.sequence)?;
-    if !sequence.join("sequence.toml").is_file() {
+    if !sequence
+        .join(engine::io::products::files::SEQUENCE_TOML)
+        .is_file()
+    {
         bail!(
             "--sequence {}: no sequence planned there (run `jsim sequence --emit-slurm --out DIR` first)",
             sequence.display()

@@ -130,7 +130,8 @@ pub fn sweep(a: &SweepArgs) -> Result<()> {
         }
         println!(
             "submit with: {}   (rerun it to resume after a failure)",
-            out.join("slurm/submit.sh").display()
+            out.join(engine::io::products::files::SLURM_SUBMIT_SH)
+                .display()
         );
         return Ok(());
     }
@@ -294,7 +295,9 @@ pub fn report(a: &ReportArgs) -> Result<()> {
     print!("{}", sweep::render_report(&s));
     println!(
         "wrote {} and {} figure(s) in {}",
-        a.dir.join("report.csv").display(),
+        a.dir
+            .join(engine::io::products::files::REPORT_CSV)
+            .display(),
         s.files.len() - 1,
         a.dir.join("report").display()
     );

@@ -62,7 +62,11 @@ pub fn solve_synthetic(a: &SyntheticArgs) -> Result<()> {
         .map(|(s, v)| [vec![Cell::I(s as i64)], sq::source_cells(v)].concat())
         .collect();
     let header: Vec<&str> = ["source"].into_iter().chain(sq::SOURCE_COLUMNS).collect();
-    engine::io::csv::write(&outputs.path("sources.csv"), &header, &rows)?;
+    engine::io::csv::write(
+        &outputs.path(engine::io::products::files::SOURCES_CSV),
+        &header,
+        &rows,
+    )?;
     let rows: Vec<Vec<Cell>> = sol
         .attitudes
         .iter()
@@ -78,7 +82,7 @@ pub fn solve_synthetic(a: &SyntheticArgs) -> Result<()> {
         })
         .collect();
     engine::io::csv::write(
-        &outputs.path("attitudes.csv"),
+        &outputs.path(engine::io::products::files::ATTITUDES_CSV),
         &["exposure", "p", "q", "offset_xi_mas", "offset_eta_mas"],
         &rows,
     )?;
@@ -99,7 +103,7 @@ pub fn solve_synthetic(a: &SyntheticArgs) -> Result<()> {
         "peak_memory_mib_rank0": engine::studies::bench_solution::peak_memory_mib(),
     });
     engine::io::write_atomic(
-        &outputs.path("solution.json"),
+        &outputs.path(engine::io::products::files::SOLUTION_JSON),
         serde_json::to_string_pretty(&summary)?.as_bytes(),
     )?;
     outputs.keep();

@@ -236,17 +236,17 @@ pub fn write_analysis(
     sky: Option<&crate::sky::wcs::ArrayWcs>,
 ) -> Result<(), IoError> {
     write_catalogue(
-        &dir.join("catalogue.csv"),
+        &dir.join(crate::io::products::files::CATALOGUE_CSV),
         &analysis.stars,
         summary.plate_scale_mas,
         sky,
     )?;
     write_epsf(
-        &dir.join("epsf.fits"),
+        &dir.join(crate::io::products::files::EPSF_FITS),
         &analysis.epsf,
         analysis.report.epsf_iterations,
     )?;
-    write_summary(&dir.join("summary.json"), summary)?;
+    write_summary(&dir.join(crate::io::products::files::SUMMARY_JSON), summary)?;
     if let Some((map, extent_px, title)) = vectors {
         write_vectors(dir, "vectors", map, extent_px, title)?;
     }

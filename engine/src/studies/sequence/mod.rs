@@ -18,7 +18,7 @@ pub mod solve_study;
 pub mod spec;
 
 /// The field's sky catalogue in a sequence's output directory (what every exposure reads).
-pub const FIELD_NAME: &str = "field.csv";
+pub const FIELD_NAME: &str = crate::io::products::files::FIELD_CSV;
 
 /// A sequence run failed.
 #[derive(Debug, thiserror::Error)]

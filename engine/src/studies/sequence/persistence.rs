@@ -18,7 +18,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 /// The field's stars bright enough to fill traps, in the output directory.
-pub const BRIGHT_FIELD_NAME: &str = "field_bright.csv";
+pub const BRIGHT_FIELD_NAME: &str = crate::io::products::files::FIELD_BRIGHT_CSV;
 
 /// The largest fraction of a star's light one pixel collects (any sub-pixel phase, no jitter): a bound
 /// that picks the stars whose brightest pixel can reach the threshold (`tests/persistence.rs` checks it

@@ -91,7 +91,11 @@ pub fn write(
         ]);
     }
     csv::write(&at(PLAN_NAME), &PLAN_COLUMNS, &plan_rows)?;
-    csv::write(&at("plan_truth.csv"), &PLAN_TRUTH_COLUMNS, &flown_rows)?;
+    csv::write(
+        &at(crate::io::products::files::PLAN_TRUTH_CSV),
+        &PLAN_TRUTH_COLUMNS,
+        &flown_rows,
+    )?;
     let cov_rows: Vec<Vec<Cell>> = (0..coverage.rows)
         .flat_map(|j| (0..coverage.columns).map(move |i| (i, j)))
         .map(|(i, j)| {
@@ -105,7 +109,7 @@ pub fn write(
         .collect();
     csv::write(&at(COVERAGE_NAME), &COVERAGE_COLUMNS, &cov_rows)?;
     crate::io::plot::count_map(
-        &at("coverage.png"),
+        &at(crate::io::products::files::COVERAGE_PNG),
         &format!(
             "{} exposures: {} stares × {} per stare × {} visits",
             plan.exposures.len(),
@@ -140,7 +144,10 @@ pub fn write(
     });
     let text = serde_json::to_string_pretty(&json)
         .map_err(|e| SequenceError::Invalid(format!("sequence.json: {e}")))?;
-    crate::io::write_atomic(&at("sequence.json"), text.as_bytes())?;
+    crate::io::write_atomic(
+        &at(crate::io::products::files::SEQUENCE_JSON),
+        text.as_bytes(),
+    )?;
     Ok(summary)
 }
 

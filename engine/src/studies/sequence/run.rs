@@ -12,12 +12,13 @@ use crate::analysis::countermeasures::Plan as Countermeasures;
 use crate::config::{Config, SceneKind};
 use crate::io::csv::Cell;
 use crate::io::fits::{self, Card, Column, Hdu};
+use crate::io::products::files;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 pub use super::{FIELD_NAME, SequenceError};
 /// The gathered catalogue of every exposure.
-pub const CATALOGUE_NAME: &str = "catalogue.fits";
+pub const CATALOGUE_NAME: &str = files::CATALOGUE_FITS;
 
 /// The measured columns of an exposure's catalogue (and of `catalogue.fits`).
 pub const CATALOGUE_HEADER: [&str; 13] = [
@@ -37,7 +38,7 @@ pub const CATALOGUE_HEADER: [&str; 13] = [
 ];
 
 /// The instrument as designed, the sequence's product for its analysis: [`DESIGN_NAME`].
-pub const DESIGN_NAME: &str = "design.toml";
+pub const DESIGN_NAME: &str = files::DESIGN_TOML;
 
 /// The configuration as the pipeline knows the instrument: `cfg` with the arrays where they were designed
 /// (no assembly offsets or turns). The simulation's `config.toml` holds the instrument as assembled (and
@@ -52,8 +53,8 @@ pub fn design_of(cfg: &Config) -> Config {
 /// (`design.toml`, [`design_of`]), which the astrometric solution (`jsim solve`) reads instead of the truth.
 pub fn write_setup(plan: &Plan, cfg: &Config, dir: &Path) -> Result<(PathBuf, PathBuf), String> {
     crate::io::ensure_dir(dir).map_err(|e| e.to_string())?;
-    let config = dir.join("config.toml");
-    let spec = dir.join("sequence.toml");
+    let config = dir.join(files::CONFIG_TOML);
+    let spec = dir.join(files::SEQUENCE_TOML);
     crate::io::write_atomic(&config, cfg.to_toml().as_bytes()).map_err(|e| e.to_string())?;
     crate::io::write_atomic(&dir.join(DESIGN_NAME), design_of(cfg).to_toml().as_bytes())
         .map_err(|e| e.to_string())?;
@@ -77,7 +78,7 @@ pub fn check_resumable(plan: &Plan, cfg: &Config, dir: &Path) -> Result<(), Sequ
     let differs =
         |name: &str, now: &str| std::fs::read_to_string(dir.join(name)).is_ok_and(|was| was != now);
     let spec = spec_text(plan).map_err(SequenceError::Invalid)?;
-    let version = std::fs::read_to_string(dir.join("sequence.json"))
+    let version = std::fs::read_to_string(dir.join(files::SEQUENCE_JSON))
         .ok()
         .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
         .map(|v| {
@@ -86,9 +87,9 @@ pub fn check_resumable(plan: &Plan, cfg: &Config, dir: &Path) -> Result<(), Sequ
                 .unwrap_or("that did not record its version")
                 .to_string()
         });
-    let why = if differs("config.toml", &cfg.to_toml()) {
+    let why = if differs(files::CONFIG_TOML, &cfg.to_toml()) {
         "its config.toml is another configuration's".to_string()
-    } else if differs("sequence.toml", &spec) {
+    } else if differs(files::SEQUENCE_TOML, &spec) {
         "its sequence.toml is another sequence's".to_string()
     } else if let Some(v) = version.filter(|v| v != crate::VERSION) {
         format!("it was written by jsim {v}, this is {}", crate::VERSION)
@@ -109,7 +110,7 @@ pub fn sequence_id(dir: &Path) -> Result<u64, SequenceError> {
     let mut bytes = Vec::new();
     for name in [
         DESIGN_NAME,
-        "sequence.toml",
+        files::SEQUENCE_TOML,
         crate::io::sky_reference::REFERENCE_NAME,
     ] {
         let path = dir.join(name);
@@ -149,17 +150,17 @@ impl SequenceDir {
 
 /// The file of exposure `index`'s catalogue.
 pub fn exposure_path(dir: &Path, index: usize) -> PathBuf {
-    dir.join("exposures").join(format!("{index:05}.csv"))
+    dir.join(files::sequence_catalogue_name(index))
 }
 
 /// The scoring's match of exposure `index`'s catalogue to the truth.
 pub fn truth_path(dir: &Path, index: usize) -> PathBuf {
-    dir.join("exposures").join(format!("{index:05}_truth.csv"))
+    dir.join(files::sequence_truth_name(index))
 }
 
 /// The image of exposure `index` when the sequence keeps its images (`jsim sequence --keep-images`).
 pub fn image_path(dir: &Path, index: usize) -> PathBuf {
-    dir.join("exposures").join(format!("fp_{index:05}.fits"))
+    dir.join(files::sequence_image_name(index))
 }
 
 /// Draw the mock bulge over the whole region of `plan` (every stare's field, its pointing error and the

@@ -48,7 +48,7 @@ fn invalid(m: impl std::fmt::Display) -> SequenceError {
 pub fn read_products(dir: &Path) -> Result<Products, SequenceError> {
     // the instrument as designed and the plan: never config.toml (the instrument as assembled, the seeds)
     let cfg_path = dir.join(super::run::DESIGN_NAME);
-    let spec_path = dir.join("sequence.toml");
+    let spec_path = dir.join(crate::io::products::files::SEQUENCE_TOML);
     if !cfg_path.exists() || !spec_path.exists() {
         return Err(invalid(format!(
             "{} holds no sequence (design.toml and sequence.toml are written by `jsim sequence`)",
@@ -330,7 +330,11 @@ pub fn write_solution(
         .chain(SOURCE_COLUMNS)
         .chain(["in_reference"])
         .collect();
-    crate::io::csv::write(&out.join("sources.csv"), &header, &rows)?;
+    crate::io::csv::write(
+        &out.join(crate::io::products::files::SOURCES_CSV),
+        &header,
+        &rows,
+    )?;
     let rows: Vec<Vec<Cell>> = sol
         .attitudes
         .iter()
@@ -348,7 +352,7 @@ pub fn write_solution(
         })
         .collect();
     crate::io::csv::write(
-        &out.join("attitudes.csv"),
+        &out.join(crate::io::products::files::ATTITUDES_CSV),
         &[
             "exposure",
             "epoch_jyear",
@@ -382,7 +386,11 @@ pub fn write_solution(
             ]);
         }
     }
-    crate::io::csv::write(&out.join("calibration.csv"), &["part", "term", "px"], &rows)?;
+    crate::io::csv::write(
+        &out.join(crate::io::products::files::CALIBRATION_CSV),
+        &["part", "term", "px"],
+        &rows,
+    )?;
     Ok(())
 }
 
@@ -399,7 +407,7 @@ pub struct Truth {
 
 /// Read the truth of a sequence (the scoring step only).
 pub fn read_truth(dir: &Path, p: &Products) -> Result<Truth, SequenceError> {
-    let cfg = Config::load(&dir.join("config.toml")).map_err(invalid)?;
+    let cfg = Config::load(&dir.join(crate::io::products::files::CONFIG_TOML)).map_err(invalid)?;
     let field = dir.join(super::run::FIELD_NAME);
     let (h, rows) = crate::io::csv::read(&field)?;
     let col = |n: &str| crate::io::csv::column_f64(&field, &h, &rows, n);

@@ -174,12 +174,12 @@ pub fn run(
     will_write(&path);
     write_precision(&path, &table)?;
     plot_precision(
-        &req.out.join("precision_vs_n.png"),
+        &req.out.join(crate::io::products::files::PRECISION_VS_N_PNG),
         &table,
         &edges,
         will_write,
     )?;
-    let path = req.out.join("solution.json");
+    let path = req.out.join(crate::io::products::files::SOLUTION_JSON);
     will_write(&path);
     let text = serde_json::to_string_pretty(&summary)
         .map_err(|e| SequenceError::Invalid(format!("solution.json: {e}")))?;
@@ -214,14 +214,23 @@ fn write_last(
         will_write(&path);
         path
     };
-    for f in ["sources.csv", "attitudes.csv", "calibration.csv"] {
+    for f in [
+        crate::io::products::files::SOURCES_CSV,
+        crate::io::products::files::ATTITUDES_CSV,
+        crate::io::products::files::CALIBRATION_CSV,
+    ] {
         at(f);
     }
     sq::write_solution(&req.out, p, s.fed, s.sol)?;
-    write_score_sources(&at("score_sources.csv"), s.fed, s.scored, s.truths)?;
+    write_score_sources(
+        &at(crate::io::products::files::SCORE_SOURCES_CSV),
+        s.fed,
+        s.scored,
+        s.truths,
+    )?;
     let att =
         crate::scoring::solution::attitude_errors(&s.fed.obs, &s.fed.exposures, s.sol, s.true_all);
-    write_score_attitudes(&at("score_attitudes.csv"), &att)?;
+    write_score_attitudes(&at(crate::io::products::files::SCORE_ATTITUDES_CSV), &att)?;
     let att_rms = attitude_rms(&att);
     log(&format!(
         "attitudes against the truth ({} exposures): offset {:.3}/{:.3} mas, roll {:.4}″, scale {:.3} ppm rms",

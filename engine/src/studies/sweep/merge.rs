@@ -125,7 +125,7 @@ pub fn merge(dir: &Path, opts: &MergeOptions) -> Result<MergeSummary, SweepError
             rows += 1;
         }
     }
-    let path = dir.join("merged.csv");
+    let path = dir.join(crate::io::products::files::MERGED_CSV);
     io::write_atomic(&path, text.as_bytes())?;
     let meta = serde_json::json!({
         "format": "jsim-sweep-merged/1",
@@ -136,7 +136,10 @@ pub fn merge(dir: &Path, opts: &MergeOptions) -> Result<MergeSummary, SweepError
         "duplicate_units": duplicates.len(),
         "sha256": digest::sha256_hex(text.as_bytes()),
     });
-    io::write_atomic(&dir.join("merged.json"), to_json(&meta).as_bytes())?;
+    io::write_atomic(
+        &dir.join(crate::io::products::files::MERGED_JSON),
+        to_json(&meta).as_bytes(),
+    )?;
     Ok(MergeSummary {
         path,
         units,

@@ -113,7 +113,7 @@ impl Record {
 
 /// Read `DIR/sweep.json`.
 pub fn read_record(dir: &Path) -> Result<Record, SweepError> {
-    let path = dir.join("sweep.json");
+    let path = dir.join(crate::io::products::files::SWEEP_JSON);
     let text = std::fs::read_to_string(&path).map_err(|e| SweepError::NotASweep {
         dir: dir.to_path_buf(),
         message: e.to_string(),

@@ -117,7 +117,7 @@ pub fn report(dir: &Path, opts: &ReportOptions) -> Result<ReportSummary, SweepEr
     files.push(plot_fractions(
         &plots, &rec, &fields, &rows, x_index, opts, threshold,
     )?);
-    let report_csv = dir.join("report.csv");
+    let report_csv = dir.join(crate::io::products::files::REPORT_CSV);
     io::write_atomic(&report_csv, csv.as_bytes())?;
     files.insert(0, report_csv);
     Ok(ReportSummary {
@@ -169,7 +169,7 @@ fn read_groups(
     rec: &super::record::Record,
     opts: &ReportOptions,
 ) -> Result<Groups, SweepError> {
-    let merged = dir.join("merged.csv");
+    let merged = dir.join(crate::io::products::files::MERGED_CSV);
     let text = std::fs::read_to_string(&merged).map_err(|e| {
         SweepError::Invalid(format!(
             "cannot read {}: {e}; run `jsim merge {}` first",

@@ -477,7 +477,7 @@ fn describe(params: &[Param], idx: &[usize]) -> String {
 
 /// Check that `dir` can hold `sweep` (empty, absent, or the same sweep) without writing anything.
 pub fn check_dir(sweep: &Sweep, dir: &Path) -> Result<(), SweepError> {
-    let rec_path = dir.join("sweep.json");
+    let rec_path = dir.join(crate::io::products::files::SWEEP_JSON);
     if rec_path.exists() {
         let found = match read_record(dir) {
             Ok(r) => r.hash,
@@ -506,7 +506,7 @@ pub fn prepare_dir(sweep: &Sweep, dir: &Path) -> Result<(), SweepError> {
     io::ensure_dir(&dir.join("shards"))?;
     io::ensure_dir(&dir.join("points"))?;
     let rec = sweep.record();
-    let rec_path = dir.join("sweep.json");
+    let rec_path = dir.join(crate::io::products::files::SWEEP_JSON);
     let current = read_record(dir).ok();
     if current.as_ref() != Some(&rec) {
         io::write_atomic(&rec_path, record::to_json(&rec).as_bytes())?;
@@ -538,7 +538,7 @@ pub fn prepare_dir(sweep: &Sweep, dir: &Path) -> Result<(), SweepError> {
             io::write_atomic(&path, body.as_bytes())?;
         }
     }
-    let points_csv = dir.join("points.csv");
+    let points_csv = dir.join(crate::io::products::files::POINTS_CSV);
     if std::fs::read_to_string(&points_csv).ok().as_deref() != Some(text.as_str()) {
         io::write_atomic(&points_csv, text.as_bytes())?;
     }

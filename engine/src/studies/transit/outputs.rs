@@ -35,7 +35,7 @@ pub fn write(dir: &Path, obs: &Observation, r: &StareResult) -> Result<(), IoErr
         ),
     ];
     ecsv::write(
-        &dir.join("lightcurve.ecsv"),
+        &dir.join(crate::io::products::files::LIGHTCURVE_ECSV),
         &[
             col("time", "d", "mid-plate, from the stare's start", &lc.t_days),
             col(
@@ -101,7 +101,7 @@ pub fn write(dir: &Path, obs: &Observation, r: &StareResult) -> Result<(), IoErr
     let jy: Vec<f64> = obs.truth.iter().map(|t| t.jitter_mean_px.1).collect();
     let js: Vec<f64> = obs.truth.iter().map(|t| t.jitter_sigma_px).collect();
     ecsv::write(
-        &dir.join("truth.ecsv"),
+        &dir.join(crate::io::products::files::TRUTH_ECSV),
         &[
             col("time", "d", "mid-plate", &lc.t_days),
             col("transit_flux", "", "injected, plate mean", &tf),
@@ -147,12 +147,16 @@ pub fn write(dir: &Path, obs: &Observation, r: &StareResult) -> Result<(), IoErr
         "backend": r.backend,
     });
     write_atomic(
-        &dir.join("transit.json"),
+        &dir.join(crate::io::products::files::TRANSIT_JSON),
         serde_json::to_string_pretty(&json)
             .unwrap_or_default()
             .as_bytes(),
     )?;
-    plot_light_curve(&dir.join("lightcurve.png"), obs, r)
+    plot_light_curve(
+        &dir.join(crate::io::products::files::LIGHTCURVE_PNG),
+        obs,
+        r,
+    )
 }
 
 /// Write the stare's products: `windows.fits` — the primary header (seed, plate, sub-exposures, gain, bias,
@@ -247,13 +251,13 @@ pub fn write_products(dir: &Path, obs: &Observation) -> Result<(), IoError> {
             "nodes per pixel",
         )],
     });
-    fits::write(&dir.join("windows.fits"), &hdus)?;
+    fits::write(&dir.join(crate::io::products::files::WINDOWS_FITS), &hdus)?;
     let t: Vec<f64> = obs.plates.iter().map(|p| p.t_mid_days).collect();
     let tx: Vec<f64> = obs.plates.iter().map(|p| p.telemetry_x_mas).collect();
     let ty: Vec<f64> = obs.plates.iter().map(|p| p.telemetry_y_mas).collect();
     let ts: Vec<f64> = obs.plates.iter().map(|p| p.telemetry_sigma_mas).collect();
     ecsv::write(
-        &dir.join("telemetry.ecsv"),
+        &dir.join(crate::io::products::files::TELEMETRY_ECSV),
         &[
             col("time", "d", "mid-plate", &t),
             col("x", "mas", "mean pointing over the plate", &tx),

@@ -188,9 +188,13 @@ fn write(dir: &Path, rows: &[MagRow]) -> Result<(), IoError> {
             ]
         })
         .collect();
-    csv::write(&dir.join("precision.csv"), &header, &table)?;
+    csv::write(
+        &dir.join(crate::io::products::files::PRECISION_CSV),
+        &header,
+        &table,
+    )?;
     write_atomic(
-        &dir.join("precision.json"),
+        &dir.join(crate::io::products::files::PRECISION_JSON),
         serde_json::to_string_pretty(rows)
             .unwrap_or_default()
             .as_bytes(),
@@ -205,7 +209,7 @@ fn write(dir: &Path, rows: &[MagRow]) -> Result<(), IoError> {
     };
     let hour = |f: fn(&MagRow) -> f64| rows.iter().map(f).collect::<Vec<f64>>();
     plot::line_plot(
-        &dir.join("precision.png"),
+        &dir.join(crate::io::products::files::PRECISION_PNG),
         "1-h scatter of the differential light curve",
         "target Hw (mag)",
         "ppm in 1 h",
