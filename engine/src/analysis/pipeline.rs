@@ -298,6 +298,7 @@ pub fn analyse_crowded_image(
         epsf_iterations: c.epsf_iterations,
         epsf_stars: c.epsf_stars,
         epsf_fallback: c.fallback.clone(),
+        epsf_variation: c.variation.clone(),
         countermeasure: Countermeasure::None.to_string(),
         crowded: true,
         ..Default::default()

@@ -23,8 +23,8 @@
 
 use super::group_fit::{FluxPrior, Member};
 use super::pass::model_image;
-use crate::analysis::epsf::Epsf;
 use crate::analysis::epsf::fit::{PixelData, annulus_sky, pixel_variance, select_disc};
+use crate::analysis::epsf::varying::EpsfField;
 use crate::analysis::image::AnalysisImage;
 use crate::analysis::registration::{Registration, register};
 use crate::config::Analysis as AnalysisCfg;
@@ -58,9 +58,9 @@ pub const FORCED_MATCH_PX: f64 = 1.0;
 
 /// The forced stars of `catalogue` (its positions in this image's pixels, as the design WCS puts them) for
 /// the model `stars` (see the module's documentation), and the catalogue's registration onto them.
-pub fn forced_members(
+pub fn forced_members<E: EpsfField + ?Sized>(
     img: &AnalysisImage,
-    epsf: &Epsf,
+    epsf: &E,
     stars: &[Member],
     catalogue: &[CatalogueStar],
     cfg: &AnalysisCfg,
@@ -169,17 +169,17 @@ fn flux_prior(zero_point_e: f64, hw: f64) -> FluxPrior {
 /// `Σ wᵢ ψᵢ (rᵢ − s) / Σ wᵢ ψᵢ²` over the usable pixels within `radius_px` of (x, y) of the residual `rd`,
 /// weights from the image's model `model + s` (the star's own light is faint beside it); `None` without a
 /// pixel.
-fn amplitude(
+fn amplitude<E: EpsfField + ?Sized>(
     rd: &PixelData<'_>,
     model: &[f64],
-    epsf: &Epsf,
+    epsf: &E,
     (x, y): (f64, f64),
     sky: f64,
     radius_px: f64,
 ) -> Option<f64> {
     let (mut num, mut den) = (0.0, 0.0);
     for (i, px, py) in select_disc(rd, x, y, radius_px).0 {
-        let psi = epsf.value(px - x, py - y);
+        let psi = epsf.value_for(x, y, px - x, py - y);
         let wgt = 1.0 / pixel_variance(model[i] + sky, 0.0, rd.floor_e2(i), 0.0);
         num += wgt * psi * (rd.e[i] - sky);
         den += wgt * psi * psi;

@@ -13,6 +13,7 @@ use crate::analysis::epsf::Epsf;
 use crate::analysis::epsf::fit::{
     FitOptions, PixelData, Profile, StarFit, flags, pixel_variance, select,
 };
+use crate::analysis::epsf::varying::EpsfField;
 use crate::numerics::linalg;
 
 /// Largest group fitted simultaneously. A larger connected group (a dense knot) is fitted star by star
@@ -93,13 +94,13 @@ pub struct Outsiders<'a> {
 
 impl Outsiders<'_> {
     /// Their light at a pixel, and the model error of the saturated ones' (e⁻).
-    fn at(&self, epsf: &Epsf, node_error: f64, px: f64, py: f64) -> (f64, f64) {
-        let h = epsf.half_px();
+    fn at<E: EpsfField + ?Sized>(&self, epsf: &E, node_error: f64, px: f64, py: f64) -> (f64, f64) {
+        let h = epsf.reach_px();
         self.stars
             .iter()
             .filter(|s| (px - s.x).abs() < h && (py - s.y).abs() < h)
             .fold((0.0, 0.0), |(a, b), s| {
-                let v = s.flux * epsf.value(px - s.x, py - s.y);
+                let v = s.flux * epsf.value_for(s.x, s.y, px - s.x, py - s.y);
                 let m = if s.saturated {
                     SATURATED_MODEL_ERROR * v.abs() + s.flux.abs() * node_error
                 } else {
@@ -114,25 +115,25 @@ impl Outsiders<'_> {
 /// (a start when `opt.fit_sky`); `node_error` is the ePSF's node error of the saturated stars' model
 /// term. Returns one fit per member, in order; every fit of a group of more than one star carries
 /// [`flags::GROUPED`].
-pub fn fit_group(
+pub fn fit_group<E: EpsfField + ?Sized>(
     img: &PixelData<'_>,
-    epsf: &Epsf,
+    epsf: &E,
     members: &[Member],
     outsiders: &Outsiders<'_>,
     sky: f64,
     node_error: f64,
     opt: &FitOptions,
 ) -> Vec<StarFit> {
-    fit_group_with::<Epsf>(img, epsf, None, members, outsiders, sky, node_error, opt)
+    fit_group_with::<Epsf, E>(img, epsf, None, members, outsiders, sky, node_error, opt)
 }
 
 /// [`fit_group`] with each member's own profile (`profiles[k]`, e.g. the telemetry forward model of its
 /// pixels' windows, [`crate::analysis::countermeasures::forward`]) in place of the shared ePSF; the outsiders
 /// stay modelled by `epsf`.
 #[allow(clippy::too_many_arguments)]
-pub fn fit_group_with<P: Profile>(
+pub fn fit_group_with<P: Profile, E: EpsfField + ?Sized>(
     img: &PixelData<'_>,
-    epsf: &Epsf,
+    epsf: &E,
     profiles: Option<&[P]>,
     members: &[Member],
     outsiders: &Outsiders<'_>,
@@ -191,7 +192,7 @@ pub fn fit_group_with<P: Profile>(
         fit_sky: opt.fit_sky,
         sky,
         node_error,
-        h: epsf.half_px(),
+        h: epsf.reach_px(),
     };
     let mut p: Vec<f64> = members
         .iter()
@@ -225,9 +226,9 @@ struct Run {
 
 /// A group's least-squares problem: the pixels (the union of the members' discs) with the outsiders'
 /// light on them, and the parameters (x, y, flux of each member, then the sky if it is fitted).
-struct Problem<'a, P: Profile> {
+struct Problem<'a, P: Profile, E: EpsfField + ?Sized> {
     img: &'a PixelData<'a>,
-    epsf: &'a Epsf,
+    epsf: &'a E,
     profiles: Option<&'a [P]>,
     members: &'a [Member],
     saturated: Vec<bool>,
@@ -245,7 +246,7 @@ struct Problem<'a, P: Profile> {
     h: f64,
 }
 
-impl<P: Profile> Problem<'_, P> {
+impl<P: Profile, E: EpsfField + ?Sized> Problem<'_, P, E> {
     fn sky_of(&self, p: &[f64]) -> f64 {
         if self.fit_sky {
             p[3 * self.n]
@@ -273,7 +274,7 @@ impl<P: Profile> Problem<'_, P> {
             }
             let (psi, gx, gy) = match self.profiles {
                 Some(pr) => pr[k].eval_at(i, px, py, p[3 * k], p[3 * k + 1]),
-                None => self.epsf.eval(dx, dy),
+                None => self.epsf.eval_for(p[3 * k], p[3 * k + 1], dx, dy),
             };
             let f = p[3 * k + 2];
             star += f * psi;

@@ -27,7 +27,10 @@ pub mod group_fit;
 pub mod pass;
 pub mod summary;
 
-pub use epsf::{MAX_CROWDED_ITERATIONS, MAX_EPSF_STARS, MIN_EPSF_SNR, build_epsf, epsf_candidates};
+pub use epsf::{
+    MAX_CROWDED_ITERATIONS, MAX_EPSF_STARS, MIN_EPSF_SNR, build_epsf, build_varying,
+    epsf_candidates,
+};
 pub use pass::{GroupStats, fit_pass, model_image};
 pub use summary::CrowdedSummary;
 
@@ -37,6 +40,7 @@ use crate::analysis::epsf::Epsf;
 use crate::analysis::epsf::build::build_options;
 use crate::analysis::epsf::build::{self, StarStart, initial_start};
 use crate::analysis::epsf::fit::{PixelData, StarFit, flags};
+use crate::analysis::epsf::varying::{EpsfField, VaryingEpsf};
 use crate::analysis::image::AnalysisImage;
 use crate::config::Analysis as AnalysisCfg;
 use crate::numerics::neighbours::Neighbours;
@@ -75,7 +79,14 @@ pub fn link_radius_px(cfg: &AnalysisCfg) -> f64 {
 pub struct Crowded {
     /// One per star found, brightest detections first, then the residual detections.
     pub fits: Vec<StarFit>,
+    /// The ePSF at the image's centre (the whole ePSF when it is constant).
     pub epsf: Epsf,
+    /// The ePSF every star was fitted with: `epsf` and its planes of change across the image
+    /// (`analysis.epsf_variation`; none when constant).
+    pub field: VaryingEpsf,
+    /// How the ePSF varies (`constant`, `linear`, `quadratic`), or why a varying ePSF asked for was kept
+    /// constant.
+    pub variation: String,
     /// Stars that built the ePSF (0 with a fallback).
     pub epsf_stars: usize,
     pub epsf_iterations: usize,
@@ -111,7 +122,7 @@ pub fn refit_forward(
     if c.model.is_empty() {
         return c.fits.clone();
     }
-    let (all, _) = pass::fit_pass_with(img, &c.epsf, &c.model, c.node_error, cfg, Some(forward));
+    let (all, _) = pass::fit_pass_with(img, &c.field, &c.model, c.node_error, cfg, Some(forward));
     let keep = flags::BLENDED | flags::RESIDUAL_FOUND;
     let mut fits: Vec<StarFit> = c
         .reported
@@ -174,7 +185,8 @@ pub fn analyse(
         })
         .collect();
     let built = first_epsf(img, cfg, model_epsf, &starts, &mut stars, noise);
-    let (epsf, node_error) = (built.epsf, built.node_error);
+    let node_error = built.node_error;
+    let (epsf, iterations) = (built.field.base.clone(), built.iterations);
     let crowded =
         |fits: Vec<StarFit>,
          n_residual: usize,
@@ -186,8 +198,10 @@ pub fn analyse(
             n_residual,
             fits,
             epsf: epsf.clone(),
+            field: built.field.clone(),
+            variation: built.variation.clone(),
             epsf_stars: built.stars,
-            epsf_iterations: built.iterations,
+            epsf_iterations: iterations,
             fallback: built.fallback.clone(),
             n_groups: groups.groups,
             largest_group: groups.largest,
@@ -204,14 +218,15 @@ pub fn analyse(
         return crowded(Vec::new(), 0, none, Vec::new(), Vec::new(), None);
     }
     // fit, look for what the model misses, fit again with the companions
-    let (fits, _) = fit_pass(img, &epsf, &stars, node_error, cfg);
+    let field = &built.field;
+    let (fits, _) = fit_pass(img, field, &stars, node_error, cfg);
     stars = members_of(&fits, &stars, img.nx, img.ny);
     let mut from_residual = vec![false; stars.len()];
-    for m in residual_stars(img, &epsf, &stars, &sn, node_error, cfg) {
+    for m in residual_stars(img, field, &stars, &sn, node_error, cfg) {
         stars.push(m);
         from_residual.push(true);
     }
-    let (fits, _) = fit_pass(img, &epsf, &stars, node_error, cfg);
+    let (fits, _) = fit_pass(img, field, &stars, node_error, cfg);
     stars = members_of(&fits, &stars, img.nx, img.ny);
     let keep = prune(&fits, &stars, &from_residual);
     let stars: Vec<Member> = keep.iter().map(|&k| stars[k]).collect();
@@ -230,13 +245,13 @@ pub fn analyse(
     // is subtracted from their neighbours' fits (forced; never reported)
     let mut registration = None;
     if let Some(cat) = catalogue.filter(|_| cfg.crowded_forced_catalogue) {
-        let (forced, reg) = forced::forced_members(img, &epsf, &stars, cat, cfg);
+        let (forced, reg) = forced::forced_members(img, field, &stars, cat, cfg);
         stars.extend(forced);
         registration = Some(reg);
     }
     from_residual.resize(stars.len(), false);
     wing.resize(stars.len(), false);
-    let (mut fits, groups) = fit_pass(img, &epsf, &stars, node_error, cfg);
+    let (mut fits, groups) = fit_pass(img, field, &stars, node_error, cfg);
     for (f, r) in fits.iter_mut().zip(&from_residual) {
         if *r {
             f.flags |= flags::RESIDUAL_FOUND;
@@ -264,7 +279,9 @@ pub fn analyse(
 
 /// The image's ePSF as the crowded analysis builds it, and what it says of itself.
 struct FirstEpsf {
-    epsf: Epsf,
+    /// The constant ePSF, or it with its planes (`analysis.epsf_variation`).
+    field: VaryingEpsf,
+    variation: String,
     stars: usize,
     iterations: usize,
     fallback: String,
@@ -297,8 +314,16 @@ fn first_epsf(
     } else {
         0.0
     };
+    let constant_note = |why: &str| {
+        if cfg.epsf_variation == crate::config::EpsfVariation::Constant {
+            cfg.epsf_variation.name().to_string()
+        } else {
+            format!("{why}: one ePSF for the image")
+        }
+    };
     let stand_in = |epsf: Epsf, fallback: String| FirstEpsf {
-        epsf,
+        field: VaryingEpsf::new(epsf, crate::config::EpsfVariation::Constant, img.nx, img.ny),
+        variation: constant_note("no ePSF built"),
         stars: 0,
         iterations: 0,
         fallback,
@@ -334,10 +359,33 @@ fn first_epsf(
         .map(|(s, _)| *s)
         .collect();
     let seed = build::gaussian_seed(&pd, &chosen, opts.oversampling, opts.half_px);
-    let (epsf, stars, iterations) = build_epsf(img, stars, &candidates, seed, node_error, cfg);
+    let (field, used, iterations, variation) = match cfg.epsf_variation {
+        crate::config::EpsfVariation::Constant => {
+            let (epsf, used, iterations) =
+                build_epsf(img, stars, &candidates, seed, node_error, cfg);
+            let field = VaryingEpsf::new(epsf, cfg.epsf_variation, img.nx, img.ny);
+            (
+                field,
+                used,
+                iterations,
+                cfg.epsf_variation.name().to_string(),
+            )
+        }
+        v => {
+            let (field, used, iterations, why) =
+                build_varying(img, stars, &candidates, seed, node_error, cfg);
+            let name = if why.is_empty() {
+                v.name().to_string()
+            } else {
+                why
+            };
+            (field, used, iterations, name)
+        }
+    };
     FirstEpsf {
-        epsf,
-        stars,
+        field,
+        variation,
+        stars: used,
         iterations,
         fallback: String::new(),
         node_error,
@@ -348,9 +396,9 @@ fn first_epsf(
 /// flux of a fit of it alone in the residual (every star found so far subtracted), as photutils'
 /// IterativePSFPhotometry does, so that the joint fit starts it with its own flux, not with its neighbour's
 /// light (with which it could swap places).
-fn residual_stars(
+fn residual_stars<E: EpsfField + ?Sized>(
     img: &AnalysisImage,
-    epsf: &Epsf,
+    epsf: &E,
     stars: &[Member],
     sn: &SkyNoise,
     node_error: f64,

@@ -4,9 +4,9 @@
 use super::group_fit::{MAX_GROUP_STARS, Member, Outsiders, fit_group, fit_group_with};
 use super::link_radius_px;
 use crate::analysis::countermeasures::forward::{Forward, fit_reach_px};
-use crate::analysis::epsf::Epsf;
 use crate::analysis::epsf::build::build_options;
 use crate::analysis::epsf::fit::{PixelData, StarFit, annulus_sky, flags};
+use crate::analysis::epsf::varying::EpsfField;
 use crate::analysis::image::AnalysisImage;
 use crate::config::Analysis as AnalysisCfg;
 use crate::numerics::neighbours::{self, Neighbours};
@@ -14,8 +14,13 @@ use crate::numerics::stats;
 use rayon::prelude::*;
 
 /// Model image `Σₖ fₖ ψ(X − xₖ, Y − yₖ)` of the stars (those with positive flux), over the ePSF table.
-pub fn model_image(epsf: &Epsf, stars: &[Member], nx: usize, ny: usize) -> Vec<f64> {
-    let h = epsf.half_px();
+pub fn model_image<E: EpsfField + ?Sized>(
+    epsf: &E,
+    stars: &[Member],
+    nx: usize,
+    ny: usize,
+) -> Vec<f64> {
+    let h = epsf.reach_px();
     let mut order: Vec<usize> = (0..stars.len())
         .filter(|&k| stars[k].flux > 0.0 && stars[k].x.is_finite() && stars[k].y.is_finite())
         .collect();
@@ -42,7 +47,7 @@ pub fn model_image(epsf: &Epsf, stars: &[Member], nx: usize, ny: usize) -> Vec<f
                 for py in py0..py1 {
                     let row = &mut band[(py - y0) * nx..(py - y0 + 1) * nx];
                     for (px, v) in row.iter_mut().enumerate().take(px1).skip(px0) {
-                        *v += s.flux * epsf.value(px as f64 - s.x, py as f64 - s.y);
+                        *v += s.flux * epsf.value_for(s.x, s.y, px as f64 - s.x, py as f64 - s.y);
                     }
                 }
             }
@@ -54,9 +59,9 @@ pub fn model_image(epsf: &Epsf, stars: &[Member], nx: usize, ny: usize) -> Vec<f
 /// light of the stars outside it (their current values in `stars`) subtracted, on a sky from the annulus of
 /// the image minus the model of all stars (the median over the group's members). A [`Member::fixed`] star
 /// is only subtracted: its fit is its current values.
-pub fn fit_pass(
+pub fn fit_pass<E: EpsfField + ?Sized>(
     img: &AnalysisImage,
-    epsf: &Epsf,
+    epsf: &E,
     stars: &[Member],
     node_error: f64,
     cfg: &AnalysisCfg,
@@ -67,9 +72,9 @@ pub fn fit_pass(
 /// [`fit_pass`] with each star fitted through its own profile from the telemetry forward model `forward`
 /// (the profile of its pixels' windows at its current position; [`fit_group_with`]); the neighbours'
 /// light, subtracted, stays modelled by `epsf`.
-pub fn fit_pass_with(
+pub fn fit_pass_with<E: EpsfField + ?Sized>(
     img: &AnalysisImage,
-    epsf: &Epsf,
+    epsf: &E,
     stars: &[Member],
     node_error: f64,
     cfg: &AnalysisCfg,
@@ -120,7 +125,7 @@ pub fn fit_pass_with(
         .into_iter()
         .map(|g| g.into_iter().map(|i| free[i]).collect())
         .collect();
-    let reach = cfg.fit_radius_px + epsf.half_px() + group_fit_reach_margin();
+    let reach = cfg.fit_radius_px + epsf.reach_px() + group_fit_reach_margin();
     let fitted: Vec<Vec<(usize, StarFit)>> = groups
         .par_iter()
         .map(|g| {

@@ -99,6 +99,57 @@ impl VaryingEpsf {
     }
 }
 
+/// An ePSF that may depend on where its star is: ψ at the offset (dx, dy) from a star at (x, y), as the
+/// crowded fits and model images evaluate it (a constant [`Epsf`] ignores the star's place; a
+/// [`VaryingEpsf`] sums its planes at the star's basis without building the star's table). The gradient is
+/// the profile's at fixed (x, y): the basis changes by ≈ 1/half-extent per pixel, ≈ 10⁻³ of ψ's own change.
+pub trait EpsfField: Sync {
+    /// ψ and its gradient in (dx, dy).
+    fn eval_for(&self, x: f64, y: f64, dx: f64, dy: f64) -> (f64, f64, f64);
+    fn value_for(&self, x: f64, y: f64, dx: f64, dy: f64) -> f64 {
+        self.eval_for(x, y, dx, dy).0
+    }
+    /// The table's half-width (px): beyond it ψ is 0.
+    fn reach_px(&self) -> f64;
+}
+
+impl EpsfField for Epsf {
+    #[inline]
+    fn eval_for(&self, _x: f64, _y: f64, dx: f64, dy: f64) -> (f64, f64, f64) {
+        self.eval(dx, dy)
+    }
+    fn reach_px(&self) -> f64 {
+        self.half_px()
+    }
+}
+
+impl EpsfField for VaryingEpsf {
+    fn eval_for(&self, x: f64, y: f64, dx: f64, dy: f64) -> (f64, f64, f64) {
+        let (mut v, mut gx, mut gy) = self.base.eval(dx, dy);
+        if self.terms.is_empty() {
+            return (v, gx, gy);
+        }
+        let b = self.basis(x, y);
+        for (t, bj) in self.terms.iter().zip(&b[1..]) {
+            let (tv, tx, ty) = t.eval(dx, dy);
+            v += bj * tv;
+            gx += bj * tx;
+            gy += bj * ty;
+        }
+        (v, gx, gy)
+    }
+    fn reach_px(&self) -> f64 {
+        self.base.half_px()
+    }
+}
+
+impl crate::analysis::epsf::fit::Profile for VaryingEpsf {
+    #[inline]
+    fn eval_at(&self, _i: usize, px: f64, py: f64, x: f64, y: f64) -> (f64, f64, f64) {
+        self.eval_for(x, y, px - x, py - y)
+    }
+}
+
 /// The result of a varying build.
 #[derive(Debug, Clone)]
 pub struct BuiltVarying {
@@ -111,18 +162,12 @@ pub struct BuiltVarying {
 
 /// Why these ePSF stars cannot constrain `variation`'s planes, or `None` when they can.
 pub fn unconstrained(
-    starts: &[StarStart],
-    use_for_build: &[bool],
+    positions: &[(f64, f64)],
     variation: EpsfVariation,
     frame: &VaryingEpsf,
 ) -> Option<String> {
     let m = 1 + n_terms(variation);
-    let b: Vec<[f64; 6]> = starts
-        .iter()
-        .zip(use_for_build)
-        .filter(|(_, u)| **u)
-        .map(|(s, _)| frame.basis(s.x, s.y))
-        .collect();
+    let b: Vec<[f64; 6]> = positions.iter().map(|&(x, y)| frame.basis(x, y)).collect();
     if b.len() < MIN_STARS_PER_TERM * m {
         return Some(format!(
             "{} ePSF stars, fewer than {} for a {} ePSF ({MIN_STARS_PER_TERM} per table): one ePSF for the image",
@@ -279,7 +324,13 @@ pub fn build(
             .map(|s| fit_star(img, &psi.at(s.x, s.y), s.x, s.y, s.flux, s.sky, &opts.fit))
             .collect()
     };
-    if let Some(why) = unconstrained(starts, use_for_build, variation, &psi) {
+    let positions: Vec<(f64, f64)> = starts
+        .iter()
+        .zip(use_for_build)
+        .filter(|(_, u)| **u)
+        .map(|(s, _)| (s.x, s.y))
+        .collect();
+    if let Some(why) = unconstrained(&positions, variation, &psi) {
         psi.terms.clear();
         return BuiltVarying {
             fits: constant.fits.clone(),
@@ -343,19 +394,16 @@ pub fn build(
     }
 }
 
+/// A profile whose ePSF changes linearly across the image, for the tests of the varying builders.
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::analysis::epsf::build::{self as constant_build, build_options};
-    use crate::config::Analysis;
-
+pub(crate) mod mixed_profile {
     /// A star's light in the pixel at offset (u, v) from its true position: the mix (1 − w) A + w B of two
     /// profiles, each two Gaussians of width σ and weights 1 − q and q, 1 px apart along x and placed so that
     /// the continuous centroid is the true position (pixel-integrated by 8 × 8 sub-samples). A: q = 0.1,
     /// σ = 0.8 px; B: q = 0.5, σ = 1.0 px. The mix w changes linearly across the field, so the true ePSF is
     /// linear in the position: a fit with one mean profile is displaced by an amount that changes with the
     /// star, and the linear ePSF can hold the profile exactly.
-    fn light(u: f64, v: f64, w: f64) -> f64 {
+    pub(crate) fn light(u: f64, v: f64, w: f64) -> f64 {
         let pair = |q: f64, sigma: f64| {
             let s2 = 2.0 * sigma * sigma;
             let m = 8;
@@ -374,10 +422,18 @@ mod tests {
     }
 
     /// The mix at pixel (x, y) of an n × n image: linear in x and y.
-    fn params(x: f64, y: f64, n: usize) -> f64 {
+    pub(crate) fn params(x: f64, y: f64, n: usize) -> f64 {
         let h = n as f64 / 2.0;
         0.5 + 0.3 * (x - h) / h + 0.15 * (y - h) / h
     }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::mixed_profile::{light, params};
+    use super::*;
+    use crate::analysis::epsf::build::{self as constant_build, build_options};
+    use crate::config::Analysis;
 
     struct Field {
         n: usize,
