@@ -52,6 +52,53 @@ fn keys(t: f64) -> (f64, f64) {
     }
 }
 
+/// The nodes an interpolation reads: four along a row from a flat index, or one.
+trait Nodes {
+    fn row4(&self, i: usize) -> [f64; 4];
+    fn node(&self, i: usize) -> f64;
+}
+
+/// One table's nodes.
+struct Table<'a>(&'a [f64]);
+
+impl Nodes for Table<'_> {
+    #[inline(always)]
+    fn row4(&self, i: usize) -> [f64; 4] {
+        let r = &self.0[i..i + 4];
+        [r[0], r[1], r[2], r[3]]
+    }
+    #[inline]
+    fn node(&self, i: usize) -> f64 {
+        self.0[i]
+    }
+}
+
+/// A table's nodes plus weighted others' on its grid.
+struct Sum<'a> {
+    base: &'a [f64],
+    tables: &'a [(f64, &'a Epsf)],
+}
+
+impl Nodes for Sum<'_> {
+    #[inline(always)]
+    fn row4(&self, i: usize) -> [f64; 4] {
+        let mut r = Table(self.base).row4(i);
+        for (w, t) in self.tables {
+            let q = Table(&t.data).row4(i);
+            for (a, b) in r.iter_mut().zip(q) {
+                *a += w * b;
+            }
+        }
+        r
+    }
+    #[inline]
+    fn node(&self, i: usize) -> f64 {
+        self.tables
+            .iter()
+            .fold(self.base[i], |acc, (w, t)| acc + w * t.data[i])
+    }
+}
+
 /// Keys' weights (a = −½) and their derivatives for the nodes at −1, 0, 1, 2 from a fractional offset
 /// `f ∈ [0, 1)`: [`keys`] at `f + 1, f, f − 1, f − 2` in closed form (no branches).
 #[inline]
@@ -91,18 +138,28 @@ impl Epsf {
         (i as f64 - self.half_nodes as f64) / self.oversampling as f64
     }
 
-    #[inline]
-    fn at(&self, ix: i64, iy: i64) -> f64 {
-        let n = self.n() as i64;
-        if ix < 0 || iy < 0 || ix >= n || iy >= n {
-            0.0
-        } else {
-            self.data[(iy * n + ix) as usize]
-        }
-    }
-
     /// ψ and its derivatives (∂ψ/∂Δx, ∂ψ/∂Δy) at (Δx, Δy) pixels; zero beyond the table.
     pub fn eval(&self, dx: f64, dy: f64) -> (f64, f64, f64) {
+        self.eval_nodes(dx, dy, &Table(&self.data))
+    }
+
+    /// As [`Epsf::eval`] of the table whose node `i` is `self`'s plus Σ wⱼ `tables[j]`'s (tables on this
+    /// table's grid): the interpolation is linear in the nodes, so this is Σ of the tables' own evaluations,
+    /// with the interpolation weights computed once.
+    pub fn eval_sum(&self, tables: &[(f64, &Epsf)], dx: f64, dy: f64) -> (f64, f64, f64) {
+        self.eval_nodes(
+            dx,
+            dy,
+            &Sum {
+                base: &self.data,
+                tables,
+            },
+        )
+    }
+
+    /// Keys's cubic interpolation of the nodes `nodes` (on this table's grid) at (Δx, Δy).
+    #[inline(always)]
+    fn eval_nodes<N: Nodes>(&self, dx: f64, dy: f64, nodes: &N) -> (f64, f64, f64) {
         let os = self.oversampling as f64;
         let (u, v) = (
             dx * os + self.half_nodes as f64,
@@ -121,9 +178,8 @@ impl Epsf {
             let n = n as usize;
             let base = (iv as usize - 1) * n + iu as usize - 1;
             for (j, &(wvj, dwvj)) in wv.iter().enumerate() {
-                let r = &self.data[base + j * n..base + j * n + 4];
                 let (mut row, mut drow) = (0.0, 0.0);
-                for (p, &(wui, dwui)) in r.iter().zip(&wu) {
+                for (p, &(wui, dwui)) in nodes.row4(base + j * n).iter().zip(&wu) {
                     row += wui * p;
                     drow += dwui * p;
                 }
@@ -136,7 +192,12 @@ impl Epsf {
         for (j, &(wvj, dwvj)) in wv.iter().enumerate() {
             let (mut row, mut drow) = (0.0, 0.0);
             for (i, &(wui, dwui)) in wu.iter().enumerate() {
-                let p = self.at(iu + i as i64 - 1, iv + j as i64 - 1);
+                let (ix, iy) = (iu + i as i64 - 1, iv + j as i64 - 1);
+                let p = if ix < 0 || iy < 0 || ix >= n || iy >= n {
+                    0.0
+                } else {
+                    nodes.node((iy * n + ix) as usize)
+                };
                 row += wui * p;
                 drow += dwui * p;
             }
@@ -246,6 +307,37 @@ impl Epsf {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The interpolation is linear in the nodes: a weighted sum's evaluation, in the table, at its border
+    /// and beyond it, is the sum of the tables' own (ψ and both derivatives).
+    #[test]
+    fn a_weighted_sum_of_tables_evaluates_as_the_sum_of_their_evaluations() {
+        let a = Epsf::from_fn(4, 3, |x, y| (-(x * x + 0.5 * y * y)).exp());
+        let b = Epsf::from_fn(4, 3, |x, y| x * (-(x * x + y * y)).exp());
+        let c = Epsf::from_fn(4, 3, |x, y| (x * y - 0.3) * (-(x * x + y * y) / 2.0).exp());
+        for (dx, dy) in [
+            (0.13, -0.41),
+            (1.7, 2.2),
+            (2.95, -2.9),
+            (3.4, 0.2),
+            (9.0, 0.0),
+        ] {
+            let got = a.eval_sum(&[(0.7, &b), (-1.3, &c)], dx, dy);
+            let (ea, eb, ec) = (a.eval(dx, dy), b.eval(dx, dy), c.eval(dx, dy));
+            let want = (
+                ea.0 + 0.7 * eb.0 - 1.3 * ec.0,
+                ea.1 + 0.7 * eb.1 - 1.3 * ec.1,
+                ea.2 + 0.7 * eb.2 - 1.3 * ec.2,
+            );
+            for (g, w) in [(got.0, want.0), (got.1, want.1), (got.2, want.2)] {
+                assert!(
+                    (g - w).abs() <= 1e-12 * (1.0 + w.abs()),
+                    "({dx}, {dy}): {g} against {w}"
+                );
+            }
+        }
+        assert_eq!(a.eval_sum(&[], 0.3, 0.2), a.eval(0.3, 0.2));
+    }
 
     #[test]
     fn closed_form_keys_weights_equal_the_kernel() {

@@ -125,18 +125,15 @@ impl EpsfField for Epsf {
 
 impl EpsfField for VaryingEpsf {
     fn eval_for(&self, x: f64, y: f64, dx: f64, dy: f64) -> (f64, f64, f64) {
-        let (mut v, mut gx, mut gy) = self.base.eval(dx, dy);
         if self.terms.is_empty() {
-            return (v, gx, gy);
+            return self.base.eval(dx, dy);
         }
         let b = self.basis(x, y);
-        for (t, bj) in self.terms.iter().zip(&b[1..]) {
-            let (tv, tx, ty) = t.eval(dx, dy);
-            v += bj * tv;
-            gx += bj * tx;
-            gy += bj * ty;
+        let mut w = [(0.0, &self.base); 5];
+        for (k, (t, bj)) in self.terms.iter().zip(&b[1..]).enumerate() {
+            w[k] = (*bj, t);
         }
-        (v, gx, gy)
+        self.base.eval_sum(&w[..self.terms.len()], dx, dy)
     }
     fn reach_px(&self) -> f64 {
         self.base.half_px()
