@@ -534,20 +534,12 @@ pub fn as_header_f64(v: f64) -> f64 {
 
 /// Read a string header of the primary HDU.
 pub fn read_string_key(path: &Path, key: &str) -> Result<String, FitsError> {
-    let fe = |e: fitsio::errors::Error| FitsError::fits(path, e);
-    let mut f = FitsFile::open(path).map_err(fe)?;
-    let hdu = f.primary_hdu().map_err(fe)?;
-    hdu.read_key::<String>(&mut f, key)
-        .map_err(|e| FitsError::fits(path, format!("header {key}: {e}")))
+    read_string_key_in(path, None, key)
 }
 
 /// Read a numeric header of the primary HDU.
 pub fn read_f64_key(path: &Path, key: &str) -> Result<f64, FitsError> {
-    let fe = |e: fitsio::errors::Error| FitsError::fits(path, e);
-    let mut f = FitsFile::open(path).map_err(fe)?;
-    let hdu = f.primary_hdu().map_err(fe)?;
-    hdu.read_key::<f64>(&mut f, key)
-        .map_err(|e| FitsError::fits(path, format!("header {key}: {e}")))
+    read_f64_key_in(path, None, key)
 }
 
 /// Read the CONFIG text extension (the TOML the file was made with).
