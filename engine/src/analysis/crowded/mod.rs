@@ -43,6 +43,7 @@ use crate::analysis::epsf::fit::{PixelData, StarFit, flags};
 use crate::analysis::epsf::varying::{EpsfField, VaryingEpsf};
 use crate::analysis::image::AnalysisImage;
 use crate::config::Analysis as AnalysisCfg;
+use crate::config::EpsfVariation;
 use crate::numerics::neighbours::Neighbours;
 use crate::numerics::stats;
 use group_fit::{Member, Outsiders, fit_group};
@@ -314,16 +315,14 @@ fn first_epsf(
     } else {
         0.0
     };
-    let constant_note = |why: &str| {
-        if cfg.epsf_variation == crate::config::EpsfVariation::Constant {
-            cfg.epsf_variation.name().to_string()
-        } else {
-            format!("{why}: one ePSF for the image")
-        }
+    // a stand-in is one table: a varying ePSF asked for says why it is not
+    let stand_in_note = match cfg.epsf_variation {
+        EpsfVariation::Constant => EpsfVariation::Constant.name().to_string(),
+        _ => "no ePSF built: one ePSF for the image".to_string(),
     };
     let stand_in = |epsf: Epsf, fallback: String| FirstEpsf {
-        field: VaryingEpsf::new(epsf, crate::config::EpsfVariation::Constant, img.nx, img.ny),
-        variation: constant_note("no ePSF built"),
+        field: VaryingEpsf::new(epsf, EpsfVariation::Constant, img.nx, img.ny),
+        variation: stand_in_note.clone(),
         stars: 0,
         iterations: 0,
         fallback,
@@ -360,7 +359,7 @@ fn first_epsf(
         .collect();
     let seed = build::gaussian_seed(&pd, &chosen, opts.oversampling, opts.half_px);
     let (field, used, iterations, variation) = match cfg.epsf_variation {
-        crate::config::EpsfVariation::Constant => {
+        EpsfVariation::Constant => {
             let (epsf, used, iterations) =
                 build_epsf(img, stars, &candidates, seed, node_error, cfg);
             let field = VaryingEpsf::new(epsf, cfg.epsf_variation, img.nx, img.ny);
