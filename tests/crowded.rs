@@ -312,8 +312,15 @@ fn a_crowded_field_reaches_its_bound_and_grouping_beats_single_fits() {
         if f.flags & flags::GROUPED == 0 || !f.usable() || truth[*k].mag_hw > 15.0 {
             continue;
         }
-        let s =
-            engine::analysis::epsf::fit::fit_star(&pd, &c.epsf, f.x, f.y, f.flux, f.sky, &opts.fit);
+        let s = engine::analysis::epsf::fit::fit_star(
+            &pd,
+            &c.field.base,
+            f.x,
+            f.y,
+            f.flux,
+            f.sky,
+            &opts.fit,
+        );
         let t = &truth[*k];
         grouped.push((f.x - t.x_px).hypot(f.y - t.y_px));
         single.push((s.x - t.x_px).hypot(s.y - t.y_px));

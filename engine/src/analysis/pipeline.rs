@@ -307,7 +307,7 @@ pub fn analyse_crowded_image(
     let plain = Analysis {
         report,
         stars,
-        epsf: c.epsf.clone(),
+        epsf: c.field.base.clone(),
     };
     let build = build_options(cfg);
     let mut measured = Vec::with_capacity(plan.countermeasures.len());

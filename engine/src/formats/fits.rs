@@ -479,10 +479,20 @@ pub fn read_table(path: &Path, ext: &str, columns: &[&str]) -> Result<Vec<Vec<f6
     let hdu = f
         .hdu(ext)
         .map_err(|e| FitsError::fits(path, format!("extension {ext}: {e}")))?;
+    read_columns(&mut f, &hdu, path, columns)
+}
+
+/// Numeric columns of a table HDU of an open file.
+fn read_columns(
+    f: &mut FitsFile,
+    hdu: &fitsio::hdu::FitsHdu,
+    path: &Path,
+    columns: &[&str],
+) -> Result<Vec<Vec<f64>>, FitsError> {
     columns
         .iter()
         .map(|c| {
-            hdu.read_col::<f64>(&mut f, c)
+            hdu.read_col::<f64>(f, c)
                 .map_err(|e| FitsError::fits(path, format!("column {c}: {e}")))
         })
         .collect()
@@ -517,13 +527,7 @@ pub fn read_table_at(
     let hdu = f
         .hdu(index)
         .map_err(|e| FitsError::fits(path, format!("no table extension: {e}")))?;
-    columns
-        .iter()
-        .map(|c| {
-            hdu.read_col::<f64>(&mut f, c)
-                .map_err(|e| FitsError::fits(path, format!("column {c}: {e}")))
-        })
-        .collect()
+    read_columns(&mut f, &hdu, path, columns)
 }
 
 /// A number as a header card keeps it: CFITSIO writes a double with 15 significant digits (`%.15G`), so an

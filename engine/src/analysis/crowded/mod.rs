@@ -80,10 +80,9 @@ pub fn link_radius_px(cfg: &AnalysisCfg) -> f64 {
 pub struct Crowded {
     /// One per star found, brightest detections first, then the residual detections.
     pub fits: Vec<StarFit>,
-    /// The ePSF at the image's centre (the whole ePSF when it is constant).
-    pub epsf: Epsf,
-    /// The ePSF every star was fitted with: `epsf` and its planes of change across the image
-    /// (`analysis.epsf_variation`; none when constant).
+    /// The ePSF every star was fitted with: its table at the image's centre (`field.base`, the whole ePSF
+    /// when it is constant) and its planes of change across the image (`analysis.epsf_variation`; none when
+    /// constant).
     pub field: VaryingEpsf,
     /// How the ePSF varies (`constant`, `linear`, `quadratic`), or why a varying ePSF asked for was kept
     /// constant.
@@ -187,7 +186,6 @@ pub fn analyse(
         .collect();
     let built = first_epsf(img, cfg, model_epsf, &starts, &mut stars, noise);
     let node_error = built.node_error;
-    let (epsf, iterations) = (built.field.base.clone(), built.iterations);
     let crowded =
         |fits: Vec<StarFit>,
          n_residual: usize,
@@ -198,11 +196,10 @@ pub fn analyse(
             n_first: fits.len() - n_residual,
             n_residual,
             fits,
-            epsf: epsf.clone(),
             field: built.field.clone(),
             variation: built.variation.clone(),
             epsf_stars: built.stars,
-            epsf_iterations: iterations,
+            epsf_iterations: built.iterations,
             fallback: built.fallback.clone(),
             n_groups: groups.groups,
             largest_group: groups.largest,
@@ -236,7 +233,7 @@ pub fn analyse(
     // leaves out without sharing a real neighbour's (which it could otherwise take over or keep from
     // settling), and is never reported
     let kept_fits: Vec<StarFit> = keep.iter().map(|&k| fits[k]).collect();
-    let mut wing = wings(&kept_fits, &from_residual, &epsf);
+    let mut wing = wings(&kept_fits, &from_residual, &field.base);
     let mut stars: Vec<Member> = stars
         .into_iter()
         .zip(&wing)

@@ -140,13 +140,6 @@ impl EpsfField for VaryingEpsf {
     }
 }
 
-impl crate::analysis::epsf::fit::Profile for VaryingEpsf {
-    #[inline]
-    fn eval_at(&self, _i: usize, px: f64, py: f64, x: f64, y: f64) -> (f64, f64, f64) {
-        self.eval_for(x, y, px - x, py - y)
-    }
-}
-
 /// The result of a varying build.
 #[derive(Debug, Clone)]
 pub struct BuiltVarying {

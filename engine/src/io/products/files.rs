@@ -40,8 +40,8 @@ const fn f(pattern: &'static str, by: &'static [Command], what: &'static str) ->
     OutputFile { pattern, by, what }
 }
 
-/// The fixed names of [`OUTPUT_FILES`] (relative to the command's output directory), for the writers and the
-/// readers: no other module spells a file's name.
+/// The fixed names of [`OUTPUT_FILES`] (relative to the command's output directory), for their writers and
+/// readers.
 pub const FLAT_CAL_FITS: &str = "flat_cal.fits";
 pub const PSF_MODEL_FITS: &str = "psf_model.fits";
 pub const REFCAT_CSV: &str = "refcat.csv";
