@@ -405,6 +405,7 @@ fn a_sequence_is_solved_from_its_products_and_scored() {
     the_sources_scatter_as_their_errors_say(&sol);
     the_assembly_and_the_attitudes_are_solved(&sol);
     bad_solve_input_is_named(&dir, &out);
+    every_other_exposure_of_each_stare_is_solved(&dir, &out);
     let _ = std::fs::remove_dir_all(&dir);
 }
 
@@ -637,6 +638,57 @@ fn bad_solve_input_is_named(dir: &Path, out: &Path) {
         stderr(&o)
     );
     assert!(!dir.join("no2").exists());
+}
+
+/// `--every 2` keeps the first exposure of each of the four stares (of two each): the attitudes are those of
+/// exposures 0, 2, 4, 6 by their own numbers; with `--excess-noise per-visit` the summary says so. A thinning
+/// beyond the exposures per stare, or an excess of no known kind, is named and writes nothing.
+fn every_other_exposure_of_each_stare_is_solved(dir: &Path, out: &Path) {
+    let sol = dir.join("every2");
+    let o = jsim()
+        .args(["solve", "--sequence"])
+        .arg(out)
+        .args(["--every", "2", "--excess-noise", "per-visit", "--out"])
+        .arg(&sol)
+        .output()
+        .expect("solve");
+    assert!(o.status.success(), "{}", stderr(&o));
+    let (h, rows) = csv(&sol.join("attitudes.csv"));
+    let e = h
+        .iter()
+        .position(|c| c == "exposure")
+        .expect("exposure column");
+    let exposures: Vec<f64> = rows.iter().map(|r| r[e]).collect();
+    assert_eq!(exposures, vec![0.0, 2.0, 4.0, 6.0]);
+    let summary: serde_json::Value = serde_json::from_str(
+        &std::fs::read_to_string(sol.join("solution.json")).expect("solution.json"),
+    )
+    .expect("json");
+    assert_eq!(summary[0]["exposures"], 4);
+    assert_eq!(summary[0]["excess_noise"], "per-visit");
+    for (args, says, name) in [
+        (["--every", "3"], "every 3: allowed 1 … 2", "no3"),
+        (
+            ["--excess-noise", "lots"],
+            "allowed none, per-stare or per-visit",
+            "no4",
+        ),
+    ] {
+        let o = jsim()
+            .args(["solve", "--sequence"])
+            .arg(out)
+            .args(args)
+            .arg("--out")
+            .arg(dir.join(name))
+            .output()
+            .expect("solve");
+        assert!(
+            !o.status.success() && stderr(&o).contains(says),
+            "{}",
+            stderr(&o)
+        );
+        assert!(!dir.join(name).exists());
+    }
 }
 
 /// plan.csv's seeds are the exposures' u64 seeds, unsigned (2⁶³ and above without a minus sign), so one

@@ -144,6 +144,9 @@ pub fn solve<'py>(
             parallax_factor: [cols[0][k], cols[1][k]],
             centre_mas: [cols[2][k], cols[3][k]],
             to_plane: [1.0, 0.0, 0.0, 1.0],
+            // every exposure a stare of its own
+            stare: k,
+            visit: k,
         })
         .collect();
     let r = "references";
@@ -217,13 +220,14 @@ pub fn solve<'py>(
     Ok(d)
 }
 
-/// `jsim.solve_sequence(sequence, *, exposures=None, out=None, model="auto", method="cg")`: what `jsim solve`
-/// does (`engine::studies::sequence::solve_study`): the solution of a sequence that has run, from its products,
+/// `jsim.solve_sequence(sequence, *, exposures=None, out=None, model="auto", method="cg", every=1,
+/// excess_noise="none")`:
+/// what `jsim solve` does (`engine::studies::sequence::solve_study`): the solution of a sequence that has run, from its products,
 /// for the first N exposures of each N in `exposures` (default: all that have run), scored against its truth,
 /// its files written to `out` (default `solution/` in the sequence's directory). Returns `solution.json`'s
 /// summaries (one dict per N) and the output directory. Bad input is a `ValueError` naming it.
 #[pyfunction]
-#[pyo3(signature = (sequence, *, exposures = None, out = None, model = "auto", method = "cg"))]
+#[pyo3(signature = (sequence, *, exposures = None, out = None, model = "auto", method = "cg", every = 1, excess_noise = "none"))]
 pub fn solve_sequence<'py>(
     py: Python<'py>,
     sequence: std::path::PathBuf,
@@ -231,19 +235,24 @@ pub fn solve_sequence<'py>(
     out: Option<std::path::PathBuf>,
     model: &str,
     method: &str,
+    every: usize,
+    excess_noise: &str,
 ) -> PyResult<Bound<'py, PyDict>> {
     use engine::studies::sequence::{solution as sq, solve_study as study};
     let model = SourceModel::parse_or_auto(model)
         .map_err(|e| PyValueError::new_err(format!("model = {e}")))?;
     let method = method_of(method)?;
+    let excess = engine::solution::ExcessNoise::parse(excess_noise)
+        .map_err(|e| PyValueError::new_err(format!("excess_noise: {e}")))?;
     let err = |e: engine::studies::sequence::SequenceError| PyValueError::new_err(e.to_string());
-    let p = sq::read_products(&sequence).map_err(err)?;
+    let p = sq::read_products_every(&sequence, every).map_err(err)?;
     let req = study::Request {
         exposures: study::exposures_to_solve(&exposures.unwrap_or_default(), p.exposures_run)
             .map_err(err)?,
         spec: sq::SolveSpec {
             model,
             method,
+            excess,
             ..Default::default()
         },
         checkpoint: None,

@@ -164,3 +164,12 @@ def test_solve_sequence_writes_what_jsim_solve_writes(jsim_bin, tmp_path):
     assert not (tmp_path / "bad").exists()
     with pytest.raises(ValueError, match="model"):
         jsim.solve_sequence(str(seq), model="proper")
+    # thinned, with the excess noise: the CLI's files again
+    subprocess.run([jsim_bin, "solve", "--sequence", str(seq), "--every", "2", "--excess-noise", "per-stare",
+                    "--out", str(tmp_path / "cli2")], check=True, capture_output=True)
+    r = jsim.solve_sequence(str(seq), every=2, excess_noise="per-stare", out=str(tmp_path / "py2"))
+    assert r["summary"][0]["exposures"] == 2 and r["summary"][0]["excess_noise"] == "per-stare"
+    for f in ["sources.csv", "attitudes.csv", "score_sources.csv", "precision_vs_n.csv"]:
+        assert (tmp_path / "py2" / f).read_bytes() == (tmp_path / "cli2" / f).read_bytes(), f
+    with pytest.raises(ValueError, match="excess_noise"):
+        jsim.solve_sequence(str(seq), excess_noise="lots")

@@ -128,6 +128,18 @@ pub(super) fn unconstrained(obs: &[Observation], active: &[bool], arrays: usize)
     SolutionError::CalibrationUnconstrained(n.iter().position(|c| *c < 3).unwrap_or(arrays))
 }
 
+/// The derivatives of a source's place along `axis` at exposure `g`'s epoch with respect to its five
+/// parameters (ξ₀, η₀, μ_ξ, μ_η, ϖ): `(1, 0, t, 0, P_ξ)` or `(0, 1, 0, t, P_η)`.
+pub(super) fn design_row(g: &ExposureGeometry, axis: usize) -> [f64; 5] {
+    [
+        if axis == 0 { 1.0 } else { 0.0 },
+        if axis == 1 { 1.0 } else { 0.0 },
+        if axis == 0 { g.t_yr } else { 0.0 },
+        if axis == 1 { g.t_yr } else { 0.0 },
+        g.parallax_factor[axis],
+    ]
+}
+
 /// One source's parameters from its observations (each turned back through its exposure's attitude) and its
 /// reference entry; a source whose full model is singular (too few epochs) gets its position only, with the
 /// reference's (or zero) motion.
@@ -162,13 +174,7 @@ pub(super) fn source_block(
             let s = a.invert(g.centre_mas, corrected_at(obs, exposures, cal, i));
             let weight = (a.p * a.p + a.q * a.q) / (o.sigma_mas * o.sigma_mas);
             for axis in 0..2 {
-                let full = [
-                    if axis == 0 { 1.0 } else { 0.0 },
-                    if axis == 1 { 1.0 } else { 0.0 },
-                    if axis == 0 { g.t_yr } else { 0.0 },
-                    if axis == 1 { g.t_yr } else { 0.0 },
-                    g.parallax_factor[axis],
-                ];
+                let full = design_row(g, axis);
                 // the parameters this model does not solve are moved to the left-hand side
                 let known: f64 = (n..5).map(|k| full[k] * fixed[k]).sum();
                 add(&full[..n], s[axis] - known, weight);

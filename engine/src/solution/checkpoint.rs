@@ -80,6 +80,8 @@ pub(super) fn fingerprint(
         {
             f(&mut h, v);
         }
+        u(&mut h, g.stare);
+        u(&mut h, g.visit);
     }
     for r in refs {
         u(&mut h, r.source);

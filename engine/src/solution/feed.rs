@@ -57,6 +57,9 @@ pub struct SkyReference {
 pub struct DesignExposure {
     pub cfg: Config,
     pub mid: Epoch,
+    /// Its stare and visit (the plan's).
+    pub stare: usize,
+    pub visit: usize,
 }
 
 /// The feed's knobs.
@@ -304,6 +307,8 @@ fn design_models(
             ),
             centre_mas: c,
             to_plane,
+            stare: d.stare,
+            visit: d.visit,
         });
         models.push(Design {
             wcs,

@@ -36,6 +36,7 @@ mod blocks;
 pub mod calibration;
 mod cg;
 pub mod checkpoint;
+pub mod excess;
 pub mod feed;
 mod groups;
 #[cfg(feature = "mpi")]
@@ -46,6 +47,7 @@ mod tiles;
 
 pub use calibration::{Calibration, CalibrationModel};
 pub use checkpoint::CheckpointStore;
+pub use excess::{ExcessBin, ExcessNoise};
 pub use ranks::{Ranks, Single};
 pub use solve::{Checkpointing, solve, solve_on, solve_with};
 
@@ -75,6 +77,11 @@ pub struct ExposureGeometry {
     /// Its design map from focal-plane px to the plane's mas (row-major 2 × 2: scale, position angle and the
     /// sky's handedness; only the calibration reads it).
     pub to_plane: [f64; 4],
+    /// The stare it belongs to: the exposures of one pointing within one visit, which see a source on the
+    /// same pixels among the same neighbours (only the excess noise reads it, [`ExcessNoise`]).
+    pub stare: usize,
+    /// The visit it belongs to: the stares of one season (only the excess noise reads it).
+    pub visit: usize,
 }
 
 impl ExposureGeometry {
@@ -181,6 +188,8 @@ pub struct Options {
     /// L, px: the calibration's focal-plane positions are in units of it (a focal plane's reach keeps its
     /// terms of order 1 and the fit well conditioned).
     pub focal_norm_px: f64,
+    /// The error beyond each observation's σ that the sources' formal errors carry (none by default).
+    pub excess: ExcessNoise,
 }
 
 impl Default for Options {
@@ -195,6 +204,7 @@ impl Default for Options {
             max_rejection_rounds: 5,
             calibration: CalibrationModel::NONE,
             focal_norm_px: calibration::DEFAULT_FOCAL_NORM_PX,
+            excess: ExcessNoise::None,
         }
     }
 }
@@ -279,6 +289,9 @@ pub struct Solution {
     pub rejected: usize,
     /// χ² of the observations kept over its degrees of freedom (NaN when none are left).
     pub chi2_per_dof: f64,
+    /// The error shared within a stare, per bin of per-observation σ, that the sources' σ carry
+    /// ([`Options::excess`]; empty when none is asked or too few sources are seen in two stares).
+    pub excess: Vec<ExcessBin>,
 }
 
 /// A list of indices for a message: all of them up to ten, else the first ten and the count.

@@ -258,6 +258,12 @@ fn solution_of(
     let opt = problem.opt;
     let n_sources = problem.prior.len();
     let (chi2_total, n_terms) = chi2(problem, &mut state, active);
+    let excess = match opt.excess {
+        super::ExcessNoise::None => Vec::new(),
+        super::ExcessNoise::PerStare | super::ExcessNoise::PerVisit => {
+            super::excess::apply(problem, &mut state, active)
+        }
+    };
     let priors: usize = refs
         .iter()
         .map(|r| r.sigma.iter().filter(|s| anchors(**s)).count())
@@ -288,6 +294,7 @@ fn solution_of(
         } else {
             f64::NAN
         },
+        excess,
     }
 }
 

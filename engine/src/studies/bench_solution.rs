@@ -222,6 +222,9 @@ fn synthetic_exposures(spec: &SyntheticSpec, step: f64, reach: f64) -> Vec<Expos
                     (k / side) as f64 * step - reach,
                 ],
                 to_plane: TO_PLANE,
+                // each exposure a pointing of its own epoch: a stare of one
+                stare: exposures.len(),
+                visit: epoch,
             });
         }
     }

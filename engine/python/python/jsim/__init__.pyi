@@ -174,10 +174,13 @@ def solve_sequence(
     out: Optional[str] = None,
     model: str = "auto",
     method: str = "cg",
+    every: int = 1,
+    excess_noise: str = "none",
 ) -> Dict[str, Any]:
     """``jsim solve`` on a sequence that has run (``jsim sequence --out``): the solution of its first N
-    exposures for each N in ``exposures`` (default: all that have run), from its products, scored against
-    its truth; writes ``jsim solve``'s files to ``out`` (default ``solution/`` in the sequence's directory)
+    exposures for each N in ``exposures`` (default: all that have run; of every ``every``-th exposure of each
+    stare, ``--every``), from its products, scored against its truth, the sources' σ carrying the
+    ``excess_noise`` (``none``, ``per-stare`` or ``per-visit``: ``--excess-noise``); writes ``jsim solve``'s files to ``out`` (default ``solution/`` in the sequence's directory)
     and returns ``summary`` (``solution.json``: one dict per N) and ``out``."""
 
 def transit_flux(

@@ -38,6 +38,11 @@ pub struct SolveArgs {
     /// default: all that have run.
     #[arg(long, value_delimiter = ',')]
     pub exposures: Vec<usize>,
+    /// Keep every K-th exposure of each stare (its 1st, (K + 1)-th, …), before --exposures: every stare and
+    /// season kept with fewer exposures in each (the precision against the exposures per star over the
+    /// sequence's whole time span); 1 … the exposures per stare.
+    #[arg(long, default_value_t = 1)]
+    pub every: usize,
     /// The sources' model: position, full (position, proper motion, parallax), or auto (full where the
     /// exposures span ≥ 0.1 yr).
     #[arg(long, default_value = "auto")]
@@ -53,6 +58,11 @@ pub struct SolveArgs {
     /// Added in quadrature to each detection's Cramér–Rao bound as its σ, mas.
     #[arg(long, default_value_t = 1.0)]
     pub sigma_floor_mas: f64,
+    /// The error beyond each detection's σ that the sources' σ carry: none, per-stare (an error a source's
+    /// detections share within a stare, measured per bin of σ from the residuals between stares) or
+    /// per-visit (shared within a visit, measured between visits).
+    #[arg(long, default_value = "none")]
+    pub excess_noise: String,
     /// A detection is a source's when within this of it after the alignment, mas.
     #[arg(long, default_value_t = 200.0)]
     pub match_radius_mas: f64,
@@ -138,12 +148,18 @@ fn emit_slurm(a: &SolveArgs) -> Result<()> {
         let ns: Vec<String> = a.exposures.iter().map(|n| n.to_string()).collect();
         opt("--exposures", ns.join(","));
     }
+    if a.every != 1 {
+        opt("--every", a.every.to_string());
+    }
     opt("--model", a.model.clone());
     if let Some(d) = a.distortion_order {
         opt("--distortion-order", d.to_string());
     }
     opt("--method", format!("{:?}", a.method).to_lowercase());
     opt("--sigma-floor-mas", a.sigma_floor_mas.to_string());
+    if a.excess_noise != engine::solution::ExcessNoise::None.name() {
+        opt("--excess-noise", a.excess_noise.clone());
+    }
     opt("--match-radius-mas", a.match_radius_mas.to_string());
     opt("--mission-exposures", a.mission_exposures.to_string());
     opt(
@@ -184,10 +200,13 @@ fn emit_slurm(a: &SolveArgs) -> Result<()> {
 
 pub fn solve(a: &SolveArgs) -> Result<()> {
     let model = SourceModel::parse_or_auto(&a.model).map_err(|e| anyhow::anyhow!("--model {e}"))?;
+    let excess = engine::solution::ExcessNoise::parse(&a.excess_noise)
+        .map_err(|e| anyhow::anyhow!("--excess-noise: {e}"))?;
     let spec = sq::SolveSpec {
         model,
         distortion_order: a.distortion_order,
         method: a.method.method(),
+        excess,
         feed: engine::solution::feed::FeedOptions {
             match_radius_mas: a.match_radius_mas,
             sigma_floor_mas: a.sigma_floor_mas,
@@ -206,7 +225,7 @@ pub fn solve(a: &SolveArgs) -> Result<()> {
         return emit_slurm(a);
     }
     let t = Instant::now();
-    let p = sq::read_products(&a.sequence)?;
+    let p = sq::read_products_every(&a.sequence, a.every)?;
     let req = study::Request {
         exposures: study::exposures_to_solve(&a.exposures, p.exposures_run)?,
         spec,

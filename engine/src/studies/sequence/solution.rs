@@ -23,6 +23,8 @@ pub struct SolveSpec {
     pub distortion_order: Option<usize>,
     /// How the solution iterates (conjugate gradients by default; the block iteration as a reference).
     pub method: Method,
+    /// The error beyond each detection's σ that the sources' σ carry (none by default).
+    pub excess: crate::solution::ExcessNoise,
     pub feed: FeedOptions,
 }
 
@@ -46,6 +48,14 @@ fn invalid(m: impl std::fmt::Display) -> SequenceError {
 
 /// Read a sequence directory's products: the exposures that have run, from the first on.
 pub fn read_products(dir: &Path) -> Result<Products, SequenceError> {
+    read_products_every(dir, 1)
+}
+
+/// [`read_products`] thinned: of the exposures that have run, every `every`-th of each stare (its 1st,
+/// (every + 1)-th, …), renumbered 0 … in their order — every stare and season kept, fewer exposures in
+/// each: the precision against the exposures per star over the sequence's whole time span. `every` is
+/// 1 … the exposures per stare (a named error otherwise).
+pub fn read_products_every(dir: &Path, every: usize) -> Result<Products, SequenceError> {
     // the instrument as designed and the plan: never config.toml (the instrument as assembled, the seeds)
     let cfg_path = dir.join(super::run::DESIGN_NAME);
     let spec_path = dir.join(crate::io::products::files::SEQUENCE_TOML);
@@ -60,7 +70,7 @@ pub fn read_products(dir: &Path) -> Result<Products, SequenceError> {
     // the plan as planned: what the pointings and rolls were meant to be, no draw of their errors
     spec.pointing_error_arcsec = 0.0;
     spec.roll_error_arcsec = 0.0;
-    let plan = super::plan(&spec, &cfg).map_err(invalid)?;
+    let mut plan = super::plan(&spec, &cfg).map_err(invalid)?;
     let exposures_run = plan
         .exposures
         .iter()
@@ -72,12 +82,41 @@ pub fn read_products(dir: &Path) -> Result<Products, SequenceError> {
             dir.display()
         )));
     }
+    if every == 0 || every > spec.exposures_per_stare {
+        return Err(invalid(format!(
+            "every {every}: allowed 1 … {} (the exposures per stare)",
+            spec.exposures_per_stare
+        )));
+    }
+    // the kept exposures, in order; each keeps its index (its files), its place in the list is its number
+    plan.exposures.truncate(exposures_run);
+    let mut first_of_stare = std::collections::HashMap::new();
+    for e in &plan.exposures {
+        first_of_stare.entry(e.stare).or_insert(e.index);
+    }
+    plan.exposures.retain(|e| {
+        first_of_stare
+            .get(&e.stare)
+            .is_none_or(|first| (e.index - first) % every == 0)
+    });
+    let exposures_run = plan.exposures.len();
+    let number_of: std::collections::HashMap<usize, usize> = plan
+        .exposures
+        .iter()
+        .enumerate()
+        .map(|(k, e)| (e.index, k))
+        .collect();
     let designs: Vec<DesignExposure> = plan.exposures[..exposures_run]
         .iter()
         .map(|e| {
             let c = design_config(&cfg, &plan, e);
             let mid = mid_exposure(&c, e);
-            DesignExposure { cfg: c, mid }
+            DesignExposure {
+                cfg: c,
+                mid,
+                stare: e.stare,
+                visit: plan.stares[e.stare].visit,
+            }
         })
         .collect();
     let id = super::run::sequence_id(dir)?;
@@ -103,7 +142,10 @@ pub fn read_products(dir: &Path) -> Result<Products, SequenceError> {
         let (cx, cy, fl) = (any("crlb_x_px")?, any("crlb_y_px")?, col("flags")?);
         for i in 0..rows.len() {
             detections.push(Detection {
-                exposure: ex[i] as usize,
+                exposure: number_of
+                    .get(&(ex[i] as usize))
+                    .copied()
+                    .unwrap_or(usize::MAX),
                 array: (ar[i] as usize).saturating_sub(1),
                 x_px: x[i],
                 y_px: y[i],
@@ -198,6 +240,7 @@ fn options(p: &Products, n: usize, spec: &SolveSpec) -> Options {
     Options {
         model,
         method: spec.method,
+        excess: spec.excess,
         calibration: CalibrationModel {
             arrays: 4,
             array_order: 2,
@@ -342,7 +385,7 @@ pub fn write_solution(
         .enumerate()
         .map(|(e, (a, g))| {
             vec![
-                Cell::I(e as i64),
+                Cell::I(p.plan.exposures.get(e).map_or(e, |x| x.index) as i64),
                 Cell::F(g.t_yr + fed.ref_epoch_jyear),
                 Cell::F(a.offset_mas[0]),
                 Cell::F(a.offset_mas[1]),

@@ -122,6 +122,15 @@ pub fn run(
             sol.rejected,
             sol.chi2_per_dof
         ));
+        for b in &sol.excess {
+            log(&format!(
+                "  excess noise ({}): σ {:.3} mas per detection → τ {:.3} mas ({} sources seen in two groups or more)",
+                opt.excess.name(),
+                b.sigma_obs_mas,
+                b.tau_mas,
+                b.sources
+            ));
+        }
         if !sol.skipped_exposures.is_empty() {
             log(&format!(
                 "  {} exposure(s) left out, tied to nothing else (fewer than 2 sources shared with the rest and \
@@ -154,6 +163,12 @@ pub fn run(
             "rejected": sol.rejected,
             "skipped_exposures": sol.skipped_exposures,
             "chi2_per_dof": sol.chi2_per_dof,
+            "excess_noise": opt.excess.name(),
+            "excess_bins": sol.excess.iter().map(|b| serde_json::json!({
+                "sigma_obs_mas": b.sigma_obs_mas,
+                "tau_mas": b.tau_mas,
+                "sources": b.sources,
+            })).collect::<Vec<_>>(),
             "solve_s": solve_s,
         }));
         // the last (largest) solution's files
