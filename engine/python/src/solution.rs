@@ -61,16 +61,19 @@ fn same_length(n: usize, what: &str, cols: &[(&str, usize)]) -> PyResult<()> {
 /// The astrometric solution of observations on one tangent plane (mas): `observations` a dict of 1-D arrays
 /// `exposure, source` (indices), `xi_mas, eta_mas, sigma_mas`; `exposures` one row per exposure: `t_yr`
 /// (years from the reference epoch), `parallax_xi, parallax_eta` (its parallax factors), `centre_xi_mas,
-/// centre_eta_mas` (the point its attitude turns about); `references` the catalogue that fixes the frame:
+/// centre_eta_mas` (the point its attitude turns about) and, optionally, `stare` and `visit` (indices: the
+/// groups whose observations of a source share an error, for `excess_noise`; default each exposure its own);
+/// `references` the catalogue that fixes the frame:
 /// `source`, `xi_mas, eta_mas, pm_xi, pm_eta, parallax` and their `sigma_…` (0 or inf leaves one free).
 /// `model`: "full" (five parameters) or "position"; `method`: "cg" (conjugate gradients, the default) or
-/// "block". Returns a dict of arrays per source (`xi_mas, eta_mas, pm_xi, pm_eta, parallax`, `sigma_…`,
+/// "block"; `excess_noise`: "none" (the default), "per-stare" or "per-visit" (the error a source's observations
+/// share within a group, measured from the residuals between groups and carried into the σ). Returns a dict of arrays per source (`xi_mas, eta_mas, pm_xi, pm_eta, parallax`, `sigma_…`,
 /// `observations`, `chi2`), per exposure (`p, q, offset_xi_mas, offset_eta_mas`: `o = c + [[p, −q], [q, p]]
 /// (s − c) + offset`; NaN for an exposure left out, listed in `skipped_exposures`) and `iterations, converged,
 /// rejected, chi2_per_dof`. Bad input is a `ValueError`
 /// naming the field.
 #[pyfunction]
-#[pyo3(signature = (observations, exposures, references, *, model = "full", method = "cg", tolerance_sigma = 1e-3, clip_sigma = 5.0, max_iterations = 500))]
+#[pyo3(signature = (observations, exposures, references, *, model = "full", method = "cg", tolerance_sigma = 1e-3, clip_sigma = 5.0, max_iterations = 500, excess_noise = "none"))]
 #[allow(clippy::too_many_arguments)]
 pub fn solve<'py>(
     py: Python<'py>,
@@ -82,10 +85,13 @@ pub fn solve<'py>(
     tolerance_sigma: f64,
     clip_sigma: f64,
     max_iterations: usize,
+    excess_noise: &str,
 ) -> PyResult<Bound<'py, PyDict>> {
     let model =
         SourceModel::parse(model).map_err(|e| PyValueError::new_err(format!("model = {e}")))?;
     let method = method_of(method)?;
+    let excess = engine::solution::ExcessNoise::parse(excess_noise)
+        .map_err(|e| PyValueError::new_err(format!("excess_noise: {e}")))?;
     let o = "observations";
     let (oe, os) = (
         indices(observations, o, "exposure")?,
@@ -138,15 +144,25 @@ pub fn solve<'py>(
             ("centre_eta_mas", cols[3].len()),
         ],
     )?;
+    // the groups that share an error: given, or every exposure its own
+    let group = |name: &str| -> PyResult<Vec<usize>> {
+        if exposures.contains(name)? {
+            let g = indices(exposures, e, name)?;
+            same_length(t.len(), e, &[(name, g.len())])?;
+            Ok(g)
+        } else {
+            Ok((0..t.len()).collect())
+        }
+    };
+    let (stare, visit) = (group("stare")?, group("visit")?);
     let geometry: Vec<ExposureGeometry> = (0..t.len())
         .map(|k| ExposureGeometry {
             t_yr: t[k],
             parallax_factor: [cols[0][k], cols[1][k]],
             centre_mas: [cols[2][k], cols[3][k]],
             to_plane: [1.0, 0.0, 0.0, 1.0],
-            // every exposure a stare of its own
-            stare: k,
-            visit: k,
+            stare: stare[k],
+            visit: visit[k],
         })
         .collect();
     let r = "references";
@@ -180,6 +196,7 @@ pub fn solve<'py>(
         tolerance_sigma,
         clip_sigma,
         max_iterations,
+        excess,
         ..Options::default()
     };
     let sol = py
@@ -217,6 +234,14 @@ pub fn solve<'py>(
     d.set_item("converged", sol.converged)?;
     d.set_item("rejected", sol.rejected)?;
     d.set_item("chi2_per_dof", sol.chi2_per_dof)?;
+    d.set_item(
+        "excess_tau_mas",
+        vector(sol.excess.iter().map(|b| b.tau_mas).collect()),
+    )?;
+    d.set_item(
+        "excess_sigma_obs_mas",
+        vector(sol.excess.iter().map(|b| b.sigma_obs_mas).collect()),
+    )?;
     Ok(d)
 }
 

@@ -131,6 +131,24 @@ def test_bad_input_is_named():
     missing = {k: v for k, v in exposures.items() if k != "t_yr"}
     with pytest.raises(ValueError, match="t_yr"):
         jsim.solve(observations, missing, references)
+    with pytest.raises(ValueError, match="excess_noise"):
+        jsim.solve(observations, exposures, references, excess_noise="lots")
+    short_stare = dict(exposures, stare=np.zeros(len(exposures["t_yr"]) - 1))
+    with pytest.raises(ValueError, match="stare"):
+        jsim.solve(observations, short_stare, references, excess_noise="per-stare")
+
+
+def test_the_excess_noise_leaves_the_solution_and_only_widens_its_sigmas():
+    # the 36 exposures in 4 visits (one per epoch): the per-visit excess measures τ from the residuals between
+    # visits and carries it into the σ (never narrower than without); the parameters do not move
+    observations, exposures, references, _, names = synthetic()
+    visits = dict(exposures, visit=np.repeat(np.arange(4), 9))
+    plain = jsim.solve(observations, visits, references)
+    with_excess = jsim.solve(observations, visits, references, excess_noise="per-visit")
+    assert len(plain["excess_tau_mas"]) == 0 and len(with_excess["excess_tau_mas"]) >= 1
+    for name in names:
+        assert np.array_equal(plain[name], with_excess[name]), name
+        assert np.all(with_excess["sigma_" + name] >= plain["sigma_" + name] * (1 - 1e-12)), name
 
 
 def test_solve_sequence_writes_what_jsim_solve_writes(jsim_bin, tmp_path):

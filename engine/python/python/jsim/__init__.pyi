@@ -158,14 +158,18 @@ def solve(
     tolerance_sigma: float = 1e-3,
     clip_sigma: float = 5.0,
     max_iterations: int = 500,
+    excess_noise: str = "none",
 ) -> Dict[str, Any]:
     """The astrometric solution (what ``jsim solve`` runs on a sequence's observations) on one tangent
     plane, mas: ``observations`` (``exposure, source, xi_mas, eta_mas, sigma_mas``), ``exposures``
-    (``t_yr, parallax_xi, parallax_eta, centre_xi_mas, centre_eta_mas``), ``references`` (``source``,
+    (``t_yr, parallax_xi, parallax_eta, centre_xi_mas, centre_eta_mas``, optionally ``stare`` and ``visit``:
+    the groups whose observations of a source share an error for ``excess_noise`` = ``"per-stare"`` or
+    ``"per-visit"``, each exposure its own by default), ``references`` (``source``,
     ``xi_mas, eta_mas, pm_xi, pm_eta, parallax`` and their ``sigma_…``). Returns per-source arrays (the five
     parameters, their ``sigma_…``, ``observations``, ``chi2``), per-exposure attitudes (``p, q,
     offset_xi_mas, offset_eta_mas``; NaN for an exposure left out, listed in ``skipped_exposures``) and
-    ``iterations, converged, rejected, chi2_per_dof``."""
+    ``iterations, converged, rejected, chi2_per_dof`` (and the excess noise measured, ``excess_tau_mas`` per
+    bin of per-observation σ ``excess_sigma_obs_mas``)."""
 
 def solve_sequence(
     sequence: str,
