@@ -498,36 +498,46 @@ fn read_columns(
         .collect()
 }
 
-/// The column names and the row count of the binary table in HDU `index` (0: the primary, 1: the first
-/// extension).
-pub fn table_layout(path: &Path, index: usize) -> Result<(Vec<String>, usize), FitsError> {
+/// A binary table open for reading (the file opened once): its columns' names and its row count, its
+/// numeric columns read on demand.
+pub struct OpenTable {
+    f: FitsFile,
+    hdu: fitsio::hdu::FitsHdu,
+    path: std::path::PathBuf,
+    pub names: Vec<String>,
+    pub num_rows: usize,
+}
+
+/// Open the binary table in HDU `index` (0: the primary, 1: the first extension).
+pub fn open_table(path: &Path, index: usize) -> Result<OpenTable, FitsError> {
     let mut f = open(path)?;
     let hdu = f
         .hdu(index)
         .map_err(|e| FitsError::fits(path, format!("no table extension: {e}")))?;
-    match &hdu.info {
+    let (names, num_rows) = match &hdu.info {
         fitsio::hdu::HduInfo::TableInfo {
             column_descriptions,
             num_rows,
-        } => Ok((
+        } => (
             column_descriptions.iter().map(|c| c.name.clone()).collect(),
             *num_rows,
-        )),
-        _ => Err(FitsError::fits(path, format!("HDU {index} is not a table"))),
-    }
+        ),
+        _ => return Err(FitsError::fits(path, format!("HDU {index} is not a table"))),
+    };
+    Ok(OpenTable {
+        f,
+        hdu,
+        path: path.to_path_buf(),
+        names,
+        num_rows,
+    })
 }
 
-/// Read numeric columns of the binary table in HDU `index` (as [`table_layout`]).
-pub fn read_table_at(
-    path: &Path,
-    index: usize,
-    columns: &[&str],
-) -> Result<Vec<Vec<f64>>, FitsError> {
-    let mut f = open(path)?;
-    let hdu = f
-        .hdu(index)
-        .map_err(|e| FitsError::fits(path, format!("no table extension: {e}")))?;
-    read_columns(&mut f, &hdu, path, columns)
+impl OpenTable {
+    /// Its numeric columns named `columns`, in that order.
+    pub fn read(&mut self, columns: &[&str]) -> Result<Vec<Vec<f64>>, FitsError> {
+        read_columns(&mut self.f, &self.hdu, &self.path, columns)
+    }
 }
 
 /// A number as a header card keeps it: CFITSIO writes a double with 15 significant digits (`%.15G`), so an

@@ -419,7 +419,8 @@ fn read_fits(path: &Path, lim: &Limits) -> Result<Catalogue, SceneError> {
             message,
         },
     };
-    let (names, num_rows) = fits::table_layout(path, 1).map_err(fe)?;
+    let mut table = fits::open_table(path, 1).map_err(fe)?;
+    let (names, num_rows) = (table.names.clone(), table.num_rows);
     if num_rows > MAX_CATALOGUE_STARS {
         return Err(SceneError::TooMany {
             path: p,
@@ -443,7 +444,7 @@ fn read_fits(path: &Path, lim: &Limits) -> Result<Catalogue, SceneError> {
     let mut cols: Vec<Option<Vec<f64>>> = vec![None; names.len()];
     for (i, c) in wanted
         .into_iter()
-        .zip(fits::read_table_at(path, 1, &wanted_names).map_err(fe)?)
+        .zip(table.read(&wanted_names).map_err(fe)?)
     {
         cols[i] = Some(c);
     }
