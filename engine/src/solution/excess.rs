@@ -71,12 +71,11 @@ impl ExcessNoise {
         }
     }
 
-    /// The group of exposures that share the error: exposure `g`'s stare or visit (None: no excess).
-    fn group(self, g: &super::ExposureGeometry) -> Option<usize> {
+    /// The group of exposures that share the error: exposure `g`'s visit for `PerVisit`, else its stare.
+    fn group(self, g: &super::ExposureGeometry) -> usize {
         match self {
-            Self::None => None,
-            Self::PerStare => Some(g.stare),
-            Self::PerVisit => Some(g.visit),
+            Self::PerVisit => g.visit,
+            Self::None | Self::PerStare => g.stare,
         }
     }
 }
@@ -133,7 +132,7 @@ fn share(p: &Problem, state: &State, active: &[bool], s: usize) -> Option<Share>
         .filter(|i| active[*i])
         .map(|i| {
             let g = &p.exposures[p.obs[i].exposure];
-            (p.opt.excess.group(g).unwrap_or(g.stare), i)
+            (p.opt.excess.group(g), i)
         })
         .collect();
     if mine.is_empty() {
@@ -213,12 +212,12 @@ const MEDIAN_CHI2_1: f64 = 0.454_936_4;
 /// τ² of one bin: where the median over its stares' terms `r̄² / ((1/W_s + τ²)(1 − h))` (per axis, h =
 /// p_eff / 2S the share of a term the source's own fit takes) is χ²₁'s, 0.4549 — the median, so that a few
 /// mismatched or blended sources, whose residuals are not Gaussian, do not set the τ of all the others; 0
-/// where the median at τ = 0 is already at or below it.
+/// where the median at τ = 0 is already at or below it. The bin's sources each keep degrees of freedom
+/// (2S − p_eff > 0.5: [`apply`] measures with no others), so 1 − h > 0.
 fn tau2_of(bin: &[&Share]) -> f64 {
     // (1/W_s, r̄² / (1 − h)) per stare and axis
     let terms: Vec<(f64, f64)> = bin
         .iter()
-        .filter(|s| 2.0 * s.stares.len() as f64 > s.p_eff)
         .flat_map(|s| {
             let keep = 1.0 - s.p_eff / (2.0 * s.stares.len() as f64);
             s.stares

@@ -100,12 +100,6 @@ pub fn read_products_every(dir: &Path, every: usize) -> Result<Products, Sequenc
             .is_none_or(|first| (e.index - first) % every == 0)
     });
     let exposures_run = plan.exposures.len();
-    let number_of: std::collections::HashMap<usize, usize> = plan
-        .exposures
-        .iter()
-        .enumerate()
-        .map(|(k, e)| (e.index, k))
-        .collect();
     let designs: Vec<DesignExposure> = plan.exposures[..exposures_run]
         .iter()
         .map(|e| {
@@ -121,7 +115,13 @@ pub fn read_products_every(dir: &Path, every: usize) -> Result<Products, Sequenc
         .collect();
     let id = super::run::sequence_id(dir)?;
     let mut detections = Vec::new();
-    for (e, d) in plan.exposures[..exposures_run].iter().zip(&designs) {
+    // each detection's exposure is its place in the kept list (its catalogue's column, checked to be the
+    // exposure's own index, numbers its file)
+    for (number, (e, d)) in plan.exposures[..exposures_run]
+        .iter()
+        .zip(&designs)
+        .enumerate()
+    {
         let path = super::run::exposure_path(dir, e.index);
         let (h, rows) = crate::io::csv::read(&path)?;
         let col = |n: &str| crate::io::csv::column_f64(&path, &h, &rows, n);
@@ -142,10 +142,7 @@ pub fn read_products_every(dir: &Path, every: usize) -> Result<Products, Sequenc
         let (cx, cy, fl) = (any("crlb_x_px")?, any("crlb_y_px")?, col("flags")?);
         for i in 0..rows.len() {
             detections.push(Detection {
-                exposure: number_of
-                    .get(&(ex[i] as usize))
-                    .copied()
-                    .unwrap_or(usize::MAX),
+                exposure: number,
                 array: (ar[i] as usize).saturating_sub(1),
                 x_px: x[i],
                 y_px: y[i],
