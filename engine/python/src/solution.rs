@@ -46,6 +46,9 @@ fn method_of(method: &str) -> PyResult<Method> {
     }
 }
 
+/// A source's parameters' column names, in [`engine::solution::Params`]' order.
+const PARAMS: [&str; 5] = ["xi_mas", "eta_mas", "pm_xi", "pm_eta", "parallax"];
+
 /// Columns that must all have `n` values.
 fn same_length(n: usize, what: &str, cols: &[(&str, usize)]) -> PyResult<()> {
     for (name, len) in cols {
@@ -92,6 +95,33 @@ pub fn solve<'py>(
     let method = method_of(method)?;
     let excess = engine::solution::ExcessNoise::parse(excess_noise)
         .map_err(|e| PyValueError::new_err(format!("excess_noise: {e}")))?;
+    let obs = observations_of(observations)?;
+    let geometry = exposures_of(exposures)?;
+    let (refs, rs) = references_of(references)?;
+    let os = obs.iter().map(|o| o.source);
+    let n_sources = os
+        .chain(rs.iter().copied())
+        .map(|s| s + 1)
+        .max()
+        .unwrap_or(0);
+    let opt = Options {
+        model,
+        method,
+        tolerance_sigma,
+        clip_sigma,
+        max_iterations,
+        excess,
+        ..Options::default()
+    };
+    let sol = py
+        .detach(|| solve_engine(&obs, &geometry, &refs, n_sources, &opt))
+        .map_err(|e| PyValueError::new_err(e.to_string()))?;
+    solution_dict(py, sol)
+}
+
+/// The observations' columns (`exposure, source, xi_mas, eta_mas, sigma_mas`) as the solution's
+/// [`Observation`]s, on array 0 at the axis (the calibration is not solved from Python).
+fn observations_of(observations: &Bound<'_, PyDict>) -> PyResult<Vec<Observation>> {
     let o = "observations";
     let (oe, os) = (
         indices(observations, o, "exposure")?,
@@ -112,7 +142,7 @@ pub fn solve<'py>(
             ("sigma_mas", osig.len()),
         ],
     )?;
-    let obs: Vec<Observation> = (0..oe.len())
+    Ok((0..oe.len())
         .map(|k| Observation {
             exposure: oe[k],
             source: os[k],
@@ -122,7 +152,12 @@ pub fn solve<'py>(
             array: 0,
             focal_px: [0.0, 0.0],
         })
-        .collect();
+        .collect())
+}
+
+/// The exposures' columns (`t_yr`, parallax factors, centres, optional `stare` and `visit`) as their
+/// [`ExposureGeometry`].
+fn exposures_of(exposures: &Bound<'_, PyDict>) -> PyResult<Vec<ExposureGeometry>> {
     let e = "exposures";
     let t = need(exposures, e, "t_yr")?;
     let cols: Vec<Vec<f64>> = [
@@ -155,7 +190,7 @@ pub fn solve<'py>(
         }
     };
     let (stare, visit) = (group("stare")?, group("visit")?);
-    let geometry: Vec<ExposureGeometry> = (0..t.len())
+    Ok((0..t.len())
         .map(|k| ExposureGeometry {
             t_yr: t[k],
             parallax_factor: [cols[0][k], cols[1][k]],
@@ -164,10 +199,14 @@ pub fn solve<'py>(
             stare: stare[k],
             visit: visit[k],
         })
-        .collect();
+        .collect())
+}
+
+/// The reference catalogue's columns (`source`, the five parameters and their `sigma_…`) as [`Reference`]s,
+/// with the source indices (the solution's source count reads them).
+fn references_of(references: &Bound<'_, PyDict>) -> PyResult<(Vec<Reference>, Vec<usize>)> {
     let r = "references";
     let rs = indices(references, r, "source")?;
-    const PARAMS: [&str; 5] = ["xi_mas", "eta_mas", "pm_xi", "pm_eta", "parallax"];
     let values: Vec<Vec<f64>> = PARAMS
         .iter()
         .map(|n| need(references, r, n))
@@ -189,19 +228,14 @@ pub fn solve<'py>(
             sigma: std::array::from_fn(|j| sigmas[j][k]),
         })
         .collect();
-    let n_sources = os.iter().chain(&rs).map(|s| s + 1).max().unwrap_or(0);
-    let opt = Options {
-        model,
-        method,
-        tolerance_sigma,
-        clip_sigma,
-        max_iterations,
-        excess,
-        ..Options::default()
-    };
-    let sol = py
-        .detach(|| solve_engine(&obs, &geometry, &refs, n_sources, &opt))
-        .map_err(|e| PyValueError::new_err(e.to_string()))?;
+    Ok((refs, rs))
+}
+
+/// The solution as the dict `jsim.solve` returns.
+fn solution_dict<'py>(
+    py: Python<'py>,
+    sol: engine::solution::Solution,
+) -> PyResult<Bound<'py, PyDict>> {
     let d = PyDict::new(py);
     let vector = |v: Vec<f64>| crate::convert::vector(py, v);
     for (j, n) in PARAMS.iter().enumerate() {
