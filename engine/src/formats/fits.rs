@@ -188,7 +188,7 @@ fn drop_primary_extname(f: &mut FitsFile) -> Result<(), String> {
 /// Every card of HDU `index` (0: the primary) as its text. Record-valued keywords (`DP1 = 'EXTVER: 1'`,
 /// `DP1 = 'AXIS.1: 1'`) repeat one keyword, which the safe reader, keyword by keyword, cannot tell apart.
 #[allow(unsafe_code)] // two CFITSIO calls (ffghsp, ffgrec) the safe wrapper does not offer; `f` is a live, open file
-pub fn header_cards(f: &mut FitsFile, index: usize) -> Result<Vec<String>, String> {
+pub(super) fn header_cards(f: &mut FitsFile, index: usize) -> Result<Vec<String>, String> {
     let hdu = std::os::raw::c_int::try_from(index + 1).map_err(|e| e.to_string())?;
     let (mut status, mut n, mut more) = (0, 0, 0);
     // SAFETY: `as_raw` is the open file's CFITSIO handle, valid for the calls
@@ -407,7 +407,7 @@ fn write_text(f: &mut FitsFile, path: &Path, name: &str, text: &str) -> Result<(
 }
 
 /// Open a file for reading, a missing one an error that says so once.
-pub fn open(path: &Path) -> Result<FitsFile, FitsError> {
+pub(super) fn open(path: &Path) -> Result<FitsFile, FitsError> {
     if !path.exists() {
         return Err(FitsError::io(
             path,
@@ -418,7 +418,7 @@ pub fn open(path: &Path) -> Result<FitsFile, FitsError> {
 }
 
 /// An HDU of an open file: extension `ext` by EXTNAME, or the primary for `None`.
-pub fn select(
+pub(super) fn select(
     f: &mut FitsFile,
     path: &Path,
     ext: Option<&str>,

@@ -4,3 +4,4 @@
 
 pub mod csv;
 pub mod fits;
+pub mod fits_reader;

@@ -16,13 +16,12 @@
 //! mean: the units of its columns' names, the image's header facts, atomic writes.
 
 pub use crate::formats::fits::{
-    Card, Column, FitsError, Hdu, Pixels, Value, as_header_f64, extension_names, header_cards,
-    open, read_f64_key, read_f64_key_in, read_plane, read_string_key, read_string_key_in,
-    read_table, read_text,
+    Card, Column, FitsError, Hdu, Pixels, Value, as_header_f64, extension_names, read_f64_key,
+    read_f64_key_in, read_plane, read_string_key, read_string_key_in, read_table, read_text,
 };
 
 use super::{IoError, temp_path};
-use crate::formats::fits::select;
+use crate::formats::fits_reader::Reader;
 use std::path::Path;
 
 impl From<FitsError> for IoError {
@@ -225,47 +224,41 @@ pub fn read_image_in(
     image_ext: Option<&str>,
     dq_ext: &str,
 ) -> Result<ImageRead, IoError> {
-    let mut f = open(path)?;
-    let fe = |e: fitsio::errors::Error| IoError::fits(path, e);
-    let hdu = select(&mut f, path, image_ext)?;
-    let (nx, ny) = match &hdu.info {
-        fitsio::hdu::HduInfo::ImageInfo { shape, .. } if shape.len() == 2 => (shape[1], shape[0]),
-        _ => {
-            return Err(IoError::fits(
-                path,
-                match image_ext {
-                    Some(name) => format!("extension {name} is not a 2-D image"),
-                    None => {
-                        "the primary HDU is not a 2-D image (a focal-plane file? its arrays are \
-                             analysed one by one by EXTNAME)"
-                            .to_string()
-                    }
-                },
-            ));
-        }
+    let mut f = Reader::open(path)?;
+    let index = match image_ext {
+        Some(name) => f.index_of(name)?,
+        None => 0,
     };
-    let data: Vec<f32> = hdu.read_image(&mut f).map_err(fe)?;
+    let Some((nx, ny)) = f.plane_shape(index)? else {
+        return Err(IoError::fits(
+            path,
+            match image_ext {
+                Some(name) => format!("extension {name} is not a 2-D image"),
+                None => "the primary HDU is not a 2-D image (a focal-plane file? its arrays are \
+                         analysed one by one by EXTNAME)"
+                    .to_string(),
+            },
+        ));
+    };
+    let data = f.image_f32(index)?;
     let numbers: std::collections::HashMap<&str, f64> = NUMERIC_KEYS
         .into_iter()
-        .filter_map(|k| hdu.read_key::<f64>(&mut f, k).ok().map(|v| (k, v)))
+        .filter_map(|k| f.key_f64(index, k).map(|v| (k, v)))
         .collect();
     // the text of every card the analysis reads: SAMPLING, and a numeric card that did not read as a number
     let texts: std::collections::HashMap<&str, String> = NUMERIC_KEYS
         .into_iter()
         .filter(|k| !numbers.contains_key(k))
         .chain(["SAMPLING"])
-        .filter_map(|k| hdu.read_key::<String>(&mut f, k).ok().map(|v| (k, v)))
+        .filter_map(|k| f.key_string(index, k).map(|v| (k, v)))
         .collect();
     let facts = ImageFacts::from_keys(|k| numbers.get(k).copied(), |k| texts.get(k).cloned())
         .map_err(|message| IoError::Format {
             path: path.to_path_buf(),
             message,
         })?;
-    let dq = match f.hdu(dq_ext) {
-        Ok(h) => h
-            .read_image::<Vec<u8>>(&mut f)
-            .ok()
-            .filter(|d| d.len() == nx * ny),
+    let dq = match f.index_of(dq_ext) {
+        Ok(i) => f.image_u8(i).ok().filter(|d| d.len() == nx * ny),
         Err(_) => None,
     };
     Ok(ImageRead {

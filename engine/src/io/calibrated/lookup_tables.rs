@@ -4,11 +4,9 @@
 //! 'Lookup'` with `D2IMj` the `D2IMARR` one. A table whose `AXIS.j` is not j is transposed; each table's
 //! `CRPIXi`, `CRVALi`, `CDELTi` default to 0, 0, 1.
 
+use crate::formats::fits_reader::Reader;
 use crate::io::IoError;
 use crate::sky::lookup_distortion::{LookupDistortion, LookupTable};
-use fitsio::FitsFile;
-use fitsio::hdu::HduInfo;
-use std::path::Path;
 
 /// A card's keyword and value: a quoted string without its quotes (`''` read as `'`, a `/` inside it
 /// kept), or otherwise the text before the comment's `/`, trimmed.
@@ -56,11 +54,11 @@ fn text_value(cards: &[String], keyword: &str) -> Option<String> {
 }
 
 /// The index of the image extension `name` of version `extver`.
-fn find_extension(f: &mut FitsFile, name: &str, extver: i64) -> Option<usize> {
-    super::image_extensions(f)
+fn find_extension(f: &mut Reader, name: &str, extver: i64) -> Option<usize> {
+    f.image_extensions()
         .into_iter()
-        .find(|(n, v, _, _)| n.eq_ignore_ascii_case(name) && *v == extver)
-        .map(|e| e.2)
+        .find(|e| e.name.eq_ignore_ascii_case(name) && e.version == extver)
+        .map(|e| e.index)
 }
 
 /// A distortion kind other than `'Lookup'` (astropy warns and leaves it out; jsim leaves RA/Dec out).
@@ -68,14 +66,14 @@ struct Unsupported(String);
 
 /// One axis's table: the extension `array_name` that `kind{j}` (with its record cards `record{j}`) names.
 fn read_table(
-    f: &mut FitsFile,
-    path: &Path,
+    f: &mut Reader,
     cards: &[String],
     (kind, record, array_name): (&str, &str, &str),
     j: usize,
 ) -> Result<Result<Option<LookupTable>, Unsupported>, IoError> {
+    let path = f.path().to_path_buf();
     let bad = |m: String| IoError::Format {
-        path: path.to_path_buf(),
+        path: path.clone(),
         message: m,
     };
     let key = format!("{kind}{j}");
@@ -92,21 +90,20 @@ fn read_table(
             "{key} names the table {array_name},{extver}, which the file does not hold"
         ))
     })?;
-    let h = f.hdu(i).map_err(|e| IoError::fits(path, e))?;
-    let naxis = match &h.info {
-        HduInfo::ImageInfo { shape, .. } if shape.len() == 2 => [shape[1], shape[0]],
-        HduInfo::ImageInfo { shape, .. } if shape.len() == 1 => [shape[0], 1],
+    let naxis = match f.image_shape(i)?.as_deref() {
+        Some([ny, nx]) => [*nx, *ny],
+        Some([n]) => [*n, 1],
         _ => {
             return Err(bad(format!(
                 "{array_name},{extver} is not a 1-D or 2-D image"
             )));
         }
     };
-    let mut number = |k: &str, d: f64| h.read_key::<f64>(f, k).unwrap_or(d);
+    let mut number = |k: &str, d: f64| f.key_f64(i, k).unwrap_or(d);
     let crpix = [number("CRPIX1", 0.0), number("CRPIX2", 0.0)];
     let crval = [number("CRVAL1", 0.0), number("CRVAL2", 0.0)];
     let cdelt = [number("CDELT1", 1.0), number("CDELT2", 1.0)];
-    let mut data: Vec<f32> = h.read_image(f).map_err(|e| IoError::fits(path, e))?;
+    let mut data = f.image_f32(i)?;
     let mut size = naxis;
     if axis != j {
         // astropy's convention: the table's axes swapped
@@ -128,8 +125,8 @@ pub enum Tables {
 }
 
 /// The lookup-table distortions of HDU `sci` (`None` when its header states none).
-pub fn read(f: &mut FitsFile, path: &Path, sci: usize) -> Result<Option<Tables>, IoError> {
-    let cards = super::super::fits::header_cards(f, sci).map_err(|m| IoError::fits(path, m))?;
+pub fn read(f: &mut Reader, sci: usize) -> Result<Option<Tables>, IoError> {
+    let cards = f.cards(sci)?;
     let mut l = LookupDistortion::default();
     let mut named = Vec::new();
     let mut unsupported = Vec::new();
@@ -146,9 +143,9 @@ pub fn read(f: &mut FitsFile, path: &Path, sci: usize) -> Result<Option<Tables>,
                 None
             }
         };
-        let d2im = read_table(f, path, &cards, ("D2IMDIS", "D2IM", "D2IMARR"), j)?;
+        let d2im = read_table(f, &cards, ("D2IMDIS", "D2IM", "D2IMARR"), j)?;
         l.det2im[j - 1] = take(d2im, format!("D2IMDIS{j}"));
-        let cpdis = read_table(f, path, &cards, ("CPDIS", "DP", "WCSDVARR"), j)?;
+        let cpdis = read_table(f, &cards, ("CPDIS", "DP", "WCSDVARR"), j)?;
         l.cpdis[j - 1] = take(cpdis, format!("CPDIS{j}"));
     }
     if !unsupported.is_empty() {

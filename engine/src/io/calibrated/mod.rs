@@ -39,7 +39,7 @@ pub use header_wcs::{ChipWcs, chip_wcs, plate_scale_mas, same_pointing};
 pub use units::{DataUnit, Observatory, calibrate, parse_dq_bits, read_noise_from_err};
 
 use super::IoError;
-use fitsio::hdu::HduInfo;
+use crate::formats::fits_reader::Reader;
 use std::path::Path;
 
 /// One chip of a calibrated file: the HDU indices (0 = primary) of its planes.
@@ -295,14 +295,6 @@ pub(super) fn wanted_keys() -> Vec<String> {
     k
 }
 
-/// The shape of HDU `i` when it is a 2-D image.
-fn image_shape(info: &HduInfo) -> Option<(usize, usize)> {
-    match info {
-        HduInfo::ImageInfo { shape, .. } if shape.len() == 2 => Some((shape[1], shape[0])),
-        _ => None,
-    }
-}
-
 /// The chips of a calibrated file: its `SCI` extensions grouped with their planes by `EXTVER`, in order, or a
 /// waivered file's cube planes ([`waivered::groups`]). Empty when the file has neither.
 pub fn imsets(path: &Path) -> Result<Vec<Imset>, IoError> {
@@ -315,12 +307,12 @@ pub fn imsets(path: &Path) -> Result<Vec<Imset>, IoError> {
 
 /// The `SCI` extensions of a file with their planes.
 fn sci_imsets(path: &Path) -> Result<Vec<Imset>, IoError> {
-    let mut f = super::fits::open(path)?;
     // a chip and its planes are 2-D; 1-D images (distortion tables) are never one
-    let found: Vec<(String, i64, usize)> = image_extensions(&mut f)
+    let found: Vec<(String, i64, usize)> = Reader::open(path)?
+        .image_extensions()
         .into_iter()
-        .filter(|e| e.3 == 2)
-        .map(|(n, v, i, _)| (n, v, i))
+        .filter(|e| e.axes == 2)
+        .map(|e| (e.name, e.version, e.index))
         .collect();
     let at = |n: &str, v: i64| {
         found
@@ -362,27 +354,6 @@ fn sci_imsets(path: &Path) -> Result<Vec<Imset>, IoError> {
         .collect())
 }
 
-/// Every image extension of `f` as (EXTNAME in capitals, EXTVER (1 when absent), HDU index, number of
-/// axes).
-pub(super) fn image_extensions(f: &mut fitsio::FitsFile) -> Vec<(String, i64, usize, usize)> {
-    let mut found = Vec::new();
-    for i in 1.. {
-        let Ok(h) = f.hdu(i) else { break };
-        let HduInfo::ImageInfo { shape, .. } = &h.info else {
-            continue;
-        };
-        let axes = shape.len();
-        let name = h
-            .read_key::<String>(f, "EXTNAME")
-            .unwrap_or_default()
-            .trim()
-            .to_ascii_uppercase();
-        let ver = h.read_key::<i64>(f, "EXTVER").unwrap_or(1);
-        found.push((name, ver, i, axes));
-    }
-    found
-}
-
 /// Extensions that are planes of a chip, never a chip: the imsets', common weight, mask and context maps,
 /// and distortion tables.
 const COMPANION_PLANES: [&str; 12] = [
@@ -403,9 +374,7 @@ const COMPANION_PLANES: [&str; 12] = [
 
 /// Whether the primary HDU holds a 2-D image (jsim's single-array files and any plain image).
 pub fn primary_is_image(path: &Path) -> Result<bool, IoError> {
-    let mut f = super::fits::open(path)?;
-    let h = f.primary_hdu().map_err(|e| IoError::fits(path, e))?;
-    Ok(image_shape(&h.info).is_some())
+    Ok(Reader::open(path)?.plane_shape(0)?.is_some())
 }
 
 /// Read chip `set` of `path` into electrons ([`calibrate`]).
@@ -413,53 +382,50 @@ pub fn read_chip(path: &Path, set: &Imset, opts: &ReadOptions) -> Result<Calibra
     if set.group.is_some() {
         return waivered::read_group(path, set, opts);
     }
-    let mut f = super::fits::open(path)?;
-    let fe = |e: fitsio::errors::Error| IoError::fits(path, e);
+    let mut f = Reader::open(path)?;
     let wanted = wanted_keys();
     let mut numbers = std::collections::HashMap::new();
     let mut texts = std::collections::HashMap::new();
     // the primary first, so that the chip's own cards replace its
     for i in [0, set.sci] {
-        let h = f.hdu(i).map_err(fe)?;
+        f.image_shape(i)?; // the HDU is there
         for k in &wanted {
-            if let Ok(v) = h.read_key::<f64>(&mut f, k) {
+            if let Some(v) = f.key_f64(i, k) {
                 numbers.insert(k.clone(), v);
             }
-            if let Ok(v) = h.read_key::<String>(&mut f, k) {
+            if let Some(v) = f.key_string(i, k) {
                 texts.insert(k.clone(), v);
             }
         }
     }
     let keys = HduKeys { numbers, texts };
-    let sci_hdu = f.hdu(set.sci).map_err(fe)?;
-    let (nx, ny) = image_shape(&sci_hdu.info)
+    let (nx, ny) = f
+        .plane_shape(set.sci)?
         .ok_or_else(|| IoError::fits(path, format!("{} is not a 2-D image", set.name())))?;
-    let sci: Vec<f32> = sci_hdu.read_image(&mut f).map_err(fe)?;
-    let mut plane_f32 = |i: Option<usize>, what: &str| -> Result<Option<Vec<f32>>, IoError> {
-        let Some(i) = i else { return Ok(None) };
-        let h = f.hdu(i).map_err(fe)?;
-        if image_shape(&h.info) != Some((nx, ny)) {
+    let sci = f.image_f32(set.sci)?;
+    // a companion plane must have SCI's shape
+    let same_shape = |f: &mut Reader, i: usize, what: &str| -> Result<(), IoError> {
+        if f.plane_shape(i)? != Some((nx, ny)) {
             return Err(IoError::fits(
                 path,
                 format!("{what},{} is not {nx}×{ny} like SCI", set.extver),
             ));
         }
-        Ok(Some(h.read_image(&mut f).map_err(fe)?))
+        Ok(())
+    };
+    let mut plane_f32 = |i: Option<usize>, what: &str| -> Result<Option<Vec<f32>>, IoError> {
+        let Some(i) = i else { return Ok(None) };
+        same_shape(&mut f, i, what)?;
+        Ok(Some(f.image_f32(i)?))
     };
     let err = plane_f32(set.err, "ERR")?;
     let var_poisson = plane_f32(set.var_poisson, "VAR_POISSON")?;
     let var_rnoise = plane_f32(set.var_rnoise, "VAR_RNOISE")?;
     let dq = match set.dq {
         Some(i) => {
-            let h = f.hdu(i).map_err(fe)?;
-            if image_shape(&h.info) != Some((nx, ny)) {
-                return Err(IoError::fits(
-                    path,
-                    format!("DQ,{} is not {nx}×{ny} like SCI", set.extver),
-                ));
-            }
-            let v: Vec<i64> = h.read_image(&mut f).map_err(fe)?;
+            same_shape(&mut f, i, "DQ")?;
             // a 16-bit DQ read as a signed integer keeps its bits in the low 16
+            let v = f.image_i64(i)?;
             Some(v.into_iter().map(|q| (q as u64) & 0xffff_ffff).collect())
         }
         None => None,
@@ -486,7 +452,7 @@ pub fn read_chip(path: &Path, set: &Imset, opts: &ReadOptions) -> Result<Calibra
         .iter()
         .any(|k| keys.text(k).is_some());
     let tables = if states_tables && chip.wcs.is_some() {
-        lookup_tables::read(&mut f, path, set.sci)?
+        lookup_tables::read(&mut f, set.sci)?
     } else {
         None
     };

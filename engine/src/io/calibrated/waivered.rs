@@ -4,8 +4,8 @@
 //! (DN), turned into electrons by `ATODGAIN`.
 
 use super::{CalibratedChip, ChipPlanes, HduKeys, Imset, ReadOptions, calibrate, wanted_keys};
+use crate::formats::fits_reader::Reader;
 use crate::io::IoError;
-use fitsio::hdu::HduInfo;
 use std::path::{Path, PathBuf};
 
 /// The group-parameter columns read per chip (the rest of the header comes from the primary).
@@ -15,28 +15,24 @@ const NUMBER_COLUMNS: [&str; 8] = [
 const TEXT_COLUMNS: [&str; 2] = ["CTYPE1", "CTYPE2"];
 
 /// The cube's shape: (chips, ny, nx) when the primary HDU is a 3-D image.
-fn cube_shape(info: &HduInfo) -> Option<(usize, usize, usize)> {
-    match info {
-        HduInfo::ImageInfo { shape, .. } if shape.len() == 3 => {
-            Some((shape[0], shape[1], shape[2]))
-        }
+fn cube_shape(f: &mut Reader) -> Result<Option<(usize, usize, usize)>, IoError> {
+    Ok(match f.image_shape(0)?.as_deref() {
+        Some([n, ny, nx]) => Some((*n, *ny, *nx)),
         _ => None,
-    }
+    })
 }
 
 /// The chips of a waivered file: one per plane of its primary cube, when extension 1 is a table with a
 /// `CRVAL1` column and a row per plane. Empty otherwise.
 pub fn groups(path: &Path) -> Result<Vec<Imset>, IoError> {
-    let mut f = crate::io::fits::open(path)?;
-    let fe = |e: fitsio::errors::Error| IoError::fits(path, e);
-    let primary = f.primary_hdu().map_err(fe)?;
-    let Some((n, _, _)) = cube_shape(&primary.info) else {
+    let mut f = Reader::open(path)?;
+    let Some((n, _, _)) = cube_shape(&mut f)? else {
         return Ok(Vec::new());
     };
-    let Ok(table) = f.hdu(1) else {
+    if !f.has(1) {
         return Ok(Vec::new());
-    };
-    let rows = match table.read_col::<f64>(&mut f, "CRVAL1") {
+    }
+    let rows = match f.column_f64(1, "CRVAL1") {
         Ok(v) => v.len(),
         Err(_) => return Ok(Vec::new()),
     };
@@ -68,43 +64,31 @@ pub fn companion_dq(path: &Path) -> Option<PathBuf> {
 /// Read chip `set` (its `group`) of a waivered file into electrons.
 pub fn read_group(path: &Path, set: &Imset, opts: &ReadOptions) -> Result<CalibratedChip, IoError> {
     let k = set.group.unwrap_or(0);
-    let mut f = crate::io::fits::open(path)?;
-    let fe = |e: fitsio::errors::Error| IoError::fits(path, e);
+    let mut f = Reader::open(path)?;
     let mut numbers = std::collections::HashMap::new();
     let mut texts = std::collections::HashMap::new();
-    let primary = f.primary_hdu().map_err(fe)?;
     for key in wanted_keys() {
-        if let Ok(v) = primary.read_key::<f64>(&mut f, &key) {
+        if let Some(v) = f.key_f64(0, &key) {
             numbers.insert(key.clone(), v);
         }
-        if let Ok(v) = primary.read_key::<String>(&mut f, &key) {
+        if let Some(v) = f.key_string(0, &key) {
             texts.insert(key, v);
         }
     }
-    let Some((n, ny, nx)) = cube_shape(&primary.info) else {
+    let Some((n, ny, nx)) = cube_shape(&mut f)? else {
         return Err(IoError::fits(path, "the primary HDU is not a data cube"));
     };
     let plane = nx * ny;
     // this chip's plane of the cube alone
-    let sci: Vec<f32> = primary
-        .read_section(&mut f, k * plane, (k + 1) * plane)
-        .map_err(fe)?;
-    let table = f.hdu(1).map_err(fe)?;
+    let sci = f.section_f32(0, k * plane, (k + 1) * plane)?;
+    f.image_shape(1)?; // the group table is there
     for c in NUMBER_COLUMNS {
-        if let Some(v) = table
-            .read_col::<f64>(&mut f, c)
-            .ok()
-            .and_then(|v| v.get(k).copied())
-        {
+        if let Some(v) = f.column_f64(1, c).ok().and_then(|v| v.get(k).copied()) {
             numbers.insert(c.to_string(), v);
         }
     }
     for c in TEXT_COLUMNS {
-        if let Some(v) = table
-            .read_col::<String>(&mut f, c)
-            .ok()
-            .and_then(|v| v.get(k).cloned())
-        {
+        if let Some(v) = f.column_string(1, c).ok().and_then(|v| v.get(k).cloned()) {
             texts.insert(c.to_string(), v);
         }
     }
@@ -119,17 +103,14 @@ pub fn read_group(path: &Path, set: &Imset, opts: &ReadOptions) -> Result<Calibr
     }
     let dq = match companion_dq(path) {
         Some(p) => {
-            let mut g = crate::io::fits::open(&p)?;
-            let h = g.primary_hdu().map_err(|e| IoError::fits(&p, e))?;
-            if cube_shape(&h.info) != Some((n, ny, nx)) {
+            let mut g = Reader::open(&p)?;
+            if cube_shape(&mut g)? != Some((n, ny, nx)) {
                 return Err(IoError::fits(
                     &p,
                     format!("not a {n} × {ny} × {nx} cube like {}", path.display()),
                 ));
             }
-            let v: Vec<i64> = h
-                .read_section(&mut g, k * plane, (k + 1) * plane)
-                .map_err(|e| IoError::fits(&p, e))?;
+            let v = g.section_i64(0, k * plane, (k + 1) * plane)?;
             notes.push(format!("DQ from {}", p.display()));
             Some(v.into_iter().map(|q| (q as u64) & 0xffff).collect())
         }
