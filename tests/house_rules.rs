@@ -1,8 +1,13 @@
-//! Files small enough to read in one sitting, functions short enough to hold in one's head (issue #53): no
-//! Rust source file of the workspace over [`MAX_FILE_LINES`] lines, and no function (free, method or a
-//! trait's provided one, tests included) over [`MAX_FN_LINES`] lines from its `fn` — its doc comments and
-//! attributes not counted — to its closing brace. The functions are found by parsing each file with `syn`,
-//! so a `fn` inside a string, a comment or a macro's text is not one.
+//! House rules the module tree cannot show (issue #53).
+//!
+//! * Files small enough to read in one sitting, functions short enough to hold in one's head: no
+//!   Rust source file of the workspace over [`MAX_FILE_LINES`] lines, and no function (free, method or a
+//!   trait's provided one, tests included) over [`MAX_FN_LINES`] lines from its `fn` — its doc comments
+//!   and attributes not counted — to its closing brace. The functions are found by parsing each file with `syn`,
+//!   so a `fn` inside a string, a comment or a macro's text is not one.
+//! * One way to FITS: no file outside `engine/src/formats` names the `fitsio` crate — the rest of the
+//!   engine, the app and the Python module read and write FITS through `formats::fits` and
+//!   `formats::fits_reader` (tests, which check files with it, excepted).
 
 use std::path::{Path, PathBuf};
 use syn::visit::{self, Visit};
@@ -140,4 +145,25 @@ fn the_counter_measures_from_fn_to_the_closing_brace_and_skips_fn_in_text() {
         ]
     );
     assert!(long_functions("fixture.rs", &text, 10).is_empty());
+}
+
+#[test]
+fn only_the_formats_layer_names_cfitsio() {
+    let mut found = Vec::new();
+    for (rel, text) in sources() {
+        let tests = rel.starts_with("tests/") || rel.starts_with("engine/tests/");
+        if tests || rel.starts_with("engine/src/formats/") {
+            continue;
+        }
+        for (k, line) in text.lines().enumerate() {
+            let code = line.split("//").next().unwrap_or("");
+            if code.contains("fitsio::") || code.trim_start().starts_with("use fitsio") {
+                found.push(format!("{rel}:{}", k + 1));
+            }
+        }
+    }
+    assert!(
+        found.is_empty(),
+        "CFITSIO named outside engine/src/formats: {found:?}"
+    );
 }
