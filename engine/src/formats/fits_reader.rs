@@ -6,6 +6,8 @@
 use super::fits::{FitsError, header_cards, open};
 use fitsio::FitsFile;
 use fitsio::hdu::{FitsHdu, HduInfo};
+use fitsio::images::ReadImage;
+use fitsio::tables::ReadsCol;
 use std::path::{Path, PathBuf};
 
 /// An image extension of a file: where it is and what the standard's keys call it.
@@ -118,57 +120,34 @@ impl Reader {
         h.read_key::<String>(&mut self.file, key).ok()
     }
 
-    /// HDU `index`'s whole image as f32 (CFITSIO converts and applies BSCALE/BZERO).
-    pub fn image_f32(&mut self, index: usize) -> Result<Vec<f32>, FitsError> {
-        let h = self.hdu(index)?;
-        h.read_image(&mut self.file).map_err(|e| self.error(e))
-    }
-
-    /// HDU `index`'s whole image as i64.
-    pub fn image_i64(&mut self, index: usize) -> Result<Vec<i64>, FitsError> {
-        let h = self.hdu(index)?;
-        h.read_image(&mut self.file).map_err(|e| self.error(e))
-    }
-
-    /// HDU `index`'s whole image as bytes (a mask).
-    pub fn image_u8(&mut self, index: usize) -> Result<Vec<u8>, FitsError> {
+    /// HDU `index`'s whole image, as `Vec<f32>`, `Vec<i64>`, `Vec<u8>`, … (CFITSIO converts the stored type and
+    /// applies BSCALE/BZERO).
+    pub fn image<T>(&mut self, index: usize) -> Result<Vec<T>, FitsError>
+    where
+        Vec<T>: ReadImage,
+    {
         let h = self.hdu(index)?;
         h.read_image(&mut self.file).map_err(|e| self.error(e))
     }
 
     /// Pixels `start … end − 1` of HDU `index`'s image in storage order (a cube's plane k of n × m pixels
-    /// is `k n m … (k + 1) n m`), as f32.
-    pub fn section_f32(
+    /// is `k n m … (k + 1) n m`).
+    pub fn section<T>(
         &mut self,
         index: usize,
         start: usize,
         end: usize,
-    ) -> Result<Vec<f32>, FitsError> {
+    ) -> Result<Vec<T>, FitsError>
+    where
+        Vec<T>: ReadImage,
+    {
         let h = self.hdu(index)?;
         h.read_section(&mut self.file, start, end)
             .map_err(|e| self.error(e))
     }
 
-    /// As [`Reader::section_f32`], as i64.
-    pub fn section_i64(
-        &mut self,
-        index: usize,
-        start: usize,
-        end: usize,
-    ) -> Result<Vec<i64>, FitsError> {
-        let h = self.hdu(index)?;
-        h.read_section(&mut self.file, start, end)
-            .map_err(|e| self.error(e))
-    }
-
-    /// Column `name` of the table in HDU `index` as numbers.
-    pub fn column_f64(&mut self, index: usize, name: &str) -> Result<Vec<f64>, FitsError> {
-        let h = self.hdu(index)?;
-        h.read_col(&mut self.file, name).map_err(|e| self.error(e))
-    }
-
-    /// Column `name` of the table in HDU `index` as text.
-    pub fn column_string(&mut self, index: usize, name: &str) -> Result<Vec<String>, FitsError> {
+    /// Column `name` of the table in HDU `index`, as `f64`, `String`, ….
+    pub fn column<T: ReadsCol>(&mut self, index: usize, name: &str) -> Result<Vec<T>, FitsError> {
         let h = self.hdu(index)?;
         h.read_col(&mut self.file, name).map_err(|e| self.error(e))
     }
@@ -235,12 +214,12 @@ mod tests {
         assert_eq!(r.key_f64(0, "GAIN"), Some(2.5));
         assert_eq!(r.key_string(0, "BUNIT").as_deref(), Some("COUNTS"));
         assert_eq!(r.key_f64(0, "NOPE"), None);
-        assert_eq!(r.image_f32(1).expect("image"), sci);
+        assert_eq!(r.image::<f32>(1).expect("image"), sci);
         assert_eq!(
-            r.section_f32(0, 12, 24).expect("section"),
+            r.section::<f32>(0, 12, 24).expect("section"),
             cube[12..].to_vec()
         );
-        assert_eq!(r.column_f64(2, "CRVAL1").expect("col"), vec![1.5, 2.5]);
+        assert_eq!(r.column::<f64>(2, "CRVAL1").expect("col"), vec![1.5, 2.5]);
         assert!(r.has(2) && !r.has(3));
         assert_eq!(r.index_of("ROWS").expect("by name"), 2);
         let absent = r.index_of("NOPE").expect_err("no such extension");
@@ -251,7 +230,7 @@ mod tests {
                 .iter()
                 .any(|c| c.starts_with("EXTNAME = 'SCI"))
         );
-        let missing = r.column_f64(2, "NOPE").expect_err("no such column");
+        let missing = r.column::<f64>(2, "NOPE").expect_err("no such column");
         assert!(missing.to_string().contains("t.fits"), "{missing}");
         std::fs::remove_dir_all(&dir).expect("clean up");
     }

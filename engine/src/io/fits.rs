@@ -240,7 +240,7 @@ pub fn read_image_in(
             },
         ));
     };
-    let data = f.image_f32(index)?;
+    let data = f.image::<f32>(index)?;
     let numbers: std::collections::HashMap<&str, f64> = NUMERIC_KEYS
         .into_iter()
         .filter_map(|k| f.key_f64(index, k).map(|v| (k, v)))
@@ -258,7 +258,7 @@ pub fn read_image_in(
             message,
         })?;
     let dq = match f.index_of(dq_ext) {
-        Ok(i) => f.image_u8(i).ok().filter(|d| d.len() == nx * ny),
+        Ok(i) => f.image::<u8>(i).ok().filter(|d| d.len() == nx * ny),
         Err(_) => None,
     };
     Ok(ImageRead {

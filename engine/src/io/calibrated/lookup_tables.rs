@@ -103,7 +103,7 @@ fn read_table(
     let crpix = [number("CRPIX1", 0.0), number("CRPIX2", 0.0)];
     let crval = [number("CRVAL1", 0.0), number("CRVAL2", 0.0)];
     let cdelt = [number("CDELT1", 1.0), number("CDELT2", 1.0)];
-    let mut data = f.image_f32(i)?;
+    let mut data = f.image::<f32>(i)?;
     let mut size = naxis;
     if axis != j {
         // astropy's convention: the table's axes swapped

@@ -402,7 +402,7 @@ pub fn read_chip(path: &Path, set: &Imset, opts: &ReadOptions) -> Result<Calibra
     let (nx, ny) = f
         .plane_shape(set.sci)?
         .ok_or_else(|| IoError::fits(path, format!("{} is not a 2-D image", set.name())))?;
-    let sci = f.image_f32(set.sci)?;
+    let sci = f.image::<f32>(set.sci)?;
     // a companion plane must have SCI's shape
     let same_shape = |f: &mut Reader, i: usize, what: &str| -> Result<(), IoError> {
         if f.plane_shape(i)? != Some((nx, ny)) {
@@ -416,7 +416,7 @@ pub fn read_chip(path: &Path, set: &Imset, opts: &ReadOptions) -> Result<Calibra
     let mut plane_f32 = |i: Option<usize>, what: &str| -> Result<Option<Vec<f32>>, IoError> {
         let Some(i) = i else { return Ok(None) };
         same_shape(&mut f, i, what)?;
-        Ok(Some(f.image_f32(i)?))
+        Ok(Some(f.image::<f32>(i)?))
     };
     let err = plane_f32(set.err, "ERR")?;
     let var_poisson = plane_f32(set.var_poisson, "VAR_POISSON")?;
@@ -425,7 +425,7 @@ pub fn read_chip(path: &Path, set: &Imset, opts: &ReadOptions) -> Result<Calibra
         Some(i) => {
             same_shape(&mut f, i, "DQ")?;
             // a 16-bit DQ read as a signed integer keeps its bits in the low 16
-            let v = f.image_i64(i)?;
+            let v = f.image::<i64>(i)?;
             Some(v.into_iter().map(|q| (q as u64) & 0xffff_ffff).collect())
         }
         None => None,

@@ -32,7 +32,7 @@ pub fn groups(path: &Path) -> Result<Vec<Imset>, IoError> {
     if !f.has(1) {
         return Ok(Vec::new());
     }
-    let rows = match f.column_f64(1, "CRVAL1") {
+    let rows = match f.column::<f64>(1, "CRVAL1") {
         Ok(v) => v.len(),
         Err(_) => return Ok(Vec::new()),
     };
@@ -80,15 +80,19 @@ pub fn read_group(path: &Path, set: &Imset, opts: &ReadOptions) -> Result<Calibr
     };
     let plane = nx * ny;
     // this chip's plane of the cube alone
-    let sci = f.section_f32(0, k * plane, (k + 1) * plane)?;
+    let sci = f.section::<f32>(0, k * plane, (k + 1) * plane)?;
     f.image_shape(1)?; // the group table is there
     for c in NUMBER_COLUMNS {
-        if let Some(v) = f.column_f64(1, c).ok().and_then(|v| v.get(k).copied()) {
+        if let Some(v) = f.column::<f64>(1, c).ok().and_then(|v| v.get(k).copied()) {
             numbers.insert(c.to_string(), v);
         }
     }
     for c in TEXT_COLUMNS {
-        if let Some(v) = f.column_string(1, c).ok().and_then(|v| v.get(k).cloned()) {
+        if let Some(v) = f
+            .column::<String>(1, c)
+            .ok()
+            .and_then(|v| v.get(k).cloned())
+        {
             texts.insert(c.to_string(), v);
         }
     }
@@ -110,7 +114,7 @@ pub fn read_group(path: &Path, set: &Imset, opts: &ReadOptions) -> Result<Calibr
                     format!("not a {n} × {ny} × {nx} cube like {}", path.display()),
                 ));
             }
-            let v = g.section_i64(0, k * plane, (k + 1) * plane)?;
+            let v = g.section::<i64>(0, k * plane, (k + 1) * plane)?;
             notes.push(format!("DQ from {}", p.display()));
             Some(v.into_iter().map(|q| (q as u64) & 0xffff).collect())
         }
