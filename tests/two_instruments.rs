@@ -465,3 +465,46 @@ fn the_catalogue_plate_model_is_scored_in_the_catalogues_frame() {
     eprintln!("none {none:.3} mas, plate-poly:3@catalogue {plate:.3} mas");
     assert!(plate < 1.1 * none, "{plate} against {none} mas");
 }
+
+/// The design's PSFs — the model PSF and its derivative planes — are computed once for all the exposures of
+/// a sequence, though each exposure's as-built focus is its own (the breathing over the orbit): a PSF is
+/// keyed by its wavefront, and the design's bank shares the images' store (it had one of its own per
+/// simulator, so every exposure of a sequence and every array of a focal plane computed them again: a third
+/// of a sequence's time, in the PSF's matrix products).
+#[test]
+fn the_exposures_of_a_sequence_compute_the_design_psfs_once() {
+    let mut cfg = deviating(Knowledge::Design, 0.0);
+    cfg.as_built.focus_breathing_nm = 10.0;
+    cfg.optics.pupil_samples = 64;
+    cfg.ace.case = engine::config::AceCase::Gaussian;
+    let mut later = cfg.clone();
+    // a quarter of an orbit on: the breathing has moved the focus
+    later.ace.first_exposure_start_s += 1450.0;
+    let optics = |c: &Config| engine::instrument::realise(c).expect("as built").optics;
+    assert!(
+        optics(&cfg) != optics(&later),
+        "the two exposures' as-built wavefronts differ"
+    );
+    let session = engine::session::Session::new();
+    let first = session.new_simulator(&cfg).expect("first exposure");
+    let second = session.new_simulator(&later).expect("second exposure");
+    let store = first.bank();
+    assert!(store.shares_with(&second.bank()));
+    let before = store.monochromatic_sets_built();
+    let kernel = first.design_kernel().expect("design kernel");
+    let terms = first.design_term_kernels().expect("term kernels").len();
+    let built = store.monochromatic_sets_built() - before;
+    assert_eq!(
+        built,
+        1 + 2 * terms,
+        "the design PSF and its ± term PSFs go into the images' store"
+    );
+    let again = second.design_kernel().expect("design kernel");
+    second.design_term_kernels().expect("term kernels");
+    assert_eq!(
+        store.monochromatic_sets_built() - before,
+        built,
+        "the second exposure computes no design PSF"
+    );
+    assert_eq!(kernel.data, again.data);
+}

@@ -524,7 +524,8 @@ impl Simulator {
                 for r in c.optics.field_table.iter_mut() {
                     crate::optics::add_term(&mut r.fringe, j, sign * delta);
                 }
-                let bank = PsfBank::new(&c);
+                // the images' store: the sequence's exposures and the focal plane's arrays compute them once
+                let bank = PsfBank::serving(self.bank.clone(), &c);
                 let psf = self.in_array_axes(bank.get(c.scene.j_minus_h, &bank.centre_key()));
                 self.kernel_with_blur(&psf, 0.0)
             };
@@ -533,13 +534,16 @@ impl Simulator {
         Ok(self.term_kernels.get_or_init(|| out))
     }
 
-    /// The PSF bank of the products' optics: the images' bank when the optics are the same.
+    /// The PSF bank of the products' optics: the images' bank when the optics are the same, else one sharing
+    /// its store when only the wavefront differs (the design against the as-built: a PSF is keyed by its
+    /// wavefront, so the design's PSFs are computed once for a whole sequence and every array of a focal
+    /// plane, not once per simulator; [`PsfBank::serving`]).
     fn design_bank(&self) -> Arc<PsfBank> {
         if self.bank.serves(&self.cfg) {
             return self.bank.clone();
         }
         self.design_bank
-            .get_or_init(|| Arc::new(PsfBank::new(&self.cfg)))
+            .get_or_init(|| PsfBank::serving(self.bank.clone(), &self.cfg))
             .clone()
     }
 
