@@ -1,5 +1,5 @@
 //! FITS files as the standard has them, through CFITSIO (bundled by `fitsio-src`): HDUs of images, binary
-//! tables and text, header cards, and reading them back. No schema: what a file of jsim's holds (its
+//! tables and text, and header cards, written ([`create`]); reading them back is [`super::fits_reader`]'s. No schema: what a file of jsim's holds (its
 //! extensions, keys, columns and units) is `io`'s; a table column's unit comes from the writer's
 //! `unit_of`.
 
@@ -183,42 +183,6 @@ fn drop_primary_extname(f: &mut FitsFile) -> Result<(), String> {
             "removing EXTNAME from the primary HDU: CFITSIO status {s}"
         )),
     }
-}
-
-/// Every card of HDU `index` (0: the primary) as its text. Record-valued keywords (`DP1 = 'EXTVER: 1'`,
-/// `DP1 = 'AXIS.1: 1'`) repeat one keyword, which the safe reader, keyword by keyword, cannot tell apart.
-#[allow(unsafe_code)] // two CFITSIO calls (ffghsp, ffgrec) the safe wrapper does not offer; `f` is a live, open file
-pub(super) fn header_cards(f: &mut FitsFile, index: usize) -> Result<Vec<String>, String> {
-    let hdu = std::os::raw::c_int::try_from(index + 1).map_err(|e| e.to_string())?;
-    let (mut status, mut n, mut more) = (0, 0, 0);
-    // SAFETY: `as_raw` is the open file's CFITSIO handle, valid for the calls
-    unsafe {
-        fitsio::sys::ffmahd(f.as_raw(), hdu, std::ptr::null_mut(), &mut status);
-        fitsio::sys::ffghsp(f.as_raw(), &mut n, &mut more, &mut status);
-    }
-    if status != 0 {
-        return Err(format!(
-            "reading HDU {index}'s header: CFITSIO status {status}"
-        ));
-    }
-    let mut cards = Vec::new();
-    for k in 1..=n {
-        // a card is 80 characters; CFITSIO writes it NUL-terminated
-        let mut buf = [0 as std::os::raw::c_char; 81];
-        // SAFETY: `buf` holds the 81 bytes ffgrec may write; the handle is as above
-        unsafe {
-            fitsio::sys::ffgrec(f.as_raw(), k, buf.as_mut_ptr(), &mut status);
-        }
-        if status != 0 {
-            return Err(format!(
-                "reading card {k} of HDU {index}: CFITSIO status {status}"
-            ));
-        }
-        // SAFETY: ffgrec NUL-terminated `buf` within its 81 bytes
-        let text = unsafe { std::ffi::CStr::from_ptr(buf.as_ptr()) };
-        cards.push(text.to_string_lossy().into_owned());
-    }
-    Ok(cards)
 }
 
 pub fn create(
@@ -406,167 +370,8 @@ fn write_text(f: &mut FitsFile, path: &Path, name: &str, text: &str) -> Result<(
     Ok(())
 }
 
-/// Open a file for reading, a missing one an error that says so once.
-pub(super) fn open(path: &Path) -> Result<FitsFile, FitsError> {
-    if !path.exists() {
-        return Err(FitsError::io(
-            path,
-            std::io::Error::new(std::io::ErrorKind::NotFound, "no such file"),
-        ));
-    }
-    FitsFile::open(path).map_err(|e| FitsError::fits(path, e))
-}
-
-/// An HDU of an open file: extension `ext` by EXTNAME, or the primary for `None`.
-pub(super) fn select(
-    f: &mut FitsFile,
-    path: &Path,
-    ext: Option<&str>,
-) -> Result<fitsio::hdu::FitsHdu, FitsError> {
-    match ext {
-        None => f.primary_hdu().map_err(|e| FitsError::fits(path, e)),
-        Some(name) => f
-            .hdu(name)
-            .map_err(|e| FitsError::fits(path, format!("extension {name}: {e}"))),
-    }
-}
-
-/// The extension names of a file (its HDUs after the primary; unnamed ones as empty strings).
-pub fn extension_names(path: &Path) -> Result<Vec<String>, FitsError> {
-    let mut f = open(path)?;
-    let mut names = Vec::new();
-    for i in 1.. {
-        let Ok(h) = f.hdu(i) else { break };
-        names.push(h.read_key::<String>(&mut f, "EXTNAME").unwrap_or_default());
-    }
-    Ok(names)
-}
-
-/// Read a 2-D image HDU (`ext`: an EXTNAME, or `None` for the primary) as f32, with its shape.
-pub fn read_plane(path: &Path, ext: Option<&str>) -> Result<(usize, usize, Vec<f32>), FitsError> {
-    let mut f = open(path)?;
-    let fe = |e: fitsio::errors::Error| FitsError::fits(path, e);
-    let hdu = select(&mut f, path, ext)?;
-    let what = ext.unwrap_or("the primary HDU");
-    let (nx, ny) = match &hdu.info {
-        fitsio::hdu::HduInfo::ImageInfo { shape, .. } if shape.len() == 2 => (shape[1], shape[0]),
-        _ => return Err(FitsError::fits(path, format!("{what} is not a 2-D image"))),
-    };
-    let data: Vec<f32> = hdu.read_image(&mut f).map_err(fe)?;
-    Ok((nx, ny, data))
-}
-
-/// Read a numeric header of an HDU (`ext`: an EXTNAME, or `None` for the primary).
-pub fn read_f64_key_in(path: &Path, ext: Option<&str>, key: &str) -> Result<f64, FitsError> {
-    let mut f = open(path)?;
-    let hdu = select(&mut f, path, ext)?;
-    hdu.read_key::<f64>(&mut f, key)
-        .map_err(|e| FitsError::fits(path, format!("header {key}: {e}")))
-}
-
-/// Read a string header of an HDU (`ext`: an EXTNAME, or `None` for the primary).
-pub fn read_string_key_in(path: &Path, ext: Option<&str>, key: &str) -> Result<String, FitsError> {
-    let mut f = open(path)?;
-    let hdu = select(&mut f, path, ext)?;
-    hdu.read_key::<String>(&mut f, key)
-        .map_err(|e| FitsError::fits(path, format!("header {key}: {e}")))
-}
-
-/// Read numeric columns of a binary-table extension.
-pub fn read_table(path: &Path, ext: &str, columns: &[&str]) -> Result<Vec<Vec<f64>>, FitsError> {
-    let fe = |e: fitsio::errors::Error| FitsError::fits(path, e);
-    let mut f = FitsFile::open(path).map_err(fe)?;
-    let hdu = f
-        .hdu(ext)
-        .map_err(|e| FitsError::fits(path, format!("extension {ext}: {e}")))?;
-    read_columns(&mut f, &hdu, path, columns)
-}
-
-/// Numeric columns of a table HDU of an open file.
-fn read_columns(
-    f: &mut FitsFile,
-    hdu: &fitsio::hdu::FitsHdu,
-    path: &Path,
-    columns: &[&str],
-) -> Result<Vec<Vec<f64>>, FitsError> {
-    columns
-        .iter()
-        .map(|c| {
-            hdu.read_col::<f64>(f, c)
-                .map_err(|e| FitsError::fits(path, format!("column {c}: {e}")))
-        })
-        .collect()
-}
-
-/// A binary table open for reading (the file opened once): its columns' names and its row count, its
-/// numeric columns read on demand.
-pub struct OpenTable {
-    f: FitsFile,
-    hdu: fitsio::hdu::FitsHdu,
-    path: std::path::PathBuf,
-    pub names: Vec<String>,
-    pub num_rows: usize,
-}
-
-/// Open the binary table in HDU `index` (0: the primary, 1: the first extension).
-pub fn open_table(path: &Path, index: usize) -> Result<OpenTable, FitsError> {
-    let mut f = open(path)?;
-    let hdu = f
-        .hdu(index)
-        .map_err(|e| FitsError::fits(path, format!("no table extension: {e}")))?;
-    let (names, num_rows) = match &hdu.info {
-        fitsio::hdu::HduInfo::TableInfo {
-            column_descriptions,
-            num_rows,
-        } => (
-            column_descriptions.iter().map(|c| c.name.clone()).collect(),
-            *num_rows,
-        ),
-        _ => return Err(FitsError::fits(path, format!("HDU {index} is not a table"))),
-    };
-    Ok(OpenTable {
-        f,
-        hdu,
-        path: path.to_path_buf(),
-        names,
-        num_rows,
-    })
-}
-
-impl OpenTable {
-    /// Its numeric columns named `columns`, in that order.
-    pub fn read(&mut self, columns: &[&str]) -> Result<Vec<Vec<f64>>, FitsError> {
-        read_columns(&mut self.f, &self.hdu, &self.path, columns)
-    }
-}
-
 /// A number as a header card keeps it: CFITSIO writes a double with 15 significant digits (`%.15G`), so an
 /// in-memory value that must equal what a reader of the file gets is rounded the same way.
 pub fn as_header_f64(v: f64) -> f64 {
     format!("{v:.14e}").parse().unwrap_or(v)
-}
-
-/// Read a string header of the primary HDU.
-pub fn read_string_key(path: &Path, key: &str) -> Result<String, FitsError> {
-    read_string_key_in(path, None, key)
-}
-
-/// Read a numeric header of the primary HDU.
-pub fn read_f64_key(path: &Path, key: &str) -> Result<f64, FitsError> {
-    read_f64_key_in(path, None, key)
-}
-
-/// Read the CONFIG text extension (the TOML the file was made with).
-pub fn read_text(path: &Path, ext: &str) -> Result<String, FitsError> {
-    let fe = |e: fitsio::errors::Error| FitsError::fits(path, e);
-    let mut f = FitsFile::open(path).map_err(fe)?;
-    let hdu = f
-        .hdu(ext)
-        .map_err(|e| FitsError::fits(path, format!("extension {ext}: {e}")))?;
-    let lines: Vec<String> = hdu.read_col(&mut f, "LINE").map_err(fe)?;
-    Ok(lines
-        .iter()
-        .map(|l| l.trim_end())
-        .collect::<Vec<_>>()
-        .join("\n"))
 }

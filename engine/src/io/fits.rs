@@ -15,9 +15,10 @@
 //! The format itself (HDUs, cards, CFITSIO) is [`crate::formats::fits`]; this module adds what jsim's files
 //! mean: the units of its columns' names, the image's header facts, atomic writes.
 
-pub use crate::formats::fits::{
-    Card, Column, FitsError, Hdu, Pixels, Value, as_header_f64, extension_names, read_f64_key,
-    read_f64_key_in, read_plane, read_string_key, read_string_key_in, read_table, read_text,
+pub use crate::formats::fits::{Card, Column, FitsError, Hdu, Pixels, Value, as_header_f64};
+pub use crate::formats::fits_reader::{
+    extension_names, read_f64_key, read_f64_key_in, read_plane, read_string_key,
+    read_string_key_in, read_table, read_text,
 };
 
 use super::{IoError, temp_path};

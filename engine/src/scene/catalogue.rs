@@ -406,7 +406,8 @@ fn read_csv(path: &Path, lim: &Limits) -> Result<Catalogue, SceneError> {
 }
 
 fn read_fits(path: &Path, lim: &Limits) -> Result<Catalogue, SceneError> {
-    use crate::formats::fits::{self, FitsError};
+    use crate::formats::fits::FitsError;
+    use crate::formats::fits_reader as fits;
     let p = path.display().to_string();
     let fe = |e: FitsError| match e {
         FitsError::Io { reason, .. } => SceneError::Io {
