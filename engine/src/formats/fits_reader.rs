@@ -361,8 +361,7 @@ mod tests {
 
     #[test]
     fn a_file_written_by_the_format_is_read_back_hdu_by_hdu() {
-        let dir = std::env::temp_dir().join(format!("jsim-fits-reader-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).expect("temp dir");
+        let dir = crate::testkit::temp_dir("fits-reader");
         let path = dir.join("t.fits");
         let sci: Vec<f32> = (0..12).map(|k| k as f32 * 0.5).collect();
         let cube: Vec<f32> = (0..24).map(|k| k as f32).collect();
@@ -428,6 +427,5 @@ mod tests {
         );
         let missing = r.column::<f64>(2, "NOPE").expect_err("no such column");
         assert!(missing.to_string().contains("t.fits"), "{missing}");
-        std::fs::remove_dir_all(&dir).expect("clean up");
     }
 }
