@@ -180,13 +180,9 @@ pub fn seen_through(
 ) -> (Epsf, f64) {
     let (nodes, weight) = deposit(track, windows, offsets, g);
     let half = (profile.half_nodes / profile.oversampling.max(1)).max(1);
-    let psi = Epsf::from_fn(profile.oversampling, half, |x, y| {
-        nodes
-            .iter()
-            .map(|&(ux, uy, c)| c * profile.value(x - ux, y - uy))
-            .sum::<f64>()
-            / weight.max(f64::MIN_POSITIVE)
-    });
+    let w = 1.0 / weight.max(f64::MIN_POSITIVE);
+    let scaled: Vec<(f64, f64, f64)> = nodes.iter().map(|&(ux, uy, c)| (ux, uy, c * w)).collect();
+    let psi = profile.shifted_sum(half, &scaled);
     (psi, weight)
 }
 

@@ -294,6 +294,81 @@ impl Epsf {
         e
     }
 
+    /// `Σ_k c_k ψ(· − u_k)` tabulated on a grid of this table's oversampling and half-width `half_px`: the
+    /// same numbers as [`Epsf::from_fn`] of the sum of [`Epsf::value`]s (to rounding), computed as one discrete
+    /// convolution. Keys's interpolation is linear in the nodes and, for a shift `u`, its weights depend only
+    /// on the fractional part of `u·oversampling` (the same at every output node), so each shift spreads its
+    /// weight over 4 × 4 integer node offsets; the table is then correlated with that small kernel: the cost
+    /// is (output nodes) × (kernel nodes), not × (shifts) × 16.
+    pub fn shifted_sum(&self, half_px: usize, shifts: &[(f64, f64, f64)]) -> Epsf {
+        let mut out = Epsf::zeros(self.oversampling, half_px);
+        if shifts.is_empty() {
+            return out;
+        }
+        let os = self.oversampling as f64;
+        // shift (ux, uy) moves the sampled node by s = −u·os: taps at floor(s) − 1 … floor(s) + 2
+        let taps: Vec<(i64, i64, [(f64, f64); 4], [(f64, f64); 4], f64)> = shifts
+            .iter()
+            .map(|&(ux, uy, c)| {
+                let (su, sv) = (-ux * os, -uy * os);
+                let (bu, bv) = (su.floor(), sv.floor());
+                (
+                    bu as i64,
+                    bv as i64,
+                    keys_weights(su - bu),
+                    keys_weights(sv - bv),
+                    c,
+                )
+            })
+            .collect();
+        let (lo_u, hi_u) = taps
+            .iter()
+            .fold((i64::MAX, i64::MIN), |(l, h), t| (l.min(t.0), h.max(t.0)));
+        let (lo_v, hi_v) = taps
+            .iter()
+            .fold((i64::MAX, i64::MIN), |(l, h), t| (l.min(t.1), h.max(t.1)));
+        let (ku, kv) = ((hi_u - lo_u + 4) as usize, (hi_v - lo_v + 4) as usize);
+        let mut kernel = vec![0.0; ku * kv];
+        for (bu, bv, wu, wv, c) in &taps {
+            let (ou, ov) = ((bu - lo_u) as usize, (bv - lo_v) as usize);
+            for (b, &(wvb, _)) in wv.iter().enumerate() {
+                for (a, &(wua, _)) in wu.iter().enumerate() {
+                    kernel[(ov + b) * ku + ou + a] += c * wua * wvb;
+                }
+            }
+        }
+        // out[iy][ix] = Σ kernel[b][a] · ψ[iy + off + lo_v − 1 + b][ix + off + lo_u − 1 + a]
+        let (n_in, n_out) = (self.n() as i64, out.n());
+        let off = self.half_nodes as i64 - out.half_nodes as i64;
+        for (b, krow) in kernel.chunks(ku).enumerate() {
+            for iy in 0..n_out {
+                let sy = iy as i64 + off + lo_v - 1 + b as i64;
+                if sy < 0 || sy >= n_in {
+                    continue;
+                }
+                let src = &self.data[(sy * n_in) as usize..((sy + 1) * n_in) as usize];
+                let dst = &mut out.data[iy * n_out..(iy + 1) * n_out];
+                for (a, &k) in krow.iter().enumerate() {
+                    if k == 0.0 {
+                        continue;
+                    }
+                    let d = off + lo_u - 1 + a as i64;
+                    // output nodes whose source node ix + d lies in the table
+                    let first = (-d).max(0) as usize;
+                    let last = (n_in - d).min(n_out as i64);
+                    if last <= first as i64 {
+                        continue;
+                    }
+                    let (s0, len) = ((first as i64 + d) as usize, last as usize - first);
+                    for (o, &v) in dst[first..first + len].iter_mut().zip(&src[s0..s0 + len]) {
+                        *o += k * v;
+                    }
+                }
+            }
+        }
+        out
+    }
+
     /// Linear interpolation between two tables of the same grid (zone interpolation): (1−t)·a + t·b.
     pub fn lerp(a: &Epsf, b: &Epsf, t: f64) -> Epsf {
         let mut out = a.clone();
@@ -307,6 +382,43 @@ impl Epsf {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The convolution gives what the direct sum of evaluations gives (another method: node by node, shift by
+    /// shift, through `value`), on a table of another half-width, shifts off the grid and beyond the edge.
+    #[test]
+    fn the_shifted_sum_is_the_sum_of_shifted_evaluations() {
+        let psi = Epsf::from_fn(4, 6, |x, y| {
+            (-(x * x + 0.7 * y * y) / 3.0).exp() * (1.0 + 0.2 * x - 0.1 * y * x)
+        });
+        let shifts: Vec<(f64, f64, f64)> = (0..37)
+            .map(|k| {
+                let t = k as f64;
+                (
+                    0.9 * (0.37 * t).sin() - 0.05,
+                    0.6 * (0.23 * t).cos() + 0.013 * t,
+                    0.2 + (t * 0.7).cos().abs(),
+                )
+            })
+            .chain([(5.7, -6.3, 0.5), (-0.125, 0.25, 1.0)])
+            .collect();
+        for half in [6, 4, 8] {
+            let fast = psi.shifted_sum(half, &shifts);
+            let slow = Epsf::from_fn(4, half, |x, y| {
+                shifts
+                    .iter()
+                    .map(|&(ux, uy, c)| c * psi.value(x - ux, y - uy))
+                    .sum()
+            });
+            let peak = slow.data.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+            let worst = fast
+                .data
+                .iter()
+                .zip(&slow.data)
+                .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
+            assert!(worst <= 1e-13 * peak, "half {half}: {worst:e} of {peak}");
+        }
+        assert!(psi.shifted_sum(6, &[]).data.iter().all(|v| *v == 0.0));
+    }
 
     /// The interpolation is linear in the nodes: a weighted sum's evaluation, in the table, at its border
     /// and beyond it, is the sum of the tables' own (ψ and both derivatives).
