@@ -14,16 +14,25 @@ reductions below, which make the whole page set run in a few minutes:
 * `jsim sequence` runs at most 2 exposures (`--exposures`; its Slurm scripts are only written), and `jsim solve`
   solves those (`--exposures 1,2`);
 * `jsim solve-synthetic` solves 300 sources × 25 exposures;
-* `jsim transit` stares at most 1.7 h with 3 comparison stars, and its precision study takes two magnitudes of
-  0.3 h;
+* `jsim transit` stares at most 0.4 h with 3 comparison stars at a 2-day period (a transit shorter than the
+  stare), and its precision study takes two magnitudes of 0.15 h;
+* `jsim bench --parts persistence` runs `--quick` (stares of 4 exposures) like every bench;
 * the sweep files are copied with the same reduced `[base]`, 2 exposures in one stare, and each grid axis cut
   to its first and last value;
 * `crowded_image.py` writes a 256-px array of 1500 stars instead of 1968 px and 10⁵ stars,
-  `photutils_catalogue.py` cuts 128 px instead of 512, and `simulate_reference.py` runs the reduced configuration
+  `photutils_catalogue.py` cuts 128 px instead of 512, `crowded_photutils.py` 96 px with one pass of finding, and `simulate_reference.py` runs the reduced configuration
   once (`--config`, `--repeat 1`) with the jsim binary under test;
-* an absolute output path (`/shared/…`) is taken inside the scratch directory.
+* an absolute output path (`/shared/…`) is taken inside the scratch directory;
+* a command that writes to its default output directory, where nothing reads it (`jsim experiment`, `crowded`,
+  `bench`, …), is given one of its own (`--out out/NAME-K`).
+
+Commands run side by side on `JSIM_DOCS_WORKERS` processes (default 2: CI's two cores; most commands use about
+one): a command waits only for the earlier commands that share a place with it — a path under `out/` that either
+names (to its second component), or a command's default output — so producers still run before consumers and
+two writers of one directory in the pages' order.
 """
 
+import concurrent.futures
 import glob
 import os
 import re
@@ -31,6 +40,7 @@ import shlex
 import shutil
 import subprocess
 import sys
+import threading
 import time
 import tomllib
 
@@ -118,6 +128,11 @@ def reduce(words, jsim_bin="jsim"):
         if name == "crowded_image.py":
             k = words.index("--stars")
             words[k + 1:k + 2] = ["1500", "--size", "256", "--mag-min", "11", "--mag-max", "16"]
+        if name == "crowded_photutils.py":
+            # a 96-px cut of the reduced array, one pass of finding
+            if "--size" in words:
+                words[words.index("--size") + 1] = "96"
+            words += ["--iters", "1"]
         if name == "photutils_catalogue.py":
             words[words.index("--size") + 1] = "128"
         if name == "simulate_reference.py":
@@ -145,14 +160,16 @@ def reduce(words, jsim_bin="jsim"):
         else:
             words += ["--exposures", "2"]
     if name == "transit":
-        # a stare of 3 comparison stars (they fit the reduced array) for 1.7 h (the default transit is
-        # 1.58 h long); the precision study at two magnitudes of 0.3 h
+        # a stare of 3 comparison stars (they fit the reduced array) for 0.4 h, the planet on a 2-day orbit
+        # (a 0.25-h transit: the stare must outlast it); the precision study at two magnitudes of 0.15 h
         words += ["--set", "transit.comparisons=3"]
         study = "--magnitudes" in words
         if study:
             k = words.index("--magnitudes") + 1
             words[k] = ",".join(words[k].split(",")[:2])
-        hours = "0.3" if study else "1.7"
+        else:
+            words += ["--set", "transit.period_days=2"]
+        hours = "0.15" if study else "0.4"
         if "--hours" in words:
             k = words.index("--hours") + 1
             words[k] = str(min(float(words[k]), float(hours)))
@@ -251,6 +268,64 @@ def test_the_pages_show_the_commands_this_test_knows():
     assert {"simulate", "analyze", "score", "experiment", "crowded", "sweep", "bench"} <= found, found
 
 
+# where a command writes when it is given no --out (the CLI's defaults)
+DEFAULT_OUT = {"simulate": "out/simulate", "analyze": "out/analyze", "experiment": "out/experiment",
+               "sequence": "out/sequence", "solve": "out/sequence", "transit": "out/transit", "crowded": "out/crowded",
+               "score": "out/score", "bench": "out/bench", "sweep": "out/sweep", "solve-synthetic": "out/solve-synthetic"}
+
+
+def places(words):
+    """The output places a command touches: each path it names under `out/` (to its second component, where two
+    commands can meet), or any other file it writes with --out, and the default output of a command given none.
+    Commands that share a place run one after the other, in the pages' order."""
+    found = set()
+    for w in words:
+        w = w.split("=", 1)[-1].lstrip("/")
+        parts = w.split("/")
+        if parts[0] == "out" and len(parts) > 1:
+            found.add("/".join(parts[:2]))
+    if "--out" in words:
+        out = words[words.index("--out") + 1].lstrip("/")
+        found.add("/".join(out.split("/")[:2]))
+    elif words[0] == "jsim" and name_of(words) in DEFAULT_OUT:
+        found.add(DEFAULT_OUT[name_of(words)])
+        if name_of(words) == "solve":
+            found.add("out/solve")
+    return found
+
+
+# what a script reads when it is given no path (its argparse defaults)
+READS = {"crowded_photutils.py": {"out/crowded"}}
+# the commands whose default output nothing reads: each is given its own, so that they need not wait on each other
+OWN_OUT = {"simulate", "analyze", "experiment", "transit", "crowded", "score", "bench", "solve-synthetic"}
+
+
+def after(cmds):
+    """For each command (in rank order), the earlier commands it waits on: those that share a place with it."""
+    owner, deps = {}, []
+    for i, (_, words) in enumerate(cmds):
+        mine = places(words) | READS.get(name_of(words), set())
+        deps.append({owner[p] for p in mine if p in owner})
+        for p in mine:
+            owner[p] = i
+    return deps
+
+
+def test_commands_that_share_an_output_run_in_order():
+    cmds = [("a", ["jsim", "sequence", "--exposures", "3"]),
+            ("b", ["jsim", "sequence", "--plan-only", "--out", "out/sequence"]),
+            ("c", ["python", "x/photutils_catalogue.py", "--out", "out/hst_photutils"]),
+            ("d", ["python", "x/check_real_image.py", "f.fits", "out/hst", "--photutils", "out/hst_photutils/p.csv"]),
+            ("e", ["jsim", "crowded", "--save-images", "--out", "out/crowded"]),
+            ("f", ["python", "x/crowded_photutils.py", "--size", "0"]),
+            ("g", ["jsim", "solve", "--method", "block"])]
+    assert after(cmds) == [set(), {0}, set(), {2}, set(), {4}, {1}]
+
+
+# the worker processes that run the commands: CI's two cores (most commands use about one)
+WORKERS = int(os.environ.get("JSIM_DOCS_WORKERS", "2"))
+
+
 def test_every_command_of_the_readme_and_docs_runs(scratch, jsim_bin):
     cmds, seen = [], set()
     for p in pages():
@@ -259,22 +334,56 @@ def test_every_command_of_the_readme_and_docs_runs(scratch, jsim_bin):
             if words and " ".join(words) not in seen:
                 seen.add(" ".join(words))
                 cmds.append((os.path.relpath(p, REPO), words))
-    cmds.sort(key=lambda pw: RANK[name_of(pw[1])])
     env = dict(os.environ, PATH=os.path.dirname(os.path.abspath(jsim_bin)) + os.pathsep + os.environ["PATH"],
                MPLBACKEND="Agg")
-    failed = []
-    for page, words in cmds:
-        run = reduce(list(words), jsim_bin)
+    cmds.sort(key=lambda pw: RANK[name_of(pw[1])])
+    for k, (page, words) in enumerate(cmds):
+        if words[0] == "jsim" and name_of(words) in OWN_OUT and "--out" not in words:
+            cmds[k] = (page, words, ["--out", f"out/{name_of(words)}-{k}"])
+        else:
+            cmds[k] = (page, words, [])
+    deps = after([(page, words + extra) for page, words, extra in cmds])
+    failed, lock = [], threading.Lock()
+
+    def run_one(k):
+        page, words, extra = cmds[k]
+        run = reduce(list(words) + extra, jsim_bin)
         if run[0] == "jsim":
             run[0] = jsim_bin
         t0 = time.perf_counter()
         r = subprocess.run(run, cwd=scratch, env=env, capture_output=True, text=True, timeout=600)
-        print(f"{time.perf_counter() - t0:6.1f} s  rc {r.returncode}  {page}: {' '.join(words)}")
+        with lock:
+            print(f"{time.perf_counter() - t0:6.1f} s  rc {r.returncode}  {page}: {' '.join(words)}", flush=True)
         if r.returncode != 0:
-            failed.append(f"{page}: {' '.join(words)}\n  ran: {' '.join(run)}\n  {r.stderr.strip()[-800:]}")
-            continue
+            return f"{page}: {' '.join(words)}\n  ran: {' '.join(run)}\n  {r.stderr.strip()[-800:]}"
         if "--out" in words and name_of(words) != "sweep":
             out = words[words.index("--out") + 1].lstrip("/")
-            assert os.path.exists(scratch / out), f"{page}: {' '.join(words)} wrote no {out}"
+            if not os.path.exists(scratch / out):
+                return f"{page}: {' '.join(words)} wrote no {out}"
+        return None
+
+    # producers before consumers: a command starts once the earlier commands it shares a place with have ended;
+    # the others run side by side, WORKERS at a time, in rank order
+    done, running, broken = set(), {}, set()
+    with concurrent.futures.ThreadPoolExecutor(max_workers=WORKERS) as pool:
+        waiting = list(range(len(cmds)))
+        while waiting or running:
+            for k in [k for k in waiting if deps[k] & broken]:
+                waiting.remove(k)
+                broken.add(k)
+                failed.append(f"{cmds[k][0]}: {' '.join(cmds[k][1])}: not run, a command it follows failed")
+            for k in [k for k in waiting if deps[k] <= done][:WORKERS - len(running)]:
+                waiting.remove(k)
+                running[pool.submit(run_one, k)] = k
+            if not running:
+                continue
+            ended, _ = concurrent.futures.wait(running, return_when=concurrent.futures.FIRST_COMPLETED)
+            for f in ended:
+                k = running.pop(f)
+                if f.result() is None:
+                    done.add(k)
+                else:
+                    broken.add(k)
+                    failed.append(f.result())
     assert not failed, "commands of the pages that do not run:\n" + "\n".join(failed)
     assert len(cmds) >= 30, f"only {len(cmds)} commands found"

@@ -18,16 +18,27 @@ use std::time::Instant;
 /// The exact setting: every pixel with an electron, every earlier exposure of the day.
 const EXACT: (f64, f64) = (1.0, 86_400.0);
 
-/// The rows of the persistence bench.
-pub fn persistence_knobs(session: &Session, base: &Config) -> Result<Vec<BenchRow>, BenchError> {
+/// Exposures per stare with `--quick`: the same three stares and target exposure, a sixth of the earlier light
+/// to remake (a smoke run; its numbers are not the documented ones).
+pub const QUICK_EXPOSURES_PER_STARE: usize = 4;
+
+/// The rows of the persistence bench (`quick`: [`QUICK_EXPOSURES_PER_STARE`] exposures a stare).
+pub fn persistence_knobs(
+    session: &Session,
+    base: &Config,
+    quick: bool,
+) -> Result<Vec<BenchRow>, BenchError> {
     let mut c = bench_config(base);
     c.ace.case = AceCase::Gaussian;
     c.detector.persistence.enabled = true;
-    let spec = Spec {
+    let mut spec = Spec {
         stares_l: 3,
         stares_b: 1,
         ..Spec::default()
     };
+    if quick {
+        spec.exposures_per_stare = QUICK_EXPOSURES_PER_STARE;
+    }
     let per_stare = spec.exposures_per_stare;
     let plan = plan(&spec, &c).map_err(|m| run::SequenceError::Invalid(m.to_string()))?;
     let dir = std::env::temp_dir().join(format!("jsim-bench-persistence-{}", std::process::id()));
