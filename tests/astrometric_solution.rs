@@ -72,12 +72,12 @@ fn with_noise_its_own_covariance_describes_its_scatter_and_outliers_go() {
     // fewer, five astrometric parameters absorb much of one bad observation: stated in the docs)
     let mut count = vec![0usize; n];
     for o in &t.obs {
-        count[o.source] += 1;
+        count[o.source()] += 1;
     }
     let mut hit = std::collections::HashSet::new();
     let mut k = 0;
     for i in (0..t.obs.len()).step_by(997) {
-        let s = t.obs[i].source;
+        let s = t.obs[i].source();
         if count[s] >= 8 && hit.insert(s) && k < 12 {
             t.obs[i].xi_mas += 80.0;
             k += 1;
@@ -151,13 +151,11 @@ fn in_stares(
     for o in &t.obs {
         let shared = [unit.sample(&mut r) * tau_mas, unit.sample(&mut r) * tau_mas];
         for m in 0..per_stare {
-            out.obs.push(Observation {
-                exposure: o.exposure * per_stare + m,
-                xi_mas: o.xi_mas + shared[0] + unit.sample(&mut r) * sigma_mas,
-                eta_mas: o.eta_mas + shared[1] + unit.sample(&mut r) * sigma_mas,
-                sigma_mas,
-                ..*o
-            });
+            let xi_mas = o.xi_mas + shared[0] + unit.sample(&mut r) * sigma_mas;
+            let eta_mas = o.eta_mas + shared[1] + unit.sample(&mut r) * sigma_mas;
+            let mut seen = o.with_exposure(o.exposure() * per_stare + m);
+            (seen.xi_mas, seen.eta_mas, seen.sigma_mas) = (xi_mas, eta_mas, sigma_mas);
+            out.obs.push(seen);
         }
     }
     out
@@ -266,7 +264,12 @@ fn bad_input_is_named() {
         Some(SolutionError::Duplicate { .. })
     ));
     // one epoch cannot give motions
-    let first: Vec<Observation> = t.obs.iter().filter(|o| o.exposure == 0).copied().collect();
+    let first: Vec<Observation> = t
+        .obs
+        .iter()
+        .filter(|o| o.exposure() == 0)
+        .copied()
+        .collect();
     let e = run(&first, &t.exposures[..1], &t.refs, &opt);
     assert!(matches!(e, Some(SolutionError::Degenerate { .. })), "{e:?}");
     // … but positions, yes
@@ -335,20 +338,19 @@ fn an_exposure_tied_to_nothing_is_left_out() {
         visit: ex.len(),
     });
     for k in 0..5 {
-        lonely.push(Observation {
-            exposure: ex.len() - 1,
-            source: 190 + k,
-            xi_mas: 5e6 + k as f64,
-            eta_mas: 5e6,
-            sigma_mas: 1.0,
-            array: 0,
-            focal_px: [0.0, 0.0],
-        });
+        lonely.push(Observation::new(
+            ex.len() - 1,
+            190 + k,
+            [5e6 + k as f64, 5e6],
+            1.0,
+            0,
+            [0.0, 0.0],
+        ));
     }
     // sources 190… are seen elsewhere too: give the lonely exposure fresh ones instead
     let n = 205;
     for (k, o) in lonely.iter_mut().rev().take(5).enumerate() {
-        o.source = 200 + k;
+        *o = o.with_source(200 + k);
     }
     // … it is left out and reported, its attitude undetermined, its sources unsolved; the rest is solved
     let sol = solve(&lonely, &ex, &t.refs, n, &opt).expect("the rest solved");
@@ -371,11 +373,7 @@ fn unconnected_exposures_and_patches_are_named() {
     // with no exposure tied to another or to the catalogue (every source seen once, no reference seen)
     // nothing can be solved: a named error
     let once: Vec<Observation> = (0..4)
-        .map(|k| Observation {
-            exposure: k / 2,
-            source: 10 + k,
-            ..t.obs[0]
-        })
+        .map(|k| t.obs[0].with_exposure(k / 2).with_source(10 + k))
         .collect();
     let e = solve(&once, &t.exposures[..2], &t.refs, 200, &pos_only()).err();
     assert!(matches!(e, Some(SolutionError::NoOverlap(2))), "{e:?}");
@@ -383,11 +381,12 @@ fn unconnected_exposures_and_patches_are_named() {
     // no reference star: its frame is undetermined, a named error listing its exposures (36 … 71)
     let e0 = t.exposures.len();
     let mut two = t.obs.clone();
-    two.extend(t.obs.iter().map(|o| Observation {
-        exposure: o.exposure + e0,
-        source: o.source + 200,
-        xi_mas: o.xi_mas + 1e8,
-        ..*o
+    two.extend(t.obs.iter().map(|o| {
+        let mut far = o
+            .with_exposure(o.exposure() + e0)
+            .with_source(o.source() + 200);
+        far.xi_mas += 1e8;
+        far
     }));
     let mut ex2 = t.exposures.clone();
     ex2.extend(t.exposures.iter().map(|g| ExposureGeometry {
@@ -501,7 +500,7 @@ fn a_distortion_a_single_pointing_cannot_see_is_named() {
     );
     // an array index beyond the model, a distortion order of 1
     let mut bad = t.obs.clone();
-    bad[3].array = 4;
+    bad[3] = bad[3].with_array(4);
     let arrays_only = Options {
         calibration: CalibrationModel {
             distortion_order: 0,
@@ -595,7 +594,7 @@ fn a_turned_and_spinning_input_frame_comes_back_in_the_catalogues() {
     // 2 mas/yr at the pattern's corner (≈ 3 × 10⁵ mas from the origin)
     let spin_rad_per_yr = 2.0 / 3.0e5;
     for o in &mut t.obs {
-        let phi = turn_rad + spin_rad_per_yr * t.exposures[o.exposure].t_yr;
+        let phi = turn_rad + spin_rad_per_yr * t.exposures[o.exposure()].t_yr;
         let (s, c) = phi.sin_cos();
         (o.xi_mas, o.eta_mas) = (c * o.xi_mas - s * o.eta_mas, s * o.xi_mas + c * o.eta_mas);
     }

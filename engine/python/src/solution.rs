@@ -98,7 +98,7 @@ pub fn solve<'py>(
     let obs = observations_of(observations)?;
     let geometry = exposures_of(exposures)?;
     let (refs, rs) = references_of(references)?;
-    let os = obs.iter().map(|o| o.source);
+    let os = obs.iter().map(|o| o.source());
     let n_sources = os
         .chain(rs.iter().copied())
         .map(|s| s + 1)
@@ -143,15 +143,7 @@ fn observations_of(observations: &Bound<'_, PyDict>) -> PyResult<Vec<Observation
         ],
     )?;
     Ok((0..oe.len())
-        .map(|k| Observation {
-            exposure: oe[k],
-            source: os[k],
-            xi_mas: ox[k],
-            eta_mas: oy[k],
-            sigma_mas: osig[k],
-            array: 0,
-            focal_px: [0.0, 0.0],
-        })
+        .map(|k| Observation::new(oe[k], os[k], [ox[k], oy[k]], osig[k], 0, [0.0, 0.0]))
         .collect())
 }
 

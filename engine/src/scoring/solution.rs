@@ -192,8 +192,8 @@ pub fn attitude_errors(
 ) -> Vec<Option<AttitudeError>> {
     let mut by_exposure: Vec<Vec<usize>> = vec![Vec::new(); exposures.len()];
     for (i, o) in obs.iter().enumerate() {
-        if truths.get(o.source).is_some_and(Option::is_some) && o.exposure < exposures.len() {
-            by_exposure[o.exposure].push(i);
+        if truths.get(o.source()).is_some_and(Option::is_some) && o.exposure() < exposures.len() {
+            by_exposure[o.exposure()].push(i);
         }
     }
     by_exposure
@@ -207,7 +207,7 @@ pub fn attitude_errors(
                 .iter()
                 .filter_map(|&i| {
                     let o = &obs[i];
-                    let t = truths[o.source].as_ref()?;
+                    let t = truths[o.source()].as_ref()?;
                     let s = g.place(&t.params);
                     let d = sol.calibration.correction_mas(o, g);
                     let m = a.apply(g.centre_mas, s);

@@ -42,7 +42,7 @@ pub(super) fn corrected_at(
     if !cal.model.solves() {
         return [o.xi_mas, o.eta_mas];
     }
-    let d = cal.correction_mas(o, &exposures[o.exposure]);
+    let d = cal.correction_mas(o, &exposures[o.exposure()]);
     [o.xi_mas - d[0], o.eta_mas - d[1]]
 }
 
@@ -111,9 +111,9 @@ pub(super) fn places_of(
     i: usize,
 ) -> Option<[f64; 2]> {
     let o = &obs[i];
-    params[o.source]
+    params[o.source()]
         .as_ref()
-        .map(|p| exposures[o.exposure].place(p))
+        .map(|p| exposures[o.exposure()].place(p))
 }
 
 /// The error of a calibration that cannot be fitted: the first array with fewer than 3 kept observations,
@@ -121,8 +121,8 @@ pub(super) fn places_of(
 pub(super) fn unconstrained(obs: &[Observation], active: &[bool], arrays: usize) -> SolutionError {
     let mut n = vec![0usize; arrays];
     for (o, on) in obs.iter().zip(active) {
-        if *on && o.array < arrays {
-            n[o.array] += 1;
+        if *on && o.array() < arrays {
+            n[o.array()] += 1;
         }
     }
     SolutionError::CalibrationUnconstrained(n.iter().position(|c| *c < 3).unwrap_or(arrays))
@@ -169,8 +169,8 @@ pub(super) fn source_block(
         let mut used = 0;
         for i in mine.iter().map(|i| *i as usize).filter(|i| active[*i]) {
             let o = &obs[i];
-            let g = &exposures[o.exposure];
-            let a = &attitudes[o.exposure];
+            let g = &exposures[o.exposure()];
+            let a = &attitudes[o.exposure()];
             let s = a.invert(g.centre_mas, corrected_at(obs, exposures, cal, i));
             let weight = (a.p * a.p + a.q * a.q) / (o.sigma_mas * o.sigma_mas);
             for axis in 0..2 {
@@ -251,7 +251,7 @@ fn epochs(
         .iter()
         .map(|i| *i as usize)
         .filter(|i| active[*i])
-        .map(|i| exposures[obs[i].exposure].t_yr)
+        .map(|i| exposures[obs[i].exposure()].t_yr)
         .collect();
     if t.is_empty() {
         return 0;
@@ -273,7 +273,7 @@ pub(super) fn attitude_block(
     let mut pairs = Vec::with_capacity(mine.len());
     for i in mine.iter().map(|i| *i as usize).filter(|i| active[*i]) {
         let o = &obs[i];
-        if let Some(p) = &params[o.source] {
+        if let Some(p) = &params[o.source()] {
             let s = g.place(p);
             let d = cal.correction_mas(o, g);
             pairs.push((

@@ -211,7 +211,7 @@ impl Calibration {
         if !self.model.solves() {
             return [0.0; 2];
         }
-        let d = self.correction_px(o.array, o.focal_px);
+        let d = self.correction_px(o.array(), o.focal_px());
         let m = &g.to_plane;
         [m[0] * d[0] + m[1] * d[1], m[2] * d[0] + m[3] * d[1]]
     }
@@ -447,7 +447,7 @@ impl Block {
             // σ in px: the plane's mas per px is √|det M|
             let w = det / (o.sigma_mas * o.sigma_mas);
             let (y, sp) = (to_focal([o.xi_mas, o.eta_mas]), to_focal(place));
-            model.terms_at(o.array, o.focal_px, norm_px, &mut phi);
+            model.terms_at(o.array(), o.focal_px(), norm_px, &mut phi);
             // x: p′ s′x − q′ s′y + a′x + Σ cx φ;  y: q′ s′x + p′ s′y + a′y + Σ cy φ
             for axis in 0..2 {
                 let att = if axis == 0 {

@@ -355,9 +355,9 @@ impl<'a> Linear<'a> {
     /// Observation `i`'s source and attitude columns, and its source's place less the exposure's centre.
     fn columns(&self, i: usize) -> Columns {
         let o = &self.p.obs[i];
-        let g = &self.p.exposures[o.exposure];
-        let a = &self.attitudes[o.exposure];
-        let place = g.place(&self.params[o.source]);
+        let g = &self.p.exposures[o.exposure()];
+        let a = &self.attitudes[o.exposure()];
+        let place = g.place(&self.params[o.source()]);
         let (dx, dy) = (place[0] - g.centre_mas[0], place[1] - g.centre_mas[1]);
         let b = [
             [1.0, 0.0],
@@ -367,7 +367,7 @@ impl<'a> Linear<'a> {
             g.parallax_factor,
         ];
         let src = b.map(|v| [a.p * v[0] - a.q * v[1], a.q * v[0] + a.p * v[1]]);
-        let s = self.lever[o.exposure];
+        let s = self.lever[o.exposure()];
         let att = [[dx / s, dy / s], [-dy / s, dx / s], [1.0, 0.0], [0.0, 1.0]];
         (src, att)
     }
@@ -385,7 +385,7 @@ impl<'a> Linear<'a> {
             self.p
                 .opt
                 .calibration
-                .terms_at(o.array, o.focal_px, self.p.opt.focal_norm_px, out);
+                .terms_at(o.array(), o.focal_px(), self.p.opt.focal_norm_px, out);
         }
     }
 
@@ -424,7 +424,7 @@ impl<'a> Linear<'a> {
                     for (k, x) in slice.iter_mut().enumerate() {
                         *x += src[k][0] * u[0] + src[k][1] * u[1];
                     }
-                    let e = self.p.obs[i].exposure;
+                    let e = self.p.obs[i].exposure();
                     for k in 0..4 {
                         acc[4 * e + k] += att[k][0] * u[0] + att[k][1] * u[1];
                     }
@@ -513,8 +513,8 @@ impl<'a> Linear<'a> {
     fn jv(&self, i: usize, cols: &Columns, phi: &[(usize, f64)], v: &[f64]) -> [f64; 2] {
         let o = &self.p.obs[i];
         let (src, att) = cols;
-        let (so, n) = (self.src_off[o.source], self.dims[o.source]);
-        let ao = self.att_off + 4 * o.exposure;
+        let (so, n) = (self.src_off[o.source()], self.dims[o.source()]);
+        let ao = self.att_off + 4 * o.exposure();
         let mut jv = [0.0; 2];
         for k in 0..n {
             jv[0] += src[k][0] * v[so + k];
@@ -525,7 +525,7 @@ impl<'a> Linear<'a> {
             jv[1] += att[k][1] * v[ao + k];
         }
         if !phi.is_empty() {
-            let m = &self.p.exposures[o.exposure].to_plane;
+            let m = &self.p.exposures[o.exposure()].to_plane;
             let (cx, cy) = (self.cal_off, self.cal_off + self.cal_axis);
             let (mut fx, mut fy) = (0.0, 0.0);
             for &(j, f) in phi {
@@ -577,9 +577,9 @@ impl<'a> Linear<'a> {
         let mut b = self.accumulate(
             |i, _, _| {
                 let o = &self.p.obs[i];
-                let g = &self.p.exposures[o.exposure];
-                let m =
-                    self.attitudes[o.exposure].apply(g.centre_mas, g.place(&self.params[o.source]));
+                let g = &self.p.exposures[o.exposure()];
+                let m = self.attitudes[o.exposure()]
+                    .apply(g.centre_mas, g.place(&self.params[o.source()]));
                 let at = self.p.place_at(&state.cal, i);
                 let w = self.weight(i);
                 [w * (at[0] - m[0]), w * (at[1] - m[1])]
@@ -659,7 +659,7 @@ impl<'a> Linear<'a> {
                     if !self.active[i] {
                         continue;
                     }
-                    let e = self.p.obs[i].exposure;
+                    let e = self.p.obs[i].exposure();
                     let (_, cols) = self.columns(i);
                     let w = self.weight(i);
                     let att = &mut acc[17 * e..17 * e + 17];

@@ -59,15 +59,15 @@ pub(super) fn fingerprint(
     let u = |h: &mut Sha256, v: usize| h.update((v as u64).to_le_bytes());
     u(&mut h, n_sources);
     for o in obs {
-        u(&mut h, o.exposure);
-        u(&mut h, o.source);
-        u(&mut h, o.array);
+        u(&mut h, o.exposure());
+        u(&mut h, o.source());
+        u(&mut h, o.array());
         for v in [
             o.xi_mas,
             o.eta_mas,
             o.sigma_mas,
-            o.focal_px[0],
-            o.focal_px[1],
+            o.focal_px()[0],
+            o.focal_px()[1],
         ] {
             f(&mut h, v);
         }

@@ -131,7 +131,7 @@ fn share(p: &Problem, state: &State, active: &[bool], s: usize) -> Option<Share>
         .map(|i| *i as usize)
         .filter(|i| active[*i])
         .map(|i| {
-            let g = &p.exposures[p.obs[i].exposure];
+            let g = &p.exposures[p.obs[i].exposure()];
             (p.opt.excess.group(g), i)
         })
         .collect();
@@ -148,7 +148,7 @@ fn share(p: &Problem, state: &State, active: &[bool], s: usize) -> Option<Share>
         while k < mine.len() && mine[k].0 == stare {
             let i = mine[k].1;
             let o = &p.obs[i];
-            let (geo, att) = (&p.exposures[o.exposure], &state.attitudes[o.exposure]);
+            let (geo, att) = (&p.exposures[o.exposure()], &state.attitudes[o.exposure()]);
             let place = att.invert(
                 geo.centre_mas,
                 corrected_at(p.obs, p.exposures, &state.cal, i),

@@ -495,17 +495,12 @@ fn observations(
             .abs()
             .sqrt();
         let (p, f) = places[i];
-        obs.push(Observation {
-            exposure: d.exposure,
-            source: index[*s],
-            xi_mas: p[0],
-            eta_mas: p[1],
-            sigma_mas: (d.crlb_px * mas_per_px)
-                .hypot(opt.sigma_floor_mas)
-                .max(1e-3),
-            array: d.array,
-            focal_px: f,
-        });
+        let sigma_mas = (d.crlb_px * mas_per_px)
+            .hypot(opt.sigma_floor_mas)
+            .max(1e-3);
+        obs.push(Observation::new(
+            d.exposure, index[*s], p, sigma_mas, d.array, f,
+        ));
         detection.push(i);
     }
     (obs, detection, kept_ref, n_sources, left_out)

@@ -152,8 +152,8 @@ pub fn tile_order(obs: &[Observation], n_sources: usize) -> Vec<usize> {
     let mut first: Vec<Option<[f64; 2]>> = vec![None; n_sources];
     let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
     for o in obs {
-        if o.source < n_sources && first[o.source].is_none() {
-            first[o.source] = Some([o.xi_mas, o.eta_mas]);
+        if o.source() < n_sources && first[o.source()].is_none() {
+            first[o.source()] = Some([o.xi_mas, o.eta_mas]);
         }
         for (k, v) in [o.xi_mas, o.eta_mas].into_iter().enumerate() {
             lo[k] = lo[k].min(v);
@@ -252,15 +252,7 @@ mod tests {
     fn the_tile_order_keeps_neighbours_together() {
         // a 16 × 16 grid of sources listed row by row: each run of 4 in tile order spans a 2 × 2 patch
         let obs: Vec<Observation> = (0..256)
-            .map(|s| Observation {
-                exposure: 0,
-                source: s,
-                xi_mas: (s % 16) as f64,
-                eta_mas: (s / 16) as f64,
-                sigma_mas: 1.0,
-                array: 0,
-                focal_px: [0.0; 2],
-            })
+            .map(|s| Observation::new(0, s, [(s % 16) as f64, (s / 16) as f64], 1.0, 0, [0.0; 2]))
             .collect();
         let order = tile_order(&obs, 257);
         assert_eq!(order[256], 256, "the unobserved source comes last");

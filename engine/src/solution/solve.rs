@@ -128,8 +128,8 @@ pub fn solve_with(
     validate(obs, exposures, refs, n_sources, opt)?;
     let skipped = unlinked_exposures(obs, exposures.len(), refs, n_sources)?;
     anchored_groups(obs, exposures.len(), refs, n_sources, &skipped)?;
-    let by_source = Groups::new(n_sources, obs.len(), |i| obs[i].source);
-    let by_exposure = Groups::new(exposures.len(), obs.len(), |i| obs[i].exposure);
+    let by_source = Groups::new(n_sources, obs.len(), |i| obs[i].source());
+    let by_exposure = Groups::new(exposures.len(), obs.len(), |i| obs[i].exposure());
     no_duplicates(obs, &by_source)?;
     let mut prior: Vec<Option<&Reference>> = vec![None; n_sources];
     for r in refs {
@@ -140,7 +140,7 @@ pub fn solve_with(
     for &e in &skipped {
         left_out[e] = true;
     }
-    let mut active: Vec<bool> = obs.iter().map(|o| !left_out[o.exposure]).collect();
+    let mut active: Vec<bool> = obs.iter().map(|o| !left_out[o.exposure()]).collect();
     // mas per focal-plane px (for the calibration's share of the convergence test)
     let mas_per_px = exposures.first().map_or(1.0, |g| {
         (g.to_plane[0] * g.to_plane[3] - g.to_plane[1] * g.to_plane[2])
@@ -360,12 +360,12 @@ fn chi2(p: &Problem, state: &mut State, active: &[bool]) -> (f64, usize) {
         }
         if let Some((rx, ry)) = residual(
             p.place_at(&state.cal, i),
-            &p.exposures[o.exposure],
-            &state.attitudes[o.exposure],
-            &state.sources[o.source],
+            &p.exposures[o.exposure()],
+            &state.attitudes[o.exposure()],
+            &state.sources[o.source()],
         ) {
             let c = (rx * rx + ry * ry) / (o.sigma_mas * o.sigma_mas);
-            state.sources[o.source].chi2 += c;
+            state.sources[o.source()].chi2 += c;
             chi2_total += c;
             n_terms += 2;
         }
@@ -387,14 +387,14 @@ fn reject(
     let mut worst: Vec<Option<(usize, f64)>> = vec![None; p.by_source.len()];
     let mut changed = 0;
     for (i, o) in p.obs.iter().enumerate() {
-        if left_out[o.exposure] {
+        if left_out[o.exposure()] {
             continue;
         }
         let Some((rx, ry)) = residual(
             p.place_at(&state.cal, i),
-            &p.exposures[o.exposure],
-            &state.attitudes[o.exposure],
-            &state.sources[o.source],
+            &p.exposures[o.exposure()],
+            &state.attitudes[o.exposure()],
+            &state.sources[o.source()],
         ) else {
             continue;
         };
@@ -404,8 +404,8 @@ fn reject(
                 active[i] = true;
                 changed += 1;
             }
-        } else if z > clip && worst[o.source].is_none_or(|(_, w)| z > w) {
-            worst[o.source] = Some((i, z));
+        } else if z > clip && worst[o.source()].is_none_or(|(_, w)| z > w) {
+            worst[o.source()] = Some((i, z));
         }
     }
     for (i, _) in worst.into_iter().flatten() {
@@ -416,7 +416,7 @@ fn reject(
         .obs
         .iter()
         .zip(active.iter())
-        .filter(|(o, on)| !**on && !left_out[o.exposure])
+        .filter(|(o, on)| !**on && !left_out[o.exposure()])
         .count();
     (changed, rejected)
 }
@@ -428,7 +428,7 @@ fn no_duplicates(obs: &[Observation], by_source: &Groups) -> Result<(), Solution
         let mut e: Vec<usize> = by_source
             .get(s)
             .iter()
-            .map(|&i| obs[i as usize].exposure)
+            .map(|&i| obs[i as usize].exposure())
             .collect();
         e.sort_unstable();
         e.windows(2).find(|w| w[0] == w[1]).map(|w| (s, w[0]))
@@ -553,13 +553,13 @@ fn unlinked_exposures(
     let mut skipped = vec![false; n_exposures];
     loop {
         let mut seen = vec![0usize; n_sources];
-        for o in obs.iter().filter(|o| !skipped[o.exposure]) {
-            seen[o.source] += 1;
+        for o in obs.iter().filter(|o| !skipped[o.exposure()]) {
+            seen[o.source()] += 1;
         }
         let mut tied = vec![0usize; n_exposures];
-        for o in obs.iter().filter(|o| !skipped[o.exposure]) {
-            if anchored[o.source] || seen[o.source] >= 2 {
-                tied[o.exposure] += 1;
+        for o in obs.iter().filter(|o| !skipped[o.exposure()]) {
+            if anchored[o.source()] || seen[o.source()] >= 2 {
+                tied[o.exposure()] += 1;
             }
         }
         let newly: Vec<usize> = (0..n_exposures)
@@ -602,10 +602,10 @@ fn anchored_groups(
     for &e in skipped {
         left_out[e] = true;
     }
-    for o in obs.iter().filter(|o| !left_out[o.exposure]) {
+    for o in obs.iter().filter(|o| !left_out[o.exposure()]) {
         let (a, b) = (
-            root(&mut parent, o.exposure),
-            root(&mut parent, n_exposures + o.source),
+            root(&mut parent, o.exposure()),
+            root(&mut parent, n_exposures + o.source()),
         );
         if a != b {
             parent[a.max(b)] = a.min(b);
@@ -745,8 +745,8 @@ fn validate_observations(
         // the focal-plane position only where a calibration reads it
         let focal: &[(&'static str, f64)] = if cm.solves() {
             &[
-                ("focal_px[0]", o.focal_px[0]),
-                ("focal_px[1]", o.focal_px[1]),
+                ("focal_px[0]", o.focal_px()[0]),
+                ("focal_px[1]", o.focal_px()[1]),
             ]
         } else {
             &[]
@@ -772,27 +772,27 @@ fn validate_observations(
                 extra: " and > 0",
             });
         }
-        if cm.arrays > 0 && o.array >= cm.arrays {
+        if cm.arrays > 0 && o.array() >= cm.arrays {
             return Err(SolutionError::OutOfRange {
                 index,
                 what: "array",
-                value: o.array,
+                value: o.array(),
                 limit: cm.arrays - 1,
             });
         }
-        if o.exposure >= exposures.len() {
+        if o.exposure() >= exposures.len() {
             return Err(SolutionError::OutOfRange {
                 index,
                 what: "exposure",
-                value: o.exposure,
+                value: o.exposure(),
                 limit: exposures.len().saturating_sub(1),
             });
         }
-        if o.source >= n_sources {
+        if o.source() >= n_sources {
             return Err(SolutionError::OutOfRange {
                 index,
                 what: "source",
-                value: o.source,
+                value: o.source(),
                 limit: n_sources.saturating_sub(1),
             });
         }

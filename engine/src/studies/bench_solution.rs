@@ -162,19 +162,18 @@ pub fn synthetic(spec: &SyntheticSpec) -> Synthetic {
                     + a.offset_mas[1]
                     + SYNTHETIC_MAS_PER_PX * dfx[1],
             ];
-            obs.push(Observation {
-                exposure: e,
-                source: s,
-                xi_mas: o[0] + gauss(&mut r, spec.obs_sigma_mas),
-                eta_mas: o[1] + gauss(&mut r, spec.obs_sigma_mas),
-                sigma_mas: if spec.obs_sigma_mas > 0.0 {
-                    spec.obs_sigma_mas
-                } else {
-                    1.0
-                },
-                array,
-                focal_px,
-            });
+            let plane_mas = [
+                o[0] + gauss(&mut r, spec.obs_sigma_mas),
+                o[1] + gauss(&mut r, spec.obs_sigma_mas),
+            ];
+            let sigma_mas = if spec.obs_sigma_mas > 0.0 {
+                spec.obs_sigma_mas
+            } else {
+                1.0
+            };
+            obs.push(Observation::new(
+                e, s, plane_mas, sigma_mas, array, focal_px,
+            ));
         }
     }
     let refs = (0..spec.sources)

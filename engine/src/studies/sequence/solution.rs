@@ -500,7 +500,7 @@ pub fn true_sources(fed: &Fed, truth: &Truth) -> Vec<Option<TrueSource>> {
         vec![Default::default(); fed.n_sources];
     for (o, &d) in fed.obs.iter().zip(&fed.detection) {
         if let Some(s) = truth.star_of_detection[d] {
-            *votes[o.source].entry(s).or_default() += 1;
+            *votes[o.source()].entry(s).or_default() += 1;
         }
     }
     votes
@@ -525,11 +525,11 @@ pub fn at_mean_epoch(
     let (mut t, mut px, mut py, mut k) =
         (vec![0.0; n], vec![0.0; n], vec![0.0; n], vec![0usize; n]);
     for o in &fed.obs {
-        let g = &fed.exposures[o.exposure];
-        t[o.source] += g.t_yr;
-        px[o.source] += g.parallax_factor[0];
-        py[o.source] += g.parallax_factor[1];
-        k[o.source] += 1;
+        let g = &fed.exposures[o.exposure()];
+        t[o.source()] += g.t_yr;
+        px[o.source()] += g.parallax_factor[0];
+        py[o.source()] += g.parallax_factor[1];
+        k[o.source()] += 1;
     }
     let place = |p: &crate::solution::Params, s: usize| -> crate::solution::Params {
         let m = k[s].max(1) as f64;
