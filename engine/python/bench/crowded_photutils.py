@@ -139,7 +139,11 @@ def main():
         pick = np.where((nn == 1) & edge & clean)[0]
         pick = pick[np.argsort(-pf[pick])][:200]
         stars = extract_stars(NDData(img), Table({"x": px[pick], "y": py[pick]}), size=25)
-        epsf = EPSFBuilder(oversampling=4, smoothing_kernel="quadratic", maxiters=10, progress_bar=False)(stars)
+        try:
+            epsf = EPSFBuilder(oversampling=4, smoothing_kernel="quadratic", maxiters=10, progress_bar=False)(stars)
+        except ValueError as e:
+            # photutils 3's EPSFBuilder refuses an ePSF with oversampled cells no star sampled (too few stars)
+            raise SystemExit(f"--size {size}: photutils built no ePSF from {len(pick)} isolated stars ({e}); cut a larger square") from None
         epsf = getattr(epsf, "epsf", epsf[0] if isinstance(epsf, tuple) else epsf)
         t_epsf = time.perf_counter() - t0
         print(f"ePSF from {len(pick)} stars in {t_epsf:.1f} s")

@@ -20,7 +20,7 @@ reductions below, which make the whole page set run in a few minutes:
 * the sweep files are copied with the same reduced `[base]`, 2 exposures in one stare, and each grid axis cut
   to its first and last value;
 * `crowded_image.py` writes a 256-px array of 1500 stars instead of 1968 px and 10⁵ stars,
-  `photutils_catalogue.py` cuts 128 px instead of 512, `crowded_photutils.py` 96 px with one pass of finding, and `simulate_reference.py` runs the reduced configuration
+  `photutils_catalogue.py` cuts 128 px instead of 512, `crowded_photutils.py` 128 px with one pass of finding, and `simulate_reference.py` runs the reduced configuration
   once (`--config`, `--repeat 1`) with the jsim binary under test;
 * an absolute output path (`/shared/…`) is taken inside the scratch directory;
 * a command that writes to its default output directory, where nothing reads it (`jsim experiment`, `crowded`,
@@ -129,9 +129,9 @@ def reduce(words, jsim_bin="jsim"):
             k = words.index("--stars")
             words[k + 1:k + 2] = ["1500", "--size", "256", "--mag-min", "11", "--mag-max", "16"]
         if name == "crowded_photutils.py":
-            # a 96-px cut of the reduced array, one pass of finding
+            # a 128-px cut of the reduced array (≥ 10 isolated stars for photutils' ePSF), one pass of finding
             if "--size" in words:
-                words[words.index("--size") + 1] = "96"
+                words[words.index("--size") + 1] = "128"
             words += ["--iters", "1"]
         if name == "photutils_catalogue.py":
             words[words.index("--size") + 1] = "128"
@@ -287,10 +287,10 @@ def places(words):
     if "--out" in words:
         out = words[words.index("--out") + 1].lstrip("/")
         found.add("/".join(out.split("/")[:2]))
-    elif words[0] == "jsim" and name_of(words) in DEFAULT_OUT:
+    elif words[0] == "jsim" and name_of(words) in DEFAULT_OUT and not (
+            name_of(words) == "solve" and "--sequence" in words):
+        # (a solve writes into its sequence's directory, named above when given)
         found.add(DEFAULT_OUT[name_of(words)])
-        if name_of(words) == "solve":
-            found.add("out/solve")
     return found
 
 
@@ -318,8 +318,9 @@ def test_commands_that_share_an_output_run_in_order():
             ("d", ["python", "x/check_real_image.py", "f.fits", "out/hst", "--photutils", "out/hst_photutils/p.csv"]),
             ("e", ["jsim", "crowded", "--save-images", "--out", "out/crowded"]),
             ("f", ["python", "x/crowded_photutils.py", "--size", "0"]),
-            ("g", ["jsim", "solve", "--method", "block"])]
-    assert after(cmds) == [set(), {0}, set(), {2}, set(), {4}, {1}]
+            ("g", ["jsim", "solve", "--method", "block"]),
+            ("h", ["jsim", "solve", "--sequence", "out/two-visits", "--exposures", "24"])]
+    assert after(cmds) == [set(), {0}, set(), {2}, set(), {4}, {1}, set()]
 
 
 # the worker processes that run the commands: CI's two cores (most commands use about one)
