@@ -36,8 +36,10 @@ pub struct BinScore {
     pub parallax_sigma_mas: f64,
     /// The pulls, error / σ, their robust scatter (1.4826 × the median absolute deviation about their median,
     /// so that the frame's error common to all sources, which σ leaves out, does not count): per axis of the
-    /// position, and of the parallax where solved; 1 where σ describes the errors. NaN without sources.
+    /// position, of the proper motion and of the parallax where solved; 1 where σ describes the errors. NaN
+    /// without sources.
     pub position_pull: f64,
+    pub pm_pull: f64,
     pub parallax_pull: f64,
 }
 
@@ -131,6 +133,7 @@ pub fn score_sources(
                 pm_sigma_mas_per_yr: rms(&[2, 3], true),
                 parallax_sigma_mas: rms(&[4], true),
                 position_pull: pulls(&[0, 1]),
+                pm_pull: pulls(&[2, 3]),
                 parallax_pull: pulls(&[4]),
             }
         })
@@ -319,6 +322,7 @@ mod tests {
         }
         let b = score_sources(&solved, &truth, &[12.0, 13.0])[0];
         assert!((b.position_pull - 1.0).abs() < 0.048, "{}", b.position_pull);
+        assert!((b.pm_pull - 1.0).abs() < 0.048, "{}", b.pm_pull);
         assert!((b.parallax_pull - 1.0).abs() < 0.068, "{}", b.parallax_pull);
         for s in &mut solved {
             s.sigma = s.sigma.map(|v| v / 2.0);

@@ -291,8 +291,8 @@ fn write_last(
 fn bin_line(b: &BinScore, s: &sq::SingleExposure) -> String {
     format!(
         "  Hw {:.0}–{:.0}: {:>6} sources, {:>4.0} obs; position {:.3} mas rms, {:.3} robust, {:.1} % beyond 5σ \
-         (σ {:.3}, pull {:.2}; single {:.2} rms, {:.2} robust → √N {:.3}); pm {:.3} mas/yr (σ {:.3}); parallax \
-         {:.3} mas (σ {:.3}, pull {:.2})",
+         (σ {:.3}, pull {:.2}; single {:.2} rms, {:.2} robust → √N {:.3}); pm {:.3} mas/yr (σ {:.3}, pull {:.2}); \
+         parallax {:.3} mas (σ {:.3}, pull {:.2})",
         b.hw_lo,
         b.hw_hi,
         b.sources,
@@ -307,6 +307,7 @@ fn bin_line(b: &BinScore, s: &sq::SingleExposure) -> String {
         s.robust_mas / b.observations.sqrt(),
         b.pm_rms_mas_per_yr,
         b.pm_sigma_mas_per_yr,
+        b.pm_pull,
         b.parallax_rms_mas,
         b.parallax_sigma_mas,
         b.parallax_pull
@@ -406,7 +407,7 @@ fn attitude_rms(att: &[Option<AttitudeError>]) -> [f64; 4] {
 }
 
 /// Columns of `precision_vs_n.csv`: per N and magnitude bin, the solved precision beside the single exposure's.
-pub const PRECISION_COLUMNS: [&str; 18] = [
+pub const PRECISION_COLUMNS: [&str; 19] = [
     "exposures",
     "hw_lo",
     "hw_hi",
@@ -425,6 +426,7 @@ pub const PRECISION_COLUMNS: [&str; 18] = [
     "parallax_sigma_mas",
     "position_pull",
     "parallax_pull",
+    "pm_pull",
 ];
 
 fn write_precision(path: &Path, table: &[PrecisionRow]) -> Result<(), SequenceError> {
@@ -451,6 +453,7 @@ fn write_precision(path: &Path, table: &[PrecisionRow]) -> Result<(), SequenceEr
                 Cell::F(b.parallax_sigma_mas),
                 Cell::F(b.position_pull),
                 Cell::F(b.parallax_pull),
+                Cell::F(b.pm_pull),
             ]
         })
         .collect();
