@@ -129,7 +129,8 @@ def reduce(words, jsim_bin="jsim"):
             k = words.index("--stars")
             words[k + 1:k + 2] = ["1500", "--size", "256", "--mag-min", "11", "--mag-max", "16"]
         if name == "crowded_photutils.py":
-            # a 128-px cut of the reduced array (≥ 10 isolated stars for photutils' ePSF), one pass of finding
+            # a 128-px cut of the reduced array (32 isolated stars: photutils 3 builds no ePSF from the 96-px cut's 18),
+            # one pass of finding
             if "--size" in words:
                 words[words.index("--size") + 1] = "128"
             words += ["--iters", "1"]
