@@ -279,10 +279,10 @@ impl PyExposure {
             files::write_image_file(&path, &self.sim, &self.exp, pixels, dq).or_py()
         })?;
         let dir = path.parent().unwrap_or(std::path::Path::new("."));
-        engine::io::instrument::write_calibration_flat(dir, &self.sim).or_py()?;
-        engine::io::instrument::write_reference_catalogue(dir, &self.sim, &SurveyModel::default())
+        engine::io::instrument::write_calibration_flat(dir, &*self.sim).or_py()?;
+        engine::io::instrument::write_reference_catalogue(dir, &*self.sim, &SurveyModel::default())
             .or_py()?;
-        engine::io::instrument::write_model_psf(dir, &self.sim).or_py()?;
+        engine::io::instrument::write_model_psf(dir, &*self.sim).or_py()?;
         engine::io::instrument::write_telemetry(
             dir,
             &self.sim,

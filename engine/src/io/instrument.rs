@@ -23,7 +23,7 @@
 
 use super::IoError;
 use super::fits::{self, Card, Hdu, Pixels};
-use crate::simulate::{FocalPlaneSimulator, Simulator};
+use crate::simulate::Simulator;
 use std::path::{Path, PathBuf};
 
 /// File name of the calibration flat beside the images.
@@ -62,56 +62,44 @@ fn flat_cards(sim: &Simulator, error: f64) -> Vec<Card> {
     ]
 }
 
-/// Write the calibration flat of a single-array simulation into `dir` (none when its analysis is
-/// uncalibrated): the path written.
-pub fn write_calibration_flat(dir: &Path, sim: &Simulator) -> Result<Option<PathBuf>, IoError> {
-    let (Some(flat), crate::config::FlatField::Calibrated { error }) =
-        (sim.calibration_flat(), sim.cfg.analysis.flat_field)
+/// Whether `arrays` write their products in the single-array form (the primary HDU; `array` = 0 in
+/// `refcat.csv`) rather than the focal plane's (an empty primary and one extension per array).
+fn single_form(arrays: &[Simulator]) -> bool {
+    arrays.len() == 1 && arrays[0].cfg.focal_plane.layout == crate::config::Layout::Single
+}
+
+/// Write the calibration flats of a focal plane's arrays into `dir` (none when the analysis is
+/// uncalibrated): the path written. One array: the primary HDU; the quad: `FLAT1` … in one file.
+pub fn write_calibration_flat(
+    dir: &Path,
+    arrays: &(impl AsRef<[Simulator]> + ?Sized),
+) -> Result<Option<PathBuf>, IoError> {
+    let arrays = arrays.as_ref();
+    let Some(crate::config::FlatField::Calibrated { error }) =
+        arrays.first().map(|a| a.cfg.analysis.flat_field)
     else {
         return Ok(None);
     };
-    let n = sim.cfg.instrument.detector_px;
-    let path = dir.join(FLAT_NAME);
-    fits::write(
-        &path,
-        &[Hdu::Image {
-            name: "",
-            nx: n,
-            ny: n,
-            pixels: Pixels::F32(&flat[..]),
-            cards: flat_cards(sim, error),
-        }],
-    )?;
-    Ok(Some(path))
-}
-
-/// Write the calibration flats of the quad focal plane into `dir` (`FLAT1` … in one file; none when the
-/// analysis is uncalibrated): the path written.
-pub fn write_focal_plane_flats(
-    dir: &Path,
-    fps: &FocalPlaneSimulator,
-) -> Result<Option<PathBuf>, IoError> {
-    let crate::config::FlatField::Calibrated { error } = fps.cfg.analysis.flat_field else {
+    let flats: Vec<_> = arrays.iter().filter_map(|s| s.calibration_flat()).collect();
+    if flats.len() != arrays.len() {
         return Ok(None);
+    }
+    let names: Vec<String> = if single_form(arrays) {
+        vec![String::new()]
+    } else {
+        (0..arrays.len()).map(flat_extension).collect()
     };
-    let flats: Vec<_> = fps
-        .arrays
-        .iter()
-        .filter_map(|s| s.calibration_flat())
-        .collect();
-    let names: Vec<String> = (0..fps.arrays.len()).map(flat_extension).collect();
-    let mut hdus = vec![Hdu::Header {
-        cards: vec![
-            Card::i(
-                "NARRAYS",
-                fps.arrays.len() as i64,
-                "arrays: extensions FLAT1..",
-            ),
-            Card::f("FLATERR", error, "relative 1-sigma error per pixel"),
-            Card::s("ORIGIN", "jsim", "JASMINE image simulator"),
-        ],
-    }];
-    for ((sim, flat), name) in fps.arrays.iter().zip(&flats).zip(&names) {
+    let mut hdus = Vec::with_capacity(arrays.len() + 1);
+    if !single_form(arrays) {
+        hdus.push(Hdu::Header {
+            cards: vec![
+                Card::i("NARRAYS", arrays.len() as i64, "arrays: extensions FLAT1.."),
+                Card::f("FLATERR", error, "relative 1-sigma error per pixel"),
+                Card::s("ORIGIN", "jsim", "JASMINE image simulator"),
+            ],
+        });
+    }
+    for ((sim, flat), name) in arrays.iter().zip(&flats).zip(&names) {
         let n = sim.cfg.instrument.detector_px;
         hdus.push(Hdu::Image {
             name: name.as_str(),
@@ -344,31 +332,21 @@ fn refcat_rows(stars: &[RefStar]) -> Vec<Vec<super::csv::Cell>> {
         .collect()
 }
 
-/// Write the reference catalogue of a single array (`refcat.csv`, `array` = 0) into `dir`.
+/// Write the reference catalogue of a focal plane's arrays (`refcat.csv`) into `dir`: `array` = 0 for the
+/// single array, 1 … 4 in the quad.
 pub fn write_reference_catalogue(
     dir: &Path,
-    sim: &Simulator,
+    arrays: &(impl AsRef<[Simulator]> + ?Sized),
     survey: &SurveyModel,
 ) -> Result<PathBuf, IoError> {
-    let path = dir.join(REFCAT_NAME);
-    super::csv::write(
-        &path,
-        &REFCAT_HEADER,
-        &refcat_rows(&reference_catalogue(sim, survey, 0)),
-    )?;
-    Ok(path)
-}
-
-/// Write the reference catalogue of the focal plane (`refcat.csv`, `array` = 1 … 4) into `dir`.
-pub fn write_focal_plane_reference_catalogue(
-    dir: &Path,
-    fps: &FocalPlaneSimulator,
-    survey: &SurveyModel,
-) -> Result<PathBuf, IoError> {
-    let stars: Vec<RefStar> = fps
-        .arrays
+    let arrays = arrays.as_ref();
+    let single = single_form(arrays);
+    let stars: Vec<RefStar> = arrays
         .iter()
-        .flat_map(|s| reference_catalogue(s, survey, s.array.index as u32 + 1))
+        .flat_map(|s| {
+            let array = if single { 0 } else { s.array.index as u32 + 1 };
+            reference_catalogue(s, survey, array)
+        })
         .collect();
     let path = dir.join(REFCAT_NAME);
     super::csv::write(&path, &REFCAT_HEADER, &refcat_rows(&stars))?;
@@ -512,10 +490,10 @@ pub fn model_psf_term_extension(j: usize) -> String {
     format!("DZ{j}")
 }
 
-/// Write the design model PSF of a single-array simulation (`psf_model.fits`) into `dir`; with its
+/// The single array's design model PSF (the primary HDU of `psf_model.fits`) into `dir`; with its
 /// derivative planes per low-order term (`DZ4` … `DZ11`, [`model_psf_terms`]) when the configuration's analysis
 /// corrects it by the stars (`analysis.telemetry_kernel = "design-fitted"`: 16 more PSFs to compute).
-pub fn write_model_psf(dir: &Path, sim: &Simulator) -> Result<PathBuf, IoError> {
+fn write_single_model_psf(dir: &Path, sim: &Simulator) -> Result<PathBuf, IoError> {
     let path = dir.join(MODEL_PSF_NAME);
     let e = model_psf(sim).map_err(|e| model_psf_error(e, &path))?;
     let terms = match sim.cfg.analysis.telemetry_kernel {
@@ -591,30 +569,31 @@ pub fn model_psf_extension(k: usize) -> String {
     format!("PSF{}", k + 1)
 }
 
-/// Write the design model PSFs of the focal plane (`PSF1` … in one file) into `dir`.
-pub fn write_focal_plane_model_psfs(
+/// Write the design model PSFs of a focal plane's arrays (`psf_model.fits`) into `dir`. One array: the
+/// primary HDU, with the derivative planes when its analysis asks for them ([`write_single_model_psf`]);
+/// the quad: `PSF1` … in one file (each array's axes).
+pub fn write_model_psf(
     dir: &Path,
-    fps: &FocalPlaneSimulator,
+    arrays: &(impl AsRef<[Simulator]> + ?Sized),
 ) -> Result<PathBuf, IoError> {
+    let arrays = arrays.as_ref();
+    if let (true, Some(sim)) = (single_form(arrays), arrays.first()) {
+        return write_single_model_psf(dir, sim);
+    }
     let path = dir.join(MODEL_PSF_NAME);
-    let psfs = fps
-        .arrays
+    let psfs = arrays
         .iter()
         .map(model_psf)
         .collect::<Result<Vec<_>, _>>()
         .map_err(|e| model_psf_error(e, &path))?;
-    let names: Vec<String> = (0..fps.arrays.len()).map(model_psf_extension).collect();
+    let names: Vec<String> = (0..arrays.len()).map(model_psf_extension).collect();
     let mut hdus = vec![Hdu::Header {
         cards: vec![
-            Card::i(
-                "NARRAYS",
-                fps.arrays.len() as i64,
-                "arrays: extensions PSF1..",
-            ),
+            Card::i("NARRAYS", arrays.len() as i64, "arrays: extensions PSF1.."),
             Card::s("ORIGIN", "jsim", "JASMINE image simulator"),
         ],
     }];
-    for ((sim, e), name) in fps.arrays.iter().zip(&psfs).zip(&names) {
+    for ((sim, e), name) in arrays.iter().zip(&psfs).zip(&names) {
         hdus.push(model_psf_hdu(name.as_str(), e, sim));
     }
     fits::write(&path, &hdus)?;

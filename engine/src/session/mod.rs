@@ -129,17 +129,10 @@ impl Session {
         lock(&self.banks).len()
     }
 
-    /// A new simulator of `cfg` (validated) on the session's bank, kernels and integrator.
+    /// A new simulator of `cfg` (validated) on the session's bank, kernels and integrator: the one array of
+    /// a single-array focal plane ([`Session::new_focal_plane`]).
     pub fn new_simulator(&self, cfg: &Config) -> Result<Simulator, SimError> {
-        cfg.validate()?;
-        // the bank of the instrument as built, which takes the images
-        let bank = self.bank(&crate::instrument::realise(cfg)?);
-        Simulator::build(
-            cfg,
-            bank,
-            self.kernels.clone(),
-            self.integrator(cfg.fidelity.backend),
-        )
+        self.new_focal_plane(cfg)?.into_single()
     }
 
     /// New simulators of every array of `cfg`'s focal plane (validated), on the session's bank, kernels and

@@ -30,6 +30,19 @@ pub struct FocalPlaneExposure {
     pub counts: Option<PlacementCounts>,
 }
 
+/// A focal plane's arrays: what the product writers take (a single [`Simulator`] is a focal plane of one).
+impl AsRef<[Simulator]> for FocalPlaneSimulator {
+    fn as_ref(&self) -> &[Simulator] {
+        &self.arrays
+    }
+}
+
+impl AsRef<[Simulator]> for Simulator {
+    fn as_ref(&self) -> &[Simulator] {
+        std::slice::from_ref(self)
+    }
+}
+
 impl FocalPlaneSimulator {
     /// Build every array's simulator from shared parts (a fresh PSF bank when `bank` does not serve
     /// `cfg`). A single-array configuration gives one simulator.
@@ -86,6 +99,15 @@ impl FocalPlaneSimulator {
             Arc::new(KernelCache::default()),
             integrator,
         )
+    }
+
+    /// The one array of a single-array focal plane (an error naming the layout for the quad).
+    pub fn into_single(self) -> Result<Simulator, SimError> {
+        let mut arrays = self.arrays;
+        match (arrays.pop(), arrays.is_empty()) {
+            (Some(one), true) => Ok(one),
+            _ => Err(SimError::NotSingleArray("a single-array simulator")),
+        }
     }
 
     /// Stars simulated over all arrays (a star near an edge counts on each array its light reaches).

@@ -13,7 +13,7 @@ use crate::optics::PsfBank;
 use crate::optics::psf::PsfTable;
 use crate::photometry;
 use crate::readout::ReadoutTiming;
-use crate::scene::{self, PlacementCounts, SceneError, Star};
+use crate::scene::{PlacementCounts, SceneError, Star};
 pub use crate::truth::TruthRow;
 use std::borrow::Cow;
 use std::collections::HashMap;
@@ -230,30 +230,16 @@ impl Simulator {
     }
 
     /// Build from shared parts: a PSF bank (replaced by a fresh one if it does not serve `cfg`), a kernel
-    /// cache and the integrator. One array only: the quad is a [`FocalPlaneSimulator`].
+    /// cache and the integrator. One array only: this is the single array of a one-array focal plane
+    /// ([`FocalPlaneSimulator::build`] is the one way a simulator is made; the quad is a
+    /// [`FocalPlaneSimulator`] of four).
     pub fn build(
         cfg: &Config,
         bank: Arc<PsfBank>,
         kernels: Arc<KernelCache>,
         integrator: Integrator,
     ) -> Result<Self, SimError> {
-        cfg.validate()?;
-        if crate::sky::array_count(cfg) != 1 {
-            return Err(SimError::NotSingleArray("a single-array simulator"));
-        }
-        // the stars land where the instrument as built puts them
-        let scene = scene::build(&crate::instrument::realise(cfg)?, &cfg.sky)?;
-        check_memory(cfg, scene.arrays.iter().map(Vec::len).sum(), 1)?;
-        let stars = scene.arrays.into_iter().next().unwrap_or_default();
-        let spec = ArraySpec {
-            place: ArrayPlace {
-                index: 0,
-                rotation_deg: 0.0,
-                seed: cfg.seed,
-            },
-            stars,
-        };
-        Self::build_array(cfg, spec, scene.counts, bank, kernels, integrator, None)
+        FocalPlaneSimulator::build(cfg, bank, kernels, integrator)?.into_single()
     }
 
     /// Build the simulator of one array from its spec, with the dataset's ACE series when another array

@@ -7,7 +7,7 @@ use engine::analysis::countermeasures::{Countermeasure, Plan};
 use engine::analysis::report::StarResult;
 use engine::config::{AceCase, Config, ReadoutOrder};
 use engine::io::score::TruthFrame;
-use engine::io::{analysis_input, calibrated, csv, exposure, products};
+use engine::io::{analysis_input, calibrated, csv, products};
 use engine::jitter::AceSeries;
 use engine::scoring::vectors::VectorMap;
 use engine::session::Session;
@@ -31,7 +31,7 @@ pub fn progress(len: u64, what: &str) -> ProgressBar {
 }
 
 /// Print the session's notes about the backend (once each).
-fn say_notes(session: &Session) {
+pub(crate) fn say_notes(session: &Session) {
     for note in session.take_notes() {
         eprintln!("jsim: {note}");
     }
@@ -90,198 +90,6 @@ pub fn ace(cfg: &Config, out: &Path, every: usize) -> Result<()> {
         s.achieved_sigma_mas.1,
         t0.elapsed().as_secs_f64()
     );
-    Ok(())
-}
-
-/// `jsim simulate`
-pub fn simulate(
-    session: &Session,
-    cfg: &Config,
-    out: &Path,
-    survey: &engine::io::instrument::SurveyModel,
-) -> Result<()> {
-    if engine::sky::array_count(cfg) > 1 {
-        return simulate_focal_plane(session, cfg, out, survey);
-    }
-    let t0 = Instant::now();
-    let sim = session.new_simulator(cfg)?;
-    say_notes(session);
-    sim.jobs()?; // PSFs and kernels now, so the timing below separates set-up from integration
-    let setup_s = t0.elapsed().as_secs_f64();
-    let mut outputs = Outputs::in_dir(out)?;
-    engine::io::write_atomic(
-        &outputs.path(engine::io::products::files::CONFIG_TOML),
-        cfg.to_toml().as_bytes(),
-    )?;
-    outputs.path(engine::io::instrument::FLAT_NAME);
-    engine::io::instrument::write_calibration_flat(out, &sim)?;
-    outputs.path(engine::io::instrument::REFCAT_NAME);
-    engine::io::instrument::write_reference_catalogue(out, &sim, survey)?;
-    outputs.path(engine::io::instrument::MODEL_PSF_NAME);
-    engine::io::instrument::write_model_psf(out, &sim)?;
-    let pb = progress(cfg.fidelity.images as u64, "simulate");
-    let mut summary = Vec::new();
-    for i in 0..cfg.fidelity.images {
-        interrupted()?;
-        let exp = sim.exposure(i).with_context(|| format!("image {i}"))?;
-        outputs.add(&out.join(exposure::image_name(i)));
-        outputs.add(&out.join(exposure::truth_name(i)));
-        let files = exposure::write_exposure(out, &sim, &exp)?;
-        // the attitude telemetry the spacecraft records over this exposure (the default quality)
-        outputs.add(&out.join(engine::io::instrument::telemetry_name(i)));
-        engine::io::instrument::write_telemetry(
-            out,
-            &sim,
-            i,
-            &engine::analysis::countermeasures::TelemetryQuality::DEFAULT,
-        )?;
-        summary.push(serde_json::json!({
-            "image": files.image.file_name().map(|n| n.to_string_lossy().to_string()),
-            "truth": files.truth_csv.file_name().map(|n| n.to_string_lossy().to_string()),
-            "t_start_s": exp.t_start_s,
-            "ace_sigma_x_mas": exp.ace.sigma_x_mas,
-            "ace_sigma_y_mas": exp.ace.sigma_y_mas,
-            "integrate_s": exp.times.integrate_s,
-            "detector_s": exp.times.detector_s,
-        }));
-        pb.inc(1);
-    }
-    pb.finish_and_clear();
-    let run = serde_json::json!({
-        "engine": engine::VERSION,
-        "config_hash": cfg.hash_hex(),
-        "seed": cfg.seed,
-        "backend": sim.backend_name(),
-        "setup_s": setup_s,
-        "total_s": t0.elapsed().as_secs_f64(),
-        "images": summary,
-    });
-    engine::io::write_atomic(
-        &outputs.path(engine::io::products::files::RUN_JSON),
-        serde_json::to_string_pretty(&run)?.as_bytes(),
-    )?;
-    outputs.keep();
-    println!(
-        "wrote {} images of {} stars to {} ({} ACE, {} readout, Hw {}) on {} in {:.1} s (PSF + kernels {:.1} s)",
-        cfg.fidelity.images,
-        sim.stars.len(),
-        out.display(),
-        cfg.ace.case.name(),
-        cfg.readout.order.name(),
-        cfg.scene.mag_hw,
-        sim.backend_name(),
-        t0.elapsed().as_secs_f64(),
-        setup_s
-    );
-    if let Some(line) = cfg.as_built.describe() {
-        println!("{line}");
-    }
-    Ok(())
-}
-
-/// `jsim simulate` on the quad focal plane: one multi-extension FITS per exposure (`fp_NNN.fits`).
-fn simulate_focal_plane(
-    session: &Session,
-    cfg: &Config,
-    out: &Path,
-    survey: &engine::io::instrument::SurveyModel,
-) -> Result<()> {
-    let t0 = Instant::now();
-    let fps = session.new_focal_plane(cfg)?;
-    say_notes(session);
-    for a in &fps.arrays {
-        a.jobs()?; // PSFs and kernels now, so the timing below separates set-up from integration
-    }
-    let setup_s = t0.elapsed().as_secs_f64();
-    let mut outputs = Outputs::in_dir(out)?;
-    engine::io::write_atomic(
-        &outputs.path(engine::io::products::files::CONFIG_TOML),
-        cfg.to_toml().as_bytes(),
-    )?;
-    outputs.path(engine::io::instrument::FLAT_NAME);
-    engine::io::instrument::write_focal_plane_flats(out, &fps)?;
-    outputs.path(engine::io::instrument::REFCAT_NAME);
-    engine::io::instrument::write_focal_plane_reference_catalogue(out, &fps, survey)?;
-    outputs.path(engine::io::instrument::MODEL_PSF_NAME);
-    engine::io::instrument::write_focal_plane_model_psfs(out, &fps)?;
-    let pb = progress(cfg.fidelity.images as u64, "simulate");
-    let mut summary = Vec::new();
-    for i in 0..cfg.fidelity.images {
-        interrupted()?;
-        let t = Instant::now();
-        let exp = fps.exposure(i).with_context(|| format!("image {i}"))?;
-        let sim_s = t.elapsed().as_secs_f64();
-        outputs.add(&out.join(engine::io::focal_plane::focal_plane_name(i)));
-        let t = Instant::now();
-        let file = engine::io::focal_plane::write_focal_plane_exposure(out, &fps, &exp)?;
-        // the telescope's attitude as the spacecraft records it (the default quality; one record for all
-        // arrays, each applies it turned by its ROTATION)
-        if let Some(first) = fps.arrays.first() {
-            outputs.add(&out.join(engine::io::instrument::telemetry_name(i)));
-            engine::io::instrument::write_telemetry(
-                out,
-                first,
-                i,
-                &engine::analysis::countermeasures::TelemetryQuality::DEFAULT,
-            )?;
-        }
-        summary.push(serde_json::json!({
-            "image": file.file_name().map(|n| n.to_string_lossy().to_string()),
-            "t_start_s": exp.arrays.first().map(|e| e.t_start_s),
-            "stars_in_truth": exp.arrays.iter().map(|e| e.truth.len()).sum::<usize>(),
-            "simulate_s": sim_s,
-            "write_s": t.elapsed().as_secs_f64(),
-        }));
-        pb.inc(1);
-    }
-    pb.finish_and_clear();
-    let counts = fps.counts.map(|c| {
-        serde_json::json!({
-            "catalogue": c.catalogue, "duplicates": c.duplicates, "photosensitive": c.photosensitive,
-            "border": c.border, "gap": c.gap, "off": c.off,
-        })
-    });
-    let run = serde_json::json!({
-        "engine": engine::VERSION,
-        "config_hash": cfg.hash_hex(),
-        "seed": cfg.seed,
-        "arrays": fps.arrays.len(),
-        "backend": fps.arrays.first().map(|a| a.backend_name()),
-        "stars_simulated": fps.star_count(),
-        "placement": counts,
-        "setup_s": setup_s,
-        "total_s": t0.elapsed().as_secs_f64(),
-        "images": summary,
-    });
-    engine::io::write_atomic(
-        &outputs.path(engine::io::products::files::RUN_JSON),
-        serde_json::to_string_pretty(&run)?.as_bytes(),
-    )?;
-    outputs.keep();
-    let placed = match fps.counts {
-        Some(c) => format!(
-            "; of {} stars {} on photosensitive pixels, {} on borders, {} in gaps, {} off the focal plane, {} duplicates",
-            c.catalogue, c.photosensitive, c.border, c.gap, c.off, c.duplicates
-        ),
-        None => String::new(),
-    };
-    println!(
-        "wrote {} focal-plane exposures of {} arrays to {} ({} ACE, {} readout) on {} in {:.1} s (PSF + kernels {:.1} s){placed}",
-        cfg.fidelity.images,
-        fps.arrays.len(),
-        out.display(),
-        cfg.ace.case.name(),
-        cfg.readout.order.name(),
-        fps.arrays
-            .first()
-            .map(|a| a.backend_name())
-            .unwrap_or_default(),
-        t0.elapsed().as_secs_f64(),
-        setup_s
-    );
-    if let Some(line) = cfg.as_built.describe() {
-        println!("{line}");
-    }
     Ok(())
 }
 

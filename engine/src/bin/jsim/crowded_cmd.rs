@@ -109,11 +109,11 @@ pub fn crowded(a: &CrowdedArgs) -> Result<()> {
             engine::io::focal_plane::write_focal_plane_exposure(&dir, &fps, &exp)?;
             // the instrument's calibration flat beside it, so that `jsim analyze` can read the exposure
             outputs.add(&dir.join(engine::io::instrument::FLAT_NAME));
-            engine::io::instrument::write_focal_plane_flats(&dir, &fps)?;
+            engine::io::instrument::write_calibration_flat(&dir, &fps)?;
             outputs.add(&dir.join(engine::io::instrument::REFCAT_NAME));
-            engine::io::instrument::write_focal_plane_reference_catalogue(&dir, &fps, &survey)?;
+            engine::io::instrument::write_reference_catalogue(&dir, &fps, &survey)?;
             outputs.add(&dir.join(engine::io::instrument::MODEL_PSF_NAME));
-            engine::io::instrument::write_focal_plane_model_psfs(&dir, &fps)?;
+            engine::io::instrument::write_model_psf(&dir, &fps)?;
             // the telescope's attitude as recorded at the plan's telemetry quality (one record for
             // all arrays; none for a static ACE)
             outputs.add(&dir.join(engine::io::instrument::telemetry_name(0)));

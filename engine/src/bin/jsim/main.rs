@@ -17,6 +17,7 @@ pub(crate) mod crowded_cmd;
 pub(crate) mod options;
 pub(crate) mod outputs;
 pub(crate) mod sequence_cmd;
+pub(crate) mod simulate_cmd;
 pub(crate) mod solve_cmd;
 pub(crate) mod sweep_cmd;
 pub(crate) mod synthetic_cmd;
@@ -394,7 +395,7 @@ fn run(cli: Cli) -> Result<()> {
         Command::Simulate { cfg, survey, out } => {
             let c = cfg.load()?;
             let s = survey.model()?;
-            cmd::simulate(&Session::new(), &c, &out, &s)
+            simulate_cmd::simulate(&Session::new(), &c, &out, &s)
         }
         Command::Analyze {
             cfg,
