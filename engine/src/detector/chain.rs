@@ -1,5 +1,5 @@
 //! One pixel's way through the detector, the same for the array's exposure ([`super::expose`]) and for the
-//! windows of a transit stare's plates (`studies::transit::observe`): the charge collected with its shot
+//! windows of a windowed readout ([`super::window`]: a transit stare's plates): the charge collected with its shot
 //! noise and clipped at the full well, the node's response over a block of pixels (inter-pixel
 //! capacitance, nonlinearity), and the readout (read noise, ÷ gain + bias, the ADC). The callers draw from
 //! their own seeded streams in their own order; the physics is here once.

@@ -23,6 +23,7 @@ pub mod chain;
 pub mod cosmic_rays;
 pub mod ipc;
 pub mod persistence;
+pub mod window;
 
 use crate::config::Config;
 use crate::readout::ReadoutTiming;

@@ -47,7 +47,9 @@ pub enum SimError {
 }
 
 pub mod focal_plane;
+mod windows;
 pub use focal_plane::{FocalPlaneExposure, FocalPlaneSimulator};
+pub use windows::WindowRead;
 
 /// The array a simulator images: its place in the focal plane and its stars.
 #[derive(Debug, Clone, PartialEq)]

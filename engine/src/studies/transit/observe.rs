@@ -27,7 +27,8 @@ use crate::analysis::countermeasures::TelemetryQuality;
 use crate::analysis::countermeasures::telemetry::TelemetryRecord;
 use crate::analysis::lightcurve::aperture_fluxes;
 use crate::config::{AceCase, Config, IntraPixel, ReadoutOrder};
-use crate::detector::chain;
+pub use crate::detector::window::Window;
+use crate::detector::window::WindowReadout;
 use crate::integrate::StarJob;
 use crate::integrate::track::Track;
 use crate::io::instrument::{SurveyModel, reference_catalogue};
@@ -52,14 +53,6 @@ pub struct StareReadout {
     pub cadence_s: f64,
     /// A window's read noise per plate, e⁻ (σ_image √n).
     pub read_noise_e: f64,
-}
-
-/// Where a star's window lies on the detector.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Window {
-    pub x0: i64,
-    pub y0: i64,
-    pub n: usize,
 }
 
 /// One plate: the windows as read (ADU, co-added) and what the telemetry says.
@@ -358,14 +351,12 @@ pub fn observe(cfg: &Config, spec: &Spec) -> Result<Observation, StareError> {
     c.ace.span_s = per_chunk as f64 * cadence + 1.0;
     let plate_scale = c.instrument.plate_scale_mas();
     let span = c.readout.t_overhead_s + spec.plate_s;
-    let d = &c.detector;
-    let dark_e = d.dark_e_per_s * spec.plate_s;
-    let detector = WindowDetector {
-        d: d.clone(),
-        dark_e,
-        full_well_e: d.full_well_e * readout.sub_exposures as f64,
-        readout: chain::Readout::coadded(d, readout.read_noise_e, readout.sub_exposures),
-    };
+    let detector = WindowReadout::new(
+        &c.detector,
+        spec.plate_s,
+        readout.sub_exposures,
+        readout.read_noise_e,
+    );
     let mut plates = Vec::with_capacity(plates_n);
     let mut truth = Vec::with_capacity(plates_n);
     let radii = spec.aperture_radii_px();
@@ -411,16 +402,15 @@ pub fn observe(cfg: &Config, spec: &Spec) -> Result<Observation, StareError> {
         });
         let mut pj = jobs.clone();
         pj[0].star.rate_e_per_s *= tf;
-        let stamps = sim.stamps(&pj, Some(&track))?;
-        if stamps.len() != jobs.len() {
+        let mut r = rng::stream(c.seed, Stream::Transit, p as u64);
+        let Some(reads) = sim.read_windows(&pj, &track, &windows, &flat_w, &detector, &mut r)?
+        else {
             return Err(StareError::Spec(
                 "transit.drift_mas_per_h: the drift took a star off the detector".into(),
             ));
-        }
-        let mut r = rng::stream(c.seed, Stream::Transit, p as u64);
+        };
         let mut windows_adu = Vec::with_capacity(windows.len());
-        for (k, (wdw, st)) in windows.iter().zip(&stamps).enumerate() {
-            let (out, clean) = expose_window(wdw, st, &flat_w[k], &detector, &mut r);
+        for (k, (wdw, read)) in windows.iter().zip(reads).enumerate() {
             // the aperture at the star's true place in this plate (its nominal place, the drift and the
             // jitter's mean); the target's without its transit (a factor on its rate): the pointing's part
             let place = (
@@ -428,8 +418,17 @@ pub fn observe(cfg: &Config, spec: &Spec) -> Result<Observation, StareError> {
                 stars[k].y_px + dyp + jitter_mean.1 - wdw.y0 as f64,
             );
             let unit = if k == 0 { tf } else { 1.0 };
-            sums.add(k, &clean, wdw.n, place, unit, &radii, spec, t_mid / 3600.0);
-            windows_adu.push(out);
+            sums.add(
+                k,
+                &read.clean_e,
+                wdw.n,
+                place,
+                unit,
+                &radii,
+                spec,
+                t_mid / 3600.0,
+            );
+            windows_adu.push(read.adu);
         }
         let tel = Normal::new(0.0, spec.telemetry_error_mas.max(1e-300)).ok();
         let mut tel_err = || tel.as_ref().map_or(0.0, |t| t.sample(&mut r));
@@ -503,18 +502,6 @@ fn stare_simulator(
         None,
     )?;
     Ok((stars, sim))
-}
-
-impl Window {
-    /// `img` (row-major, `detector_px` wide) cut to the window.
-    fn cut(&self, img: &[f32], detector_px: usize) -> Vec<f32> {
-        let mut out = Vec::with_capacity(self.n * self.n);
-        for y in 0..self.n {
-            let row = (self.y0 + y as i64) as usize * detector_px + self.x0 as usize;
-            out.extend_from_slice(&img[row..row + self.n]);
-        }
-        out
-    }
 }
 
 /// A window of `n` pixels around each catalogue place, all on a detector of `detector_px`.
@@ -610,55 +597,6 @@ impl CleanSums {
             b.add(k, t_h, &q);
         }
     }
-}
-
-/// The detector a plate's windows are read with: the imaging detector's chain ([`crate::detector::chain`])
-/// for n co-added sub-exposures, the plate's dark charge.
-struct WindowDetector {
-    d: crate::config::Detector,
-    dark_e: f64,
-    /// The sum's full well: n sub-exposures' (each kept below its own by the readout's choice).
-    full_well_e: f64,
-    readout: chain::Readout,
-}
-
-/// One window of a plate: the star's noise-free electrons `st` cut to `wdw` (the clean window, e⁻), and
-/// the window as read (ADU): × the flat, + dark, shot noise, the full well, the node's response, the
-/// co-added readout. Each pixel's read noise is drawn beside its shot noise from `r`, so the stream's
-/// order is the pixels'.
-fn expose_window(
-    wdw: &Window,
-    st: &crate::integrate::Stamp,
-    flat: &[f32],
-    det: &WindowDetector,
-    r: &mut impl rand::Rng,
-) -> (Vec<f32>, Vec<f64>) {
-    let n2 = wdw.n * wdw.n;
-    let (mut clean, mut charge, mut read_e) =
-        (vec![0.0f64; n2], vec![0.0f64; n2], vec![0.0f64; n2]);
-    for y in 0..wdw.n {
-        for x in 0..wdw.n {
-            let (sx, sy) = (wdw.x0 + x as i64 - st.x0, wdw.y0 + y as i64 - st.y0);
-            let star_e = if sx >= 0 && sy >= 0 && (sx as usize) < st.nx && (sy as usize) < st.ny {
-                st.data[sy as usize * st.nx + sx as usize]
-            } else {
-                0.0
-            };
-            let i = y * wdw.n + x;
-            clean[i] = star_e;
-            let mean = star_e.max(0.0) * flat[i] as f64 + det.dark_e;
-            let (e, _) = chain::clip_full_well(chain::shot_e(&det.d, mean, r), det.full_well_e);
-            charge[i] = e;
-            read_e[i] = det.readout.noise_e(r);
-        }
-    }
-    chain::respond(&mut charge, wdw.n, &det.d);
-    let out = charge
-        .iter()
-        .zip(&read_e)
-        .map(|(e, rn)| det.readout.digitised(e + rn).0)
-        .collect();
-    (out, clean)
 }
 
 /// The realistic ACE of a stare, generated in chunks of whole plates (two at a time, one per core; each
