@@ -132,6 +132,7 @@ impl Session {
     /// A new simulator of `cfg` (validated) on the session's bank, kernels and integrator: the one array of
     /// a single-array focal plane ([`Session::new_focal_plane`]).
     pub fn new_simulator(&self, cfg: &Config) -> Result<Simulator, SimError> {
+        crate::simulate::check_single_array(cfg)?;
         self.new_focal_plane(cfg)?.into_single()
     }
 

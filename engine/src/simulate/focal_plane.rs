@@ -140,3 +140,43 @@ impl FocalPlaneSimulator {
         })
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A single-array simulator of the quad is a named error, from the session as from `Simulator::new`, and
+    /// an invalid quad configuration names its field first (validation before the layout); a single array
+    /// of the focal-plane simulator is the single-array simulator.
+    #[test]
+    fn the_quad_is_not_a_single_array_and_one_array_is() {
+        let mut quad = crate::testkit::small_config();
+        quad.focal_plane.layout = crate::config::Layout::Quad;
+        let single_err = |r: Result<Simulator, SimError>| match r {
+            Err(SimError::NotSingleArray(_)) => true,
+            Err(e) => panic!("another error: {e}"),
+            Ok(_) => false,
+        };
+        assert!(single_err(Simulator::new(&quad)));
+        assert!(single_err(
+            crate::session::Session::new().new_simulator(&quad)
+        ));
+        let mut bad = quad.clone();
+        bad.scene.mag_hw = f64::NAN;
+        let msg = Simulator::new(&bad)
+            .err()
+            .map(|e| e.to_string())
+            .unwrap_or_default();
+        assert!(msg.contains("scene.mag_hw"), "{msg}");
+        let c = crate::testkit::small_config();
+        let one = FocalPlaneSimulator::new(&c)
+            .expect("focal plane")
+            .into_single()
+            .expect("one");
+        let direct = Simulator::new(&c).expect("simulator");
+        assert_eq!(one.stars, direct.stars);
+        assert_eq!(one.array, direct.array);
+        let (a, b) = (one.exposure(0).expect("a"), direct.exposure(0).expect("b"));
+        assert_eq!(a.image.adu, b.image.adu, "the same image, bit for bit");
+    }
+}

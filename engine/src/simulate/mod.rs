@@ -218,6 +218,15 @@ pub struct Simulator {
     turned: std::sync::Mutex<HashMap<usize, (Arc<PsfTable>, Arc<PsfTable>)>>,
 }
 
+/// `cfg` valid and of one array: the quad is refused before any of its four arrays is built.
+pub(crate) fn check_single_array(cfg: &Config) -> Result<(), SimError> {
+    cfg.validate()?;
+    if crate::sky::array_count(cfg) != 1 {
+        return Err(SimError::NotSingleArray("a single-array simulator"));
+    }
+    Ok(())
+}
+
 impl Simulator {
     /// Build with a fresh PSF bank and kernel cache, on the configured backend (a session shares these
     /// between simulators: the engine session's `simulator`).
@@ -241,6 +250,7 @@ impl Simulator {
         kernels: Arc<KernelCache>,
         integrator: Integrator,
     ) -> Result<Self, SimError> {
+        check_single_array(cfg)?;
         FocalPlaneSimulator::build(cfg, bank, kernels, integrator)?.into_single()
     }
 
