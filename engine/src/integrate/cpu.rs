@@ -39,6 +39,16 @@ impl Stamp {
     pub fn sum(&self) -> f64 {
         self.data.iter().sum()
     }
+
+    /// The value at detector pixel (x, y): 0 outside the stamp.
+    pub fn at(&self, x: i64, y: i64) -> f64 {
+        let (sx, sy) = (x - self.x0, y - self.y0);
+        if sx >= 0 && sy >= 0 && (sx as usize) < self.nx && (sy as usize) < self.ny {
+            self.data[sy as usize * self.nx + sx as usize]
+        } else {
+            0.0
+        }
+    }
 }
 
 /// Where a star's stamp lies: centred on its mean jittered position, `radius + ⌈excursion⌉` pixels around,
@@ -519,6 +529,24 @@ pub fn fast_stamp(
 mod tests {
     use super::*;
     use crate::config::{Config, ReadoutOrder};
+
+    /// A stamp's value at a detector pixel is its own pixel inside and 0 on every side outside.
+    #[test]
+    fn a_stamp_is_read_at_detector_pixels_and_zero_outside() {
+        let st = Stamp {
+            x0: 10,
+            y0: -2,
+            nx: 3,
+            ny: 2,
+            data: vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0],
+        };
+        assert_eq!(st.at(10, -2), 1.0);
+        assert_eq!(st.at(12, -2), 3.0);
+        assert_eq!(st.at(11, -1), 5.0);
+        for (x, y) in [(9, -2), (13, -2), (10, -3), (10, 0), (-5, 100)] {
+            assert_eq!(st.at(x, y), 0.0, "({x}, {y})");
+        }
+    }
 
     fn wiggly_track(n: usize, dt: f64, amp_px: f64) -> Track {
         let dx = (0..n)

@@ -81,16 +81,14 @@ pub fn write_calibration_flat(
         return Ok(None);
     };
     let flats: Vec<_> = arrays.iter().filter_map(|s| s.calibration_flat()).collect();
-    if flats.len() != arrays.len() {
-        return Ok(None);
-    }
-    let names: Vec<String> = if single_form(arrays) {
+    let single = single_form(arrays);
+    let names: Vec<String> = if single {
         vec![String::new()]
     } else {
         (0..arrays.len()).map(flat_extension).collect()
     };
     let mut hdus = Vec::with_capacity(arrays.len() + 1);
-    if !single_form(arrays) {
+    if !single {
         hdus.push(Hdu::Header {
             cards: vec![
                 Card::i("NARRAYS", arrays.len() as i64, "arrays: extensions FLAT1.."),

@@ -17,7 +17,8 @@ pub struct WindowRead {
 impl Simulator {
     /// Star k of `jobs` integrated along `track` and read in `windows[k]` through `flats[k]` (the flat cut
     /// to the window) by `readout`, every window's noise from `r` in window order. `None` when a star's
-    /// light left the detector (its stamp is gone, so the windows no longer match their stars).
+    /// light left the detector (its stamp is gone, so the windows no longer match their stars) or when
+    /// `windows` and `flats` are not one per job.
     pub fn read_windows(
         &self,
         jobs: &[StarJob],
@@ -36,15 +37,7 @@ impl Simulator {
             .zip(&stamps)
             .zip(flats)
             .map(|((wdw, st), flat)| {
-                let star_e = |x: i64, y: i64| {
-                    let (sx, sy) = (x - st.x0, y - st.y0);
-                    if sx >= 0 && sy >= 0 && (sx as usize) < st.nx && (sy as usize) < st.ny {
-                        st.data[sy as usize * st.nx + sx as usize]
-                    } else {
-                        0.0
-                    }
-                };
-                let (adu, clean_e) = readout.read(wdw, star_e, flat, r);
+                let (adu, clean_e) = readout.read(wdw, |x, y| st.at(x, y), flat, r);
                 WindowRead { adu, clean_e }
             })
             .collect();

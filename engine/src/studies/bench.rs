@@ -113,16 +113,7 @@ pub fn compare(a: &[Stamp], r: &[Stamp]) -> (f64, f64, f64) {
         // stamps may differ in size (a knob changes the stamp): compare on the reference's pixels
         for iy in 0..y.ny {
             for ix in 0..y.nx {
-                let (gx, gy) = (y.x0 + ix as i64, y.y0 + iy as i64);
-                let v = if gx >= x.x0
-                    && gy >= x.y0
-                    && gx < x.x0 + x.nx as i64
-                    && gy < x.y0 + x.ny as i64
-                {
-                    x.data[(gy - x.y0) as usize * x.nx + (gx - x.x0) as usize]
-                } else {
-                    0.0
-                };
+                let v = x.at(y.x0 + ix as i64, y.y0 + iy as i64);
                 let e = (v - y.data[iy * y.nx + ix]).abs() / peak;
                 worst = worst.max(e);
                 sq += e * e;
